@@ -1,0 +1,55 @@
+//! Shared fixtures for the criterion benchmarks: the paper's case-study task and seeded
+//! trajectories (a tiny xorshift generator keeps the benches free of extra dependencies).
+
+use tlshield_core::{Center, Predicate, Spec};
+
+/// The paper's task formula (Sec. VI).
+pub const TASK: &str = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)";
+
+/// State length of the case study: x, y, theta, three goal centres, two obstacle centres.
+pub const STATE_DIM: usize = 13;
+
+/// The task spec with Ball goals read from the state and Halfspace channel constraints.
+pub fn task_spec() -> Spec {
+    let goal = |k: usize| {
+        Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
+    };
+    let mut c1 = vec![0.0; STATE_DIM];
+    c1[0] = 1.0;
+    c1[1] = -1.0;
+    let c2: Vec<f64> = c1.iter().map(|v| -v).collect();
+    Spec::new(
+        TASK,
+        [
+            ("g1", goal(0)),
+            ("g2", goal(1)),
+            ("g3", goal(2)),
+            ("c1", Predicate::halfspace(c1, 1.5).unwrap()),
+            ("c2", Predicate::halfspace(c2, 1.5).unwrap()),
+        ],
+    )
+    .unwrap()
+}
+
+/// `count` random-walk trajectories of `steps` states each, flattened `(count, steps, 13)`.
+pub fn random_trajectories(count: usize, steps: usize, seed: u64) -> Vec<f64> {
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut out = Vec::with_capacity(count * steps * STATE_DIM);
+    for _ in 0..count {
+        let goals: Vec<f64> = (0..10).map(|_| 4.0 * uniform() - 2.0).collect();
+        let (mut x, mut y) = (0.0, 0.0);
+        for _ in 0..steps {
+            x += 0.2 * (uniform() - 0.5);
+            y += 0.2 * (uniform() - 0.5);
+            out.extend_from_slice(&[x, y, 0.0]);
+            out.extend_from_slice(&goals);
+        }
+    }
+    out
+}

@@ -1,0 +1,84 @@
+//! Error types, one enum per concern. Every error a caller can trigger is a value, never a panic.
+
+use thiserror::Error;
+
+/// A problem with a formula or with the predicates that give its atoms meaning.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SpecError {
+    /// The formula text does not follow the grammar.
+    #[error("parse error at column {column}: {message}\n  {formula}\n  {caret:>column$}")]
+    Parse {
+        /// 1-based column (in characters) where the problem starts.
+        column: usize,
+        /// What was expected and what was found.
+        message: String,
+        /// The formula text, for the rendered message.
+        formula: String,
+        /// Always `"^"`; kept as a field so the message can point at the column.
+        caret: &'static str,
+    },
+    /// The formula parses but is not syntactically co-safe (not scTLTL).
+    #[error("not an scTLTL formula (column {column}): {message}\n  {formula}\n  {caret:>column$}")]
+    NotCoSafe {
+        /// 1-based column of the offending operator.
+        column: usize,
+        /// Why the formula is rejected.
+        message: String,
+        /// The formula text, for the rendered message.
+        formula: String,
+        /// Always `"^"`.
+        caret: &'static str,
+    },
+    /// Atoms of the formula that have no predicate.
+    #[error("atom(s) without a predicate: {}", .0.join(", "))]
+    MissingPredicates(Vec<String>),
+    /// A predicate's parameters are invalid.
+    #[error("invalid predicate: {0}")]
+    InvalidPredicate(String),
+    /// Two predicates disagree on the length of the state vector.
+    #[error("predicates disagree on the state dimension: {0}")]
+    InconsistentDimension(String),
+}
+
+impl SpecError {
+    pub(crate) fn parse(formula: &str, column: usize, message: impl Into<String>) -> Self {
+        SpecError::Parse {
+            column,
+            message: message.into(),
+            formula: formula.to_string(),
+            caret: "^",
+        }
+    }
+
+    pub(crate) fn not_co_safe(formula: &str, column: usize, message: impl Into<String>) -> Self {
+        SpecError::NotCoSafe {
+            column,
+            message: message.into(),
+            formula: formula.to_string(),
+            caret: "^",
+        }
+    }
+}
+
+/// A problem with numeric input data: shapes, non-finite values, out-of-range indices.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum InputError {
+    /// An array has the wrong size along some axis.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which argument and axis.
+        what: String,
+        /// The size that was expected (may describe a range, e.g. "at least 3").
+        expected: String,
+        /// The size that was given.
+        got: String,
+    },
+    /// An input value is NaN or infinite.
+    #[error("{what} is {value} (all values must be finite)")]
+    NonFinite {
+        /// Which element, e.g. `traj[3, 1]`.
+        what: String,
+        /// The offending value.
+        value: f64,
+    },
+}

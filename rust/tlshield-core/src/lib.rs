@@ -1,0 +1,27 @@
+//! Pure-Rust core of **tlshield**: temporal-logic (scTLTL) specifications over state
+//! predicates, their quantitative robustness over trajectories, and (in later modules) the
+//! automaton, safe sets and the CLF-CBF quadratic program that shield a reinforcement-learning
+//! agent.
+//!
+//! The crate knows nothing about Python; `tlshield-py` wraps it.
+//!
+//! ```
+//! use tlshield_core::{Predicate, Spec, Trajectory};
+//!
+//! // "eventually s < 4" over a one-dimensional state.
+//! let below_four = Predicate::halfspace(vec![-1.0], 4.0).unwrap();
+//! let spec = Spec::new("F low", [("low", below_four)]).unwrap();
+//! let states = [5.0, 4.5, 3.0, 6.0];
+//! let rho = spec.robustness(Trajectory::new(&states, 1).unwrap()).unwrap();
+//! assert_eq!(rho, 1.0); // max(4 - s_t) over the closed window s_0..s_3
+//! ```
+
+pub mod error;
+pub mod predicate;
+pub mod robustness;
+pub mod spec;
+
+pub use error::{InputError, SpecError};
+pub use predicate::{Ball, Center, Halfspace, Predicate};
+pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
+pub use spec::{Formula, Spec};

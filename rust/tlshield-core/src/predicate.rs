@@ -1,0 +1,294 @@
+//! State predicates: real-valued functions of the full state vector whose sign says whether an
+//! atom holds (`> 0` holds). Each has an exact value and gradient.
+
+use crate::error::{InputError, SpecError};
+
+/// `rho(s) = w . s + b`: a half-space of the state space (the paper's channel constraints).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Halfspace {
+    w: Vec<f64>,
+    b: f64,
+}
+
+/// Where a [`Ball`]'s centre comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Center {
+    /// A fixed point.
+    Fixed(Vec<f64>),
+    /// Read from these state dimensions (goals or obstacles that live in the state).
+    Dims(Vec<usize>),
+}
+
+/// `rho(s) = radius - |s[pos] - c|`: inside a ball around a fixed or state-dependent centre.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ball {
+    pos: Vec<usize>,
+    radius: f64,
+    center: Center,
+}
+
+/// A state predicate.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Predicate {
+    /// See [`Halfspace`].
+    Halfspace(Halfspace),
+    /// See [`Ball`].
+    Ball(Ball),
+}
+
+fn check_finite(what: &str, values: &[f64]) -> Result<(), SpecError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(SpecError::InvalidPredicate(format!(
+            "{what}[{i}] is {} (must be finite)",
+            values[i]
+        ))),
+        None => Ok(()),
+    }
+}
+
+fn check_distinct(what: &str, dims: &[usize]) -> Result<(), SpecError> {
+    for (i, d) in dims.iter().enumerate() {
+        if dims[..i].contains(d) {
+            return Err(SpecError::InvalidPredicate(format!(
+                "{what} lists dimension {d} twice"
+            )));
+        }
+    }
+    Ok(())
+}
+
+impl Predicate {
+    /// A half-space predicate `w . s + b`. `w` must be non-empty and finite, `b` finite.
+    pub fn halfspace(w: Vec<f64>, b: f64) -> Result<Self, SpecError> {
+        if w.is_empty() {
+            return Err(SpecError::InvalidPredicate(
+                "Halfspace w must have at least one entry".into(),
+            ));
+        }
+        check_finite("Halfspace w", &w)?;
+        check_finite("Halfspace b", &[b])?;
+        Ok(Predicate::Halfspace(Halfspace { w, b }))
+    }
+
+    /// A ball predicate `radius - |s[pos] - c|`. `pos` must be non-empty with distinct
+    /// dimensions, `radius` finite and non-negative, and the centre as long as `pos` (a state
+    /// centre must not share dimensions with `pos`).
+    pub fn ball(pos: Vec<usize>, radius: f64, center: Center) -> Result<Self, SpecError> {
+        if pos.is_empty() {
+            return Err(SpecError::InvalidPredicate(
+                "Ball pos must name at least one dimension".into(),
+            ));
+        }
+        check_distinct("Ball pos", &pos)?;
+        if !radius.is_finite() || radius < 0.0 {
+            return Err(SpecError::InvalidPredicate(format!(
+                "Ball radius must be finite and >= 0, got {radius}"
+            )));
+        }
+        let center_len = match &center {
+            Center::Fixed(c) => {
+                check_finite("Ball center", c)?;
+                c.len()
+            }
+            Center::Dims(d) => {
+                check_distinct("Ball center_dims", d)?;
+                if let Some(shared) = d.iter().find(|x| pos.contains(x)) {
+                    return Err(SpecError::InvalidPredicate(format!(
+                        "Ball center_dims shares dimension {shared} with pos"
+                    )));
+                }
+                d.len()
+            }
+        };
+        if center_len != pos.len() {
+            return Err(SpecError::InvalidPredicate(format!(
+                "Ball centre has {center_len} entries but pos has {}",
+                pos.len()
+            )));
+        }
+        Ok(Predicate::Ball(Ball {
+            pos,
+            radius,
+            center,
+        }))
+    }
+
+    /// The exact state length this predicate needs, if it fixes one (a half-space does).
+    pub fn exact_dim(&self) -> Option<usize> {
+        match self {
+            Predicate::Halfspace(h) => Some(h.w.len()),
+            Predicate::Ball(_) => None,
+        }
+    }
+
+    /// The smallest state length this predicate can read (largest index used + 1).
+    pub fn min_dim(&self) -> usize {
+        match self {
+            Predicate::Halfspace(h) => h.w.len(),
+            Predicate::Ball(b) => {
+                let center_max = match &b.center {
+                    Center::Fixed(_) => 0,
+                    Center::Dims(d) => d.iter().copied().max().map_or(0, |m| m + 1),
+                };
+                b.pos
+                    .iter()
+                    .copied()
+                    .max()
+                    .map_or(0, |m| m + 1)
+                    .max(center_max)
+            }
+        }
+    }
+
+    /// Checks that a state of length `n` can be read by this predicate.
+    pub fn check_dim(&self, n: usize) -> Result<(), InputError> {
+        let ok = match self.exact_dim() {
+            Some(d) => n == d,
+            None => n >= self.min_dim(),
+        };
+        if ok {
+            return Ok(());
+        }
+        Err(InputError::Shape {
+            what: "state length".into(),
+            expected: match self.exact_dim() {
+                Some(d) => d.to_string(),
+                None => format!("at least {}", self.min_dim()),
+            },
+            got: n.to_string(),
+        })
+    }
+
+    /// Robustness at state `s`. The caller guarantees `check_dim(s.len())`.
+    #[inline]
+    pub fn value(&self, s: &[f64]) -> f64 {
+        match self {
+            Predicate::Halfspace(h) => h.w.iter().zip(s).map(|(w, x)| w * x).sum::<f64>() + h.b,
+            Predicate::Ball(b) => b.radius - b.distance(s),
+        }
+    }
+
+    /// Gradient of [`Predicate::value`] at `s`, written into `out` (length `s.len()`).
+    /// At the centre of a ball the gradient is zero (never NaN).
+    pub fn gradient_into(&self, s: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        match self {
+            Predicate::Halfspace(h) => out[..h.w.len()].copy_from_slice(&h.w),
+            Predicate::Ball(b) => {
+                let dist = b.distance(s);
+                if dist == 0.0 {
+                    return;
+                }
+                for (k, &p) in b.pos.iter().enumerate() {
+                    let unit = (s[p] - b.center_at(s, k)) / dist;
+                    out[p] -= unit;
+                    if let Center::Dims(d) = &b.center {
+                        out[d[k]] += unit;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl Ball {
+    #[inline]
+    fn center_at(&self, s: &[f64], k: usize) -> f64 {
+        match &self.center {
+            Center::Fixed(c) => c[k],
+            Center::Dims(d) => s[d[k]],
+        }
+    }
+
+    #[inline]
+    fn distance(&self, s: &[f64]) -> f64 {
+        let mut sq = 0.0;
+        for (k, &p) in self.pos.iter().enumerate() {
+            let diff = s[p] - self.center_at(s, k);
+            sq += diff * diff;
+        }
+        sq.sqrt()
+    }
+
+    /// State dimensions of the point that must be inside the ball.
+    pub fn pos(&self) -> &[usize] {
+        &self.pos
+    }
+
+    /// The radius.
+    pub fn radius(&self) -> f64 {
+        self.radius
+    }
+
+    /// Where the centre comes from.
+    pub fn center(&self) -> &Center {
+        &self.center
+    }
+}
+
+impl Halfspace {
+    /// The normal vector.
+    pub fn w(&self) -> &[f64] {
+        &self.w
+    }
+
+    /// The offset.
+    pub fn b(&self) -> f64 {
+        self.b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn halfspace_value_and_gradient() {
+        let p = Predicate::halfspace(vec![1.0, -1.0], 1.5).unwrap();
+        assert_eq!(p.value(&[2.0, 1.0]), 2.5);
+        let mut g = [9.0; 2];
+        p.gradient_into(&[2.0, 1.0], &mut g);
+        assert_eq!(g, [1.0, -1.0]);
+    }
+
+    #[test]
+    fn ball_with_state_centre_value_and_gradient() {
+        let p = Predicate::ball(vec![0, 1], 1.0, Center::Dims(vec![2, 3])).unwrap();
+        let s = [3.0, 4.0, 0.0, 0.0];
+        assert_eq!(p.value(&s), -4.0);
+        let mut g = [0.0; 4];
+        p.gradient_into(&s, &mut g);
+        assert_eq!(g, [-0.6, -0.8, 0.6, 0.8]);
+    }
+
+    #[test]
+    fn ball_gradient_at_centre_is_zero() {
+        let p = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![1.0, 1.0])).unwrap();
+        let mut g = [f64::NAN; 2];
+        p.gradient_into(&[1.0, 1.0], &mut g);
+        assert_eq!(g, [0.0, 0.0]);
+        assert_eq!(p.value(&[1.0, 1.0]), 1.0);
+    }
+
+    #[test]
+    fn invalid_predicates_are_rejected() {
+        assert!(Predicate::ball(vec![0], -1.0, Center::Fixed(vec![0.0])).is_err());
+        assert!(Predicate::ball(vec![0], 1.0, Center::Fixed(vec![0.0, 1.0])).is_err());
+        assert!(Predicate::ball(vec![0, 0], 1.0, Center::Fixed(vec![0.0, 1.0])).is_err());
+        assert!(Predicate::ball(vec![0], 1.0, Center::Dims(vec![0])).is_err());
+        assert!(Predicate::ball(vec![], 1.0, Center::Fixed(vec![])).is_err());
+        assert!(Predicate::halfspace(vec![], 0.0).is_err());
+        assert!(Predicate::halfspace(vec![f64::NAN], 0.0).is_err());
+        assert!(Predicate::halfspace(vec![1.0], f64::INFINITY).is_err());
+    }
+
+    #[test]
+    fn dimension_checks_name_expected_and_got() {
+        let p = Predicate::ball(vec![0, 5], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
+        let err = p.check_dim(3).unwrap_err().to_string();
+        assert!(err.contains("at least 6") && err.contains("got 3"), "{err}");
+        let h = Predicate::halfspace(vec![1.0; 4], 0.0).unwrap();
+        assert!(h.check_dim(4).is_ok());
+        assert!(h.check_dim(5).is_err());
+    }
+}

@@ -1,0 +1,638 @@
+//! Quantitative (robustness) and Boolean semantics of scTLTL over finite trajectories.
+//!
+//! The window is CLOSED: a trajectory `s_0..s_T` is read including `s_T`, so `rho > 0` agrees
+//! with an automaton that reads every state. (The paper's example `rho(s_0:3, F(s<4))` takes the
+//! max over `s_0..s_2`; we take it over `s_0..s_3`.)
+//!
+//! Both semantics are computed in ONE backward sweep over time: every operator's value at `t`
+//! depends only on its operands at `t` and on values at `t + 1`
+//! (`F a = max(a, (F a)')`, `a U b = max(b, min(a, (a U b)'))`, `X a = a'`), so evaluation
+//! needs two value slots per formula node instead of one array per node.
+
+use rayon::prelude::*;
+
+use crate::error::InputError;
+use crate::spec::{Formula, Spec};
+
+/// One instruction of a compiled formula; operands are indices of earlier instructions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Op {
+    True,
+    False,
+    Atom(usize),
+    Not(usize),
+    And(usize, usize),
+    Or(usize, usize),
+    Implies(usize, usize),
+    Until(usize, usize),
+    Eventually(usize),
+    Next(usize),
+}
+
+/// A formula compiled to post-order instructions (the root is last).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Program {
+    ops: Vec<Op>,
+}
+
+impl Program {
+    pub(crate) fn compile(formula: &Formula) -> Self {
+        let mut ops = Vec::new();
+        Self::emit(formula, &mut ops);
+        Program { ops }
+    }
+
+    fn emit(formula: &Formula, ops: &mut Vec<Op>) -> usize {
+        let op = match formula {
+            Formula::True => Op::True,
+            Formula::False => Op::False,
+            Formula::Atom(i) => Op::Atom(*i),
+            Formula::Not(a) => Op::Not(Self::emit(a, ops)),
+            Formula::Eventually(a) => Op::Eventually(Self::emit(a, ops)),
+            Formula::Next(a) => Op::Next(Self::emit(a, ops)),
+            Formula::Implies(a, b) => {
+                let a = Self::emit(a, ops);
+                Op::Implies(a, Self::emit(b, ops))
+            }
+            Formula::Until(a, b) => {
+                let a = Self::emit(a, ops);
+                Op::Until(a, Self::emit(b, ops))
+            }
+            Formula::And(parts) | Formula::Or(parts) => {
+                let conj = matches!(formula, Formula::And(_));
+                let mut acc = Self::emit(&parts[0], ops);
+                for part in &parts[1..] {
+                    let next = Self::emit(part, ops);
+                    ops.push(if conj {
+                        Op::And(acc, next)
+                    } else {
+                        Op::Or(acc, next)
+                    });
+                    acc = ops.len() - 1;
+                }
+                return acc;
+            }
+        };
+        ops.push(op);
+        ops.len() - 1
+    }
+}
+
+/// A value domain for the backward sweep: real robustness or Boolean truth.
+trait Semantics {
+    type Value: Copy;
+    const TOP: Self::Value;
+    const BOTTOM: Self::Value;
+    fn atom(rho: f64) -> Self::Value;
+    fn not(a: Self::Value) -> Self::Value;
+    fn and(a: Self::Value, b: Self::Value) -> Self::Value;
+    fn or(a: Self::Value, b: Self::Value) -> Self::Value;
+}
+
+struct Quantitative;
+
+impl Semantics for Quantitative {
+    type Value = f64;
+    const TOP: f64 = f64::INFINITY;
+    const BOTTOM: f64 = f64::NEG_INFINITY;
+    #[inline]
+    fn atom(rho: f64) -> f64 {
+        rho
+    }
+    #[inline]
+    fn not(a: f64) -> f64 {
+        -a
+    }
+    #[inline]
+    fn and(a: f64, b: f64) -> f64 {
+        a.min(b)
+    }
+    #[inline]
+    fn or(a: f64, b: f64) -> f64 {
+        a.max(b)
+    }
+}
+
+struct Boolean;
+
+impl Semantics for Boolean {
+    type Value = bool;
+    const TOP: bool = true;
+    const BOTTOM: bool = false;
+    #[inline]
+    fn atom(rho: f64) -> bool {
+        rho > 0.0
+    }
+    #[inline]
+    fn not(a: bool) -> bool {
+        !a
+    }
+    #[inline]
+    fn and(a: bool, b: bool) -> bool {
+        a && b
+    }
+    #[inline]
+    fn or(a: bool, b: bool) -> bool {
+        a || b
+    }
+}
+
+/// A validated, row-major view of states `s_0..s_T` (T + 1 rows of `dim` values).
+#[derive(Debug, Clone, Copy)]
+pub struct Trajectory<'a> {
+    data: &'a [f64],
+    dim: usize,
+}
+
+impl<'a> Trajectory<'a> {
+    /// Wraps `data` as rows of `dim` values. Needs at least one row and finite values.
+    pub fn new(data: &'a [f64], dim: usize) -> Result<Self, InputError> {
+        if dim == 0 || data.is_empty() || data.len() % dim != 0 {
+            return Err(InputError::Shape {
+                what: "trajectory".into(),
+                expected: "at least one state of at least one value".into(),
+                got: format!("{} values in rows of {dim}", data.len()),
+            });
+        }
+        check_finite("traj", data, dim)?;
+        Ok(Trajectory { data, dim })
+    }
+
+    /// Number of states (T + 1).
+    pub fn len(&self) -> usize {
+        self.data.len() / self.dim
+    }
+
+    /// Always false: a trajectory holds at least one state.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// State `t`.
+    #[inline]
+    pub fn state(&self, t: usize) -> &'a [f64] {
+        &self.data[t * self.dim..(t + 1) * self.dim]
+    }
+
+    /// Length of each state.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+}
+
+/// A validated batch of equally long trajectories, `(B, T + 1, dim)` in C order.
+#[derive(Debug, Clone, Copy)]
+pub struct TrajectoryBatch<'a> {
+    data: &'a [f64],
+    steps: usize,
+    dim: usize,
+}
+
+impl<'a> TrajectoryBatch<'a> {
+    /// Wraps `data` as `batch` trajectories of `steps` states of `dim` values each.
+    pub fn new(
+        data: &'a [f64],
+        batch: usize,
+        steps: usize,
+        dim: usize,
+    ) -> Result<Self, InputError> {
+        if steps == 0 || dim == 0 {
+            return Err(InputError::Shape {
+                what: "trajs".into(),
+                expected: "at least one state of at least one value per trajectory".into(),
+                got: format!("({batch}, {steps}, {dim})"),
+            });
+        }
+        if data.len() != batch * steps * dim {
+            return Err(InputError::Shape {
+                what: "trajs".into(),
+                expected: format!(
+                    "{} values for shape ({batch}, {steps}, {dim})",
+                    batch * steps * dim
+                ),
+                got: data.len().to_string(),
+            });
+        }
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            let (b, rest) = (i / (steps * dim), i % (steps * dim));
+            return Err(InputError::NonFinite {
+                what: format!("trajs[{b}, {}, {}]", rest / dim, rest % dim),
+                value: data[i],
+            });
+        }
+        Ok(TrajectoryBatch { data, steps, dim })
+    }
+
+    /// Number of trajectories.
+    pub fn len(&self) -> usize {
+        self.data.len() / (self.steps * self.dim)
+    }
+
+    /// Whether the batch holds no trajectory.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    fn trajectories(&self) -> impl IndexedParallelIterator<Item = Trajectory<'a>> + 'a {
+        let dim = self.dim;
+        self.data
+            .par_chunks(self.steps * self.dim)
+            .map(move |data| Trajectory { data, dim })
+    }
+}
+
+/// Reports the first non-finite value of a row-major array as `name[row, col]`.
+pub(crate) fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), InputError> {
+    match data.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(i) if data.len() == dim => Err(InputError::NonFinite {
+            what: format!("{name}[{i}]"),
+            value: data[i],
+        }),
+        Some(i) => Err(InputError::NonFinite {
+            what: format!("{name}[{}, {}]", i / dim, i % dim),
+            value: data[i],
+        }),
+    }
+}
+
+/// Reusable buffers for evaluation, so repeated calls allocate nothing.
+#[derive(Debug, Default, Clone)]
+pub struct Scratch {
+    atoms: Vec<f64>,
+    cur_f: Vec<f64>,
+    next_f: Vec<f64>,
+    cur_b: Vec<bool>,
+    next_b: Vec<bool>,
+}
+
+trait Buffers<V> {
+    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<V>, &mut Vec<V>);
+}
+
+impl Buffers<f64> for Scratch {
+    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>) {
+        (&mut self.atoms, &mut self.cur_f, &mut self.next_f)
+    }
+}
+
+impl Buffers<bool> for Scratch {
+    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<bool>, &mut Vec<bool>) {
+        (&mut self.atoms, &mut self.cur_b, &mut self.next_b)
+    }
+}
+
+fn sweep<S: Semantics>(spec: &Spec, traj: Trajectory<'_>, scratch: &mut Scratch) -> S::Value
+where
+    Scratch: Buffers<S::Value>,
+{
+    let ops = &spec.program.ops;
+    // Slots start at BOTTOM: the value "after the end" of F, U and X is false / -inf.
+    let (atoms, cur, next) = scratch.split();
+    atoms.resize(spec.atoms().len(), 0.0);
+    cur.clear();
+    cur.resize(ops.len(), S::BOTTOM);
+    next.clear();
+    next.resize(ops.len(), S::BOTTOM);
+    for t in (0..traj.len()).rev() {
+        spec.atom_robustness_into(traj.state(t), atoms);
+        for (i, op) in ops.iter().enumerate() {
+            cur[i] = match *op {
+                Op::True => S::TOP,
+                Op::False => S::BOTTOM,
+                Op::Atom(k) => S::atom(atoms[k]),
+                Op::Not(a) => S::not(cur[a]),
+                Op::And(a, b) => S::and(cur[a], cur[b]),
+                Op::Or(a, b) => S::or(cur[a], cur[b]),
+                Op::Implies(a, b) => S::or(S::not(cur[a]), cur[b]),
+                Op::Until(a, b) => S::or(cur[b], S::and(cur[a], next[i])),
+                Op::Eventually(a) => S::or(cur[a], next[i]),
+                Op::Next(a) => next[a],
+            };
+        }
+        std::mem::swap(cur, next);
+    }
+    next[ops.len() - 1]
+}
+
+impl Spec {
+    fn check_trajectory(&self, traj: &Trajectory<'_>) -> Result<(), InputError> {
+        self.check_state_len(traj.dim())
+    }
+
+    /// Robustness `rho(s_0..s_T, phi)` at `t = 0` (closed window).
+    pub fn robustness(&self, traj: Trajectory<'_>) -> Result<f64, InputError> {
+        self.robustness_with(traj, &mut Scratch::default())
+    }
+
+    /// [`Spec::robustness`] reusing `scratch` (no allocation after the first call).
+    pub fn robustness_with(
+        &self,
+        traj: Trajectory<'_>,
+        scratch: &mut Scratch,
+    ) -> Result<f64, InputError> {
+        self.check_trajectory(&traj)?;
+        Ok(sweep::<Quantitative>(self, traj, scratch))
+    }
+
+    /// Boolean satisfaction of the whole trajectory (an atom holds iff its robustness is > 0).
+    pub fn satisfied(&self, traj: Trajectory<'_>) -> Result<bool, InputError> {
+        self.check_trajectory(&traj)?;
+        Ok(sweep::<Boolean>(self, traj, &mut Scratch::default()))
+    }
+
+    /// Robustness of every trajectory of a batch, in parallel (rayon).
+    pub fn robustness_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<f64>, InputError> {
+        self.check_state_len(batch.dim)?;
+        let mut out = vec![0.0; batch.len()];
+        out.par_iter_mut().zip(batch.trajectories()).for_each_init(
+            Scratch::default,
+            |scratch, (o, traj)| {
+                *o = sweep::<Quantitative>(self, traj, scratch);
+            },
+        );
+        Ok(out)
+    }
+
+    /// Boolean satisfaction of every trajectory of a batch, in parallel (rayon).
+    pub fn satisfied_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<bool>, InputError> {
+        self.check_state_len(batch.dim)?;
+        let mut out = vec![false; batch.len()];
+        out.par_iter_mut().zip(batch.trajectories()).for_each_init(
+            Scratch::default,
+            |scratch, (o, traj)| {
+                *o = sweep::<Boolean>(self, traj, scratch);
+            },
+        );
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::{Center, Predicate};
+    use proptest::prelude::*;
+
+    /// Direct transcription of the semantics (DESIGN.md), O(T^2) per operator: the oracle.
+    fn brute(spec: &Spec, f: &Formula, traj: &Trajectory<'_>, t: usize) -> f64 {
+        let last = traj.len() - 1;
+        match f {
+            Formula::True => f64::INFINITY,
+            Formula::False => f64::NEG_INFINITY,
+            Formula::Atom(k) => spec.predicates()[*k].value(traj.state(t)),
+            Formula::Not(a) => -brute(spec, a, traj, t),
+            Formula::And(v) => v
+                .iter()
+                .map(|g| brute(spec, g, traj, t))
+                .fold(f64::INFINITY, f64::min),
+            Formula::Or(v) => v
+                .iter()
+                .map(|g| brute(spec, g, traj, t))
+                .fold(f64::NEG_INFINITY, f64::max),
+            Formula::Implies(a, b) => (-brute(spec, a, traj, t)).max(brute(spec, b, traj, t)),
+            Formula::Eventually(a) => (t..=last)
+                .map(|u| brute(spec, a, traj, u))
+                .fold(f64::NEG_INFINITY, f64::max),
+            Formula::Next(a) if t < last => brute(spec, a, traj, t + 1),
+            Formula::Next(_) => f64::NEG_INFINITY,
+            Formula::Until(a, b) => (t..=last)
+                .map(|u| {
+                    let before = (t..u)
+                        .map(|v| brute(spec, a, traj, v))
+                        .fold(f64::INFINITY, f64::min);
+                    brute(spec, b, traj, u).min(before)
+                })
+                .fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+
+    /// Boolean oracle: quantifiers over time, atoms hold iff robustness > 0.
+    fn brute_bool(spec: &Spec, f: &Formula, traj: &Trajectory<'_>, t: usize) -> bool {
+        let last = traj.len() - 1;
+        match f {
+            Formula::True => true,
+            Formula::False => false,
+            Formula::Atom(k) => spec.predicates()[*k].value(traj.state(t)) > 0.0,
+            Formula::Not(a) => !brute_bool(spec, a, traj, t),
+            Formula::And(v) => v.iter().all(|g| brute_bool(spec, g, traj, t)),
+            Formula::Or(v) => v.iter().any(|g| brute_bool(spec, g, traj, t)),
+            Formula::Implies(a, b) => !brute_bool(spec, a, traj, t) || brute_bool(spec, b, traj, t),
+            Formula::Eventually(a) => (t..=last).any(|u| brute_bool(spec, a, traj, u)),
+            Formula::Next(a) => t < last && brute_bool(spec, a, traj, t + 1),
+            Formula::Until(a, b) => (t..=last).any(|u| {
+                brute_bool(spec, b, traj, u) && (t..u).all(|v| brute_bool(spec, a, traj, v))
+            }),
+        }
+    }
+
+    const NAMES: [&str; 4] = ["p", "q", "r", "ball"];
+
+    fn predicates() -> Vec<(&'static str, Predicate)> {
+        let axis = |k: usize| {
+            let mut w = vec![0.0; 3];
+            w[k] = 1.0;
+            Predicate::halfspace(w, 0.0).unwrap()
+        };
+        vec![
+            ("p", axis(0)),
+            ("q", axis(1)),
+            ("r", axis(2)),
+            (
+                "ball",
+                Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.5, -0.5])).unwrap(),
+            ),
+        ]
+    }
+
+    fn propositional() -> impl Strategy<Value = Formula> {
+        let leaf = prop_oneof![
+            8 => (0..NAMES.len()).prop_map(Formula::Atom),
+            1 => Just(Formula::True),
+            1 => Just(Formula::False),
+        ];
+        leaf.prop_recursive(3, 12, 3, |inner| {
+            prop_oneof![
+                inner.clone().prop_map(|a| Formula::Not(Box::new(a))),
+                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::and(vec![a, b])),
+                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::or(vec![a, b])),
+                (inner.clone(), inner)
+                    .prop_map(|(a, b)| Formula::Implies(Box::new(a), Box::new(b))),
+            ]
+        })
+    }
+
+    /// Random syntactically co-safe formulas.
+    fn co_safe() -> impl Strategy<Value = Formula> {
+        propositional().prop_recursive(4, 24, 3, |inner| {
+            prop_oneof![
+                propositional().prop_map(|a| Formula::Not(Box::new(a))),
+                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::and(vec![a, b])),
+                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::or(vec![a, b])),
+                (propositional(), inner.clone())
+                    .prop_map(|(a, b)| Formula::Implies(Box::new(a), Box::new(b))),
+                (inner.clone(), inner.clone())
+                    .prop_map(|(a, b)| Formula::Until(Box::new(a), Box::new(b))),
+                inner.clone().prop_map(|a| Formula::Eventually(Box::new(a))),
+                inner.prop_map(|a| Formula::Next(Box::new(a))),
+            ]
+        })
+    }
+
+    /// Trajectories on a coarse grid (so ties and exact zeros happen) or continuous values.
+    fn trajectory() -> impl Strategy<Value = Vec<f64>> {
+        let value = prop_oneof![(-2i32..=2).prop_map(|v| v as f64 * 0.5), -2.0..2.0f64];
+        (1usize..8).prop_flat_map(move |steps| prop::collection::vec(value.clone(), steps * 3))
+    }
+
+    fn spec_for(f: &Formula) -> Spec {
+        let names: Vec<String> = NAMES.iter().map(|s| s.to_string()).collect();
+        Spec::new(&f.display(&names).to_string(), predicates()).unwrap()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        #[test]
+        fn sweep_matches_brute_force(f in co_safe(), data in trajectory()) {
+            let spec = spec_for(&f);
+            let traj = Trajectory::new(&data, 3).unwrap();
+            let rho = spec.robustness(traj).unwrap();
+            let expected = brute(&spec, spec.formula(), &traj, 0);
+            prop_assert_eq!(rho, expected);
+            let sat = spec.satisfied(traj).unwrap();
+            prop_assert_eq!(sat, brute_bool(&spec, spec.formula(), &traj, 0));
+            if rho > 0.0 { prop_assert!(sat, "rho = {} > 0 but not satisfied", rho); }
+            if rho < 0.0 { prop_assert!(!sat, "rho = {} < 0 but satisfied", rho); }
+        }
+
+        #[test]
+        fn canonical_text_round_trips(f in co_safe()) {
+            let names: Vec<String> = NAMES.iter().map(|s| s.to_string()).collect();
+            let text = f.display(&names).to_string();
+            let (parsed, atoms) = Formula::parse(&text).unwrap();
+            prop_assert_eq!(parsed.display(&atoms).to_string(), text);
+        }
+
+        #[test]
+        fn batch_equals_single_calls(f in co_safe(), data in prop::collection::vec(-2.0..2.0f64, 4 * 5 * 3)) {
+            let spec = spec_for(&f);
+            let batch = spec.robustness_batch(TrajectoryBatch::new(&data, 4, 5, 3).unwrap()).unwrap();
+            let sats = spec.satisfied_batch(TrajectoryBatch::new(&data, 4, 5, 3).unwrap()).unwrap();
+            for (b, chunk) in data.chunks(15).enumerate() {
+                let traj = Trajectory::new(chunk, 3).unwrap();
+                prop_assert_eq!(batch[b], spec.robustness(traj).unwrap());
+                prop_assert_eq!(sats[b], spec.satisfied(traj).unwrap());
+            }
+        }
+
+        #[test]
+        fn parser_never_panics(text in "\\PC{0,40}") {
+            let _ = Formula::parse(&text);
+        }
+
+        #[test]
+        fn parser_never_panics_on_formula_like_text(text in "[a-c FXGU!&|()<>=\\[\\]-]{0,40}") {
+            let _ = Formula::parse(&text);
+        }
+    }
+
+    fn one_dim(formula: &str, name: &str, predicate: Predicate) -> Spec {
+        Spec::new(formula, [(name, predicate)]).unwrap()
+    }
+
+    #[test]
+    fn paper_example_eventually_below_four_closed_window() {
+        // Paper Sec. III-B: rho(s_0:3, F(s < 4)) = max(4 - s_t); our window includes s_3.
+        let spec = one_dim(
+            "F low",
+            "low",
+            Predicate::halfspace(vec![-1.0], 4.0).unwrap(),
+        );
+        let states = [6.0, 5.0, 4.5, 3.5];
+        let rho = spec
+            .robustness(Trajectory::new(&states, 1).unwrap())
+            .unwrap();
+        assert_eq!(rho, 0.5);
+        // The paper's half-open window would give max(-2, -1, -0.5) = -0.5 here.
+        assert!(spec
+            .satisfied(Trajectory::new(&states, 1).unwrap())
+            .unwrap());
+        let short = &states[..3];
+        assert_eq!(
+            spec.robustness(Trajectory::new(short, 1).unwrap()).unwrap(),
+            -0.5
+        );
+    }
+
+    fn running_example() -> Spec {
+        // Regions a, b, c of radius 1 on a line (paper Sec. V); state = [x, y].
+        let region =
+            |x: f64| Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![x, 0.0])).unwrap();
+        Spec::new(
+            "(F a | F b) & F c & ((!a & !b) U c)",
+            [("a", region(0.0)), ("b", region(4.0)), ("c", region(8.0))],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn paper_running_example_visit_c_then_a() {
+        let spec = running_example();
+        // Start between a and b (outside both), go to c, then back to a.
+        let path = [2.0, 0.0, 8.0, 0.0, 0.0, 0.0];
+        let traj = Trajectory::new(&path, 2).unwrap();
+        assert!(spec.satisfied(traj).unwrap());
+        // Every conjunct holds with margin 1 (centres reached); the binding term is the until:
+        // !a & !b at s_0 has robustness min(|2-0|-1, |2-4|-1) = 1.
+        assert_eq!(spec.robustness(traj).unwrap(), 1.0);
+    }
+
+    #[test]
+    fn paper_running_example_a_before_c_violates() {
+        let spec = running_example();
+        let path = [2.0, 0.0, 0.0, 0.0, 8.0, 0.0];
+        let traj = Trajectory::new(&path, 2).unwrap();
+        assert!(!spec.satisfied(traj).unwrap());
+        // (!a & !b) fails at s_1 by 1 before c is reached at s_2: the until scores -1.
+        assert_eq!(spec.robustness(traj).unwrap(), -1.0);
+    }
+
+    #[test]
+    fn constants_and_next_at_the_end() {
+        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
+        let spec = one_dim("X p", "p", p.clone());
+        let one = [1.0];
+        assert_eq!(
+            spec.robustness(Trajectory::new(&one, 1).unwrap()).unwrap(),
+            f64::NEG_INFINITY
+        );
+        let spec = one_dim("F true | p", "p", p);
+        assert_eq!(
+            spec.robustness(Trajectory::new(&one, 1).unwrap()).unwrap(),
+            f64::INFINITY
+        );
+    }
+
+    #[test]
+    fn bad_trajectories_are_errors() {
+        assert!(Trajectory::new(&[], 1).is_err());
+        assert!(Trajectory::new(&[1.0, 2.0, 3.0], 2).is_err());
+        let err = Trajectory::new(&[1.0, 2.0, f64::NAN, 0.0], 2).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "traj[1, 0] is NaN (all values must be finite)"
+        );
+        let err = TrajectoryBatch::new(&[0.0, 0.0, 0.0, f64::INFINITY], 2, 1, 2).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "trajs[1, 0, 1] is inf (all values must be finite)"
+        );
+        assert!(TrajectoryBatch::new(&[0.0; 5], 2, 1, 2).is_err());
+        let spec = running_example();
+        let err = spec
+            .robustness(Trajectory::new(&[0.0], 1).unwrap())
+            .unwrap_err();
+        assert_eq!(err.to_string(), "state length: expected at least 2, got 1");
+    }
+}
