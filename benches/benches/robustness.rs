@@ -1,6 +1,7 @@
 //! Robustness of the paper's task over T = 200 trajectories: one at a time and a batch of 1000.
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use std::hint::black_box;
 use tlshield_bench::{random_trajectories, task_spec, STATE_DIM};
 use tlshield_core::{Scratch, Trajectory, TrajectoryBatch};
 

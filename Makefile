@@ -1,0 +1,32 @@
+# The two quick-start commands:  `make run` (the main job) and `make test` (every test).
+# Both install what they need into .venv first (scripts/setup.sh).
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: run test bench lint setup
+
+setup:
+	@bash scripts/setup.sh
+
+## The main job on its defaults.
+run: setup
+	$(BIN)/python -m tlshield demo
+
+## Every test: Rust (cargo test) and Python (pytest).
+test: setup
+	cargo test --workspace
+	$(BIN)/python -m pytest
+
+## Benchmarks: criterion, then the Python comparison against rtamt and argus.
+bench:
+	@EXTRAS=train,test,bench bash scripts/setup.sh
+	cargo bench -p tlshield-bench
+	$(BIN)/python benches/compare_robustness.py
+
+## Formatting and lints (rustfmt, clippy, ruff, stubtest).
+lint:
+	@EXTRAS=train,test,lint bash scripts/setup.sh
+	cargo fmt --all -- --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	$(BIN)/ruff check python tests benches
+	$(BIN)/ruff format --check python tests benches

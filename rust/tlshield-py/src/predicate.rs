@@ -1,0 +1,228 @@
+//! `Halfspace` and `Ball`: Python classes around `tlshield_core::Predicate`.
+
+use numpy::{IntoPyArray, PyArray1};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use tlshield_core::{Center, Predicate};
+
+use crate::convert::{indices, FloatArray};
+use crate::errors::map;
+
+fn state<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
+    FloatArray::extract(obj, "s", 1, "(n,)")
+}
+
+fn value(p: &Predicate, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+    map(p.robustness(&state(s)?.values()))
+}
+
+fn gradient<'py>(p: &Predicate, s: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    Ok(map(p.gradient(&state(s)?.values()))?.into_pyarray(s.py()))
+}
+
+fn fmt_list<T: std::fmt::Debug>(v: &[T]) -> String {
+    format!("{v:?}")
+}
+
+/// Half-space predicate `rho(s) = w . s + b` (holds iff > 0).
+#[pyclass(name = "Halfspace", module = "tlshield._core", frozen)]
+pub struct PyHalfspace {
+    pub(crate) inner: Predicate,
+}
+
+#[pymethods]
+impl PyHalfspace {
+    #[new]
+    fn new(w: &Bound<'_, PyAny>, b: f64) -> PyResult<Self> {
+        let w = FloatArray::extract(w, "w", 1, "(n,)")?
+            .values()
+            .into_owned();
+        Ok(PyHalfspace {
+            inner: map(Predicate::halfspace(w, b))?,
+        })
+    }
+
+    /// Robustness `w . s + b` at state `s`.
+    fn robustness(&self, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+        value(&self.inner, s)
+    }
+
+    /// Gradient of the robustness at `s` (equals `w`).
+    fn gradient<'py>(&self, s: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        gradient(&self.inner, s)
+    }
+
+    /// The normal vector.
+    #[getter]
+    fn w<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.halfspace().w().to_vec().into_pyarray(py)
+    }
+
+    /// The offset.
+    #[getter]
+    fn b(&self) -> f64 {
+        self.halfspace().b()
+    }
+
+    fn __repr__(&self) -> String {
+        let h = self.halfspace();
+        format!("Halfspace(w={}, b={:?})", fmt_list(h.w()), h.b())
+    }
+
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let h = slf.get().halfspace();
+        let args = PyTuple::new(
+            py,
+            [
+                h.w().to_vec().into_pyobject(py)?.into_any(),
+                h.b().into_pyobject(py)?.into_any(),
+            ],
+        )?;
+        Ok((slf.get_type().into_any(), args))
+    }
+}
+
+impl PyHalfspace {
+    fn halfspace(&self) -> &tlshield_core::Halfspace {
+        match &self.inner {
+            Predicate::Halfspace(h) => h,
+            Predicate::Ball(_) => unreachable!("PyHalfspace always wraps a half-space"),
+        }
+    }
+}
+
+/// Ball predicate `rho(s) = radius - |s[pos] - c|` with a fixed centre `center` or a centre read
+/// from the state dimensions `center_dims` (give exactly one).
+#[pyclass(name = "Ball", module = "tlshield._core", frozen)]
+pub struct PyBall {
+    pub(crate) inner: Predicate,
+}
+
+#[pymethods]
+impl PyBall {
+    #[new]
+    #[pyo3(signature = (pos, radius, center=None, center_dims=None))]
+    fn new(
+        pos: &Bound<'_, PyAny>,
+        radius: f64,
+        center: Option<&Bound<'_, PyAny>>,
+        center_dims: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let pos = indices(pos, "pos")?;
+        let center = match (center, center_dims) {
+            (Some(c), None) => {
+                Center::Fixed(FloatArray::extract(c, "center", 1, "(len(pos),)")?.values().into_owned())
+            }
+            (None, Some(d)) => Center::Dims(indices(d, "center_dims")?),
+            (None, None) => {
+                return Err(PyValueError::new_err(
+                    "Ball needs a centre: pass center=[...] (fixed) or center_dims=[...] (read from the state)",
+                ))
+            }
+            (Some(_), Some(_)) => {
+                return Err(PyValueError::new_err(
+                    "Ball takes center or center_dims, not both",
+                ))
+            }
+        };
+        Ok(PyBall {
+            inner: map(Predicate::ball(pos, radius, center))?,
+        })
+    }
+
+    /// Robustness `radius - |s[pos] - c|` at state `s`.
+    fn robustness(&self, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+        value(&self.inner, s)
+    }
+
+    /// Gradient of the robustness at `s` (zero at the centre).
+    fn gradient<'py>(&self, s: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        gradient(&self.inner, s)
+    }
+
+    /// State dimensions of the point that must be inside.
+    #[getter]
+    fn pos(&self) -> Vec<usize> {
+        self.ball().pos().to_vec()
+    }
+
+    /// The radius.
+    #[getter]
+    fn radius(&self) -> f64 {
+        self.ball().radius()
+    }
+
+    /// The fixed centre, or None when it is read from the state.
+    #[getter]
+    fn center(&self) -> Option<Vec<f64>> {
+        match self.ball().center() {
+            Center::Fixed(c) => Some(c.clone()),
+            Center::Dims(_) => None,
+        }
+    }
+
+    /// The state dimensions holding the centre, or None for a fixed centre.
+    #[getter]
+    fn center_dims(&self) -> Option<Vec<usize>> {
+        match self.ball().center() {
+            Center::Fixed(_) => None,
+            Center::Dims(d) => Some(d.clone()),
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let b = self.ball();
+        let centre = match b.center() {
+            Center::Fixed(c) => format!("center={}", fmt_list(c)),
+            Center::Dims(d) => format!("center_dims={}", fmt_list(d)),
+        };
+        format!(
+            "Ball(pos={}, radius={:?}, {centre})",
+            fmt_list(b.pos()),
+            b.radius()
+        )
+    }
+
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let b = slf.get().ball();
+        let none = py.None().into_bound(py);
+        let (center, dims) = match b.center() {
+            Center::Fixed(c) => (c.clone().into_pyobject(py)?.into_any(), none),
+            Center::Dims(d) => (none, d.clone().into_pyobject(py)?.into_any()),
+        };
+        let args = PyTuple::new(
+            py,
+            [
+                b.pos().to_vec().into_pyobject(py)?.into_any(),
+                b.radius().into_pyobject(py)?.into_any(),
+                center,
+                dims,
+            ],
+        )?;
+        Ok((slf.get_type().into_any(), args))
+    }
+}
+
+impl PyBall {
+    fn ball(&self) -> &tlshield_core::Ball {
+        match &self.inner {
+            Predicate::Ball(b) => b,
+            Predicate::Halfspace(_) => unreachable!("PyBall always wraps a ball"),
+        }
+    }
+}
+
+/// Wraps a core predicate in the matching Python class.
+pub fn to_python<'py>(py: Python<'py>, p: &Predicate) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match p {
+        Predicate::Halfspace(_) => Bound::new(py, PyHalfspace { inner: p.clone() })?.into_any(),
+        Predicate::Ball(_) => Bound::new(py, PyBall { inner: p.clone() })?.into_any(),
+    })
+}

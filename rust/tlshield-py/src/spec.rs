@@ -1,0 +1,157 @@
+//! `Spec`: a formula with its predicates; robustness of trajectories, single and batched.
+
+use numpy::{IntoPyArray, PyArray1};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use tlshield_core::{Predicate, Spec, Trajectory, TrajectoryBatch};
+
+use crate::convert::FloatArray;
+use crate::errors::map;
+use crate::predicate::{to_python, PyBall, PyHalfspace};
+
+/// An scTLTL formula over named state predicates.
+#[pyclass(name = "Spec", module = "tlshield._core", frozen)]
+pub struct PySpec {
+    pub(crate) inner: Spec,
+}
+
+fn predicate_of(key: &Bound<'_, PyAny>, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
+    if let Ok(h) = value.cast::<PyHalfspace>() {
+        return Ok(h.get().inner.clone());
+    }
+    if let Ok(b) = value.cast::<PyBall>() {
+        return Ok(b.get().inner.clone());
+    }
+    Err(PyTypeError::new_err(format!(
+        "predicates[{}]: expected a tlshield.Halfspace or tlshield.Ball, got {}",
+        key.repr().map_or_else(|_| "?".into(), |r| r.to_string()),
+        value
+            .get_type()
+            .name()
+            .map_or_else(|_| "?".into(), |n| n.to_string())
+    )))
+}
+
+fn trajectory<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
+    FloatArray::extract(obj, "traj", 2, "(T+1, n)")
+}
+
+#[pymethods]
+impl PySpec {
+    #[new]
+    fn new(formula: &str, predicates: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let items = predicates.call_method0("items").map_err(|_| {
+            PyTypeError::new_err(format!(
+                "predicates: expected a mapping of atom names to predicates, got {}",
+                predicates
+                    .get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
+            ))
+        })?;
+        let mut bound = Vec::new();
+        for item in items.try_iter()? {
+            let (key, value): (Bound<'_, PyAny>, Bound<'_, PyAny>) = item?.extract()?;
+            let name: String = key.extract().map_err(|_| {
+                PyTypeError::new_err(format!(
+                    "predicates: keys must be atom names (str), got {}",
+                    key.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+                ))
+            })?;
+            let predicate = predicate_of(&key, &value)?;
+            bound.push((name, predicate));
+        }
+        Ok(PySpec {
+            inner: map(Spec::new(formula, bound))?,
+        })
+    }
+
+    /// Atom names in order of first appearance in the formula.
+    #[getter]
+    fn atoms(&self) -> Vec<String> {
+        self.inner.atoms().to_vec()
+    }
+
+    /// The predicates of the atoms, by name.
+    #[getter]
+    fn predicates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let dict = PyDict::new(py);
+        for (name, p) in self.inner.atoms().iter().zip(self.inner.predicates()) {
+            dict.set_item(name, to_python(py, p)?)?;
+        }
+        Ok(dict)
+    }
+
+    /// Robustness of every atom at state `s`, shape (n_atoms,).
+    fn atom_robustness<'py>(
+        &self,
+        py: Python<'py>,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let s = FloatArray::extract(s, "s", 1, "(n,)")?;
+        Ok(map(self.inner.atom_robustness(&s.values()))?.into_pyarray(py))
+    }
+
+    /// Robustness of the trajectory `traj` (shape (T+1, n)) at t = 0, closed window.
+    fn robustness(&self, traj: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let arr = trajectory(traj)?;
+        let values = arr.values();
+        map(self
+            .inner
+            .robustness(map(Trajectory::new(&values, arr.shape()[1]))?))
+    }
+
+    /// Whether the trajectory satisfies the formula (Boolean semantics).
+    fn satisfied(&self, traj: &Bound<'_, PyAny>) -> PyResult<bool> {
+        let arr = trajectory(traj)?;
+        let values = arr.values();
+        map(self
+            .inner
+            .satisfied(map(Trajectory::new(&values, arr.shape()[1]))?))
+    }
+
+    /// Robustness of each trajectory of `trajs` (shape (B, T+1, n)) -> (B,), computed in
+    /// parallel with the GIL released.
+    fn robustness_batch<'py>(
+        &self,
+        py: Python<'py>,
+        trajs: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let arr = FloatArray::extract(trajs, "trajs", 3, "(B, T+1, n)")?;
+        let shape = arr.shape();
+        let (b, t, n) = (shape[0], shape[1], shape[2]);
+        let values = arr.values();
+        let batch = map(TrajectoryBatch::new(&values, b, t, n))?;
+        let spec = &self.inner;
+        let out = py.detach(|| spec.robustness_batch(batch));
+        Ok(map(out)?.into_pyarray(py))
+    }
+
+    fn __str__(&self) -> String {
+        self.inner.to_string()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Spec({:?}, atoms={:?})",
+            self.inner.to_string(),
+            self.inner.atoms()
+        )
+    }
+
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let this = slf.get();
+        let args = PyTuple::new(
+            py,
+            [
+                this.inner.to_string().into_pyobject(py)?.into_any(),
+                this.predicates(py)?.into_any(),
+            ],
+        )?;
+        Ok((slf.get_type().into_any(), args))
+    }
+}
