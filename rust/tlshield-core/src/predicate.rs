@@ -8,6 +8,8 @@ use crate::error::{InputError, SpecError};
 pub struct Halfspace {
     w: Vec<f64>,
     b: f64,
+    /// The non-zero entries of `w` as (dimension, weight): most constraints read few dimensions.
+    terms: Vec<(usize, f64)>,
 }
 
 /// Where a [`Ball`]'s centre comes from.
@@ -67,7 +69,13 @@ impl Predicate {
         }
         check_finite("Halfspace w", &w)?;
         check_finite("Halfspace b", &[b])?;
-        Ok(Predicate::Halfspace(Halfspace { w, b }))
+        let terms = w
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v != 0.0)
+            .map(|(i, v)| (i, *v))
+            .collect();
+        Ok(Predicate::Halfspace(Halfspace { w, b, terms }))
     }
 
     /// A ball predicate `radius - |s[pos] - c|`. `pos` must be non-empty with distinct
@@ -179,7 +187,7 @@ impl Predicate {
     #[inline]
     pub fn value(&self, s: &[f64]) -> f64 {
         match self {
-            Predicate::Halfspace(h) => h.w.iter().zip(s).map(|(w, x)| w * x).sum::<f64>() + h.b,
+            Predicate::Halfspace(h) => h.terms.iter().map(|&(i, w)| w * s[i]).sum::<f64>() + h.b,
             Predicate::Ball(b) => b.radius - b.distance(s),
         }
     }

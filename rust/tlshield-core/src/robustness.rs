@@ -4,10 +4,13 @@
 //! with an automaton that reads every state. (The paper's example `rho(s_0:3, F(s<4))` takes the
 //! max over `s_0..s_2`; we take it over `s_0..s_3`.)
 //!
-//! Both semantics are computed in ONE backward sweep over time: every operator's value at `t`
-//! depends only on its operands at `t` and on values at `t + 1`
-//! (`F a = max(a, (F a)')`, `a U b = max(b, min(a, (a U b)'))`, `X a = a'`), so evaluation
-//! needs two value slots per formula node instead of one array per node.
+//! The formula is compiled once into post-order instructions with shared subformulas merged
+//! (an atom used twice is evaluated once). Evaluation is node-major: each instruction fills one
+//! array over time, so propositional operators are element-wise loops the compiler vectorises
+//! and temporal ones are single backward scans (`F a = max(a, (F a)')`,
+//! `a U b = max(b, min(a, (a U b)'))`, `X a = a'`). Buffers live in a reusable [`Scratch`].
+
+use std::collections::HashMap;
 
 use rayon::prelude::*;
 
@@ -38,31 +41,40 @@ pub(crate) struct Program {
 impl Program {
     pub(crate) fn compile(formula: &Formula) -> Self {
         let mut ops = Vec::new();
-        Self::emit(formula, &mut ops);
+        let mut seen = HashMap::new();
+        Self::emit(formula, &mut ops, &mut seen);
         Program { ops }
     }
 
-    fn emit(formula: &Formula, ops: &mut Vec<Op>) -> usize {
+    /// Emits `formula` (reusing an identical earlier subformula) and returns its slot.
+    fn emit<'f>(
+        formula: &'f Formula,
+        ops: &mut Vec<Op>,
+        seen: &mut HashMap<&'f Formula, usize>,
+    ) -> usize {
+        if let Some(&slot) = seen.get(formula) {
+            return slot;
+        }
         let op = match formula {
             Formula::True => Op::True,
             Formula::False => Op::False,
             Formula::Atom(i) => Op::Atom(*i),
-            Formula::Not(a) => Op::Not(Self::emit(a, ops)),
-            Formula::Eventually(a) => Op::Eventually(Self::emit(a, ops)),
-            Formula::Next(a) => Op::Next(Self::emit(a, ops)),
+            Formula::Not(a) => Op::Not(Self::emit(a, ops, seen)),
+            Formula::Eventually(a) => Op::Eventually(Self::emit(a, ops, seen)),
+            Formula::Next(a) => Op::Next(Self::emit(a, ops, seen)),
             Formula::Implies(a, b) => {
-                let a = Self::emit(a, ops);
-                Op::Implies(a, Self::emit(b, ops))
+                let a = Self::emit(a, ops, seen);
+                Op::Implies(a, Self::emit(b, ops, seen))
             }
             Formula::Until(a, b) => {
-                let a = Self::emit(a, ops);
-                Op::Until(a, Self::emit(b, ops))
+                let a = Self::emit(a, ops, seen);
+                Op::Until(a, Self::emit(b, ops, seen))
             }
             Formula::And(parts) | Formula::Or(parts) => {
                 let conj = matches!(formula, Formula::And(_));
-                let mut acc = Self::emit(&parts[0], ops);
+                let mut acc = Self::emit(&parts[0], ops, seen);
                 for part in &parts[1..] {
-                    let next = Self::emit(part, ops);
+                    let next = Self::emit(part, ops, seen);
                     ops.push(if conj {
                         Op::And(acc, next)
                     } else {
@@ -70,10 +82,12 @@ impl Program {
                     });
                     acc = ops.len() - 1;
                 }
+                seen.insert(formula, acc);
                 return acc;
             }
         };
         ops.push(op);
+        seen.insert(formula, ops.len() - 1);
         ops.len() - 1
     }
 }
@@ -105,11 +119,21 @@ impl Semantics for Quantitative {
     }
     #[inline]
     fn and(a: f64, b: f64) -> f64 {
-        a.min(b)
+        // Values are finite or infinite, never NaN, so a plain comparison is exact (and maps
+        // to one SIMD instruction, unlike f64::min's NaN handling).
+        if a < b {
+            a
+        } else {
+            b
+        }
     }
     #[inline]
     fn or(a: f64, b: f64) -> f64 {
-        a.max(b)
+        if a > b {
+            a
+        } else {
+            b
+        }
     }
 }
 
@@ -180,7 +204,9 @@ impl<'a> Trajectory<'a> {
     }
 }
 
-/// A validated batch of equally long trajectories, `(B, T + 1, dim)` in C order.
+/// A batch of equally long trajectories, `(B, T + 1, dim)` in C order. The shape is checked
+/// here; values are checked for NaN/inf by the batch evaluators while they read each
+/// trajectory (one pass over memory instead of two), which report the first bad value.
 #[derive(Debug, Clone, Copy)]
 pub struct TrajectoryBatch<'a> {
     data: &'a [f64],
@@ -213,13 +239,6 @@ impl<'a> TrajectoryBatch<'a> {
                 got: data.len().to_string(),
             });
         }
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            let (b, rest) = (i / (steps * dim), i % (steps * dim));
-            return Err(InputError::NonFinite {
-                what: format!("trajs[{b}, {}, {}]", rest / dim, rest % dim),
-                value: data[i],
-            });
-        }
         Ok(TrajectoryBatch { data, steps, dim })
     }
 
@@ -233,17 +252,71 @@ impl<'a> TrajectoryBatch<'a> {
         self.data.is_empty()
     }
 
-    fn trajectories(&self) -> impl IndexedParallelIterator<Item = Trajectory<'a>> + 'a {
-        let dim = self.dim;
-        self.data
-            .par_chunks(self.steps * self.dim)
-            .map(move |data| Trajectory { data, dim })
+    fn non_finite(&self, i: usize) -> InputError {
+        let (b, rest) = (i / (self.steps * self.dim), i % (self.steps * self.dim));
+        InputError::NonFinite {
+            what: format!("trajs[{b}, {}, {}]", rest / self.dim, rest % self.dim),
+            value: self.data[i],
+        }
     }
+
+    /// Applies `f` to every trajectory in parallel, checking each one's values just before
+    /// evaluating it (while it is in cache).
+    fn map<V, F>(&self, fill: V, f: F) -> Result<Vec<V>, InputError>
+    where
+        V: Copy + Send,
+        F: Fn(Trajectory<'_>, &mut Scratch) -> V + Sync,
+    {
+        let stride = self.steps * self.dim;
+        let mut out = vec![fill; self.len()];
+        if stride == 0 || out.is_empty() {
+            return Ok(out);
+        }
+        let first_bad = out
+            .par_iter_mut()
+            .zip(self.data.par_chunks(stride))
+            .enumerate()
+            .map_init(Scratch::default, |scratch, (b, (o, data))| {
+                if let Some(i) = first_non_finite(data) {
+                    return Some(b * stride + i);
+                }
+                *o = f(
+                    Trajectory {
+                        data,
+                        dim: self.dim,
+                    },
+                    scratch,
+                );
+                None
+            })
+            .filter_map(|bad| bad)
+            .min();
+        match first_bad {
+            Some(i) => Err(self.non_finite(i)),
+            None => Ok(out),
+        }
+    }
+}
+
+/// Index of the first NaN or infinity. Scans blocks with a branch-free fold (vectorised) and
+/// only searches inside a block that failed.
+pub fn first_non_finite(data: &[f64]) -> Option<usize> {
+    const BLOCK: usize = 64;
+    data.chunks(BLOCK).enumerate().find_map(|(k, block)| {
+        if block.iter().fold(true, |ok, v| ok & v.is_finite()) {
+            None
+        } else {
+            block
+                .iter()
+                .position(|v| !v.is_finite())
+                .map(|i| k * BLOCK + i)
+        }
+    })
 }
 
 /// Reports the first non-finite value of a row-major array as `name[row, col]`.
 pub(crate) fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), InputError> {
-    match data.iter().position(|v| !v.is_finite()) {
+    match first_non_finite(data) {
         None => Ok(()),
         Some(i) if data.len() == dim => Err(InputError::NonFinite {
             what: format!("{name}[{i}]"),
@@ -256,63 +329,93 @@ pub(crate) fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), I
     }
 }
 
-/// Reusable buffers for evaluation, so repeated calls allocate nothing.
+/// Reusable buffers for evaluation, so repeated calls allocate nothing once warm.
 #[derive(Debug, Default, Clone)]
 pub struct Scratch {
-    atoms: Vec<f64>,
-    cur_f: Vec<f64>,
-    next_f: Vec<f64>,
-    cur_b: Vec<bool>,
-    next_b: Vec<bool>,
+    real: Vec<f64>,
+    truth: Vec<bool>,
 }
 
-trait Buffers<V> {
-    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<V>, &mut Vec<V>);
+trait Buffer<V> {
+    fn buffer(&mut self) -> &mut Vec<V>;
 }
 
-impl Buffers<f64> for Scratch {
-    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>) {
-        (&mut self.atoms, &mut self.cur_f, &mut self.next_f)
+impl Buffer<f64> for Scratch {
+    fn buffer(&mut self) -> &mut Vec<f64> {
+        &mut self.real
     }
 }
 
-impl Buffers<bool> for Scratch {
-    fn split(&mut self) -> (&mut Vec<f64>, &mut Vec<bool>, &mut Vec<bool>) {
-        (&mut self.atoms, &mut self.cur_b, &mut self.next_b)
+impl Buffer<bool> for Scratch {
+    fn buffer(&mut self) -> &mut Vec<bool> {
+        &mut self.truth
     }
 }
 
-fn sweep<S: Semantics>(spec: &Spec, traj: Trajectory<'_>, scratch: &mut Scratch) -> S::Value
+/// `out[t] = f(a[t], b[t])`, written so the compiler can vectorise it.
+#[inline(always)]
+fn zip_with<V: Copy>(out: &mut [V], a: &[V], b: &[V], f: impl Fn(V, V) -> V) {
+    for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
+        *o = f(x, y);
+    }
+}
+
+/// Evaluates the compiled formula over `traj` and returns its value at `t = 0`.
+fn evaluate<S: Semantics>(spec: &Spec, traj: Trajectory<'_>, scratch: &mut Scratch) -> S::Value
 where
-    Scratch: Buffers<S::Value>,
+    Scratch: Buffer<S::Value>,
 {
     let ops = &spec.program.ops;
-    // Slots start at BOTTOM: the value "after the end" of F, U and X is false / -inf.
-    let (atoms, cur, next) = scratch.split();
-    atoms.resize(spec.atoms().len(), 0.0);
-    cur.clear();
-    cur.resize(ops.len(), S::BOTTOM);
-    next.clear();
-    next.resize(ops.len(), S::BOTTOM);
-    for t in (0..traj.len()).rev() {
-        spec.atom_robustness_into(traj.state(t), atoms);
-        for (i, op) in ops.iter().enumerate() {
-            cur[i] = match *op {
-                Op::True => S::TOP,
-                Op::False => S::BOTTOM,
-                Op::Atom(k) => S::atom(atoms[k]),
-                Op::Not(a) => S::not(cur[a]),
-                Op::And(a, b) => S::and(cur[a], cur[b]),
-                Op::Or(a, b) => S::or(cur[a], cur[b]),
-                Op::Implies(a, b) => S::or(S::not(cur[a]), cur[b]),
-                Op::Until(a, b) => S::or(cur[b], S::and(cur[a], next[i])),
-                Op::Eventually(a) => S::or(cur[a], next[i]),
-                Op::Next(a) => next[a],
-            };
+    let len = traj.len();
+    let last = len - 1;
+    let values = scratch.buffer();
+    values.clear();
+    values.resize(ops.len() * len, S::BOTTOM);
+    for (i, op) in ops.iter().enumerate() {
+        // Operands always precede the instruction, so they live in `done`.
+        let (done, rest) = values.split_at_mut(i * len);
+        let out = &mut rest[..len];
+        let slot = |k: usize| &done[k * len..(k + 1) * len];
+        match *op {
+            Op::True => out.fill(S::TOP),
+            Op::False => out.fill(S::BOTTOM),
+            Op::Atom(k) => {
+                let predicate = &spec.predicates()[k];
+                for (t, o) in out.iter_mut().enumerate() {
+                    *o = S::atom(predicate.value(traj.state(t)));
+                }
+            }
+            Op::Not(a) => {
+                for (o, &x) in out.iter_mut().zip(slot(a)) {
+                    *o = S::not(x);
+                }
+            }
+            Op::And(a, b) => zip_with(out, slot(a), slot(b), S::and),
+            Op::Or(a, b) => zip_with(out, slot(a), slot(b), S::or),
+            Op::Implies(a, b) => zip_with(out, slot(a), slot(b), |x, y| S::or(S::not(x), y)),
+            Op::Eventually(a) => {
+                let a = slot(a);
+                let mut acc = S::BOTTOM;
+                for t in (0..len).rev() {
+                    acc = S::or(a[t], acc);
+                    out[t] = acc;
+                }
+            }
+            Op::Until(a, b) => {
+                let (a, b) = (slot(a), slot(b));
+                let mut acc = S::BOTTOM;
+                for t in (0..len).rev() {
+                    acc = S::or(b[t], S::and(a[t], acc));
+                    out[t] = acc;
+                }
+            }
+            Op::Next(a) => {
+                out[..last].copy_from_slice(&slot(a)[1..]);
+                out[last] = S::BOTTOM;
+            }
         }
-        std::mem::swap(cur, next);
     }
-    next[ops.len() - 1]
+    values[(ops.len() - 1) * len]
 }
 
 impl Spec {
@@ -332,39 +435,29 @@ impl Spec {
         scratch: &mut Scratch,
     ) -> Result<f64, InputError> {
         self.check_trajectory(&traj)?;
-        Ok(sweep::<Quantitative>(self, traj, scratch))
+        Ok(evaluate::<Quantitative>(self, traj, scratch))
     }
 
     /// Boolean satisfaction of the whole trajectory (an atom holds iff its robustness is > 0).
     pub fn satisfied(&self, traj: Trajectory<'_>) -> Result<bool, InputError> {
         self.check_trajectory(&traj)?;
-        Ok(sweep::<Boolean>(self, traj, &mut Scratch::default()))
+        Ok(evaluate::<Boolean>(self, traj, &mut Scratch::default()))
     }
 
     /// Robustness of every trajectory of a batch, in parallel (rayon).
     pub fn robustness_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<f64>, InputError> {
         self.check_state_len(batch.dim)?;
-        let mut out = vec![0.0; batch.len()];
-        out.par_iter_mut().zip(batch.trajectories()).for_each_init(
-            Scratch::default,
-            |scratch, (o, traj)| {
-                *o = sweep::<Quantitative>(self, traj, scratch);
-            },
-        );
-        Ok(out)
+        batch.map(0.0, |traj, scratch| {
+            evaluate::<Quantitative>(self, traj, scratch)
+        })
     }
 
     /// Boolean satisfaction of every trajectory of a batch, in parallel (rayon).
     pub fn satisfied_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<bool>, InputError> {
         self.check_state_len(batch.dim)?;
-        let mut out = vec![false; batch.len()];
-        out.par_iter_mut().zip(batch.trajectories()).for_each_init(
-            Scratch::default,
-            |scratch, (o, traj)| {
-                *o = sweep::<Boolean>(self, traj, scratch);
-            },
-        );
-        Ok(out)
+        batch.map(false, |traj, scratch| {
+            evaluate::<Boolean>(self, traj, scratch)
+        })
     }
 }
 
@@ -623,7 +716,12 @@ mod tests {
             err.to_string(),
             "traj[1, 0] is NaN (all values must be finite)"
         );
-        let err = TrajectoryBatch::new(&[0.0, 0.0, 0.0, f64::INFINITY], 2, 1, 2).unwrap_err();
+        let sum = Predicate::halfspace(vec![1.0, 1.0], 0.0).unwrap();
+        let spec2 = Spec::new("F a", [("a", sum)]).unwrap();
+        let data = [0.0, 0.0, 0.0, f64::INFINITY, f64::NAN, 0.0];
+        let err = spec2
+            .robustness_batch(TrajectoryBatch::new(&data, 3, 1, 2).unwrap())
+            .unwrap_err();
         assert_eq!(
             err.to_string(),
             "trajs[1, 0, 1] is inf (all values must be finite)"
