@@ -192,6 +192,47 @@ impl Predicate {
         }
     }
 
+    /// Robustness at every state of a row-major trajectory (`out.len()` states of `dim` values),
+    /// with the predicate's shape resolved once outside the loop over time.
+    pub fn values_into(&self, states: &[f64], dim: usize, out: &mut [f64]) {
+        let rows = states.chunks_exact(dim);
+        match self {
+            Predicate::Halfspace(h) => match h.terms.as_slice() {
+                [(i, wi), (j, wj)] => {
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        *o = wi * s[*i] + wj * s[*j] + h.b;
+                    }
+                }
+                _ => {
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        *o = self.value(s);
+                    }
+                }
+            },
+            Predicate::Ball(b) => match (b.pos.as_slice(), &b.center) {
+                ([px, py], Center::Dims(c)) => {
+                    let (cx, cy) = (c[0], c[1]);
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        let (dx, dy) = (s[*px] - s[cx], s[*py] - s[cy]);
+                        *o = b.radius - (dx * dx + dy * dy).sqrt();
+                    }
+                }
+                ([px, py], Center::Fixed(c)) => {
+                    let (cx, cy) = (c[0], c[1]);
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        let (dx, dy) = (s[*px] - cx, s[*py] - cy);
+                        *o = b.radius - (dx * dx + dy * dy).sqrt();
+                    }
+                }
+                _ => {
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        *o = self.value(s);
+                    }
+                }
+            },
+        }
+    }
+
     /// Gradient of [`Predicate::value`] at `s`, written into `out` (length `s.len()`).
     /// At the centre of a ball the gradient is zero (never NaN).
     pub fn gradient_into(&self, s: &[f64], out: &mut [f64]) {

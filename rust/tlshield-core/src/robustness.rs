@@ -15,6 +15,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use crate::error::InputError;
+use crate::predicate::Predicate;
 use crate::spec::{Formula, Spec};
 
 /// One instruction of a compiled formula; operands are indices of earlier instructions.
@@ -97,7 +98,13 @@ trait Semantics {
     type Value: Copy;
     const TOP: Self::Value;
     const BOTTOM: Self::Value;
-    fn atom(rho: f64) -> Self::Value;
+    /// Fills `out` with the atom's value at every state (`reals` is spare room for robustness).
+    fn atom_values(
+        p: &Predicate,
+        traj: Trajectory<'_>,
+        out: &mut [Self::Value],
+        reals: &mut Vec<f64>,
+    );
     fn not(a: Self::Value) -> Self::Value;
     fn and(a: Self::Value, b: Self::Value) -> Self::Value;
     fn or(a: Self::Value, b: Self::Value) -> Self::Value;
@@ -109,9 +116,8 @@ impl Semantics for Quantitative {
     type Value = f64;
     const TOP: f64 = f64::INFINITY;
     const BOTTOM: f64 = f64::NEG_INFINITY;
-    #[inline]
-    fn atom(rho: f64) -> f64 {
-        rho
+    fn atom_values(p: &Predicate, traj: Trajectory<'_>, out: &mut [f64], _: &mut Vec<f64>) {
+        p.values_into(traj.data, traj.dim, out);
     }
     #[inline]
     fn not(a: f64) -> f64 {
@@ -143,9 +149,12 @@ impl Semantics for Boolean {
     type Value = bool;
     const TOP: bool = true;
     const BOTTOM: bool = false;
-    #[inline]
-    fn atom(rho: f64) -> bool {
-        rho > 0.0
+    fn atom_values(p: &Predicate, traj: Trajectory<'_>, out: &mut [bool], reals: &mut Vec<f64>) {
+        reals.resize(out.len(), 0.0);
+        p.values_into(traj.data, traj.dim, reals);
+        for (o, &rho) in out.iter_mut().zip(reals.iter()) {
+            *o = rho > 0.0;
+        }
     }
     #[inline]
     fn not(a: bool) -> bool {
@@ -334,21 +343,23 @@ pub(crate) fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), I
 pub struct Scratch {
     real: Vec<f64>,
     truth: Vec<bool>,
+    atom: Vec<f64>,
 }
 
 trait Buffer<V> {
-    fn buffer(&mut self) -> &mut Vec<V>;
+    /// The value buffer for this semantics and a spare robustness buffer.
+    fn buffers(&mut self) -> (&mut Vec<V>, &mut Vec<f64>);
 }
 
 impl Buffer<f64> for Scratch {
-    fn buffer(&mut self) -> &mut Vec<f64> {
-        &mut self.real
+    fn buffers(&mut self) -> (&mut Vec<f64>, &mut Vec<f64>) {
+        (&mut self.real, &mut self.atom)
     }
 }
 
 impl Buffer<bool> for Scratch {
-    fn buffer(&mut self) -> &mut Vec<bool> {
-        &mut self.truth
+    fn buffers(&mut self) -> (&mut Vec<bool>, &mut Vec<f64>) {
+        (&mut self.truth, &mut self.atom)
     }
 }
 
@@ -368,7 +379,7 @@ where
     let ops = &spec.program.ops;
     let len = traj.len();
     let last = len - 1;
-    let values = scratch.buffer();
+    let (values, reals) = scratch.buffers();
     values.clear();
     values.resize(ops.len() * len, S::BOTTOM);
     for (i, op) in ops.iter().enumerate() {
@@ -379,12 +390,7 @@ where
         match *op {
             Op::True => out.fill(S::TOP),
             Op::False => out.fill(S::BOTTOM),
-            Op::Atom(k) => {
-                let predicate = &spec.predicates()[k];
-                for (t, o) in out.iter_mut().enumerate() {
-                    *o = S::atom(predicate.value(traj.state(t)));
-                }
-            }
+            Op::Atom(k) => S::atom_values(&spec.predicates()[k], traj, out, reals),
             Op::Not(a) => {
                 for (o, &x) in out.iter_mut().zip(slot(a)) {
                     *o = S::not(x);
@@ -464,7 +470,7 @@ impl Spec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::predicate::{Center, Predicate};
+    use crate::predicate::Center;
     use proptest::prelude::*;
 
     /// Direct transcription of the semantics (DESIGN.md), O(T^2) per operator: the oracle.
