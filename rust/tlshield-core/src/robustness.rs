@@ -37,6 +37,9 @@ pub(crate) enum Op {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Program {
     ops: Vec<Op>,
+    /// Whether each instruction's value is needed at every time step (`false`: only at t = 0,
+    /// e.g. the root and `F` directly under a conjunction, which then reduce instead of scan).
+    full: Vec<bool>,
 }
 
 impl Program {
@@ -44,7 +47,24 @@ impl Program {
         let mut ops = Vec::new();
         let mut seen = HashMap::new();
         Self::emit(formula, &mut ops, &mut seen);
-        Program { ops }
+        // Consumers come after their operands, so one reverse pass settles every need.
+        let mut full = vec![false; ops.len()];
+        for i in (0..ops.len()).rev() {
+            match ops[i] {
+                Op::Not(a) => full[a] |= full[i],
+                Op::And(a, b) | Op::Or(a, b) | Op::Implies(a, b) => {
+                    full[a] |= full[i];
+                    full[b] |= full[i];
+                }
+                Op::Eventually(a) | Op::Next(a) => full[a] = true,
+                Op::Until(a, b) => {
+                    full[a] = true;
+                    full[b] = true;
+                }
+                Op::True | Op::False | Op::Atom(_) => {}
+            }
+        }
+        Program { ops, full }
     }
 
     /// Emits `formula` (reusing an identical earlier subformula) and returns its slot.
@@ -95,7 +115,7 @@ impl Program {
 
 /// A value domain for the backward sweep: real robustness or Boolean truth.
 trait Semantics {
-    type Value: Copy;
+    type Value: Copy + PartialEq;
     const TOP: Self::Value;
     const BOTTOM: Self::Value;
     /// Fills `out` with the atom's value at every state (`reals` is spare room for robustness).
@@ -371,12 +391,43 @@ fn zip_with<V: Copy>(out: &mut [V], a: &[V], b: &[V], f: impl Fn(V, V) -> V) {
     }
 }
 
+/// `max`/`or` of all values, with four independent accumulators (no serial dependency chain).
+fn any_of<S: Semantics>(a: &[S::Value]) -> S::Value {
+    let mut acc = [S::BOTTOM; 4];
+    let mut quads = a.chunks_exact(4);
+    for q in &mut quads {
+        for k in 0..4 {
+            acc[k] = S::or(acc[k], q[k]);
+        }
+    }
+    let tail = quads
+        .remainder()
+        .iter()
+        .fold(S::BOTTOM, |x, &y| S::or(x, y));
+    S::or(S::or(acc[0], acc[1]), S::or(S::or(acc[2], acc[3]), tail))
+}
+
+/// `a U b` at t = 0 by a forward scan: the best `min(b[t], min a[..t])` so far, stopping as
+/// soon as the running `min a` cannot beat it any more.
+fn until_at_start<S: Semantics>(a: &[S::Value], b: &[S::Value]) -> S::Value {
+    let mut best = S::BOTTOM;
+    let mut prefix = S::TOP;
+    for (&x, &y) in a.iter().zip(b) {
+        best = S::or(best, S::and(y, prefix));
+        prefix = S::and(prefix, x);
+        if S::or(best, prefix) == best {
+            break;
+        }
+    }
+    best
+}
+
 /// Evaluates the compiled formula over `traj` and returns its value at `t = 0`.
 fn evaluate<S: Semantics>(spec: &Spec, traj: Trajectory<'_>, scratch: &mut Scratch) -> S::Value
 where
     Scratch: Buffer<S::Value>,
 {
-    let ops = &spec.program.ops;
+    let Program { ops, full } = &spec.program;
     let len = traj.len();
     let last = len - 1;
     let (values, reals) = scratch.buffers();
@@ -385,8 +436,32 @@ where
     for (i, op) in ops.iter().enumerate() {
         // Operands always precede the instruction, so they live in `done`.
         let (done, rest) = values.split_at_mut(i * len);
-        let out = &mut rest[..len];
         let slot = |k: usize| &done[k * len..(k + 1) * len];
+        if !full[i] {
+            // Only the value at t = 0 is read by anyone.
+            rest[0] = match *op {
+                Op::True => S::TOP,
+                Op::False => S::BOTTOM,
+                Op::Atom(k) => {
+                    let first = Trajectory {
+                        data: traj.state(0),
+                        dim: traj.dim,
+                    };
+                    S::atom_values(&spec.predicates()[k], first, &mut rest[..1], reals);
+                    rest[0]
+                }
+                Op::Not(a) => S::not(slot(a)[0]),
+                Op::And(a, b) => S::and(slot(a)[0], slot(b)[0]),
+                Op::Or(a, b) => S::or(slot(a)[0], slot(b)[0]),
+                Op::Implies(a, b) => S::or(S::not(slot(a)[0]), slot(b)[0]),
+                Op::Eventually(a) => any_of::<S>(slot(a)),
+                Op::Until(a, b) => until_at_start::<S>(slot(a), slot(b)),
+                Op::Next(a) if len > 1 => slot(a)[1],
+                Op::Next(_) => S::BOTTOM,
+            };
+            continue;
+        }
+        let out = &mut rest[..len];
         match *op {
             Op::True => out.fill(S::TOP),
             Op::False => out.fill(S::BOTTOM),
