@@ -1,0 +1,535 @@
+"""Trajectory robustness of the paper's task: tlshield against rtamt and argus, in one run.
+
+Run from the repository root (``make bench`` installs rtamt and argus through the ``bench``
+extra first)::
+
+    .venv/bin/python benches/compare_robustness.py [--seed N] [--quick] [--json PATH]
+
+The task ``(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)`` is evaluated at t = 0
+over random trajectories of the 13-dimensional state
+``[x, y, theta, g1x, g1y, g2x, g2y, g3x, g3y, o1x, o1y, o2x, o2y]`` (T = 200 steps), with
+``g_i = 0.5 - |(x, y) - (g_ix, g_iy)|``, ``c1 = x - y + 1.5`` and ``c2 = y - x + 1.5``.
+
+Every tool does the whole job a Python user would have it do, per trajectory: tlshield takes
+the raw trajectory; rtamt and argus get the five predicate signals computed with numpy and
+turned into their own input objects inside the timed region. Parsing the formula and building
+the monitor happens once, outside it, for every tool.
+
+Semantics (closed window over s_0..s_T; ``a U b`` = max over t' >= t of
+min(b(t'), min over t <= t'' < t' of a(t''))):
+
+* rtamt (``StlDiscreteTimeOfflineSpecification``): its offline ``until`` is the backward
+  recursion ``r(t) = max(b(t), min(a(t), r(t+1)))``, ``r(T+1) = -inf``, which is exactly the
+  definition above; ``eventually`` is the suffix max. The formula is sent as it is.
+* argus: its untimed ``U`` also demands ``a`` at the instant ``b`` is met
+  (``r(t) = max(min(a(t), b(t)), min(a(t), r(t+1)))``), so each ``a U b`` is sent as
+  ``(a | b) U b``, which is equal to the definition above for every real-valued signal
+  (min/max only, so bit for bit). Signals use ``interpolation_method="constant"``: with the
+  default linear interpolation argus adds zero-crossing points and its robustness is no
+  longer the discrete-time one.
+
+Before timing, all available tools (and the numpy reference below, the oracle) must agree
+within 1e-9 on the first 50 trajectories, or the script stops with exit code 1. A tool that
+cannot be imported is reported and its column left out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import importlib.metadata
+import json
+import math
+import platform
+import re
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+FORMULA = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
+HORIZON = 200  # T: a trajectory has T + 1 states
+STATE_DIM = 13
+RADIUS = 0.5
+HALF_WIDTH = 1.5
+GOAL_DIMS = {"g1": (3, 4), "g2": (5, 6), "g3": (7, 8)}
+N_CHECK = 50
+BATCH = 1000
+TOLERANCE = 1e-9
+
+# Ratios the tlshield columns are expected to reach.
+TARGET_SINGLE = 50.0
+TARGET_BATCH_VS_LOOP = 100.0
+TARGET_BATCH_VS_SINGLE = 1.6
+
+Formula = tuple
+Monitor = Callable[[np.ndarray], float]
+
+
+# --------------------------------------------------------------------------------------------
+# Trajectories and predicates
+# --------------------------------------------------------------------------------------------
+
+
+def make_trajectories(rng: np.random.Generator, n: int, horizon: int = HORIZON) -> np.ndarray:
+    """Noisy goal-seeking walks, shape (n, horizon + 1, 13), some satisfying the task.
+
+    Each walker heads for g1 or g2 and then for g3; a quarter skip straight to g3 (breaking the
+    order), and random speed and noise leave some short of g3 or outside the channel.
+    """
+    goal1 = np.array([2.0, 3.0]) + rng.uniform(-0.4, 0.4, (n, 2))
+    goal2 = np.array([3.0, 2.0]) + rng.uniform(-0.4, 0.4, (n, 2))
+    goal3 = np.array([5.5, 5.5]) + rng.uniform(-0.5, 0.5, (n, 2))
+    obst1 = np.array([1.0, 2.5]) + rng.uniform(-0.3, 0.3, (n, 2))
+    obst2 = np.array([4.5, 3.0]) + rng.uniform(-0.3, 0.3, (n, 2))
+    first = np.where((rng.random(n) < 0.5)[:, None], goal1, goal2)
+    via_done = rng.random(n) < 0.25
+    speed = rng.uniform(0.03, 0.1, n)[:, None]
+    noise = rng.uniform(0.0, 0.2, n)[:, None]
+
+    trajs = np.empty((n, horizon + 1, STATE_DIM))
+    trajs[:, :, 3:5] = goal1[:, None]
+    trajs[:, :, 5:7] = goal2[:, None]
+    trajs[:, :, 7:9] = goal3[:, None]
+    trajs[:, :, 9:11] = obst1[:, None]
+    trajs[:, :, 11:13] = obst2[:, None]
+    pos = rng.normal(0.0, 0.2, (n, 2))
+    for t in range(horizon + 1):
+        target = np.where(via_done[:, None], goal3, first)
+        delta = target - pos
+        via_done |= np.hypot(delta[:, 0], delta[:, 1]) < 0.3
+        theta = np.arctan2(delta[:, 1], delta[:, 0])
+        trajs[:, t, 0:2] = pos
+        trajs[:, t, 2] = theta
+        step = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        pos = pos + speed * step + noise * rng.normal(size=(n, 2))
+    return trajs
+
+
+def predicate_signals(traj: np.ndarray) -> dict[str, np.ndarray]:
+    """The five atom signals over time, shape traj.shape[:-1] (works on one or many)."""
+    x = traj[..., 0]
+    y = traj[..., 1]
+    signals = {
+        name: RADIUS - np.hypot(x - traj[..., cx], y - traj[..., cy])
+        for name, (cx, cy) in GOAL_DIMS.items()
+    }
+    signals["c1"] = x - y + HALF_WIDTH
+    signals["c2"] = y - x + HALF_WIDTH
+    return signals
+
+
+# --------------------------------------------------------------------------------------------
+# A small formula parser (the tlshield grammar's subset used here) and the numpy reference
+# --------------------------------------------------------------------------------------------
+
+_TOKEN = re.compile(r"\s*(?:([a-z_][a-z0-9_]*)|([!&|()FU]))")
+
+
+def parse(text: str) -> Formula:
+    """Parse ``! F & | U ( )`` and atoms; loosest to tightest: ``|`` < ``&`` < ``U`` < prefix.
+
+    Nodes are ("atom", name), ("not", a), ("F", a), ("and", a, b), ("or", a, b),
+    ("until", a, b); ``U`` is right-associative, ``&`` and ``|`` left-associative.
+    """
+    tokens: list[str] = []
+    at = 0
+    while at < len(text.rstrip()):
+        match = _TOKEN.match(text, at)
+        if match is None:
+            raise ValueError(f"bad formula at column {at}: {text!r}")
+        tokens.append(match.group(1) or match.group(2))
+        at = match.end()
+    tokens.append("")
+    pos = 0
+
+    def take(expected: str | None = None) -> str:
+        nonlocal pos
+        tok = tokens[pos]
+        if expected is not None and tok != expected:
+            raise ValueError(f"expected {expected!r}, got {tok!r} in {text!r}")
+        pos += 1
+        return tok
+
+    def binary(op: str, name: str, operand: Callable[[], Formula]) -> Formula:
+        node = operand()
+        while tokens[pos] == op:
+            take()
+            node = (name, node, operand())
+        return node
+
+    def disjunction() -> Formula:
+        return binary("|", "or", conjunction)
+
+    def conjunction() -> Formula:
+        return binary("&", "and", until)
+
+    def until() -> Formula:
+        left = unary()
+        if tokens[pos] == "U":
+            take()
+            return ("until", left, until())
+        return left
+
+    def unary() -> Formula:
+        tok = take()
+        if tok == "!":
+            return ("not", unary())
+        if tok == "F":
+            return ("F", unary())
+        if tok == "(":
+            node = disjunction()
+            take(")")
+            return node
+        if re.fullmatch(r"[a-z_][a-z0-9_]*", tok):
+            return ("atom", tok)
+        raise ValueError(f"unexpected {tok!r} in {text!r}")
+
+    tree = disjunction()
+    take("")
+    return tree
+
+
+def reference_signal(f: Formula, signals: dict[str, np.ndarray]) -> np.ndarray:
+    """Robustness at every t (last axis is time), by backward recursion; the agreement oracle."""
+    op = f[0]
+    if op == "atom":
+        return signals[f[1]]
+    if op == "not":
+        return -reference_signal(f[1], signals)
+    if op == "F":
+        sub = reference_signal(f[1], signals)
+        return np.flip(np.maximum.accumulate(np.flip(sub, -1), axis=-1), -1)
+    left = reference_signal(f[1], signals)
+    right = reference_signal(f[2], signals)
+    if op == "and":
+        return np.minimum(left, right)
+    if op == "or":
+        return np.maximum(left, right)
+    if op == "until":
+        out = np.empty(np.broadcast_shapes(left.shape, right.shape))
+        nxt = np.full(out.shape[:-1], -np.inf)
+        for t in range(out.shape[-1] - 1, -1, -1):
+            nxt = np.maximum(right[..., t], np.minimum(left[..., t], nxt))
+            out[..., t] = nxt
+        return out
+    raise ValueError(f"unknown operator {op!r}")
+
+
+class Reference:
+    """Pure-numpy robustness at t = 0, single or vectorised over a batch."""
+
+    def __init__(self, formula: str) -> None:
+        self.tree = parse(formula)
+
+    def robustness(self, traj: np.ndarray) -> float:
+        return float(reference_signal(self.tree, predicate_signals(traj))[0])
+
+    def robustness_batch(self, trajs: np.ndarray) -> np.ndarray:
+        return reference_signal(self.tree, predicate_signals(trajs))[:, 0]
+
+
+# --------------------------------------------------------------------------------------------
+# The tools
+# --------------------------------------------------------------------------------------------
+
+
+def to_rtamt(f: Formula) -> str:
+    """rtamt STL text; its offline ``until`` already has the semantics wanted here."""
+    op = f[0]
+    if op == "atom":
+        return f"({f[1]} > 0)"
+    if op == "not":
+        return f"(not {to_rtamt(f[1])})"
+    if op == "F":
+        return f"(eventually {to_rtamt(f[1])})"
+    return f"({to_rtamt(f[1])} {op} {to_rtamt(f[2])})"
+
+
+def rtamt_monitor(formula: str, atoms: Sequence[str]) -> Monitor:
+    import rtamt
+
+    spec = rtamt.StlDiscreteTimeOfflineSpecification()
+    for name in atoms:
+        spec.declare_var(name, "float")
+    spec.spec = to_rtamt(parse(formula))
+    spec.parse()
+    time_stamps = list(range(HORIZON + 1))
+
+    def robustness(traj: np.ndarray) -> float:
+        dataset: dict[str, list[Any]] = {"time": time_stamps}
+        for name, values in predicate_signals(traj).items():
+            dataset[name] = values.tolist()
+        return spec.evaluate(dataset)[0][1]
+
+    return robustness
+
+
+def to_argus(f: Formula) -> Any:
+    """argus expression; ``a U b`` becomes ``(a | b) U b`` (argus demands ``a`` at t' too)."""
+    import argus
+
+    op = f[0]
+    if op == "atom":
+        return argus.VarFloat(f[1]) > argus.ConstFloat(0.0)
+    if op == "not":
+        return argus.Not(to_argus(f[1]))
+    if op == "F":
+        return argus.Eventually(to_argus(f[1]), interval=(None, None))
+    left, right = to_argus(f[1]), to_argus(f[2])
+    if op == "and":
+        return argus.And([left, right])
+    if op == "or":
+        return argus.Or([left, right])
+    if op == "until":
+        return argus.Until(argus.Or([left, right]), right, interval=(None, None))
+    raise ValueError(f"unknown operator {op!r}")
+
+
+def argus_monitor(formula: str, atoms: Sequence[str]) -> Monitor:
+    import argus
+
+    expr = to_argus(parse(formula))
+    time_stamps = [float(t) for t in range(HORIZON + 1)]
+    signal = argus.FloatSignal.from_samples
+
+    def robustness(traj: np.ndarray) -> float:
+        trace = argus.Trace(
+            {
+                name: signal(list(zip(time_stamps, values.tolist())), interpolation_method="constant")
+                for name, values in predicate_signals(traj).items()
+            }
+        )
+        rob = argus.eval_robust_semantics(expr, trace, interpolation_method="constant")
+        return rob.at(0.0)
+
+    return robustness
+
+
+def tlshield_spec(formula: str) -> Any:
+    import tlshield
+
+    def halfspace(wx: float, wy: float) -> Any:
+        w = [0.0] * STATE_DIM
+        w[0], w[1] = wx, wy
+        return tlshield.Halfspace(w=w, b=HALF_WIDTH)
+
+    predicates = {
+        name: tlshield.Ball(pos=[0, 1], radius=RADIUS, center_dims=list(dims))
+        for name, dims in GOAL_DIMS.items()
+    }
+    predicates["c1"] = halfspace(1.0, -1.0)
+    predicates["c2"] = halfspace(-1.0, 1.0)
+    return tlshield.Spec(formula, predicates)
+
+
+def package_version(dist: str) -> str | None:
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+# --------------------------------------------------------------------------------------------
+# Timing
+# --------------------------------------------------------------------------------------------
+
+
+def measure(call: Callable[[Any], object], items: Sequence[Any], budget: float,
+            min_reps: int, max_reps: int = 10_000, min_block: float = 2e-3) -> tuple[float, int, int]:
+    """Median seconds per call over blocks of calls cycling through ``items``.
+
+    Blocks are sized to last at least ``min_block`` seconds and their count fits ``budget``
+    (between ``min_reps`` and ``max_reps``). Returns (median, blocks, calls per block).
+    """
+    start = time.perf_counter()
+    call(items[0])  # warm-up, and a first estimate of the cost
+    first = max(time.perf_counter() - start, 1e-9)
+    inner = max(1, math.ceil(min_block / first))
+    reps = int(min(max_reps, max(min_reps, budget / (inner * first))))
+    blocks = [[items[(r * inner + k) % len(items)] for k in range(inner)] for r in range(reps)]
+    samples = []
+    gc.collect()
+    gc.disable()
+    try:
+        for block in blocks:
+            t0 = time.perf_counter()
+            for item in block:
+                call(item)
+            samples.append((time.perf_counter() - t0) / inner)
+    finally:
+        gc.enable()
+    return statistics.median(samples), reps, inner
+
+
+# --------------------------------------------------------------------------------------------
+# Main
+# --------------------------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=0, help="trajectory seed (default 0)")
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions (smoke run)")
+    parser.add_argument("--json", metavar="PATH", help="also write the numbers to PATH")
+    args = parser.parse_args(argv)
+
+    budget_single = 0.6 if args.quick else 4.0
+    budget_batch = 0.6 if args.quick else 4.0
+    loop_reps = 1 if args.quick else 3
+
+    atoms = list(dict.fromkeys(re.findall(r"[a-z_][a-z0-9_]*", FORMULA)))
+    rng = np.random.default_rng(args.seed)
+    trajs = make_trajectories(rng, BATCH)
+    singles = list(trajs[:N_CHECK])
+
+    reference = Reference(FORMULA)
+    tools: dict[str, Monitor] = {}
+    batch_fn: Callable[[np.ndarray], np.ndarray] | None = None
+    skipped: dict[str, str] = {}
+    for name, build in (
+        ("tlshield", lambda: tlshield_spec(FORMULA)),
+        ("rtamt", lambda: rtamt_monitor(FORMULA, atoms)),
+        ("argus", lambda: argus_monitor(FORMULA, atoms)),
+    ):
+        try:
+            built = build()
+        except ImportError as err:
+            skipped[name] = f"{type(err).__name__}: {err}"
+            print(f"note: {name} cannot be imported ({skipped[name]}); its column is skipped.")
+            continue
+        if name == "tlshield":
+            tools[name] = built.robustness
+            batch_fn = built.robustness_batch
+        else:
+            tools[name] = built
+    tools["numpy-ref"] = reference.robustness
+
+    # Agreement before any timing: every tool against the reference on N_CHECK trajectories.
+    expected = reference.robustness_batch(trajs[:N_CHECK])
+    if not np.allclose(expected, [reference.robustness(tr) for tr in singles], atol=TOLERANCE):
+        raise SystemExit("numpy reference: batch and single evaluation disagree")
+    satisfied = float(np.mean(reference.robustness_batch(trajs) > 0))
+    print(f"formula: {FORMULA}")
+    print(f"{BATCH} trajectories of {HORIZON + 1} states, seed {args.seed}; "
+          f"{satisfied:.0%} satisfy; robustness of the first {N_CHECK} in "
+          f"[{expected.min():.3f}, {expected.max():.3f}]")
+    disagreements: dict[str, float] = {}
+    for name, fn in tools.items():
+        got = np.array([fn(tr) for tr in singles])
+        disagreements[name] = float(np.max(np.abs(got - expected)))
+    if batch_fn is not None:
+        got = np.asarray(batch_fn(trajs[:N_CHECK]))
+        disagreements["tlshield batch"] = float(np.max(np.abs(got - expected)))
+    for name, diff in disagreements.items():
+        print(f"max |{name} - reference| over {N_CHECK} trajectories: {diff:.3g}")
+    bad = {k: v for k, v in disagreements.items() if not v <= TOLERANCE}
+    if bad:
+        print(f"ERROR: tools disagree beyond {TOLERANCE:g}: {bad}", file=sys.stderr)
+        return 1
+
+    # (a) one trajectory per call.
+    single_us: dict[str, float] = {}
+    runs: dict[str, dict[str, int]] = {}
+    for name, fn in tools.items():
+        median, reps, inner = measure(fn, singles, budget_single, min_reps=5)
+        single_us[name] = median * 1e6
+        runs[f"single {name}"] = {"blocks": reps, "calls_per_block": inner}
+
+    # (b) a batch of BATCH trajectories: one batch call, or a Python loop of single calls.
+    batch_list = list(trajs)
+    batch_us: dict[str, float] = {}
+
+    def loop(fn: Monitor) -> Callable[[object], object]:
+        return lambda _: [fn(tr) for tr in batch_list]
+
+    plans: list[tuple[str, Callable[[object], object], float, int]] = []
+    if batch_fn is not None:
+        plans.append(("tlshield batch", lambda _: batch_fn(trajs), budget_batch, 5))
+        plans.append(("tlshield loop", loop(tools["tlshield"]), budget_batch, 3))
+    for name in ("rtamt", "argus"):
+        if name in tools:
+            plans.append((f"{name} loop", loop(tools[name]), 0.0, loop_reps))
+    plans.append(("numpy-ref batch", lambda _: reference.robustness_batch(trajs), budget_batch, 3))
+    for label, fn, budget, min_reps in plans:
+        median, reps, _ = measure(fn, [None], budget, min_reps=min_reps, max_reps=max(min_reps, 200))
+        batch_us[label] = median / BATCH * 1e6
+        runs[label] = {"blocks": reps, "calls_per_block": 1}
+
+    # Ratios (tlshield against the others) and the report.
+    ratios: list[tuple[str, float | None, float]] = []
+
+    def ratio(num: float | None, den: float | None) -> float | None:
+        return None if num is None or den is None else num / den
+
+    tls_single = single_us.get("tlshield")
+    tls_batch = batch_us.get("tlshield batch")
+    for other in ("rtamt", "argus"):
+        ratios.append((f"single: tlshield vs {other}",
+                       ratio(single_us.get(other), tls_single), TARGET_SINGLE))
+    for other in ("rtamt", "argus"):
+        ratios.append((f"batch: tlshield batch vs looping {other}",
+                       ratio(batch_us.get(f"{other} loop"), tls_batch), TARGET_BATCH_VS_LOOP))
+    ratios.append(("batch: tlshield batch vs 1000 single tlshield calls",
+                   ratio(batch_us.get("tlshield loop"), tls_batch), TARGET_BATCH_VS_SINGLE))
+
+    def cell(value: float | None) -> str:
+        return "-" if value is None else f"{value:,.2f}"
+
+    columns = ["tlshield", "rtamt", "argus", "numpy-ref"]
+    print()
+    print(f"Median us per trajectory (T = {HORIZON}; "
+          f"{platform.python_implementation()} {platform.python_version()}, numpy "
+          f"{np.__version__}):")
+    print()
+    print("| measurement | " + " | ".join(columns) + " |")
+    print("|---|" + "---:|" * len(columns))
+    print("| single trajectory | " + " | ".join(cell(single_us.get(c)) for c in columns) + " |")
+    print(f"| batch of {BATCH} (tlshield, numpy-ref: one batch call; others: Python loop) | "
+          + " | ".join(cell(batch_us.get(f"{c} batch", batch_us.get(f"{c} loop")))
+                       for c in columns) + " |")
+    print(f"| {BATCH} single tlshield calls in a Python loop | "
+          + cell(batch_us.get("tlshield loop")) + " | - | - | - |")
+    print()
+    print("| ratio | value | target | |")
+    print("|---|---:|---:|---|")
+    for label, value, target in ratios:
+        status = "n/a" if value is None else ("ok" if value >= target else "BELOW TARGET")
+        shown = "-" if value is None else f"{value:,.1f}x"
+        print(f"| {label} | {shown} | >= {target:g}x | {status} |")
+    for name, why in skipped.items():
+        print(f"\n{name} skipped: {why}")
+
+    if args.json:
+        report = {
+            "formula": FORMULA,
+            "horizon": HORIZON,
+            "batch": BATCH,
+            "seed": args.seed,
+            "quick": args.quick,
+            "satisfied_fraction": satisfied,
+            "max_abs_diff_vs_reference": disagreements,
+            "single_us": single_us,
+            "batch_us_per_trajectory": batch_us,
+            "ratios": {label: {"value": value, "target": target} for label, value, target in ratios},
+            "runs": runs,
+            "skipped": skipped,
+            "versions": {
+                "python": platform.python_version(),
+                "numpy": np.__version__,
+                "tlshield": package_version("tlshield"),
+                "rtamt": package_version("rtamt"),
+                "argus-temporal-logic": package_version("argus-temporal-logic"),
+            },
+        }
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=2)
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
