@@ -29,7 +29,7 @@ min(b(t'), min over t <= t'' < t' of a(t''))):
   longer the discrete-time one.
 
 Before timing, all available tools (and the numpy reference below, the oracle) must agree
-within 1e-9 on the first 50 trajectories, or the script stops with exit code 1. A tool that
+within 1e-9 on the first 200 trajectories, or the script stops with exit code 1. A tool that
 cannot be imported is reported and its column left out.
 """
 
@@ -40,6 +40,7 @@ import gc
 import importlib.metadata
 import json
 import math
+import os
 import platform
 import re
 import statistics
@@ -56,7 +57,8 @@ STATE_DIM = 13
 RADIUS = 0.5
 HALF_WIDTH = 1.5
 GOAL_DIMS = {"g1": (3, 4), "g2": (5, 6), "g3": (7, 8)}
-N_CHECK = 50
+N_CHECK = 200  # trajectories every tool must agree on before timing
+N_TIMED = 50  # distinct trajectories the single-call timings cycle through
 BATCH = 1000
 TOLERANCE = 1e-9
 
@@ -77,16 +79,20 @@ Monitor = Callable[[np.ndarray], float]
 def make_trajectories(rng: np.random.Generator, n: int, horizon: int = HORIZON) -> np.ndarray:
     """Noisy goal-seeking walks, shape (n, horizon + 1, 13), some satisfying the task.
 
-    Each walker heads for g1 or g2 and then for g3; a quarter skip straight to g3 (breaking the
-    order), and random speed and noise leave some short of g3 or outside the channel.
+    Each walker heads for g1 or g2 and then for g3; a quarter take the two the other way round
+    (breaking ``!g3 U (g1 | g2)``), and random speed and noise leave some short of their goals
+    or outside the channel.
     """
     goal1 = np.array([2.0, 3.0]) + rng.uniform(-0.4, 0.4, (n, 2))
     goal2 = np.array([3.0, 2.0]) + rng.uniform(-0.4, 0.4, (n, 2))
-    goal3 = np.array([5.5, 5.5]) + rng.uniform(-0.5, 0.5, (n, 2))
+    goal3 = np.array([5.5, 5.5]) + rng.uniform(-0.8, 0.8, (n, 2))
     obst1 = np.array([1.0, 2.5]) + rng.uniform(-0.3, 0.3, (n, 2))
     obst2 = np.array([4.5, 3.0]) + rng.uniform(-0.3, 0.3, (n, 2))
     first = np.where((rng.random(n) < 0.5)[:, None], goal1, goal2)
-    via_done = rng.random(n) < 0.25
+    reverse = (rng.random(n) < 0.25)[:, None]
+    waypoint_a = np.where(reverse, goal3, first)
+    waypoint_b = np.where(reverse, first, goal3)
+    reached_a = np.zeros(n, dtype=bool)
     speed = rng.uniform(0.03, 0.1, n)[:, None]
     noise = rng.uniform(0.0, 0.2, n)[:, None]
 
@@ -98,9 +104,9 @@ def make_trajectories(rng: np.random.Generator, n: int, horizon: int = HORIZON) 
     trajs[:, :, 11:13] = obst2[:, None]
     pos = rng.normal(0.0, 0.2, (n, 2))
     for t in range(horizon + 1):
-        target = np.where(via_done[:, None], goal3, first)
+        target = np.where(reached_a[:, None], waypoint_b, waypoint_a)
         delta = target - pos
-        via_done |= np.hypot(delta[:, 0], delta[:, 1]) < 0.3
+        reached_a |= np.hypot(delta[:, 0], delta[:, 1]) < 0.3
         theta = np.arctan2(delta[:, 1], delta[:, 0])
         trajs[:, t, 0:2] = pos
         trajs[:, t, 2] = theta
@@ -193,6 +199,13 @@ def parse(text: str) -> Formula:
     return tree
 
 
+def atom_names(f: Formula) -> list[str]:
+    """Atom names in order of first appearance."""
+    if f[0] == "atom":
+        return [f[1]]
+    return list(dict.fromkeys(name for sub in f[1:] for name in atom_names(sub)))
+
+
 def reference_signal(f: Formula, signals: dict[str, np.ndarray]) -> np.ndarray:
     """Robustness at every t (last axis is time), by backward recursion; the agreement oracle."""
     op = f[0]
@@ -249,13 +262,14 @@ def to_rtamt(f: Formula) -> str:
     return f"({to_rtamt(f[1])} {op} {to_rtamt(f[2])})"
 
 
-def rtamt_monitor(formula: str, atoms: Sequence[str]) -> Monitor:
+def rtamt_monitor(formula: str) -> Monitor:
     import rtamt
 
+    tree = parse(formula)
     spec = rtamt.StlDiscreteTimeOfflineSpecification()
-    for name in atoms:
+    for name in atom_names(tree):
         spec.declare_var(name, "float")
-    spec.spec = to_rtamt(parse(formula))
+    spec.spec = to_rtamt(tree)
     spec.parse()
     time_stamps = list(range(HORIZON + 1))
 
@@ -289,7 +303,7 @@ def to_argus(f: Formula) -> Any:
     raise ValueError(f"unknown operator {op!r}")
 
 
-def argus_monitor(formula: str, atoms: Sequence[str]) -> Monitor:
+def argus_monitor(formula: str) -> Monitor:
     import argus
 
     expr = to_argus(parse(formula))
@@ -299,7 +313,10 @@ def argus_monitor(formula: str, atoms: Sequence[str]) -> Monitor:
     def robustness(traj: np.ndarray) -> float:
         trace = argus.Trace(
             {
-                name: signal(list(zip(time_stamps, values.tolist())), interpolation_method="constant")
+                name: signal(
+                    list(zip(time_stamps, values.tolist(), strict=True)),
+                    interpolation_method="constant",
+                )
                 for name, values in predicate_signals(traj).items()
             }
         )
@@ -338,18 +355,27 @@ def package_version(dist: str) -> str | None:
 # --------------------------------------------------------------------------------------------
 
 
-def measure(call: Callable[[Any], object], items: Sequence[Any], budget: float,
-            min_reps: int, max_reps: int = 10_000, min_block: float = 2e-3) -> tuple[float, int, int]:
+def measure(
+    call: Callable[[Any], object],
+    items: Sequence[Any],
+    budget: float,
+    min_reps: int,
+    max_reps: int = 10_000,
+    min_block: float = 2e-3,
+) -> tuple[float, int, int]:
     """Median seconds per call over blocks of calls cycling through ``items``.
 
     Blocks are sized to last at least ``min_block`` seconds and their count fits ``budget``
     (between ``min_reps`` and ``max_reps``). Returns (median, blocks, calls per block).
     """
-    start = time.perf_counter()
-    call(items[0])  # warm-up, and a first estimate of the cost
-    first = max(time.perf_counter() - start, 1e-9)
-    inner = max(1, math.ceil(min_block / first))
-    reps = int(min(max_reps, max(min_reps, budget / (inner * first))))
+    call(items[0])  # warm-up
+    calls, start = 0, time.perf_counter()
+    while (elapsed := time.perf_counter() - start) < min_block:
+        call(items[calls % len(items)])
+        calls += 1
+    per_call = elapsed / calls
+    inner = max(1, math.ceil(min_block / per_call))
+    reps = int(min(max_reps, max(min_reps, budget / (inner * per_call))))
     blocks = [[items[(r * inner + k) % len(items)] for k in range(inner)] for r in range(reps)]
     samples = []
     gc.collect()
@@ -370,137 +396,190 @@ def measure(call: Callable[[Any], object], items: Sequence[Any], budget: float,
 # --------------------------------------------------------------------------------------------
 
 
+class Tools:
+    """The monitors that could be built: name -> robustness of one trajectory."""
+
+    def __init__(self) -> None:
+        self.single: dict[str, Monitor] = {}
+        self.tlshield_batch: Callable[[np.ndarray], np.ndarray] | None = None
+        self.skipped: dict[str, str] = {}
+        self.versions = {"python": platform.python_version(), "numpy": np.__version__}
+
+    @classmethod
+    def load(cls, formula: str) -> Tools:
+        tools = cls()
+        builders: dict[str, Callable[[], Any]] = {
+            "tlshield": lambda: tlshield_spec(formula),
+            "rtamt": lambda: rtamt_monitor(formula),
+            "argus": lambda: argus_monitor(formula),
+        }
+        for name, build in builders.items():
+            try:
+                built = build()
+            except ImportError as err:
+                tools.skipped[name] = f"{type(err).__name__}: {err}"
+                print(f"note: {name} cannot be imported ({tools.skipped[name]}); column skipped")
+                continue
+            if name == "tlshield":
+                tools.versions[name] = sys.modules["tlshield"].__version__
+                tools.single[name] = built.robustness
+                tools.tlshield_batch = built.robustness_batch
+            else:
+                dist = "argus-temporal-logic" if name == "argus" else name
+                tools.versions[name] = package_version(dist)
+                tools.single[name] = built
+        tools.single["numpy-ref"] = Reference(formula).robustness
+        return tools
+
+
+def check_agreement(tools: Tools, trajs: np.ndarray, expected: np.ndarray) -> dict[str, float]:
+    """Max |tool - reference| over ``trajs`` for every tool (and tlshield's batch call)."""
+    diffs = {
+        name: float(np.max(np.abs(np.array([fn(tr) for tr in trajs]) - expected)))
+        for name, fn in tools.single.items()
+    }
+    if tools.tlshield_batch is not None:
+        got = np.asarray(tools.tlshield_batch(trajs))
+        diffs["tlshield batch"] = float(np.max(np.abs(got - expected)))
+    return diffs
+
+
+def time_batches(
+    tools: Tools, reference: Reference, trajs: np.ndarray, budget: float, loop_reps: int
+) -> tuple[dict[str, float], dict[str, dict[str, int]]]:
+    """Median us per trajectory for a whole batch: batch calls, or Python loops of calls."""
+    as_list = list(trajs)
+
+    def loop(fn: Monitor) -> Callable[[object], object]:
+        return lambda _: [fn(tr) for tr in as_list]
+
+    plans: list[tuple[str, Callable[[object], object], float, int]] = []
+    batch = tools.tlshield_batch
+    if batch is not None:
+        plans.append(("tlshield batch", lambda _: batch(trajs), budget, 5))
+        plans.append(("tlshield loop", loop(tools.single["tlshield"]), budget, 3))
+    for name in ("rtamt", "argus"):
+        if name in tools.single:
+            plans.append((f"{name} loop", loop(tools.single[name]), 0.0, loop_reps))
+    plans.append(("numpy-ref batch", lambda _: reference.robustness_batch(trajs), budget, 3))
+    per_traj: dict[str, float] = {}
+    runs: dict[str, dict[str, int]] = {}
+    for label, fn, plan_budget, min_reps in plans:
+        median, reps, inner = measure(fn, [None], plan_budget, min_reps, max(min_reps, 200))
+        per_traj[label] = median / len(trajs) * 1e6
+        runs[label] = {"blocks": reps, "calls_per_block": inner}
+    return per_traj, runs
+
+
+def speedups(
+    single_us: dict[str, float], batch_us: dict[str, float]
+) -> list[tuple[str, float | None, float]]:
+    """(label, tlshield speedup or None when a side is missing, target)."""
+
+    def ratio(slow: float | None, fast: float | None) -> float | None:
+        return None if slow is None or fast is None else slow / fast
+
+    tls_single = single_us.get("tlshield")
+    tls_batch = batch_us.get("tlshield batch")
+    rows = [
+        (f"single: tlshield vs {other}", ratio(single_us.get(other), tls_single), TARGET_SINGLE)
+        for other in ("rtamt", "argus")
+    ]
+    rows += [
+        (
+            f"batch: tlshield batch vs looping {other}",
+            ratio(batch_us.get(f"{other} loop"), tls_batch),
+            TARGET_BATCH_VS_LOOP,
+        )
+        for other in ("rtamt", "argus")
+    ]
+    rows.append(
+        (
+            f"batch: tlshield batch vs {BATCH} single tlshield calls",
+            ratio(batch_us.get("tlshield loop"), tls_batch),
+            TARGET_BATCH_VS_SINGLE,
+        )
+    )
+    return rows
+
+
+def print_tables(
+    single_us: dict[str, float],
+    batch_us: dict[str, float],
+    ratios: list[tuple[str, float | None, float]],
+) -> None:
+    def cell(value: float | None) -> str:
+        return "-" if value is None else f"{value:,.2f}"
+
+    columns = ["tlshield", "rtamt", "argus", "numpy-ref"]
+    batch_row = [batch_us.get(f"{c} batch", batch_us.get(f"{c} loop")) for c in columns]
+    print(
+        f"\nMedian us per trajectory (T = {HORIZON}; {os.cpu_count()} cores, which tlshield's"
+        " batch call may all use; everything else runs on one):\n"
+    )
+    print("| measurement | " + " | ".join(columns) + " |")
+    print("|---|" + "---:|" * len(columns))
+    print("| single trajectory | " + " | ".join(cell(single_us.get(c)) for c in columns) + " |")
+    print(
+        f"| batch of {BATCH} (tlshield, numpy-ref: one batch call; rtamt, argus: Python loop) | "
+        + " | ".join(cell(v) for v in batch_row)
+        + " |"
+    )
+    print(
+        f"| {BATCH} single tlshield calls in a Python loop | "
+        + cell(batch_us.get("tlshield loop"))
+        + " | - | - | - |"
+    )
+    print("\n| tlshield speedup | value | target | |")
+    print("|---|---:|---:|---|")
+    for label, value, target in ratios:
+        status = "n/a" if value is None else ("ok" if value >= target else "BELOW TARGET")
+        shown = "-" if value is None else f"{value:,.1f}x"
+        print(f"| {label} | {shown} | >= {target:g}x | {status} |")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=0, help="trajectory seed (default 0)")
     parser.add_argument("--quick", action="store_true", help="fewer repetitions (smoke run)")
     parser.add_argument("--json", metavar="PATH", help="also write the numbers to PATH")
     args = parser.parse_args(argv)
+    budget = 0.6 if args.quick else 4.0  # seconds per measurement, roughly
+    loop_reps = 1 if args.quick else 3  # rtamt and argus loops over the whole batch
 
-    budget_single = 0.6 if args.quick else 4.0
-    budget_batch = 0.6 if args.quick else 4.0
-    loop_reps = 1 if args.quick else 3
-
-    atoms = list(dict.fromkeys(re.findall(r"[a-z_][a-z0-9_]*", FORMULA)))
-    rng = np.random.default_rng(args.seed)
-    trajs = make_trajectories(rng, BATCH)
-    singles = list(trajs[:N_CHECK])
-
+    trajs = make_trajectories(np.random.default_rng(args.seed), BATCH)
     reference = Reference(FORMULA)
-    tools: dict[str, Monitor] = {}
-    batch_fn: Callable[[np.ndarray], np.ndarray] | None = None
-    skipped: dict[str, str] = {}
-    for name, build in (
-        ("tlshield", lambda: tlshield_spec(FORMULA)),
-        ("rtamt", lambda: rtamt_monitor(FORMULA, atoms)),
-        ("argus", lambda: argus_monitor(FORMULA, atoms)),
-    ):
-        try:
-            built = build()
-        except ImportError as err:
-            skipped[name] = f"{type(err).__name__}: {err}"
-            print(f"note: {name} cannot be imported ({skipped[name]}); its column is skipped.")
-            continue
-        if name == "tlshield":
-            tools[name] = built.robustness
-            batch_fn = built.robustness_batch
-        else:
-            tools[name] = built
-    tools["numpy-ref"] = reference.robustness
+    tools = Tools.load(FORMULA)
+    print(f"versions: {tools.versions}")
 
-    # Agreement before any timing: every tool against the reference on N_CHECK trajectories.
+    # Agreement before any timing, against the numpy reference.
     expected = reference.robustness_batch(trajs[:N_CHECK])
-    if not np.allclose(expected, [reference.robustness(tr) for tr in singles], atol=TOLERANCE):
-        raise SystemExit("numpy reference: batch and single evaluation disagree")
     satisfied = float(np.mean(reference.robustness_batch(trajs) > 0))
     print(f"formula: {FORMULA}")
-    print(f"{BATCH} trajectories of {HORIZON + 1} states, seed {args.seed}; "
-          f"{satisfied:.0%} satisfy; robustness of the first {N_CHECK} in "
-          f"[{expected.min():.3f}, {expected.max():.3f}]")
-    disagreements: dict[str, float] = {}
-    for name, fn in tools.items():
-        got = np.array([fn(tr) for tr in singles])
-        disagreements[name] = float(np.max(np.abs(got - expected)))
-    if batch_fn is not None:
-        got = np.asarray(batch_fn(trajs[:N_CHECK]))
-        disagreements["tlshield batch"] = float(np.max(np.abs(got - expected)))
-    for name, diff in disagreements.items():
+    print(
+        f"{BATCH} trajectories of {HORIZON + 1} states, seed {args.seed}: {satisfied:.0%} satisfy;"
+        f" robustness of the first {N_CHECK} in [{expected.min():.3f}, {expected.max():.3f}]"
+    )
+    diffs = check_agreement(tools, trajs[:N_CHECK], expected)
+    for name, diff in diffs.items():
         print(f"max |{name} - reference| over {N_CHECK} trajectories: {diff:.3g}")
-    bad = {k: v for k, v in disagreements.items() if not v <= TOLERANCE}
+    bad = {name: diff for name, diff in diffs.items() if not diff <= TOLERANCE}
     if bad:
-        print(f"ERROR: tools disagree beyond {TOLERANCE:g}: {bad}", file=sys.stderr)
+        print(f"ERROR: robustness disagrees beyond {TOLERANCE:g}: {bad}", file=sys.stderr)
         return 1
 
-    # (a) one trajectory per call.
     single_us: dict[str, float] = {}
     runs: dict[str, dict[str, int]] = {}
-    for name, fn in tools.items():
-        median, reps, inner = measure(fn, singles, budget_single, min_reps=5)
+    singles = list(trajs[:N_TIMED])
+    for name, fn in tools.single.items():
+        median, reps, inner = measure(fn, singles, budget, min_reps=5)
         single_us[name] = median * 1e6
         runs[f"single {name}"] = {"blocks": reps, "calls_per_block": inner}
-
-    # (b) a batch of BATCH trajectories: one batch call, or a Python loop of single calls.
-    batch_list = list(trajs)
-    batch_us: dict[str, float] = {}
-
-    def loop(fn: Monitor) -> Callable[[object], object]:
-        return lambda _: [fn(tr) for tr in batch_list]
-
-    plans: list[tuple[str, Callable[[object], object], float, int]] = []
-    if batch_fn is not None:
-        plans.append(("tlshield batch", lambda _: batch_fn(trajs), budget_batch, 5))
-        plans.append(("tlshield loop", loop(tools["tlshield"]), budget_batch, 3))
-    for name in ("rtamt", "argus"):
-        if name in tools:
-            plans.append((f"{name} loop", loop(tools[name]), 0.0, loop_reps))
-    plans.append(("numpy-ref batch", lambda _: reference.robustness_batch(trajs), budget_batch, 3))
-    for label, fn, budget, min_reps in plans:
-        median, reps, _ = measure(fn, [None], budget, min_reps=min_reps, max_reps=max(min_reps, 200))
-        batch_us[label] = median / BATCH * 1e6
-        runs[label] = {"blocks": reps, "calls_per_block": 1}
-
-    # Ratios (tlshield against the others) and the report.
-    ratios: list[tuple[str, float | None, float]] = []
-
-    def ratio(num: float | None, den: float | None) -> float | None:
-        return None if num is None or den is None else num / den
-
-    tls_single = single_us.get("tlshield")
-    tls_batch = batch_us.get("tlshield batch")
-    for other in ("rtamt", "argus"):
-        ratios.append((f"single: tlshield vs {other}",
-                       ratio(single_us.get(other), tls_single), TARGET_SINGLE))
-    for other in ("rtamt", "argus"):
-        ratios.append((f"batch: tlshield batch vs looping {other}",
-                       ratio(batch_us.get(f"{other} loop"), tls_batch), TARGET_BATCH_VS_LOOP))
-    ratios.append(("batch: tlshield batch vs 1000 single tlshield calls",
-                   ratio(batch_us.get("tlshield loop"), tls_batch), TARGET_BATCH_VS_SINGLE))
-
-    def cell(value: float | None) -> str:
-        return "-" if value is None else f"{value:,.2f}"
-
-    columns = ["tlshield", "rtamt", "argus", "numpy-ref"]
-    print()
-    print(f"Median us per trajectory (T = {HORIZON}; "
-          f"{platform.python_implementation()} {platform.python_version()}, numpy "
-          f"{np.__version__}):")
-    print()
-    print("| measurement | " + " | ".join(columns) + " |")
-    print("|---|" + "---:|" * len(columns))
-    print("| single trajectory | " + " | ".join(cell(single_us.get(c)) for c in columns) + " |")
-    print(f"| batch of {BATCH} (tlshield, numpy-ref: one batch call; others: Python loop) | "
-          + " | ".join(cell(batch_us.get(f"{c} batch", batch_us.get(f"{c} loop")))
-                       for c in columns) + " |")
-    print(f"| {BATCH} single tlshield calls in a Python loop | "
-          + cell(batch_us.get("tlshield loop")) + " | - | - | - |")
-    print()
-    print("| ratio | value | target | |")
-    print("|---|---:|---:|---|")
-    for label, value, target in ratios:
-        status = "n/a" if value is None else ("ok" if value >= target else "BELOW TARGET")
-        shown = "-" if value is None else f"{value:,.1f}x"
-        print(f"| {label} | {shown} | >= {target:g}x | {status} |")
-    for name, why in skipped.items():
+    batch_us, batch_runs = time_batches(tools, reference, trajs, budget, loop_reps)
+    runs.update(batch_runs)
+    ratios = speedups(single_us, batch_us)
+    print_tables(single_us, batch_us, ratios)
+    for name, why in tools.skipped.items():
         print(f"\n{name} skipped: {why}")
 
     if args.json:
@@ -510,20 +589,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             "batch": BATCH,
             "seed": args.seed,
             "quick": args.quick,
+            "cores": os.cpu_count(),
             "satisfied_fraction": satisfied,
-            "max_abs_diff_vs_reference": disagreements,
+            "max_abs_diff_vs_reference": diffs,
             "single_us": single_us,
             "batch_us_per_trajectory": batch_us,
-            "ratios": {label: {"value": value, "target": target} for label, value, target in ratios},
+            "speedups": {label: {"value": v, "target": t} for label, v, t in ratios},
             "runs": runs,
-            "skipped": skipped,
-            "versions": {
-                "python": platform.python_version(),
-                "numpy": np.__version__,
-                "tlshield": package_version("tlshield"),
-                "rtamt": package_version("rtamt"),
-                "argus-temporal-logic": package_version("argus-temporal-logic"),
-            },
+            "skipped": tools.skipped,
+            "versions": tools.versions,
         }
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=2)
