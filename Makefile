@@ -30,3 +30,4 @@ lint:
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(BIN)/ruff check python tests benches
 	$(BIN)/ruff format --check python tests benches
+	$(BIN)/python -m mypy.stubtest tlshield._core --allowlist stubtest_allow.txt

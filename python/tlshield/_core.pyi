@@ -1,19 +1,22 @@
 """Type stubs for the compiled module ``tlshield._core`` (hand-written; keep in sync)."""
 
 from collections.abc import Mapping, Sequence
+from typing import TypeAlias, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from typing_extensions import Self
 
 __version__: str
 
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""
 
+@final
 class Halfspace:
     """Half-space predicate ``rho(s) = w . s + b`` (holds iff > 0)."""
 
-    def __init__(self, w: ArrayLike, b: float) -> None: ...
+    def __new__(cls, w: ArrayLike, b: float) -> Self: ...
     def robustness(self, s: ArrayLike) -> float: ...
     def gradient(self, s: ArrayLike) -> NDArray[np.float64]: ...
     @property
@@ -21,16 +24,17 @@ class Halfspace:
     @property
     def b(self) -> float: ...
 
+@final
 class Ball:
     """Ball predicate ``rho(s) = radius - |s[pos] - c|``; centre fixed or read from the state."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         pos: Sequence[int],
         radius: float,
         center: ArrayLike | None = None,
         center_dims: Sequence[int] | None = None,
-    ) -> None: ...
+    ) -> Self: ...
     def robustness(self, s: ArrayLike) -> float: ...
     def gradient(self, s: ArrayLike) -> NDArray[np.float64]: ...
     @property
@@ -42,12 +46,13 @@ class Ball:
     @property
     def center_dims(self) -> list[int] | None: ...
 
-Predicate = Halfspace | Ball
+Predicate: TypeAlias = Halfspace | Ball
 
+@final
 class Spec:
     """An scTLTL formula over named state predicates."""
 
-    def __init__(self, formula: str, predicates: Mapping[str, Predicate]) -> None: ...
+    def __new__(cls, formula: str, predicates: Mapping[str, Predicate]) -> Self: ...
     @property
     def atoms(self) -> list[str]: ...
     @property
