@@ -82,3 +82,33 @@ pub enum InputError {
         value: f64,
     },
 }
+
+/// A problem building or using an automaton.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum AutomatonError {
+    /// The alphabet is the set of atom valuations; more than this many atoms is refused.
+    #[error("the formula has {0} atoms; automata support at most {max}", max = crate::automaton::MAX_ATOMS)]
+    TooManyAtoms(usize),
+    /// The automaton grew past the supported number of states.
+    #[error("the automaton has more than {0} states")]
+    TooManyStates(usize),
+    /// The formula has more distinct temporal subformulas than the construction supports.
+    #[error("the formula has more than {0} distinct temporal subformulas")]
+    TooManyObligations(usize),
+    /// A state id that does not exist.
+    #[error("{what}: state {q} does not exist (the automaton has states 0..{num_states})")]
+    UnknownState {
+        /// Which argument.
+        what: String,
+        /// The id given.
+        q: i64,
+        /// Number of states.
+        num_states: usize,
+    },
+    /// The trap state has no task reward (the environment pays a trap penalty there).
+    #[error("q = {0} is the trap state, which has no task reward; pass trap_penalty to reward it")]
+    TrapReward(usize),
+    /// Bad numeric input.
+    #[error(transparent)]
+    Input(#[from] InputError),
+}

@@ -16,12 +16,15 @@
 //! assert_eq!(rho, 1.0); // max(4 - s_t) over the closed window s_0..s_3
 //! ```
 
+pub mod automaton;
+pub mod cnf;
 pub mod error;
 pub mod predicate;
 pub mod robustness;
 pub mod spec;
 
-pub use error::{InputError, SpecError};
+pub use automaton::{Automaton, Edge};
+pub use error::{AutomatonError, InputError, SpecError};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 pub use spec::{Formula, Spec};

@@ -543,7 +543,7 @@ impl Spec {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::predicate::Center;
     use proptest::prelude::*;
@@ -637,7 +637,7 @@ mod tests {
     }
 
     /// Random syntactically co-safe formulas.
-    fn co_safe() -> impl Strategy<Value = Formula> {
+    pub(crate) fn co_safe() -> impl Strategy<Value = Formula> {
         propositional().prop_recursive(4, 24, 3, |inner| {
             prop_oneof![
                 propositional().prop_map(|a| Formula::Not(Box::new(a))),
@@ -654,12 +654,12 @@ mod tests {
     }
 
     /// Trajectories on a coarse grid (so ties and exact zeros happen) or continuous values.
-    fn trajectory() -> impl Strategy<Value = Vec<f64>> {
+    pub(crate) fn trajectory() -> impl Strategy<Value = Vec<f64>> {
         let value = prop_oneof![(-2i32..=2).prop_map(|v| v as f64 * 0.5), -2.0..2.0f64];
         (1usize..8).prop_flat_map(move |steps| prop::collection::vec(value.clone(), steps * 3))
     }
 
-    fn spec_for(f: &Formula) -> Spec {
+    pub(crate) fn spec_for(f: &Formula) -> Spec {
         let names: Vec<String> = NAMES.iter().map(|s| s.to_string()).collect();
         Spec::new(&f.display(&names).to_string(), predicates()).unwrap()
     }

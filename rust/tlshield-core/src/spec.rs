@@ -14,7 +14,7 @@ use crate::robustness::Program;
 
 /// An scTLTL formula. Atoms are indices into the atom list of the [`Spec`] (or of
 /// [`Formula::parse`]). `And`/`Or` are n-ary and never directly nest themselves.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Formula {
     /// Always true (robustness `+inf`).
     True,

@@ -1,0 +1,909 @@
+//! The FSA of an scTLTL formula, built natively: formula progression over the valuations of
+//! the atoms with canonical simplification, acceptance by end-of-trace evaluation, then
+//! minimisation. The result is unique for the formula's language: one absorbing accepting
+//! state, and at most one trap state (no path to acceptance). Guards are minimised DNFs.
+//!
+//! The FSA reads every state of a trajectory: `q_0 = delta(initial, s_0)`,
+//! `q_{t+1} = delta(q_t, s_{t+1})`; an atom holds iff its robustness is > 0.
+//!
+//! Also here: the FSA-augmented reward (Eq. 5A1) and the CBF safe set (Eq. 5C1).
+
+use std::collections::{HashMap, VecDeque};
+
+use rayon::prelude::*;
+
+use crate::cnf::{self, Cube, Literal};
+use crate::error::{AutomatonError, InputError};
+use crate::robustness::{check_finite, Trajectory};
+use crate::spec::{Formula, Spec};
+
+/// Most atoms an automaton supports (its alphabet has `2^atoms` letters).
+pub const MAX_ATOMS: usize = 16;
+
+/// Most states an automaton may have (state ids are stored as `u32`, tables stay small).
+pub const MAX_STATES: usize = 1 << 16;
+
+/// One edge of the automaton with its guard.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Edge {
+    /// Source state.
+    pub src: usize,
+    /// Target state.
+    pub dst: usize,
+    /// Minimised DNF over the atoms.
+    pub guard: Vec<Cube>,
+}
+
+/// A deterministic automaton over atom valuations, with the per-state data the shield needs.
+#[derive(Debug, Clone)]
+pub struct Automaton {
+    spec: Spec,
+    letters: usize,
+    initial: usize,
+    accepting: Vec<bool>,
+    trap: Option<usize>,
+    /// `table[q * letters + v]`: the successor of `q` on valuation `v`.
+    table: Vec<u32>,
+    edges: Vec<Edge>,
+    /// Per state: the cubes of D_q, the OR of the guards to states other than q and the trap.
+    progress: Vec<Vec<Cube>>,
+    /// Per state: the guard of its edge to the trap (empty: no such edge).
+    trap_guard: Vec<Vec<Cube>>,
+    /// Per state: the CNF of the negated trap guard (empty: no trap edge).
+    trap_cnf: Vec<Vec<Vec<Literal>>>,
+}
+
+/// Most distinct temporal obligations (subformulas under `F`, `U`, `X`) a formula may have.
+pub const MAX_OBLIGATIONS: usize = 128;
+
+/// A positive Boolean combination of obligations in canonical DNF: each cube is a set of
+/// obligation ids (bit `k`: obligation `k` must hold at the start of the rest of the trace).
+/// Cubes are sorted and no cube contains another (absorption), so equal functions of the
+/// obligations get equal values and progression reaches finitely many of them.
+/// `[]` is false; `[0]` (the empty cube) is true.
+type Dnf = Vec<u128>;
+
+const TRUE: u128 = 0;
+
+fn absorb(mut cubes: Vec<u128>) -> Dnf {
+    cubes.sort_unstable_by_key(|c| (c.count_ones(), *c));
+    cubes.dedup();
+    let mut kept: Vec<u128> = Vec::with_capacity(cubes.len());
+    for c in cubes {
+        if !kept.iter().any(|&d| d & !c == 0) {
+            kept.push(c);
+        }
+    }
+    kept.sort_unstable();
+    kept
+}
+
+fn dnf_or(mut a: Dnf, b: Dnf) -> Dnf {
+    a.extend(b);
+    absorb(a)
+}
+
+fn dnf_and(a: &[u128], b: &[u128]) -> Dnf {
+    absorb(
+        a.iter()
+            .flat_map(|x| b.iter().map(move |y| x | y))
+            .collect(),
+    )
+}
+
+fn constant(b: bool) -> Dnf {
+    if b {
+        vec![TRUE]
+    } else {
+        Vec::new()
+    }
+}
+
+/// Truth of a propositional formula under valuation `v`.
+fn holds(f: &Formula, v: u32) -> bool {
+    match f {
+        Formula::True => true,
+        Formula::False => false,
+        Formula::Atom(i) => v >> i & 1 == 1,
+        Formula::Not(a) => !holds(a, v),
+        Formula::And(parts) => parts.iter().all(|p| holds(p, v)),
+        Formula::Or(parts) => parts.iter().any(|p| holds(p, v)),
+        Formula::Implies(a, b) => !holds(a, v) || holds(b, v),
+        // Co-safety puts only propositional formulas under `!` and left of `->`, the only
+        // places this is called.
+        Formula::Until(..) | Formula::Eventually(_) | Formula::Next(_) => false,
+    }
+}
+
+/// The obligations met so far: formulas that must hold at the start of the rest of the trace.
+#[derive(Default)]
+struct Obligations {
+    formulas: Vec<Formula>,
+    ids: HashMap<Formula, usize>,
+}
+
+impl Obligations {
+    fn id(&mut self, f: &Formula) -> Result<u128, AutomatonError> {
+        if let Some(&k) = self.ids.get(f) {
+            return Ok(1u128 << k);
+        }
+        if self.formulas.len() == MAX_OBLIGATIONS {
+            return Err(AutomatonError::TooManyObligations(MAX_OBLIGATIONS));
+        }
+        self.ids.insert(f.clone(), self.formulas.len());
+        self.formulas.push(f.clone());
+        Ok(1u128 << (self.formulas.len() - 1))
+    }
+
+    /// What remains of "`f` holds from here" after reading a state with valuation `v`.
+    fn progress(&mut self, f: &Formula, v: u32) -> Result<Dnf, AutomatonError> {
+        Ok(match f {
+            Formula::True | Formula::False | Formula::Atom(_) | Formula::Not(_) => {
+                constant(holds(f, v))
+            }
+            Formula::And(parts) => {
+                let mut acc = vec![TRUE];
+                for p in parts {
+                    acc = dnf_and(&acc, &self.progress(p, v)?);
+                }
+                acc
+            }
+            Formula::Or(parts) => {
+                let mut acc = Vec::new();
+                for p in parts {
+                    acc = dnf_or(acc, self.progress(p, v)?);
+                }
+                acc
+            }
+            Formula::Implies(a, b) if holds(a, v) => self.progress(b, v)?,
+            Formula::Implies(..) => vec![TRUE],
+            Formula::Eventually(a) => dnf_or(self.progress(a, v)?, vec![self.id(f)?]),
+            Formula::Until(a, b) => {
+                let keep = dnf_and(&self.progress(a, v)?, &[self.id(f)?]);
+                dnf_or(self.progress(b, v)?, keep)
+            }
+            // `X a`: `a` must hold from the next state on (which must exist).
+            Formula::Next(a) => vec![self.id(a)?],
+        })
+    }
+
+    /// Progression of a whole residual.
+    fn step(&mut self, residual: &[u128], v: u32) -> Result<Dnf, AutomatonError> {
+        let mut out = Vec::new();
+        for &cube in residual {
+            let mut acc = vec![TRUE];
+            let mut bits = cube;
+            while bits != 0 && !acc.is_empty() {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let f = self.formulas[k].clone();
+                acc = dnf_and(&acc, &self.progress(&f, v)?);
+            }
+            out.extend(acc);
+        }
+        Ok(absorb(out))
+    }
+}
+
+impl Automaton {
+    /// Builds the minimal automaton of `spec`'s formula.
+    pub fn build(spec: &Spec) -> Result<Self, AutomatonError> {
+        let n = spec.atoms().len();
+        if n > MAX_ATOMS {
+            return Err(AutomatonError::TooManyAtoms(n));
+        }
+        let letters = 1usize << n;
+
+        // 1. Explore the residuals reachable by progression. A residual holds on the empty
+        //    rest of a trace iff it is `true` (every obligation needs a state).
+        let mut obligations = Obligations::default();
+        let start: Dnf = vec![obligations.id(spec.formula())?];
+        let mut ids: HashMap<Dnf, usize> = HashMap::from([(start.clone(), 0)]);
+        let mut residuals = vec![start];
+        let mut raw: Vec<u32> = Vec::new();
+        let mut next = 0;
+        while next < residuals.len() {
+            let current = residuals[next].clone();
+            for v in 0..letters as u32 {
+                let succ = obligations.step(&current, v)?;
+                let id = match ids.get(&succ) {
+                    Some(&id) => id,
+                    None => {
+                        if residuals.len() >= MAX_STATES {
+                            return Err(AutomatonError::TooManyStates(MAX_STATES));
+                        }
+                        ids.insert(succ.clone(), residuals.len());
+                        residuals.push(succ);
+                        residuals.len() - 1
+                    }
+                };
+                raw.push(id as u32);
+            }
+            next += 1;
+        }
+        let accepting_raw: Vec<bool> = residuals.iter().map(|r| r.contains(&TRUE)).collect();
+
+        // 2. Minimise (Moore refinement), then number states breadth-first from the start.
+        let block = minimise(&raw, &accepting_raw, letters);
+        let blocks = block.iter().max().map_or(0, |m| m + 1);
+        let mut representative = vec![usize::MAX; blocks];
+        for (q, &b) in block.iter().enumerate().rev() {
+            representative[b] = q;
+        }
+        let mut order = vec![usize::MAX; blocks];
+        let mut queue = VecDeque::from([block[0]]);
+        order[block[0]] = 0;
+        let mut count = 1;
+        let mut table = vec![0u32; blocks * letters];
+        let mut visit = Vec::with_capacity(blocks);
+        while let Some(b) = queue.pop_front() {
+            visit.push(b);
+            let q = representative[b];
+            for v in 0..letters {
+                let nb = block[raw[q * letters + v] as usize];
+                if order[nb] == usize::MAX {
+                    order[nb] = count;
+                    count += 1;
+                    queue.push_back(nb);
+                }
+            }
+        }
+        for &b in &visit {
+            let q = representative[b];
+            for v in 0..letters {
+                table[order[b] * letters + v] = order[block[raw[q * letters + v] as usize]] as u32;
+            }
+        }
+        let num_states = count;
+        table.truncate(num_states * letters);
+        let mut accepting = vec![false; num_states];
+        for &b in &visit {
+            accepting[order[b]] = accepting_raw[representative[b]];
+        }
+
+        // 3. The trap: the state from which no accepting state is reachable (at most one
+        //    after minimisation).
+        let mut reaches = accepting.clone();
+        loop {
+            let mut changed = false;
+            for q in 0..num_states {
+                if !reaches[q]
+                    && table[q * letters..(q + 1) * letters]
+                        .iter()
+                        .any(|&d| reaches[d as usize])
+                {
+                    reaches[q] = true;
+                    changed = true;
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+        let trap = reaches.iter().position(|r| !r);
+
+        // 4. Guards.
+        let mut edges = Vec::new();
+        for src in 0..num_states {
+            let mut by_dst: Vec<Vec<u32>> = vec![Vec::new(); num_states];
+            for v in 0..letters {
+                by_dst[table[src * letters + v] as usize].push(v as u32);
+            }
+            for (dst, minterms) in by_dst.iter().enumerate() {
+                if !minterms.is_empty() {
+                    edges.push(Edge {
+                        src,
+                        dst,
+                        guard: cnf::minimise(minterms, n),
+                    });
+                }
+            }
+        }
+        let mut progress_cubes = vec![Vec::new(); num_states];
+        let mut trap_guard = vec![Vec::new(); num_states];
+        for e in &edges {
+            if Some(e.dst) == trap && e.src != e.dst {
+                trap_guard[e.src] = e.guard.clone();
+            } else if e.dst != e.src && Some(e.dst) != trap {
+                progress_cubes[e.src].extend_from_slice(&e.guard);
+            }
+        }
+        let trap_cnf = trap_guard.iter().map(|g| cnf::complement_cnf(g)).collect();
+        Ok(Automaton {
+            spec: spec.clone(),
+            letters,
+            initial: 0,
+            accepting,
+            trap,
+            table,
+            edges,
+            progress: progress_cubes,
+            trap_guard,
+            trap_cnf,
+        })
+    }
+
+    /// The spec the automaton was built from.
+    pub fn spec(&self) -> &Spec {
+        &self.spec
+    }
+
+    /// Number of states.
+    pub fn num_states(&self) -> usize {
+        self.accepting.len()
+    }
+
+    /// The state before anything is read (the formula itself).
+    pub fn initial(&self) -> usize {
+        self.initial
+    }
+
+    /// Whether `q` is accepting.
+    pub fn is_accepting(&self, q: usize) -> bool {
+        self.accepting[q]
+    }
+
+    /// Accepting states, ascending.
+    pub fn accepting(&self) -> Vec<usize> {
+        (0..self.num_states())
+            .filter(|&q| self.accepting[q])
+            .collect()
+    }
+
+    /// The trap state, if the formula can be violated.
+    pub fn trap(&self) -> Option<usize> {
+        self.trap
+    }
+
+    /// All edges (self-loops included), sorted by source then target.
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    /// The CNF of the negated trap guard of `q` (empty: `q` has no trap edge).
+    pub fn trap_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
+        self.check_state("q", q as i64)?;
+        Ok(&self.trap_cnf[q])
+    }
+
+    /// The guard of `q`'s edge to the trap (empty: none).
+    pub fn trap_guard(&self, q: usize) -> Result<&[Cube], AutomatonError> {
+        self.check_state("q", q as i64)?;
+        Ok(&self.trap_guard[q])
+    }
+
+    /// The cubes of D_q (Eq. 5A1): the guards of `q`'s edges to other non-trap states.
+    pub fn progress_guard(&self, q: usize) -> Result<&[Cube], AutomatonError> {
+        self.check_state("q", q as i64)?;
+        Ok(&self.progress[q])
+    }
+
+    /// Checks a state id given by a caller.
+    pub fn check_state(&self, what: &str, q: i64) -> Result<usize, AutomatonError> {
+        match usize::try_from(q) {
+            Ok(q) if q < self.num_states() => Ok(q),
+            _ => Err(AutomatonError::UnknownState {
+                what: what.into(),
+                q,
+                num_states: self.num_states(),
+            }),
+        }
+    }
+
+    fn check_vector(&self, s: &[f64]) -> Result<(), InputError> {
+        self.spec.check_state_len(s.len())?;
+        check_finite("s", s, s.len())
+    }
+
+    /// Atom robustness at `s` into a stack buffer (no allocation).
+    #[inline]
+    fn atom_rho(&self, s: &[f64]) -> [f64; MAX_ATOMS] {
+        let mut rho = [0.0; MAX_ATOMS];
+        self.spec
+            .atom_robustness_into(s, &mut rho[..self.spec.atoms().len()]);
+        rho
+    }
+
+    #[inline]
+    fn valuation(rho: &[f64]) -> usize {
+        rho.iter()
+            .enumerate()
+            .fold(0, |v, (i, &r)| v | (usize::from(r > 0.0) << i))
+    }
+
+    /// The successor of `q` after reading state `s` (validated).
+    pub fn step(&self, q: usize, s: &[f64]) -> Result<usize, AutomatonError> {
+        self.check_state("q", q as i64)?;
+        self.check_vector(s)?;
+        Ok(self.step_unchecked(q, s))
+    }
+
+    /// The successor of `q` on the atom valuation `v` (bit `i` set: atom `i` holds). The caller
+    /// guarantees `q < num_states()` and `v < 2^atoms`.
+    pub fn step_valuation(&self, q: usize, v: usize) -> usize {
+        self.table[q * self.letters + v] as usize
+    }
+
+    /// [`Automaton::step`] for inputs the caller has validated.
+    #[inline]
+    pub fn step_unchecked(&self, q: usize, s: &[f64]) -> usize {
+        let rho = self.atom_rho(s);
+        let v = Self::valuation(&rho[..self.spec.atoms().len()]);
+        self.table[q * self.letters + v] as usize
+    }
+
+    /// Steps a batch in parallel: row `i` of `states` (row-major, `dim` values) from `qs[i]`.
+    pub fn step_batch(
+        &self,
+        qs: &[i64],
+        states: &[f64],
+        dim: usize,
+    ) -> Result<Vec<usize>, AutomatonError> {
+        if dim == 0 || states.len() != qs.len() * dim {
+            return Err(InputError::Shape {
+                what: "states".into(),
+                expected: format!("({}, n) to match qs", qs.len()),
+                got: format!("{} values in rows of {dim}", states.len()),
+            }
+            .into());
+        }
+        self.spec.check_state_len(dim)?;
+        check_finite("states", states, dim)?;
+        let qs: Vec<usize> = qs
+            .iter()
+            .enumerate()
+            .map(|(i, &q)| self.check_state(&format!("qs[{i}]"), q))
+            .collect::<Result<_, _>>()?;
+        Ok(qs
+            .par_iter()
+            .zip(states.par_chunks(dim))
+            .map(|(&q, s)| self.step_unchecked(q, s))
+            .collect())
+    }
+
+    /// The state after reading every state of `traj`, starting from the initial state.
+    pub fn run(&self, traj: Trajectory<'_>) -> Result<usize, AutomatonError> {
+        self.spec.check_state_len(traj.dim())?;
+        Ok((0..traj.len()).fold(self.initial, |q, t| self.step_unchecked(q, traj.state(t))))
+    }
+
+    /// Whether the automaton accepts `traj` (reads every state, ends in an accepting state).
+    pub fn accepts(&self, traj: Trajectory<'_>) -> Result<bool, AutomatonError> {
+        Ok(self.accepting[self.run(traj)?])
+    }
+
+    /// The FSA-augmented reward of Eq. 5A1 for leaving `q` into state `s_next`:
+    /// `min(rho(s', D_q), c_r * rho(s', !psi_{q,trap}))`, `rho(s', D_q)` without a trap edge,
+    /// 0 in an accepting state, `trap_penalty` in the trap (an error when it is `None`).
+    pub fn reward(
+        &self,
+        q: usize,
+        s_next: &[f64],
+        c_r: f64,
+        trap_penalty: Option<f64>,
+    ) -> Result<f64, AutomatonError> {
+        self.check_state("q", q as i64)?;
+        self.check_vector(s_next)?;
+        if !(c_r.is_finite() && c_r > 0.0) {
+            return Err(InputError::Shape {
+                what: "c_r".into(),
+                expected: "a finite weight > 0".into(),
+                got: c_r.to_string(),
+            }
+            .into());
+        }
+        if Some(q) == self.trap {
+            return match trap_penalty {
+                Some(p) if p.is_finite() => Ok(p),
+                Some(p) => Err(InputError::NonFinite {
+                    what: "trap_penalty".into(),
+                    value: p,
+                }
+                .into()),
+                None => Err(AutomatonError::TrapReward(q)),
+            };
+        }
+        Ok(self.reward_unchecked(q, s_next, c_r))
+    }
+
+    /// [`Automaton::reward`] for validated inputs and a non-trap `q`.
+    #[inline]
+    pub fn reward_unchecked(&self, q: usize, s_next: &[f64], c_r: f64) -> f64 {
+        if self.accepting[q] {
+            return 0.0;
+        }
+        let rho = self.atom_rho(s_next);
+        let progress = cnf::dnf_robustness(&self.progress[q], &rho);
+        if self.trap_cnf[q].is_empty() {
+            progress
+        } else {
+            progress.min(c_r * cnf::cnf_robustness(&self.trap_cnf[q], &rho))
+        }
+    }
+
+    /// The CBF safe set of Eq. 5C1 at `(s, q)`: per clause of the negated trap guard, the
+    /// literal with the largest robustness at `s` and that robustness (empty without a trap
+    /// edge).
+    pub fn safe_set(&self, q: usize, s: &[f64]) -> Result<Vec<(Literal, f64)>, AutomatonError> {
+        self.check_state("q", q as i64)?;
+        self.check_vector(s)?;
+        let mut out = Vec::with_capacity(self.trap_cnf[q].len());
+        self.safe_set_into(q, s, &mut out);
+        Ok(out)
+    }
+
+    /// [`Automaton::safe_set`] into a reused buffer, for validated inputs.
+    pub fn safe_set_into(&self, q: usize, s: &[f64], out: &mut Vec<(Literal, f64)>) {
+        out.clear();
+        if self.trap_cnf[q].is_empty() {
+            return;
+        }
+        let rho = self.atom_rho(s);
+        out.extend(cnf::safe_literals(&self.trap_cnf[q], &rho));
+    }
+
+    /// Graphviz DOT text: accepting states double circles, the trap filled red.
+    pub fn to_dot(&self) -> String {
+        let atoms = self.spec.atoms();
+        let mut out = String::from("digraph fsa {\n  rankdir=LR;\n  node [shape=circle, fontname=\"Helvetica\"];\n  edge [fontname=\"Helvetica\", fontsize=10];\n  start [shape=point];\n");
+        out.push_str(&format!("  start -> q{};\n", self.initial));
+        for q in 0..self.num_states() {
+            let mut attrs = vec![];
+            if self.accepting[q] {
+                attrs.push("shape=doublecircle".to_string());
+            }
+            if Some(q) == self.trap {
+                attrs.push(format!("label=\"q{q}\\ntrap\""));
+                attrs.push("style=filled, fillcolor=\"#f4b6b6\"".to_string());
+            }
+            if attrs.is_empty() {
+                out.push_str(&format!("  q{q};\n"));
+            } else {
+                out.push_str(&format!("  q{q} [{}];\n", attrs.join(", ")));
+            }
+        }
+        for e in &self.edges {
+            out.push_str(&format!(
+                "  q{} -> q{} [label=\"{}\"];\n",
+                e.src,
+                e.dst,
+                cnf::dnf_text(&e.guard, atoms)
+            ));
+        }
+        out.push_str("}\n");
+        out
+    }
+}
+
+/// Moore partition refinement: returns the block of every state, blocks numbered by first
+/// occurrence.
+fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
+    let n = accepting.len();
+    let mut block: Vec<usize> = accepting.iter().map(|&a| usize::from(a)).collect();
+    let mut count = 0;
+    loop {
+        let mut ids: HashMap<Vec<usize>, usize> = HashMap::new();
+        let mut refined = vec![0; n];
+        for q in 0..n {
+            let mut signature = Vec::with_capacity(letters + 1);
+            signature.push(block[q]);
+            signature.extend(
+                table[q * letters..(q + 1) * letters]
+                    .iter()
+                    .map(|&d| block[d as usize]),
+            );
+            let next_id = ids.len();
+            refined[q] = *ids.entry(signature).or_insert(next_id);
+        }
+        let new_count = ids.len();
+        block = refined;
+        if new_count == count {
+            return block;
+        }
+        count = new_count;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::{Center, Predicate};
+    use crate::robustness::tests::{co_safe, spec_for, trajectory};
+    use crate::spec::Spec;
+    use proptest::prelude::*;
+
+    fn running_example() -> Automaton {
+        let region =
+            |x: f64| Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![x, 0.0])).unwrap();
+        let spec = Spec::new(
+            "(F a | F b) & F c & ((!a & !b) U c)",
+            [("a", region(0.0)), ("b", region(4.0)), ("c", region(8.0))],
+        )
+        .unwrap();
+        Automaton::build(&spec).unwrap()
+    }
+
+    fn task() -> Automaton {
+        let goal = |k: usize| {
+            Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
+        };
+        let mut c1 = vec![0.0; 13];
+        c1[0] = 1.0;
+        c1[1] = -1.0;
+        let c2: Vec<f64> = c1.iter().map(|v| -v).collect();
+        let spec = Spec::new(
+            "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)",
+            [
+                ("g1", goal(0)),
+                ("g2", goal(1)),
+                ("g3", goal(2)),
+                ("c1", Predicate::halfspace(c1, 1.5).unwrap()),
+                ("c2", Predicate::halfspace(c2, 1.5).unwrap()),
+            ],
+        )
+        .unwrap();
+        Automaton::build(&spec).unwrap()
+    }
+
+    fn edge_list(aut: &Automaton) -> Vec<(usize, usize, String)> {
+        aut.edges()
+            .iter()
+            .map(|e| (e.src, e.dst, cnf::dnf_text(&e.guard, aut.spec().atoms())))
+            .collect()
+    }
+
+    fn cnf_text(aut: &Automaton, q: usize) -> Vec<String> {
+        let atoms = aut.spec().atoms();
+        aut.trap_cnf(q)
+            .unwrap()
+            .iter()
+            .map(|clause| {
+                clause
+                    .iter()
+                    .map(|l| format!("{}{}", if l.positive { "" } else { "!" }, atoms[l.atom]))
+                    .collect::<Vec<_>>()
+                    .join(" | ")
+            })
+            .collect()
+    }
+
+    fn owned(edges: &[(usize, usize, &str)]) -> Vec<(usize, usize, String)> {
+        edges
+            .iter()
+            .map(|(a, b, g)| (*a, *b, g.to_string()))
+            .collect()
+    }
+
+    #[test]
+    fn running_example_matches_the_paper() {
+        // Paper Fig. 5.1: q0 --c--> q1 --(a | b)--> qf, and the trap when a or b comes before c.
+        let aut = running_example();
+        assert_eq!(
+            (aut.num_states(), aut.initial(), aut.trap()),
+            (4, 0, Some(1))
+        );
+        assert_eq!(aut.accepting(), vec![3]);
+        assert_eq!(
+            edge_list(&aut),
+            owned(&[
+                (0, 0, "!a & !b & !c"),
+                (0, 1, "a & !c | b & !c"),
+                (0, 2, "!a & !b & c"),
+                (0, 3, "a & c | b & c"),
+                (1, 1, "true"),
+                (2, 2, "!a & !b"),
+                (2, 3, "a | b"),
+                (3, 3, "true"),
+            ])
+        );
+        assert_eq!(cnf_text(&aut, 0), ["!a | c", "!b | c"]);
+        assert!(aut.trap_cnf(2).unwrap().is_empty());
+    }
+
+    #[test]
+    fn running_example_safe_set_is_the_papers() {
+        // Between a and b, far from c: the kept literals are !a and !b (paper: C(s, q0)).
+        let aut = running_example();
+        let kept = aut.safe_set(0, &[2.0, 0.0]).unwrap();
+        let lit = |atom, positive| Literal { atom, positive };
+        assert_eq!(kept, vec![(lit(0, false), 1.0), (lit(1, false), 1.0)]);
+        // Inside a the first clause keeps !a (the best literal, though violated: -0.5 > -6.5).
+        let kept = aut.safe_set(0, &[0.5, 0.0]).unwrap();
+        assert_eq!(kept, vec![(lit(0, false), -0.5), (lit(1, false), 2.5)]);
+        assert!(aut.safe_set(2, &[2.0, 0.0]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn running_example_rewards_by_hand() {
+        let aut = running_example();
+        // s' = (2, 0): rho(a) = rho(b) = -1, rho(c) = -5. D_q0 = (!a&!b&c) | (a&c) | (b&c) = -5;
+        // negated trap guard (!a|c)&(!b|c) = 1, times c_r = 2 -> 2; reward = min(-5, 2).
+        assert_eq!(aut.reward(0, &[2.0, 0.0], 2.0, None).unwrap(), -5.0);
+        // s' = (0.5, 0), inside a: rho(a) = 0.5, rho(b) = -2.5, rho(c) = -6.5.
+        // D_q0 = -6.5; CNF = min(max(-0.5, -6.5), max(2.5, -6.5)) = -0.5 -> c_r * -0.5 = -1.
+        assert_eq!(aut.reward(0, &[0.5, 0.0], 2.0, None).unwrap(), -6.5);
+        assert_eq!(aut.reward(0, &[0.5, 0.0], 20.0, None).unwrap(), -10.0);
+        // q2 has no trap edge: the reward is rho(a | b) = max(-1, -1).
+        assert_eq!(aut.reward(2, &[2.0, 0.0], 2.0, None).unwrap(), -1.0);
+        assert_eq!(aut.reward(3, &[2.0, 0.0], 2.0, None).unwrap(), 0.0);
+        assert!(matches!(
+            aut.reward(1, &[2.0, 0.0], 2.0, None),
+            Err(AutomatonError::TrapReward(1))
+        ));
+        assert_eq!(aut.reward(1, &[2.0, 0.0], 2.0, Some(-7.0)).unwrap(), -7.0);
+        assert!(aut.reward(0, &[2.0, 0.0], 0.0, None).is_err());
+        assert!(aut.reward(9, &[2.0, 0.0], 1.0, None).is_err());
+        assert!(aut.reward(0, &[f64::NAN, 0.0], 1.0, None).is_err());
+    }
+
+    #[test]
+    fn task_automaton() {
+        let aut = task();
+        assert_eq!(
+            (aut.num_states(), aut.initial(), aut.trap()),
+            (4, 0, Some(1))
+        );
+        assert_eq!(aut.accepting(), vec![2]);
+        assert_eq!(
+            edge_list(&aut),
+            owned(&[
+                (0, 0, "!g1 & !g2 & !g3 & c1 & c2"),
+                (0, 1, "!g3 & !c1 | !g3 & !c2 | !g1 & !g2 & g3"),
+                (0, 2, "g1 & g3 | g2 & g3"),
+                (0, 3, "g1 & !g3 & c1 & c2 | g2 & !g3 & c1 & c2"),
+                (1, 1, "true"),
+                (2, 2, "true"),
+                (3, 1, "!g3 & !c1 | !g3 & !c2"),
+                (3, 2, "g3"),
+                (3, 3, "!g3 & c1 & c2"),
+            ])
+        );
+        assert_eq!(cnf_text(&aut, 0), ["g3 | c1", "g3 | c2", "g1 | g2 | !g3"]);
+        assert_eq!(cnf_text(&aut, 3), ["g3 | c1", "g3 | c2"]);
+    }
+
+    #[test]
+    fn task_safe_set_near_the_channel_border_keeps_the_channel() {
+        let aut = task();
+        // x = 0, y = 1.4: c1 = x - y + 1.5 = 0.1 (near the border), c2 = 2.9; goals far away.
+        let mut s = [0.0; 13];
+        s[1] = 1.4;
+        s[3..9].copy_from_slice(&[3.0, 3.0, 5.0, 4.0, 8.0, 8.0]);
+        let kept = aut.safe_set(0, &s).unwrap();
+        let names: Vec<_> = kept
+            .iter()
+            .map(|(l, _)| (aut.spec().atoms()[l.atom].as_str(), l.positive))
+            .collect();
+        assert_eq!(names, [("c1", true), ("c2", true), ("g3", false)]);
+        assert!((kept[0].1 - 0.1).abs() < 1e-12 && (kept[1].1 - 2.9).abs() < 1e-12);
+        assert!((kept[2].1 - ((8.0f64.powi(2) + 6.6f64.powi(2)).sqrt() - 0.5)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unsatisfiable_and_trivial_formulas() {
+        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
+        let unsat =
+            Automaton::build(&Spec::new("F false & p", [("p", p.clone())]).unwrap()).unwrap();
+        assert_eq!(unsat.trap(), Some(unsat.initial()));
+        assert!(unsat.accepting().is_empty());
+        let valid = Automaton::build(&Spec::new("true | p", [("p", p.clone())]).unwrap()).unwrap();
+        assert_eq!(valid.trap(), None);
+        let next = Automaton::build(&Spec::new("X (p | true)", [("p", p)]).unwrap()).unwrap();
+        let one = [1.0];
+        assert!(!next.accepts(Trajectory::new(&one, 1).unwrap()).unwrap());
+        let two = [1.0, -1.0];
+        assert!(next.accepts(Trajectory::new(&two, 1).unwrap()).unwrap());
+    }
+
+    #[test]
+    fn too_many_atoms_is_an_error() {
+        let names: Vec<String> = (0..17).map(|i| format!("p{i}")).collect();
+        let text = names
+            .iter()
+            .map(|n| format!("F {n}"))
+            .collect::<Vec<_>>()
+            .join(" & ");
+        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
+        let spec = Spec::new(&text, names.iter().map(|n| (n.as_str(), p.clone()))).unwrap();
+        let err = Automaton::build(&spec).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "the formula has 17 atoms; automata support at most 16"
+        );
+    }
+
+    #[test]
+    fn dot_marks_accepting_and_trap() {
+        let dot = task().to_dot();
+        assert!(dot.contains("q2 [shape=doublecircle]"));
+        assert!(dot.contains("q1 [label=\"q1\\ntrap\""));
+        assert!(dot.contains("start -> q0;"));
+    }
+
+    /// Boolean semantics over a word of valuations: independent of progression.
+    fn sat(f: &Formula, word: &[usize], t: usize) -> bool {
+        match f {
+            Formula::True => true,
+            Formula::False => false,
+            Formula::Atom(i) => t < word.len() && word[t] >> i & 1 == 1,
+            Formula::Not(a) => !sat(a, word, t),
+            Formula::And(v) => v.iter().all(|g| sat(g, word, t)),
+            Formula::Or(v) => v.iter().any(|g| sat(g, word, t)),
+            Formula::Implies(a, b) => !sat(a, word, t) || sat(b, word, t),
+            Formula::Eventually(a) => (t..word.len()).any(|u| sat(a, word, u)),
+            Formula::Next(a) => t + 1 < word.len() && sat(a, word, t + 1),
+            Formula::Until(a, b) => {
+                (t..word.len()).any(|u| sat(b, word, u) && (t..u).all(|v| sat(a, word, v)))
+            }
+        }
+    }
+
+    fn words(letters: usize, len: usize) -> Vec<Vec<usize>> {
+        (0..len).fold(vec![vec![]], |acc, _| {
+            acc.into_iter()
+                .flat_map(|w| (0..letters).map(move |v| [w.clone(), vec![v]].concat()))
+                .collect()
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1500))]
+
+        #[test]
+        fn acceptance_equals_the_formula_on_trajectories(f in co_safe(), data in trajectory()) {
+            let spec = spec_for(&f);
+            let aut = Automaton::build(&spec).unwrap();
+            let traj = Trajectory::new(&data, 3).unwrap();
+            prop_assert_eq!(aut.accepts(traj).unwrap(), spec.satisfied(traj).unwrap());
+        }
+
+        #[test]
+        fn acceptance_and_trap_on_words(f in co_safe(), raw in prop::collection::vec(0usize..16, 1..6)) {
+            let spec = spec_for(&f);
+            let aut = Automaton::build(&spec).unwrap();
+            let letters = 1usize << spec.atoms().len();
+            let word: Vec<usize> = raw.iter().map(|v| v % letters).collect();
+            // Every prefix: acceptance equals the formula on that prefix, and the trap is
+            // entered exactly when no extension satisfies it. Shortest witnesses are shorter
+            // than the number of states, so extensions up to that length decide it.
+            let mut q = aut.initial();
+            for k in 0..word.len() {
+                q = aut.step_valuation(q, word[k]);
+                let prefix = &word[..=k];
+                prop_assert_eq!(aut.is_accepting(q), sat(spec.formula(), prefix, 0));
+                let bound = aut.num_states().saturating_sub(1);
+                if (letters as f64).powi(bound as i32) <= 4096.0 {
+                    let extendable = (0..=bound).any(|len| {
+                        words(letters, len).iter().any(|ext| sat(spec.formula(), &[prefix, ext].concat(), 0))
+                    });
+                    prop_assert_eq!(Some(q) == aut.trap(), !extendable);
+                } else if Some(q) == aut.trap() {
+                    for ext in words(letters, 2) {
+                        prop_assert!(!sat(spec.formula(), &[prefix, &ext[..]].concat(), 0));
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn automaton_is_minimal_and_deterministic(f in co_safe()) {
+            let spec = spec_for(&f);
+            let a = Automaton::build(&spec).unwrap();
+            let b = Automaton::build(&spec).unwrap();
+            prop_assert_eq!(a.edges(), b.edges());
+            prop_assert_eq!(a.accepting().len() <= 1, true);
+            // Every state is reachable from the initial one (breadth-first numbering).
+            let letters = 1usize << spec.atoms().len();
+            let mut seen = vec![false; a.num_states()];
+            seen[a.initial()] = true;
+            let mut stack = vec![a.initial()];
+            while let Some(q) = stack.pop() {
+                for v in 0..letters {
+                    let d = a.step_valuation(q, v);
+                    if !seen[d] { seen[d] = true; stack.push(d); }
+                }
+            }
+            prop_assert!(seen.iter().all(|s| *s));
+        }
+    }
+}
