@@ -9,6 +9,14 @@ Write a task as an scTLTL formula over state predicates; tlshield computes its r
 0.5
 """
 
-from tlshield._core import Ball, Halfspace, Spec, SpecError, __version__
+from tlshield._core import (
+    Automaton,
+    Ball,
+    Halfspace,
+    Spec,
+    SpecError,
+    __version__,
+    formula_atoms,
+)
 
-__all__ = ["Ball", "Halfspace", "Spec", "SpecError", "__version__"]
+__all__ = ["Automaton", "Ball", "Halfspace", "Spec", "SpecError", "__version__", "formula_atoms"]

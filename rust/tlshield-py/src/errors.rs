@@ -3,7 +3,7 @@
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::PyErr;
-use tlshield_core::{InputError, SpecError as CoreSpecError};
+use tlshield_core::{AutomatonError, InputError, SpecError as CoreSpecError};
 
 create_exception!(
     tlshield,
@@ -23,6 +23,12 @@ impl From<CoreSpecError> for PyCoreError {
 
 impl From<InputError> for PyCoreError {
     fn from(err: InputError) -> Self {
+        PyCoreError(PyValueError::new_err(err.to_string()))
+    }
+}
+
+impl From<AutomatonError> for PyCoreError {
+    fn from(err: AutomatonError) -> Self {
         PyCoreError(PyValueError::new_err(err.to_string()))
     }
 }

@@ -3,12 +3,21 @@
 //! This crate only converts between Python/numpy and the core types and maps core errors to
 //! Python exceptions; all logic lives in `tlshield-core`.
 
+mod automaton;
 mod convert;
 mod errors;
 mod predicate;
 mod spec;
 
 use pyo3::prelude::*;
+
+/// Parses an scTLTL formula and returns its atoms in order of first appearance (raises
+/// ``SpecError`` like ``Spec`` does). Useful to build predicates for a formula's atoms.
+#[pyfunction]
+fn formula_atoms(formula: &str) -> PyResult<Vec<String>> {
+    let (_, atoms) = errors::map(tlshield_core::Formula::parse(formula))?;
+    Ok(atoms)
+}
 
 /// The compiled core of tlshield. Import from `tlshield`, not from here.
 #[pymodule]
@@ -18,5 +27,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<spec::PySpec>()?;
+    m.add_class::<automaton::PyAutomaton>()?;
+    m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

@@ -4,7 +4,11 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use tlshield_core::{Predicate, Spec, Trajectory, TrajectoryBatch};
+use std::sync::{Arc, OnceLock};
+
+use tlshield_core::{Automaton, Predicate, Spec, Trajectory, TrajectoryBatch};
+
+use crate::automaton::PyAutomaton;
 
 use crate::convert::FloatArray;
 use crate::errors::map;
@@ -14,6 +18,17 @@ use crate::predicate::{to_python, PyBall, PyHalfspace};
 #[pyclass(name = "Spec", module = "tlshield._core", frozen)]
 pub struct PySpec {
     pub(crate) inner: Spec,
+    automaton: OnceLock<Arc<Automaton>>,
+}
+
+impl PySpec {
+    /// Wraps a core spec.
+    pub fn from_core(inner: Spec) -> Self {
+        PySpec {
+            inner,
+            automaton: OnceLock::new(),
+        }
+    }
 }
 
 fn predicate_of(key: &Bound<'_, PyAny>, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
@@ -62,9 +77,7 @@ impl PySpec {
             let predicate = predicate_of(&key, &value)?;
             bound.push((name, predicate));
         }
-        Ok(PySpec {
-            inner: map(Spec::new(formula, bound))?,
-        })
+        Ok(PySpec::from_core(map(Spec::new(formula, bound))?))
     }
 
     /// Atom names in order of first appearance in the formula.
@@ -126,6 +139,17 @@ impl PySpec {
         let spec = &self.inner;
         let out = py.detach(|| spec.robustness_batch(batch));
         Ok(map(out)?.into_pyarray(py))
+    }
+
+    /// The finite state automaton of the formula (built once per spec, then shared).
+    fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
+        if let Some(aut) = self.automaton.get() {
+            return Ok(PyAutomaton { inner: aut.clone() });
+        }
+        let spec = &self.inner;
+        let built = Arc::new(map(py.detach(|| Automaton::build(spec)))?);
+        let aut = self.automaton.get_or_init(|| built);
+        Ok(PyAutomaton { inner: aut.clone() })
     }
 
     fn __str__(&self) -> String {

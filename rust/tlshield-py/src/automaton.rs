@@ -1,0 +1,213 @@
+//! `Automaton`: the FSA of a spec, its stepper, reward and safe sets.
+
+use std::sync::Arc;
+
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use tlshield_core::cnf::{dnf_text, Literal};
+use tlshield_core::{Automaton, Trajectory};
+
+use crate::convert::FloatArray;
+use crate::errors::map;
+use crate::spec::PySpec;
+
+/// The finite state automaton of an scTLTL spec (see ``Spec.automaton()``).
+#[pyclass(name = "Automaton", module = "tlshield._core", frozen)]
+pub struct PyAutomaton {
+    pub(crate) inner: Arc<Automaton>,
+}
+
+fn vector<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<FloatArray<'py>> {
+    FloatArray::extract(obj, name, 1, "(n,)")
+}
+
+impl PyAutomaton {
+    fn state(&self, q: i64) -> PyResult<usize> {
+        map(self.inner.check_state("q", q))
+    }
+
+    fn literal(&self, l: &Literal) -> (String, bool) {
+        (self.inner.spec().atoms()[l.atom].clone(), l.positive)
+    }
+}
+
+#[pymethods]
+impl PyAutomaton {
+    /// Number of states.
+    #[getter]
+    fn num_states(&self) -> usize {
+        self.inner.num_states()
+    }
+
+    /// The state before anything is read; ``q_0 = step(initial, s_0)``.
+    #[getter]
+    fn initial(&self) -> usize {
+        self.inner.initial()
+    }
+
+    /// Accepting states (one for a satisfiable formula: absorbing).
+    #[getter]
+    fn accepting(&self) -> Vec<usize> {
+        self.inner.accepting()
+    }
+
+    /// The trap state (no path to acceptance), or None.
+    #[getter]
+    fn trap(&self) -> Option<usize> {
+        self.inner.trap()
+    }
+
+    /// The atoms, in the order of the spec (bit i of a valuation is atom i).
+    #[getter]
+    fn atoms(&self) -> Vec<String> {
+        self.inner.spec().atoms().to_vec()
+    }
+
+    /// The spec the automaton was built from.
+    #[getter]
+    fn spec(&self) -> PySpec {
+        PySpec::from_core(self.inner.spec().clone())
+    }
+
+    /// Every edge as ``(src, dst, guard)``, the guard a minimised DNF (``a & !b | c``).
+    fn edges(&self) -> Vec<(usize, usize, String)> {
+        let atoms = self.inner.spec().atoms();
+        self.inner
+            .edges()
+            .iter()
+            .map(|e| (e.src, e.dst, dnf_text(&e.guard, atoms)))
+            .collect()
+    }
+
+    /// Graphviz DOT text (accepting states double circles, the trap filled red).
+    fn to_dot(&self) -> String {
+        self.inner.to_dot()
+    }
+
+    /// The state after reading state vector ``s`` from state ``q``.
+    fn step(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<usize> {
+        let q = self.state(q)?;
+        map(self.inner.step(q, &vector(s, "s")?.values()))
+    }
+
+    /// Steps many automata at once: ``qs`` (B,) ints, ``states`` (B, n) -> (B,) next states.
+    /// Parallel, with the GIL released.
+    fn step_batch<'py>(
+        &self,
+        py: Python<'py>,
+        qs: PyArrayLike1<'py, i64, AllowTypeChange>,
+        states: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let arr = FloatArray::extract(states, "states", 2, "(B, n)")?;
+        if arr.shape()[0] != qs.len() {
+            return Err(PyValueError::new_err(format!(
+                "states: expected {} rows to match qs, got {}",
+                qs.len(),
+                arr.shape()[0]
+            )));
+        }
+        let dim = arr.shape()[1];
+        let values = arr.values();
+        let qs = qs.as_array().to_vec();
+        let aut = &self.inner;
+        let out = py.detach(|| aut.step_batch(&qs, &values, dim));
+        Ok(map(out)?
+            .into_iter()
+            .map(|q| q as i64)
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
+    }
+
+    /// The state after reading every row of ``traj`` (T+1, n) from the initial state.
+    fn run(&self, traj: &Bound<'_, PyAny>) -> PyResult<usize> {
+        let arr = FloatArray::extract(traj, "traj", 2, "(T+1, n)")?;
+        let values = arr.values();
+        map(self
+            .inner
+            .run(map(Trajectory::new(&values, arr.shape()[1]))?))
+    }
+
+    /// Whether the automaton accepts ``traj`` (equals ``Spec.satisfied``).
+    fn accepts(&self, traj: &Bound<'_, PyAny>) -> PyResult<bool> {
+        let arr = FloatArray::extract(traj, "traj", 2, "(T+1, n)")?;
+        let values = arr.values();
+        map(self
+            .inner
+            .accepts(map(Trajectory::new(&values, arr.shape()[1]))?))
+    }
+
+    /// Eq. 5A1: ``min(rho(s', D_q), c_r * rho(s', !psi_{q,trap}))`` for leaving ``q`` into
+    /// ``s_next``; ``rho(s', D_q)`` without a trap edge; 0 in the accepting state;
+    /// ``trap_penalty`` in the trap (required there).
+    #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
+    fn reward(
+        &self,
+        q: i64,
+        s_next: &Bound<'_, PyAny>,
+        c_r: f64,
+        trap_penalty: Option<f64>,
+    ) -> PyResult<f64> {
+        let q = self.state(q)?;
+        map(self
+            .inner
+            .reward(q, &vector(s_next, "s_next")?.values(), c_r, trap_penalty))
+    }
+
+    /// The CNF of the negated trap guard of ``q``: clauses of ``(atom, positive)`` literals
+    /// (empty when ``q`` has no trap edge).
+    fn trap_cnf(&self, q: i64) -> PyResult<Vec<Vec<(String, bool)>>> {
+        let q = self.state(q)?;
+        Ok(map(self.inner.trap_cnf(q))?
+            .iter()
+            .map(|clause| clause.iter().map(|l| self.literal(l)).collect())
+            .collect())
+    }
+
+    /// Eq. 5C1: per clause of ``trap_cnf(q)`` the literal with the largest robustness at ``s``,
+    /// as ``(atom, positive, robustness)`` (empty when ``q`` has no trap edge).
+    fn safe_set(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<Vec<(String, bool, f64)>> {
+        let q = self.state(q)?;
+        let kept = map(self.inner.safe_set(q, &vector(s, "s")?.values()))?;
+        Ok(kept
+            .iter()
+            .map(|(l, rho)| {
+                let (atom, positive) = self.literal(l);
+                (atom, positive, *rho)
+            })
+            .collect())
+    }
+
+    fn __repr__(&self) -> String {
+        let trap = self
+            .inner
+            .trap()
+            .map_or("None".to_string(), |t| t.to_string());
+        let atoms: Vec<String> = self
+            .inner
+            .spec()
+            .atoms()
+            .iter()
+            .map(|a| format!("'{a}'"))
+            .collect();
+        format!(
+            "Automaton(num_states={}, initial={}, accepting={:?}, trap={trap}, atoms=[{}])",
+            self.inner.num_states(),
+            self.inner.initial(),
+            self.inner.accepting(),
+            atoms.join(", ")
+        )
+    }
+
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>,))> {
+        let spec = Bound::new(py, self.spec())?;
+        let rebuild = py
+            .import("tlshield._core")?
+            .getattr("Spec")?
+            .getattr("automaton")?;
+        Ok((rebuild, (spec.into_any(),)))
+    }
+}

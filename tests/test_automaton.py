@@ -1,0 +1,239 @@
+"""Automaton from Python: the paper's examples, properties against the reference, bad input."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+import tlshield
+from tlshield.cli import main
+from tlshield.envs.channel import STATE_DIM, channel_task_spec
+
+from .reference import satisfied, to_text
+from .test_properties import REFERENCE_PREDICATES, RUST_PREDICATES, co_safe, values
+
+
+def region(x: float) -> tlshield.Ball:
+    return tlshield.Ball(pos=[0, 1], radius=1.0, center=[x, 0.0])
+
+
+@pytest.fixture
+def running() -> tlshield.Automaton:
+    spec = tlshield.Spec(
+        "(F a | F b) & F c & ((!a & !b) U c)",
+        {"a": region(0.0), "b": region(4.0), "c": region(8.0)},
+    )
+    return spec.automaton()
+
+
+@pytest.fixture
+def task() -> tlshield.Automaton:
+    return channel_task_spec(half_width=1.5, goal_radius=0.5).automaton()
+
+
+def test_running_example_structure(running: tlshield.Automaton) -> None:
+    # Paper Fig. 5.1: q0 --c--> q1 --(a | b)--> qf, trap when a or b come before c.
+    assert (running.num_states, running.initial, running.trap) == (4, 0, 1)
+    assert running.accepting == [3]
+    assert running.edges() == [
+        (0, 0, "!a & !b & !c"),
+        (0, 1, "a & !c | b & !c"),
+        (0, 2, "!a & !b & c"),
+        (0, 3, "a & c | b & c"),
+        (1, 1, "true"),
+        (2, 2, "!a & !b"),
+        (2, 3, "a | b"),
+        (3, 3, "true"),
+    ]
+    assert running.trap_cnf(0) == [[("a", False), ("c", True)], [("b", False), ("c", True)]]
+    assert running.trap_cnf(2) == []
+
+
+def test_running_example_safe_set_and_reward(running: tlshield.Automaton) -> None:
+    s = np.array([2.0, 0.0])  # between a and b, far from c
+    # The paper's C(s, q0) = {!a, !b}.
+    assert running.safe_set(0, s) == [("a", False, 1.0), ("b", False, 1.0)]
+    assert running.safe_set(2, s) == []
+    # rho(D_q0) = -5 (c is 5 beyond reach); rho(!psi_trap) = 1; min(-5, 2 * 1).
+    assert running.reward(0, s, 2.0) == -5.0
+    # Inside a: D_q0 = -6.5; negated trap guard -0.5 -> c_r = 20 makes it -10.
+    assert running.reward(0, [0.5, 0.0], 20.0) == -10.0
+    assert running.reward(2, s, 2.0) == -1.0  # rho(a | b), no trap edge
+    assert running.reward(3, s, 2.0) == 0.0  # accepting
+    assert running.reward(1, s, 2.0, trap_penalty=-7.0) == -7.0
+
+
+def test_running_example_runs(running: tlshield.Automaton) -> None:
+    good = np.array([[2.0, 0.0], [8.0, 0.0], [0.0, 0.0]])
+    bad = np.array([[2.0, 0.0], [0.0, 0.0], [8.0, 0.0]])
+    assert running.run(good) == 3 and running.accepts(good)
+    assert running.run(bad) == 1 and not running.accepts(bad)
+    q0 = running.step(running.initial, good[0])
+    assert running.step(q0, good[1]) == 2
+
+
+def test_task_automaton(task: tlshield.Automaton) -> None:
+    assert (task.num_states, task.initial, task.trap, task.accepting) == (4, 0, 1, [2])
+    assert task.atoms == ["g1", "g2", "g3", "c1", "c2"]
+    assert (0, 3, "g1 & !g3 & c1 & c2 | g2 & !g3 & c1 & c2") in task.edges()
+    assert (3, 2, "g3") in task.edges()
+    assert task.trap_cnf(0) == [
+        [("g3", True), ("c1", True)],
+        [("g3", True), ("c2", True)],
+        [("g1", True), ("g2", True), ("g3", False)],
+    ]
+
+
+def test_task_safe_set_near_the_channel_border(task: tlshield.Automaton) -> None:
+    s = np.zeros(STATE_DIM)
+    s[1] = 1.4  # x = 0, y = 1.4: c1 = 0.1 (close to the border), c2 = 2.9
+    s[3:9] = [3.0, 3.0, 5.0, 4.0, 8.0, 8.0]
+    kept = task.safe_set(0, s)
+    assert [(a, p) for a, p, _ in kept] == [("c1", True), ("c2", True), ("g3", False)]
+    np.testing.assert_allclose([v for *_, v in kept], [0.1, 2.9, math.hypot(8.0, 6.6) - 0.5])
+    # Reward at the same point: D_q0 is led by reaching g1 (rho(g1) = 0.5 - |(0,1.4)-(3,3)|).
+    d_q0 = max(
+        min(0.5 - math.hypot(3, 1.6), 0.5 - math.hypot(8, 6.6)),  # g1 & g3
+        min(0.5 - math.hypot(3, 1.6), -(0.5 - math.hypot(8, 6.6)), 0.1, 2.9),  # g1 & !g3 & ...
+        min(0.5 - math.hypot(5, 2.6), -(0.5 - math.hypot(8, 6.6)), 0.1, 2.9),
+    )
+    assert task.reward(0, s, 1.0) == pytest.approx(min(d_q0, 0.1))
+
+
+def test_dot_and_pickle(task: tlshield.Automaton) -> None:
+    dot = task.to_dot()
+    assert dot.startswith("digraph fsa {") and "doublecircle" in dot and "trap" in dot
+    clone = pickle.loads(pickle.dumps(task))
+    assert clone.edges() == task.edges()
+    assert "trap=1" in repr(task)
+
+
+def test_step_batch_equals_step(task: tlshield.Automaton) -> None:
+    rng = np.random.default_rng(3)
+    states = rng.normal(scale=2.0, size=(64, STATE_DIM))
+    qs = rng.integers(0, task.num_states, size=64)
+    out = task.step_batch(qs, states)
+    assert out.dtype == np.int64
+    assert out.tolist() == [task.step(int(q), s) for q, s in zip(qs, states, strict=True)]
+
+
+@settings(max_examples=600, deadline=None)
+@given(co_safe, st.integers(1, 7).flatmap(lambda n: arrays(np.float64, (n, 3), elements=values)))
+def test_acceptance_matches_reference(formula: tuple, traj: np.ndarray) -> None:
+    aut = tlshield.Spec(to_text(formula), RUST_PREDICATES).automaton()
+    assert aut.accepts(traj) == satisfied(formula, traj, REFERENCE_PREDICATES)
+
+
+@settings(max_examples=300, deadline=None)
+@given(co_safe, arrays(np.float64, (3,), elements=values), st.floats(0.1, 10.0))
+def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
+    aut = tlshield.Spec(to_text(formula), RUST_PREDICATES).automaton()
+    spec = aut.spec
+    rho = dict(zip(spec.atoms, spec.atom_robustness(s), strict=True))
+
+    def dnf(guard: str) -> float:
+        if guard == "false":
+            return -math.inf
+        if guard == "true":
+            return math.inf
+        return max(
+            min(-rho[lit[1:]] if lit.startswith("!") else rho[lit] for lit in cube.split(" & "))
+            for cube in guard.split(" | ")
+        )
+
+    for q in range(aut.num_states):
+        if q == aut.trap:
+            continue
+        if q in aut.accepting:
+            assert aut.reward(q, s, c_r) == 0.0
+            continue
+        progress = [g for src, dst, g in aut.edges() if src == q and dst not in (q, aut.trap)]
+        expected = max(dnf(g) for g in progress)
+        clauses = aut.trap_cnf(q)
+        if clauses:
+            cnf = min(max(rho[a] if p else -rho[a] for a, p in c) for c in clauses)
+            expected = min(expected, c_r * cnf)
+            kept = aut.safe_set(q, s)
+            assert [v for *_, v in kept] == [
+                max(rho[a] if p else -rho[a] for a, p in c) for c in clauses
+            ]
+        assert aut.reward(q, s, c_r) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+# --- bad input ----------------------------------------------------------------------------
+
+
+def test_bad_state_ids(task: tlshield.Automaton) -> None:
+    s = np.zeros(STATE_DIM)
+    for q in (-1, 4, 10**6):
+        with pytest.raises(ValueError, match=rf"q: state {q} does not exist \(the automaton"):
+            task.step(q, s)
+        with pytest.raises(ValueError, match="does not exist"):
+            task.reward(q, s, 1.0)
+        with pytest.raises(ValueError, match="does not exist"):
+            task.safe_set(q, s)
+        with pytest.raises(ValueError, match="does not exist"):
+            task.trap_cnf(q)
+    with pytest.raises(ValueError, match=r"qs\[1\]: state 9 does not exist"):
+        task.step_batch([0, 9], np.zeros((2, STATE_DIM)))
+    with pytest.raises(TypeError):
+        task.step(1.5, s)  # type: ignore[arg-type]
+
+
+def test_bad_vectors(task: tlshield.Automaton) -> None:
+    with pytest.raises(ValueError, match="state length: expected 13, got 3"):
+        task.step(0, [0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"s\[2\] is NaN"):
+        task.safe_set(0, [0.0, 0.0, math.nan] + [0.0] * 10)
+    with pytest.raises(ValueError, match=r"is inf"):
+        task.reward(0, [math.inf] + [0.0] * 12, 1.0)
+    with pytest.raises(ValueError, match="expected 3 rows to match qs, got 2"):
+        task.step_batch([0, 0, 0], np.zeros((2, STATE_DIM)))
+    with pytest.raises(ValueError, match=r"states\[1, 0\] is NaN"):
+        task.step_batch([0, 0], np.array([[0.0] * 13, [math.nan] + [0.0] * 12]))
+    with pytest.raises(ValueError, match="expected a 2-D array"):
+        task.run(np.zeros(STATE_DIM))
+    with pytest.raises(ValueError, match="c_r: expected a finite weight > 0"):
+        task.reward(0, np.zeros(STATE_DIM), 0.0)
+    with pytest.raises(ValueError, match="trap state, which has no task reward"):
+        task.reward(task.trap, np.zeros(STATE_DIM), 1.0)
+    with pytest.raises(ValueError, match="trap_penalty is NaN"):
+        task.reward(task.trap, np.zeros(STATE_DIM), 1.0, trap_penalty=math.nan)
+
+
+def test_too_many_atoms() -> None:
+    names = [f"p{i}" for i in range(17)]
+    spec = tlshield.Spec(" & ".join(f"F {n}" for n in names), dict.fromkeys(names, region(0)))
+    with pytest.raises(ValueError, match="17 atoms; automata support at most 16"):
+        spec.automaton()
+
+
+# --- command line -------------------------------------------------------------------------
+
+
+def test_cli_fsa(capsys: pytest.CaptureFixture[str], tmp_path) -> None:
+    dot = tmp_path / "task.dot"
+    assert main(["fsa", "--dot", str(dot)]) == 0
+    out = capsys.readouterr().out
+    assert "q1 (trap)" in out and "q2 (accepting)" in out
+    assert "(g3 | c1) & (g3 | c2) & (g1 | g2 | !g3)" in out
+    assert dot.read_text().startswith("digraph fsa")
+    assert main(["fsa", "F a & X b"]) == 0
+
+
+def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fsa", "G a"]) == 2
+    assert "`G` (always) is not allowed" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        main(["--help"])
+    assert info.value.code == 0
+    with pytest.raises(SystemExit) as info:
+        main(["nonsense"])
+    assert info.value.code == 2
+    assert main(["demo", "--steps", "1"]) == 2
