@@ -20,8 +20,8 @@ use crate::spec::{Formula, Spec};
 /// Most atoms an automaton supports (its alphabet has `2^atoms` letters).
 pub const MAX_ATOMS: usize = 16;
 
-/// Most states an automaton may have (state ids are stored as `u32`, tables stay small).
-pub const MAX_STATES: usize = 1 << 16;
+/// Most transitions (states x 2^atoms) an automaton may have: its table stays under 16 MiB.
+pub const MAX_TRANSITIONS: usize = 1 << 22;
 
 /// One edge of the automaton with its guard.
 #[derive(Debug, Clone, PartialEq)]
@@ -209,8 +209,11 @@ impl Automaton {
                 let id = match ids.get(&succ) {
                     Some(&id) => id,
                     None => {
-                        if residuals.len() >= MAX_STATES {
-                            return Err(AutomatonError::TooManyStates(MAX_STATES));
+                        if (residuals.len() + 1) * letters > MAX_TRANSITIONS {
+                            return Err(AutomatonError::TooLarge {
+                                states: residuals.len() + 1,
+                                letters,
+                            });
                         }
                         ids.insert(succ.clone(), residuals.len());
                         residuals.push(succ);
@@ -810,6 +813,29 @@ mod tests {
             err.to_string(),
             "the formula has 17 atoms; automata support at most 16"
         );
+    }
+
+    #[test]
+    fn oversized_automata_are_an_error() {
+        // 16 independent goals: 2^16 residuals over 2^16 letters.
+        let names: Vec<String> = (0..16).map(|i| format!("p{i}")).collect();
+        let text = names
+            .iter()
+            .map(|n| format!("F {n}"))
+            .collect::<Vec<_>>()
+            .join(" & ");
+        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
+        let spec = Spec::new(&text, names.iter().map(|n| (n.as_str(), p.clone()))).unwrap();
+        let err = Automaton::build(&spec).unwrap_err().to_string();
+        assert!(err.contains("too large"), "{err}");
+        // Ten of them fit: 2^10 states.
+        let text = names[..10]
+            .iter()
+            .map(|n| format!("F {n}"))
+            .collect::<Vec<_>>()
+            .join(" & ");
+        let spec = Spec::new(&text, names.iter().map(|n| (n.as_str(), p.clone()))).unwrap();
+        assert_eq!(Automaton::build(&spec).unwrap().num_states(), 1 << 10);
     }
 
     #[test]

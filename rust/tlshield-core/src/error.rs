@@ -89,9 +89,18 @@ pub enum AutomatonError {
     /// The alphabet is the set of atom valuations; more than this many atoms is refused.
     #[error("the formula has {0} atoms; automata support at most {max}", max = crate::automaton::MAX_ATOMS)]
     TooManyAtoms(usize),
-    /// The automaton grew past the supported number of states.
-    #[error("the automaton has more than {0} states")]
-    TooManyStates(usize),
+    /// The automaton grew past the supported size.
+    #[error(
+        "the automaton is too large: {states} states x {letters} letters exceeds {max} transitions \
+         (use fewer atoms)",
+        max = crate::automaton::MAX_TRANSITIONS
+    )]
+    TooLarge {
+        /// States reached so far.
+        states: usize,
+        /// Letters (2^atoms).
+        letters: usize,
+    },
     /// The formula has more distinct temporal subformulas than the construction supports.
     #[error("the formula has more than {0} distinct temporal subformulas")]
     TooManyObligations(usize),
