@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use crate::cnf::{self, Cube, Literal};
 use crate::error::{AutomatonError, InputError};
+use crate::predicate::{Center, Predicate};
 use crate::robustness::{check_finite, Trajectory};
 use crate::spec::{Formula, Spec};
 
@@ -545,6 +546,53 @@ impl Automaton {
         out.extend(cnf::safe_literals(&self.trap_cnf[q], &rho));
     }
 
+    /// The CLF goal of Eq. 5B1 at `(s, q)`: among `q`'s edges to other non-trap states the one
+    /// whose guard has the largest robustness at `s` (the first on ties), in its DNF the cube
+    /// with the largest robustness, and the mean of the centres of that cube's positive Ball
+    /// literals. `None` when there is no such edge or the cube has no positive Ball literal.
+    pub fn goal(&self, q: usize, s: &[f64]) -> Result<Option<Vec<f64>>, AutomatonError> {
+        self.check_state("q", q as i64)?;
+        self.check_vector(s)?;
+        Ok(self.goal_unchecked(q, s))
+    }
+
+    /// [`Automaton::goal`] for validated inputs.
+    pub fn goal_unchecked(&self, q: usize, s: &[f64]) -> Option<Vec<f64>> {
+        let rho = self.atom_rho(s);
+        let (cube, _) = self
+            .edges
+            .iter()
+            .filter(|e| e.src == q && e.dst != q && Some(e.dst) != self.trap)
+            .filter_map(|e| best_cube(&e.guard, &rho))
+            .fold(None, |best: Option<(&Cube, f64)>, cur| match best {
+                Some(b) if b.1 >= cur.1 => Some(b),
+                _ => Some(cur),
+            })?;
+        let mut sum: Vec<f64> = Vec::new();
+        let mut count = 0.0;
+        for lit in cube.literals().filter(|l| l.positive) {
+            if let Predicate::Ball(ball) = &self.spec.predicates()[lit.atom] {
+                let centre: Vec<f64> = match ball.center() {
+                    Center::Fixed(c) => c.clone(),
+                    Center::Dims(d) => d.iter().map(|&i| s[i]).collect(),
+                };
+                if sum.is_empty() {
+                    sum = centre;
+                } else if sum.len() == centre.len() {
+                    sum.iter_mut().zip(&centre).for_each(|(a, b)| *a += b);
+                } else {
+                    continue;
+                }
+                count += 1.0;
+            }
+        }
+        if count == 0.0 {
+            return None;
+        }
+        sum.iter_mut().for_each(|v| *v /= count);
+        Some(sum)
+    }
+
     /// Graphviz DOT text: accepting states double circles, the trap filled red.
     pub fn to_dot(&self) -> String {
         let atoms = self.spec.atoms();
@@ -576,6 +624,17 @@ impl Automaton {
         out.push_str("}\n");
         out
     }
+}
+
+/// The cube of a DNF with the largest robustness (the first on ties) and that robustness.
+fn best_cube<'a>(guard: &'a [Cube], rho: &[f64]) -> Option<(&'a Cube, f64)> {
+    guard
+        .iter()
+        .map(|c| (c, c.robustness(rho)))
+        .fold(None, |best: Option<(&Cube, f64)>, cur| match best {
+            Some(b) if b.1 >= cur.1 => Some(b),
+            _ => Some(cur),
+        })
 }
 
 /// Moore partition refinement: returns the block of every state, blocks numbered by first
@@ -610,7 +669,6 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::predicate::{Center, Predicate};
     use crate::robustness::tests::{co_safe, spec_for, trajectory};
     use crate::spec::Spec;
     use proptest::prelude::*;
@@ -737,6 +795,29 @@ mod tests {
         assert!(aut.reward(0, &[2.0, 0.0], 0.0, None).is_err());
         assert!(aut.reward(9, &[2.0, 0.0], 1.0, None).is_err());
         assert!(aut.reward(0, &[f64::NAN, 0.0], 1.0, None).is_err());
+    }
+
+    #[test]
+    fn goals_follow_eq_5b1() {
+        let aut = running_example();
+        // At q0 the edge to q2 (reach c) is the only one that does not risk the trap first;
+        // D_q0's best cube decides: from x = 2 the cube !a & !b & c scores min(1, 1, -5) = -5,
+        // a & c and b & c score -5 too; the first best (to q2, cube !a & !b & c) wins -> c.
+        assert_eq!(aut.goal(0, &[2.0, 0.0]).unwrap(), Some(vec![8.0, 0.0]));
+        // At q2 (after c): a or b, whichever is closer.
+        assert_eq!(aut.goal(2, &[3.0, 0.0]).unwrap(), Some(vec![4.0, 0.0]));
+        assert_eq!(aut.goal(2, &[1.0, 0.0]).unwrap(), Some(vec![0.0, 0.0]));
+        // Accepting and trap states have no goal.
+        assert_eq!(aut.goal(3, &[1.0, 0.0]).unwrap(), None);
+        assert_eq!(aut.goal(1, &[1.0, 0.0]).unwrap(), None);
+        // A cube with two positive balls aims at the mean of their centres.
+        let task = task();
+        let mut s = [0.0; 13];
+        s[..2].copy_from_slice(&[1.1, 1.0]);
+        s[3..9].copy_from_slice(&[1.0, 1.0, 5.0, 4.0, 1.2, 1.0]);
+        // Inside both g1 and g3 (they overlap): the cube g1 & g3 (to acceptance) is the best.
+        let goal = task.goal(0, &s).unwrap().unwrap();
+        assert!((goal[0] - 1.1).abs() < 1e-12 && (goal[1] - 1.0).abs() < 1e-12);
     }
 
     #[test]

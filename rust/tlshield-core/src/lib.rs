@@ -18,12 +18,14 @@
 
 pub mod automaton;
 pub mod cnf;
+pub mod dynamics;
 pub mod error;
 pub mod predicate;
 pub mod robustness;
 pub mod spec;
 
 pub use automaton::{Automaton, Edge};
+pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, SpecError};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
