@@ -21,6 +21,7 @@ pub mod cnf;
 pub mod dynamics;
 pub mod error;
 pub mod predicate;
+pub mod qp;
 pub mod robustness;
 pub mod spec;
 
