@@ -220,20 +220,19 @@ pub fn kkt_residual(qp: &DenseQp, x: &[f64], z: &[f64]) -> f64 {
     let n = qp.vars();
     let mut worst = qp.max_violation(x);
     worst = z.iter().fold(worst, |w, &zi| w.max(-zi));
-    for j in 0..n {
-        let grad = qp.p_diag[j] * x[j]
+    for (j, xj) in x.iter().enumerate() {
+        let grad = qp.p_diag[j] * xj
             + qp.c[j]
-            + (0..qp.rows()).map(|i| qp.g[i * n + j] * z[i]).sum::<f64>();
+            + z.iter()
+                .enumerate()
+                .map(|(i, zi)| qp.g[i * n + j] * zi)
+                .sum::<f64>();
         worst = worst.max(grad.abs());
     }
-    for i in 0..qp.rows() {
-        let slack = qp.h[i]
-            - qp.g[i * n..(i + 1) * n]
-                .iter()
-                .zip(x)
-                .map(|(a, b)| a * b)
-                .sum::<f64>();
-        worst = worst.max((z[i] * slack).abs());
+    for (i, zi) in z.iter().enumerate() {
+        let row = &qp.g[i * n..(i + 1) * n];
+        let slack = qp.h[i] - row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+        worst = worst.max((zi * slack).abs());
     }
     worst
 }
