@@ -29,14 +29,16 @@ trajectory generator):
 
 2. **Per-step FSA work** at an automaton state q (every non-accepting, non-trap state) for a
    state vector s: what an RL loop asks of the automaton every step, next state, Eq. 5A1
-   reward and Eq. 5C1 safe set. tlshield: three calls, ``aut.step(q, s)``,
-   ``aut.reward(q, s, c_r)`` and ``aut.safe_set(q, s)``. The Python alternative, as reference
+   reward for leaving q and the Eq. 5C1 safe set at (s, q') for the next action. tlshield: one
+   call, ``aut.advance(q, s, c_r)`` (the three separate calls ``aut.step(q, s)``,
+   ``aut.reward(q, s, c_r)``, ``aut.safe_set(q', s)`` are timed too and must give the same
+   result). The Python alternative, as reference
    implementations of the paper do it: the five predicate robustness values with numpy, then
    the guard strings of ``aut.edges()`` (parsed once, at setup, into cubes of literals)
    evaluated in Python: the next state is the edge whose guard holds; the reward is
    ``min(rho(D_q), c_r * -rho(psi_trap))`` with the robustness of a DNF the max over its cubes
    of the min over their literals (``rho(D_q)`` alone without a trap edge); the safe set keeps
-   per clause of ``aut.trap_cnf(q)`` the literal with the largest robustness. Before timing,
+   per clause of ``aut.trap_cnf(q')`` the literal with the largest robustness. Before timing,
    both must agree on 2000 random (q, s) pairs: the same next state, the reward within 1e-12,
    the same safe-set literals with robustness within 1e-12.
 
@@ -209,7 +211,7 @@ class PythonFsa:
         raise ValueError(f"no edge out of {q} holds for {holds}")
 
     def evaluate(self, q: int, s: np.ndarray, c_r: float) -> tuple[int, float, SafeSet]:
-        """(next state, reward, safe set) at ``q`` for ``s``: one step of the RL loop."""
+        """(next state q', reward for leaving q, safe set at (s, q')): one step of the RL loop."""
         rho = predicate_values(s)
         holds = [value > 0.0 for value in rho]
         nxt = self.next_state(q, holds)
@@ -221,7 +223,7 @@ class PythonFsa:
             if trap_guard is not None:
                 reward = min(reward, c_r * -dnf_rho(trap_guard, rho))
         safe: SafeSet = []
-        for clause in self.cnf[q]:
+        for clause in self.cnf[nxt]:
             best: tuple[str, bool, float] | None = None
             for atom, positive, i, sign in clause:
                 value = sign * rho[i]
@@ -271,7 +273,10 @@ def check_step(
     for q, s in pairs:
         atom_rho = np.asarray(spec.atom_robustness(s))[perm]
         atom_diff = float(np.max(np.abs(atom_rho - np.array(predicate_values(s)))))
-        got = (aut.step(q, s), aut.reward(q, s, C_R), aut.safe_set(q, s))
+        got = aut.advance(q, s, C_R)
+        separate = (aut.step(q, s), aut.reward(q, s, C_R), aut.safe_set(got[0], s))
+        if separate != got:
+            failures.append(f"q={q} s={s.tolist()}: advance {got} != separate calls {separate}")
         want = pyfsa.evaluate(q, s, C_R)
         taken[(q, want[0])] += 1
         reward_diff = 0.0 if got[1] == want[1] else abs(got[1] - want[1])
@@ -518,9 +523,10 @@ def print_tables(
     print("| measurement | tlshield | Python (numpy predicates, parsed guards) |")
     print("|---|---:|---:|")
     print(
-        "| step + reward + safe set (tlshield: 3 calls; Python: predicates once, then guards) | "
+        "| step + reward + safe set (tlshield: `advance`; Python: predicates once, then guards) | "
         f"{fmt(step_us.get('tlshield'))} | {fmt(step_us.get('python'))} |"
     )
+    print(f"| the same as 3 tlshield calls | {fmt(step_us.get('tlshield 3 calls'))} | - |")
     print(
         f"| next state only | {fmt(step_us.get('tlshield step'))} | "
         f"{fmt(step_us.get('python predicates + next state'))} (with the predicates) |"
@@ -669,17 +675,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
 
     # --- timing: per step -------------------------------------------------------------------
-    def tlshield_all(item: tuple[int, np.ndarray]) -> object:
+    def tlshield_separate(item: tuple[int, np.ndarray]) -> object:
         q, s = item
-        return aut.step(q, s), aut.reward(q, s, C_R), aut.safe_set(q, s)
+        nxt = aut.step(q, s)
+        return nxt, aut.reward(q, s, C_R), aut.safe_set(nxt, s)
 
     def python_next(item: tuple[int, np.ndarray]) -> object:
         q, s = item
         return pyfsa.next_state(q, [value > 0.0 for value in predicate_values(s)])
 
     plans: dict[str, Callable[[Any], object]] = {
-        "tlshield": tlshield_all,
+        "tlshield": lambda item: aut.advance(item[0], item[1], C_R),
         "python": lambda item: pyfsa.evaluate(item[0], item[1], C_R),
+        "tlshield 3 calls": tlshield_separate,
         "tlshield step": lambda item: aut.step(item[0], item[1]),
         "tlshield reward": lambda item: aut.reward(item[0], item[1], C_R),
         "tlshield safe_set": lambda item: aut.safe_set(item[0], item[1]),
@@ -710,9 +718,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             None,
         ),
         (
-            "per step: tlshield (3 calls) vs Python",
+            "per step: tlshield `advance` vs Python",
             ratio(step_us["python"], step_us["tlshield"]),
             TARGET_STEP,
+        ),
+        (
+            "per step: tlshield step + reward + safe_set (3 calls) vs Python",
+            ratio(step_us["python"], step_us["tlshield 3 calls"]),
+            None,
         ),
     ]
     print_tables(build_ms, step_us, states, ratios, versions)

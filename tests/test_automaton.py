@@ -237,3 +237,26 @@ def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
         main(["nonsense"])
     assert info.value.code == 2
     assert main(["demo", "--steps", "1"]) == 2
+
+
+@settings(max_examples=200, deadline=None)
+@given(co_safe, arrays(np.float64, (3,), elements=values))
+def test_advance_equals_the_separate_calls(formula: tuple, s: np.ndarray) -> None:
+    aut = tlshield.Spec(to_text(formula), RUST_PREDICATES).automaton()
+    for q in range(aut.num_states):
+        penalty = -100.0 if q == aut.trap else None
+        nxt, reward, safe = aut.advance(q, s, 2.0, trap_penalty=penalty)
+        assert nxt == aut.step(q, s)
+        assert reward == aut.reward(q, s, 2.0, trap_penalty=penalty)
+        assert safe == aut.safe_set(nxt, s)
+
+
+def test_advance_bad_input(task: tlshield.Automaton) -> None:
+    with pytest.raises(ValueError, match="does not exist"):
+        task.advance(7, np.zeros(STATE_DIM), 1.0)
+    with pytest.raises(ValueError, match="expected 13, got 2"):
+        task.advance(0, [0.0, 0.0], 1.0)
+    with pytest.raises(ValueError, match="c_r"):
+        task.advance(0, np.zeros(STATE_DIM), -1.0)
+    with pytest.raises(ValueError, match="trap state"):
+        task.advance(task.trap, np.zeros(STATE_DIM), 1.0)

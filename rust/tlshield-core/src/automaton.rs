@@ -9,6 +9,7 @@
 //! Also here: the FSA-augmented reward (Eq. 5A1) and the CBF safe set (Eq. 5C1).
 
 use std::collections::{HashMap, VecDeque};
+use std::hash::{BuildHasherDefault, Hasher};
 
 use rayon::prelude::*;
 
@@ -116,60 +117,146 @@ fn holds(f: &Formula, v: u32) -> bool {
     }
 }
 
-/// The obligations met so far: formulas that must hold at the start of the rest of the trace.
+/// A small, fast hasher for the build's maps (keys are addresses and short bit vectors; no
+/// untrusted input reaches them).
 #[derive(Default)]
-struct Obligations {
-    formulas: Vec<Formula>,
-    ids: HashMap<Formula, usize>,
+struct FxHasher(u64);
+
+impl Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn write_u128(&mut self, i: u128) {
+        self.write_u64(i as u64);
+        self.write_u64((i >> 64) as u64);
+    }
+
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
-impl Obligations {
-    fn id(&mut self, f: &Formula) -> Result<u128, AutomatonError> {
-        if let Some(&k) = self.ids.get(f) {
-            return Ok(1u128 << k);
+type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
+
+/// The obligations of a formula: the subformulas that can be left to hold "from the next
+/// state on" (the formula itself, every `F` and `U` node, every `X` operand). Structurally
+/// equal subformulas share an id; ids are assigned once, before exploring.
+struct Obligations<'f> {
+    formulas: Vec<&'f Formula>,
+    /// Node address -> obligation id.
+    by_node: FastMap<*const Formula, usize>,
+    /// `progress(formulas[k], v)` at `k * letters + v`, computed on first use.
+    memo: Vec<Option<Dnf>>,
+    letters: usize,
+}
+
+impl<'f> Obligations<'f> {
+    fn new(root: &'f Formula, letters: usize) -> Result<Self, AutomatonError> {
+        let mut this = Obligations {
+            formulas: Vec::new(),
+            by_node: FastMap::default(),
+            memo: Vec::new(),
+            letters,
+        };
+        let mut structural: HashMap<&'f Formula, usize> = HashMap::new();
+        this.register(root, &mut structural)?;
+        this.visit(root, &mut structural)?;
+        this.memo = vec![None; this.formulas.len() * letters];
+        Ok(this)
+    }
+
+    fn register(
+        &mut self,
+        f: &'f Formula,
+        structural: &mut HashMap<&'f Formula, usize>,
+    ) -> Result<(), AutomatonError> {
+        let next = self.formulas.len();
+        let id = *structural.entry(f).or_insert(next);
+        if id == next {
+            if next == MAX_OBLIGATIONS {
+                return Err(AutomatonError::TooManyObligations(MAX_OBLIGATIONS));
+            }
+            self.formulas.push(f);
         }
-        if self.formulas.len() == MAX_OBLIGATIONS {
-            return Err(AutomatonError::TooManyObligations(MAX_OBLIGATIONS));
+        self.by_node.insert(f as *const Formula, id);
+        Ok(())
+    }
+
+    fn visit(
+        &mut self,
+        f: &'f Formula,
+        structural: &mut HashMap<&'f Formula, usize>,
+    ) -> Result<(), AutomatonError> {
+        match f {
+            Formula::True | Formula::False | Formula::Atom(_) => {}
+            Formula::Not(a) => self.visit(a, structural)?,
+            Formula::And(parts) | Formula::Or(parts) => {
+                for p in parts {
+                    self.visit(p, structural)?;
+                }
+            }
+            Formula::Implies(a, b) => {
+                self.visit(a, structural)?;
+                self.visit(b, structural)?;
+            }
+            Formula::Eventually(a) => {
+                self.register(f, structural)?;
+                self.visit(a, structural)?;
+            }
+            Formula::Until(a, b) => {
+                self.register(f, structural)?;
+                self.visit(a, structural)?;
+                self.visit(b, structural)?;
+            }
+            Formula::Next(a) => {
+                self.register(a, structural)?;
+                self.visit(a, structural)?;
+            }
         }
-        self.ids.insert(f.clone(), self.formulas.len());
-        self.formulas.push(f.clone());
-        Ok(1u128 << (self.formulas.len() - 1))
+        Ok(())
+    }
+
+    fn id(&self, f: &Formula) -> u128 {
+        1u128 << self.by_node[&(f as *const Formula)]
     }
 
     /// What remains of "`f` holds from here" after reading a state with valuation `v`.
-    fn progress(&mut self, f: &Formula, v: u32) -> Result<Dnf, AutomatonError> {
-        Ok(match f {
+    fn progress(&self, f: &Formula, v: u32) -> Dnf {
+        match f {
             Formula::True | Formula::False | Formula::Atom(_) | Formula::Not(_) => {
                 constant(holds(f, v))
             }
-            Formula::And(parts) => {
-                let mut acc = vec![TRUE];
-                for p in parts {
-                    acc = dnf_and(&acc, &self.progress(p, v)?);
-                }
-                acc
-            }
-            Formula::Or(parts) => {
-                let mut acc = Vec::new();
-                for p in parts {
-                    acc = dnf_or(acc, self.progress(p, v)?);
-                }
-                acc
-            }
-            Formula::Implies(a, b) if holds(a, v) => self.progress(b, v)?,
+            Formula::And(parts) => parts
+                .iter()
+                .fold(vec![TRUE], |acc, p| dnf_and(&acc, &self.progress(p, v))),
+            Formula::Or(parts) => parts
+                .iter()
+                .fold(Vec::new(), |acc, p| dnf_or(acc, self.progress(p, v))),
+            Formula::Implies(a, b) if holds(a, v) => self.progress(b, v),
             Formula::Implies(..) => vec![TRUE],
-            Formula::Eventually(a) => dnf_or(self.progress(a, v)?, vec![self.id(f)?]),
+            Formula::Eventually(a) => dnf_or(self.progress(a, v), vec![self.id(f)]),
             Formula::Until(a, b) => {
-                let keep = dnf_and(&self.progress(a, v)?, &[self.id(f)?]);
-                dnf_or(self.progress(b, v)?, keep)
+                let keep = dnf_and(&self.progress(a, v), &[self.id(f)]);
+                dnf_or(self.progress(b, v), keep)
             }
             // `X a`: `a` must hold from the next state on (which must exist).
-            Formula::Next(a) => vec![self.id(a)?],
-        })
+            Formula::Next(a) => vec![self.id(a)],
+        }
     }
 
     /// Progression of a whole residual.
-    fn step(&mut self, residual: &[u128], v: u32) -> Result<Dnf, AutomatonError> {
+    fn step(&mut self, residual: &[u128], v: u32) -> Dnf {
         let mut out = Vec::new();
         for &cube in residual {
             let mut acc = vec![TRUE];
@@ -177,12 +264,15 @@ impl Obligations {
             while bits != 0 && !acc.is_empty() {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let f = self.formulas[k].clone();
-                acc = dnf_and(&acc, &self.progress(&f, v)?);
+                let slot = k * self.letters + v as usize;
+                if self.memo[slot].is_none() {
+                    self.memo[slot] = Some(self.progress(self.formulas[k], v));
+                }
+                acc = dnf_and(&acc, self.memo[slot].as_deref().unwrap_or(&[]));
             }
             out.extend(acc);
         }
-        Ok(absorb(out))
+        absorb(out)
     }
 }
 
@@ -197,16 +287,17 @@ impl Automaton {
 
         // 1. Explore the residuals reachable by progression. A residual holds on the empty
         //    rest of a trace iff it is `true` (every obligation needs a state).
-        let mut obligations = Obligations::default();
-        let start: Dnf = vec![obligations.id(spec.formula())?];
-        let mut ids: HashMap<Dnf, usize> = HashMap::from([(start.clone(), 0)]);
+        let mut obligations = Obligations::new(spec.formula(), letters)?;
+        let start: Dnf = vec![obligations.id(spec.formula())];
+        let mut ids: FastMap<Dnf, usize> = FastMap::default();
+        ids.insert(start.clone(), 0);
         let mut residuals = vec![start];
         let mut raw: Vec<u32> = Vec::new();
         let mut next = 0;
         while next < residuals.len() {
             let current = residuals[next].clone();
             for v in 0..letters as u32 {
-                let succ = obligations.step(&current, v)?;
+                let succ = obligations.step(&current, v);
                 let id = match ids.get(&succ) {
                     Some(&id) => id,
                     None => {
@@ -488,40 +579,81 @@ impl Automaton {
     ) -> Result<f64, AutomatonError> {
         self.check_state("q", q as i64)?;
         self.check_vector(s_next)?;
-        if !(c_r.is_finite() && c_r > 0.0) {
-            return Err(InputError::Shape {
-                what: "c_r".into(),
-                expected: "a finite weight > 0".into(),
-                got: c_r.to_string(),
-            }
-            .into());
-        }
+        self.check_weight(c_r)?;
         if Some(q) == self.trap {
-            return match trap_penalty {
-                Some(p) if p.is_finite() => Ok(p),
-                Some(p) => Err(InputError::NonFinite {
-                    what: "trap_penalty".into(),
-                    value: p,
-                }
-                .into()),
-                None => Err(AutomatonError::TrapReward(q)),
-            };
+            return self.trap_reward(q, trap_penalty);
         }
         Ok(self.reward_unchecked(q, s_next, c_r))
+    }
+
+    /// One step of the FSA-augmented loop from one evaluation of the atoms at `s_next`:
+    /// the next state `q' = step(q, s_next)`, the reward of Eq. 5A1 for leaving `q`
+    /// ([`Automaton::reward`]), and the safe set at `(s_next, q')` written into `safe`
+    /// ([`Automaton::safe_set`]).
+    pub fn advance(
+        &self,
+        q: usize,
+        s_next: &[f64],
+        c_r: f64,
+        trap_penalty: Option<f64>,
+        safe: &mut Vec<(Literal, f64)>,
+    ) -> Result<(usize, f64), AutomatonError> {
+        self.check_state("q", q as i64)?;
+        self.check_vector(s_next)?;
+        self.check_weight(c_r)?;
+        let rho = self.atom_rho(s_next);
+        let rho = &rho[..self.spec.atoms().len()];
+        let reward = if Some(q) == self.trap {
+            self.trap_reward(q, trap_penalty)?
+        } else {
+            self.reward_from(q, rho, c_r)
+        };
+        let next = self.table[q * self.letters + Self::valuation(rho)] as usize;
+        safe.clear();
+        safe.extend(cnf::safe_literals(&self.trap_cnf[next], rho));
+        Ok((next, reward))
+    }
+
+    fn check_weight(&self, c_r: f64) -> Result<(), AutomatonError> {
+        if c_r.is_finite() && c_r > 0.0 {
+            return Ok(());
+        }
+        Err(InputError::Shape {
+            what: "c_r".into(),
+            expected: "a finite weight > 0".into(),
+            got: c_r.to_string(),
+        }
+        .into())
+    }
+
+    fn trap_reward(&self, q: usize, trap_penalty: Option<f64>) -> Result<f64, AutomatonError> {
+        match trap_penalty {
+            Some(p) if p.is_finite() => Ok(p),
+            Some(p) => Err(InputError::NonFinite {
+                what: "trap_penalty".into(),
+                value: p,
+            }
+            .into()),
+            None => Err(AutomatonError::TrapReward(q)),
+        }
     }
 
     /// [`Automaton::reward`] for validated inputs and a non-trap `q`.
     #[inline]
     pub fn reward_unchecked(&self, q: usize, s_next: &[f64], c_r: f64) -> f64 {
+        let rho = self.atom_rho(s_next);
+        self.reward_from(q, &rho[..self.spec.atoms().len()], c_r)
+    }
+
+    fn reward_from(&self, q: usize, rho: &[f64], c_r: f64) -> f64 {
         if self.accepting[q] {
             return 0.0;
         }
-        let rho = self.atom_rho(s_next);
-        let progress = cnf::dnf_robustness(&self.progress[q], &rho);
+        let progress = cnf::dnf_robustness(&self.progress[q], rho);
         if self.trap_cnf[q].is_empty() {
             progress
         } else {
-            progress.min(c_r * cnf::cnf_robustness(&self.trap_cnf[q], &rho))
+            progress.min(c_r * cnf::cnf_robustness(&self.trap_cnf[q], rho))
         }
     }
 
@@ -818,6 +950,29 @@ mod tests {
         // Inside both g1 and g3 (they overlap): the cube g1 & g3 (to acceptance) is the best.
         let goal = task.goal(0, &s).unwrap().unwrap();
         assert!((goal[0] - 1.1).abs() < 1e-12 && (goal[1] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn advance_fuses_step_reward_and_safe_set() {
+        let aut = running_example();
+        let mut safe = Vec::new();
+        for (q, s) in [
+            (0, [2.0, 0.0]),
+            (0, [8.0, 0.0]),
+            (2, [4.5, 0.0]),
+            (0, [0.5, 0.0]),
+        ] {
+            let (next, reward) = aut.advance(q, &s, 2.0, None, &mut safe).unwrap();
+            assert_eq!(next, aut.step(q, &s).unwrap());
+            assert_eq!(reward, aut.reward(q, &s, 2.0, None).unwrap());
+            assert_eq!(safe, aut.safe_set(next, &s).unwrap());
+        }
+        assert!(aut.advance(1, &[0.0, 0.0], 2.0, None, &mut safe).is_err());
+        assert_eq!(
+            aut.advance(1, &[0.0, 0.0], 2.0, Some(-3.0), &mut safe)
+                .unwrap(),
+            (1, -3.0)
+        );
     }
 
     #[test]

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{Automaton, Trajectory};
 
@@ -16,6 +17,8 @@ use crate::spec::PySpec;
 #[pyclass(name = "Automaton", module = "tlshield._core", frozen)]
 pub struct PyAutomaton {
     pub(crate) inner: Arc<Automaton>,
+    /// The atom names as Python strings, made once (results reuse them).
+    names: Vec<Py<PyString>>,
 }
 
 fn vector<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<FloatArray<'py>> {
@@ -23,6 +26,27 @@ fn vector<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<FloatArray<'py>>
 }
 
 impl PyAutomaton {
+    /// Wraps a built automaton.
+    pub fn new(py: Python<'_>, inner: Arc<Automaton>) -> Self {
+        let names = inner
+            .spec()
+            .atoms()
+            .iter()
+            .map(|a| PyString::new(py, a).unbind())
+            .collect();
+        PyAutomaton { inner, names }
+    }
+
+    fn kept<'py>(
+        &self,
+        py: Python<'py>,
+        kept: &[(Literal, f64)],
+    ) -> Vec<(Bound<'py, PyString>, bool, f64)> {
+        kept.iter()
+            .map(|(l, rho)| (self.names[l.atom].bind(py).clone(), l.positive, *rho))
+            .collect()
+    }
+
     fn state(&self, q: i64) -> PyResult<usize> {
         map(self.inner.check_state("q", q))
     }
@@ -166,16 +190,41 @@ impl PyAutomaton {
 
     /// Eq. 5C1: per clause of ``trap_cnf(q)`` the literal with the largest robustness at ``s``,
     /// as ``(atom, positive, robustness)`` (empty when ``q`` has no trap edge).
-    fn safe_set(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<Vec<(String, bool, f64)>> {
+    fn safe_set<'py>(
+        &self,
+        py: Python<'py>,
+        q: i64,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<Vec<(Bound<'py, PyString>, bool, f64)>> {
         let q = self.state(q)?;
         let kept = map(self.inner.safe_set(q, &vector(s, "s")?.values()))?;
-        Ok(kept
-            .iter()
-            .map(|(l, rho)| {
-                let (atom, positive) = self.literal(l);
-                (atom, positive, *rho)
-            })
-            .collect())
+        Ok(self.kept(py, &kept))
+    }
+
+    /// One step of the loop from a single evaluation of the atoms at ``s_next``:
+    /// ``(q_next, reward, safe_set)`` with ``q_next = step(q, s_next)``,
+    /// ``reward = reward(q, s_next, c_r, trap_penalty)`` and
+    /// ``safe_set = safe_set(q_next, s_next)`` (the constraints for the next action).
+    #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
+    #[allow(clippy::type_complexity)]
+    fn advance<'py>(
+        &self,
+        py: Python<'py>,
+        q: i64,
+        s_next: &Bound<'py, PyAny>,
+        c_r: f64,
+        trap_penalty: Option<f64>,
+    ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, bool, f64)>)> {
+        let q = self.state(q)?;
+        let mut kept = Vec::new();
+        let (next, reward) = map(self.inner.advance(
+            q,
+            &vector(s_next, "s_next")?.values(),
+            c_r,
+            trap_penalty,
+            &mut kept,
+        ))?;
+        Ok((next, reward, self.kept(py, &kept)))
     }
 
     fn __repr__(&self) -> String {

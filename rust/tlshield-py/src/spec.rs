@@ -144,12 +144,11 @@ impl PySpec {
     /// The finite state automaton of the formula (built once per spec, then shared).
     fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
         if let Some(aut) = self.automaton.get() {
-            return Ok(PyAutomaton { inner: aut.clone() });
+            return Ok(PyAutomaton::new(py, aut.clone()));
         }
-        let spec = &self.inner;
-        let built = Arc::new(map(py.detach(|| Automaton::build(spec)))?);
+        let built = Arc::new(map(Automaton::build(&self.inner))?);
         let aut = self.automaton.get_or_init(|| built);
-        Ok(PyAutomaton { inner: aut.clone() })
+        Ok(PyAutomaton::new(py, aut.clone()))
     }
 
     fn __str__(&self) -> String {
