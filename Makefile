@@ -17,11 +17,12 @@ test: setup
 	cargo test --workspace
 	$(BIN)/python -m pytest
 
-## Benchmarks: criterion, then the Python comparison against rtamt and argus.
+## Benchmarks: criterion, then the Python comparisons (rtamt, argus; ltlf2dfa + mona).
 bench:
 	@EXTRAS=train,test,bench bash scripts/setup.sh
 	cargo bench -p tlshield-bench
 	$(BIN)/python benches/compare_robustness.py
+	$(BIN)/python benches/compare_automaton.py --install-mona
 
 ## Formatting and lints (rustfmt, clippy, ruff, stubtest).
 lint:
