@@ -696,10 +696,7 @@ impl Automaton {
             .iter()
             .filter(|e| e.src == q && e.dst != q && Some(e.dst) != self.trap)
             .filter_map(|e| best_cube(&e.guard, &rho))
-            .fold(None, |best: Option<(&Cube, f64)>, cur| match best {
-                Some(b) if b.1 >= cur.1 => Some(b),
-                _ => Some(cur),
-            })?;
+            .fold(None, cnf::first_max)?;
         let mut sum: Vec<f64> = Vec::new();
         let mut count = 0.0;
         for lit in cube.literals().filter(|l| l.positive) {
@@ -763,10 +760,7 @@ fn best_cube<'a>(guard: &'a [Cube], rho: &[f64]) -> Option<(&'a Cube, f64)> {
     guard
         .iter()
         .map(|c| (c, c.robustness(rho)))
-        .fold(None, |best: Option<(&Cube, f64)>, cur| match best {
-            Some(b) if b.1 >= cur.1 => Some(b),
-            _ => Some(cur),
-        })
+        .fold(None, cnf::first_max)
 }
 
 /// Moore partition refinement: returns the block of every state, blocks numbered by first

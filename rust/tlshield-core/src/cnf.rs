@@ -233,6 +233,15 @@ pub fn cnf_robustness(clauses: &[Vec<Literal>], atom_rho: &[f64]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// Fold step keeping the first item with the largest score: `iter.fold(None, first_max)`.
+/// Ties keep the earlier item, so choices are deterministic.
+pub fn first_max<T>(best: Option<(T, f64)>, cur: (T, f64)) -> Option<(T, f64)> {
+    match best {
+        Some(b) if b.1 >= cur.1 => Some(b),
+        _ => Some(cur),
+    }
+}
+
 /// Eq. 5C1 with argmax: per clause the literal with the LARGEST robustness (the first one on
 /// ties) and that robustness. The paper prints argmin, which would keep e.g. "be inside g3" for
 /// the clause (g3 | c1); argmax keeps the literal that holds with the largest margin.
@@ -244,10 +253,7 @@ pub fn safe_literals<'a>(
         clause
             .iter()
             .map(|l| (*l, l.robustness(atom_rho)))
-            .fold(None, |best: Option<(Literal, f64)>, cur| match best {
-                Some(b) if b.1 >= cur.1 => Some(b),
-                _ => Some(cur),
-            })
+            .fold(None, first_max)
             .expect("clauses are never empty")
     })
 }
