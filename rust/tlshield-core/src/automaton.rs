@@ -12,6 +12,7 @@ use std::collections::{HashMap, VecDeque};
 use std::hash::{BuildHasherDefault, Hasher};
 
 use rayon::prelude::*;
+use smallvec::{smallvec, SmallVec};
 
 use crate::cnf::{self, Cube, Literal};
 use crate::error::{AutomatonError, InputError};
@@ -63,29 +64,46 @@ pub const MAX_OBLIGATIONS: usize = 128;
 /// Cubes are sorted and no cube contains another (absorption), so equal functions of the
 /// obligations get equal values and progression reaches finitely many of them.
 /// `[]` is false; `[0]` (the empty cube) is true.
-type Dnf = Vec<u128>;
+///
+/// Stored inline up to four cubes (the common case), so progression rarely allocates.
+type Dnf = SmallVec<[u128; 4]>;
 
 const TRUE: u128 = 0;
 
-fn absorb(mut cubes: Vec<u128>) -> Dnf {
+/// Canonical form in place: sorted, no duplicates, no cube containing another.
+fn absorb(mut cubes: Dnf) -> Dnf {
+    if cubes.len() < 2 {
+        return cubes;
+    }
+    // Fewest obligations first, so a cube can only be absorbed by one kept before it.
     cubes.sort_unstable_by_key(|c| (c.count_ones(), *c));
     cubes.dedup();
-    let mut kept: Vec<u128> = Vec::with_capacity(cubes.len());
-    for c in cubes {
-        if !kept.iter().any(|&d| d & !c == 0) {
-            kept.push(c);
+    let mut kept = 0;
+    for i in 0..cubes.len() {
+        let c = cubes[i];
+        if !cubes[..kept].iter().any(|&d| d & !c == 0) {
+            cubes[kept] = c;
+            kept += 1;
         }
     }
-    kept.sort_unstable();
-    kept
+    cubes.truncate(kept);
+    cubes.sort_unstable();
+    cubes
 }
 
-fn dnf_or(mut a: Dnf, b: Dnf) -> Dnf {
-    a.extend(b);
+fn dnf_or(mut a: Dnf, b: &[u128]) -> Dnf {
+    a.extend_from_slice(b);
     absorb(a)
 }
 
 fn dnf_and(a: &[u128], b: &[u128]) -> Dnf {
+    // Fast paths: `true` is the identity, `false` absorbs, and two single cubes make one.
+    match (a, b) {
+        ([TRUE], other) | (other, [TRUE]) => return SmallVec::from_slice(other),
+        ([], _) | (_, []) => return SmallVec::new(),
+        (&[x], &[y]) => return smallvec![x | y],
+        _ => {}
+    }
     absorb(
         a.iter()
             .flat_map(|x| b.iter().map(move |y| x | y))
@@ -95,9 +113,9 @@ fn dnf_and(a: &[u128], b: &[u128]) -> Dnf {
 
 fn constant(b: bool) -> Dnf {
     if b {
-        vec![TRUE]
+        smallvec![TRUE]
     } else {
-        Vec::new()
+        SmallVec::new()
     }
 }
 
@@ -114,6 +132,17 @@ fn holds(f: &Formula, v: u32) -> bool {
         // Co-safety puts only propositional formulas under `!` and left of `->`, the only
         // places this is called.
         Formula::Until(..) | Formula::Eventually(_) | Formula::Next(_) => false,
+    }
+}
+
+/// The atoms occurring in `f` (bit `i`: atom `i`); progression of `f` reads no others.
+fn atom_mask(f: &Formula) -> u32 {
+    match f {
+        Formula::True | Formula::False => 0,
+        Formula::Atom(i) => 1 << i,
+        Formula::Not(a) | Formula::Eventually(a) | Formula::Next(a) => atom_mask(a),
+        Formula::And(parts) | Formula::Or(parts) => parts.iter().fold(0, |m, p| m | atom_mask(p)),
+        Formula::Implies(a, b) | Formula::Until(a, b) => atom_mask(a) | atom_mask(b),
     }
 }
 
@@ -154,32 +183,33 @@ type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
 /// equal subformulas share an id; ids are assigned once, before exploring.
 struct Obligations<'f> {
     formulas: Vec<&'f Formula>,
+    /// The atoms each obligation reads: its progression depends on `v & masks[k]` only.
+    masks: Vec<u32>,
     /// Node address -> obligation id.
     by_node: FastMap<*const Formula, usize>,
-    /// `progress(formulas[k], v)` at `k * letters + v`, computed on first use.
-    memo: Vec<Option<Dnf>>,
-    letters: usize,
+    /// `progress(formulas[k], v & masks[k])` by `(k, v & masks[k])`, computed on first use
+    /// (a map: only the projections actually reached are stored).
+    memo: FastMap<(usize, u32), Dnf>,
 }
 
 impl<'f> Obligations<'f> {
-    fn new(root: &'f Formula, letters: usize) -> Result<Self, AutomatonError> {
+    fn new(root: &'f Formula) -> Result<Self, AutomatonError> {
         let mut this = Obligations {
             formulas: Vec::new(),
+            masks: Vec::new(),
             by_node: FastMap::default(),
-            memo: Vec::new(),
-            letters,
+            memo: FastMap::default(),
         };
-        let mut structural: HashMap<&'f Formula, usize> = HashMap::new();
+        let mut structural: FastMap<&'f Formula, usize> = FastMap::default();
         this.register(root, &mut structural)?;
         this.visit(root, &mut structural)?;
-        this.memo = vec![None; this.formulas.len() * letters];
         Ok(this)
     }
 
     fn register(
         &mut self,
         f: &'f Formula,
-        structural: &mut HashMap<&'f Formula, usize>,
+        structural: &mut FastMap<&'f Formula, usize>,
     ) -> Result<(), AutomatonError> {
         let next = self.formulas.len();
         let id = *structural.entry(f).or_insert(next);
@@ -188,6 +218,7 @@ impl<'f> Obligations<'f> {
                 return Err(AutomatonError::TooManyObligations(MAX_OBLIGATIONS));
             }
             self.formulas.push(f);
+            self.masks.push(atom_mask(f));
         }
         self.by_node.insert(f as *const Formula, id);
         Ok(())
@@ -196,7 +227,7 @@ impl<'f> Obligations<'f> {
     fn visit(
         &mut self,
         f: &'f Formula,
-        structural: &mut HashMap<&'f Formula, usize>,
+        structural: &mut FastMap<&'f Formula, usize>,
     ) -> Result<(), AutomatonError> {
         match f {
             Formula::True | Formula::False | Formula::Atom(_) => {}
@@ -239,36 +270,66 @@ impl<'f> Obligations<'f> {
             }
             Formula::And(parts) => parts
                 .iter()
-                .fold(vec![TRUE], |acc, p| dnf_and(&acc, &self.progress(p, v))),
+                .fold(smallvec![TRUE], |acc, p| dnf_and(&acc, &self.progress(p, v))),
             Formula::Or(parts) => parts
                 .iter()
-                .fold(Vec::new(), |acc, p| dnf_or(acc, self.progress(p, v))),
+                .fold(SmallVec::new(), |acc, p| dnf_or(acc, &self.progress(p, v))),
             Formula::Implies(a, b) if holds(a, v) => self.progress(b, v),
-            Formula::Implies(..) => vec![TRUE],
-            Formula::Eventually(a) => dnf_or(self.progress(a, v), vec![self.id(f)]),
+            Formula::Implies(..) => smallvec![TRUE],
+            Formula::Eventually(a) => dnf_or(self.progress(a, v), &[self.id(f)]),
             Formula::Until(a, b) => {
                 let keep = dnf_and(&self.progress(a, v), &[self.id(f)]);
-                dnf_or(self.progress(b, v), keep)
+                dnf_or(self.progress(b, v), &keep)
             }
             // `X a`: `a` must hold from the next state on (which must exist).
-            Formula::Next(a) => vec![self.id(a)],
+            Formula::Next(a) => smallvec![self.id(a)],
         }
+    }
+
+    /// "`f` holds from here" as a DNF over obligations, when `f` is an `&`/`|` combination of
+    /// `F`/`U` nodes (the usual shape of a task); `None` otherwise. Starting from this
+    /// instead of `[f]` spares progressing the whole formula once per letter: only its parts
+    /// are progressed, each over the few atoms it reads.
+    fn unfold(&self, f: &Formula) -> Option<Dnf> {
+        match f {
+            Formula::Eventually(_) | Formula::Until(..) => Some(smallvec![self.id(f)]),
+            Formula::And(parts) => parts.iter().try_fold(smallvec![TRUE], |acc: Dnf, p| {
+                Some(dnf_and(&acc, &self.unfold(p)?))
+            }),
+            Formula::Or(parts) => parts
+                .iter()
+                .try_fold(Dnf::new(), |acc, p| Some(dnf_or(acc, &self.unfold(p)?))),
+            _ => None,
+        }
+    }
+
+    /// The atoms a residual reads: its successor depends on `v & mask` only.
+    fn residual_mask(&self, residual: &[u128]) -> u32 {
+        let used = residual.iter().fold(0u128, |m, c| m | c);
+        (0..self.formulas.len())
+            .filter(|k| used >> k & 1 == 1)
+            .fold(0, |m, k| m | self.masks[k])
     }
 
     /// Progression of a whole residual.
     fn step(&mut self, residual: &[u128], v: u32) -> Dnf {
-        let mut out = Vec::new();
+        let mut out = Dnf::new();
         for &cube in residual {
-            let mut acc = vec![TRUE];
+            let mut acc: Dnf = smallvec![TRUE];
             let mut bits = cube;
             while bits != 0 && !acc.is_empty() {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let slot = k * self.letters + v as usize;
-                if self.memo[slot].is_none() {
-                    self.memo[slot] = Some(self.progress(self.formulas[k], v));
-                }
-                acc = dnf_and(&acc, self.memo[slot].as_deref().unwrap_or(&[]));
+                let key = (k, v & self.masks[k]);
+                acc = match self.memo.get(&key) {
+                    Some(progressed) => dnf_and(&acc, progressed),
+                    None => {
+                        let progressed = self.progress(self.formulas[k], key.1);
+                        let product = dnf_and(&acc, &progressed);
+                        self.memo.insert(key, progressed);
+                        product
+                    }
+                };
             }
             out.extend(acc);
         }
@@ -287,17 +348,30 @@ impl Automaton {
 
         // 1. Explore the residuals reachable by progression. A residual holds on the empty
         //    rest of a trace iff it is `true` (every obligation needs a state).
-        let mut obligations = Obligations::new(spec.formula(), letters)?;
-        let start: Dnf = vec![obligations.id(spec.formula())];
+        let mut obligations = Obligations::new(spec.formula())?;
+        let start: Dnf = obligations
+            .unfold(spec.formula())
+            .unwrap_or_else(|| smallvec![obligations.id(spec.formula())]);
         let mut ids: FastMap<Dnf, usize> = FastMap::default();
         ids.insert(start.clone(), 0);
         let mut residuals = vec![start];
         let mut raw: Vec<u32> = Vec::new();
+        let mut raw_masks: Vec<u32> = Vec::new();
         let mut next = 0;
+        // Successor per projected valuation `v & mask` of the current residual.
+        let mut by_projection = vec![u32::MAX; letters];
         while next < residuals.len() {
             let current = residuals[next].clone();
+            let mask = obligations.residual_mask(&current);
+            raw_masks.push(mask);
+            by_projection.fill(u32::MAX);
             for v in 0..letters as u32 {
-                let succ = obligations.step(&current, v);
+                let projected = (v & mask) as usize;
+                if by_projection[projected] != u32::MAX {
+                    raw.push(by_projection[projected]);
+                    continue;
+                }
+                let succ = obligations.step(&current, v & mask);
                 let id = match ids.get(&succ) {
                     Some(&id) => id,
                     None => {
@@ -312,6 +386,7 @@ impl Automaton {
                         residuals.len() - 1
                     }
                 };
+                by_projection[projected] = id as u32;
                 raw.push(id as u32);
             }
             next += 1;
@@ -378,18 +453,26 @@ impl Automaton {
         let trap = reaches.iter().position(|r| !r);
 
         // 4. Guards.
+        //    A state's row depends only on the atoms its residual reads (`mask`), so each
+        //    guard is minimised over those atoms alone.
+        let mut mask_of = vec![0u32; num_states];
+        for &b in &visit {
+            mask_of[order[b]] = raw_masks[representative[b]];
+        }
         let mut edges = Vec::new();
+        let mut by_dst: Vec<Vec<u32>> = vec![Vec::new(); num_states];
         for src in 0..num_states {
-            let mut by_dst: Vec<Vec<u32>> = vec![Vec::new(); num_states];
-            for v in 0..letters {
-                by_dst[table[src * letters + v] as usize].push(v as u32);
+            let mask = mask_of[src];
+            by_dst.iter_mut().for_each(Vec::clear);
+            for v in (0..letters as u32).filter(|v| v & !mask == 0) {
+                by_dst[table[src * letters + v as usize] as usize].push(v);
             }
             for (dst, minterms) in by_dst.iter().enumerate() {
                 if !minterms.is_empty() {
                     edges.push(Edge {
                         src,
                         dst,
-                        guard: cnf::minimise(minterms, n),
+                        guard: cnf::minimise_within(minterms, mask),
                     });
                 }
             }
@@ -769,22 +852,26 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
     let n = accepting.len();
     let mut block: Vec<usize> = accepting.iter().map(|&a| usize::from(a)).collect();
     let mut count = 0;
+    // Signatures (own block, then the successors' blocks) live in one flat buffer.
+    let width = letters + 1;
+    let mut signatures = vec![0u32; n * width];
+    let mut refined = vec![0; n];
     loop {
-        let mut ids: HashMap<Vec<usize>, usize> = HashMap::new();
-        let mut refined = vec![0; n];
         for q in 0..n {
-            let mut signature = Vec::with_capacity(letters + 1);
-            signature.push(block[q]);
-            signature.extend(
-                table[q * letters..(q + 1) * letters]
-                    .iter()
-                    .map(|&d| block[d as usize]),
-            );
+            let sig = &mut signatures[q * width..(q + 1) * width];
+            sig[0] = block[q] as u32;
+            for (slot, &d) in sig[1..].iter_mut().zip(&table[q * letters..(q + 1) * letters]) {
+                *slot = block[d as usize] as u32;
+            }
+        }
+        let mut ids: FastMap<&[u32], usize> =
+            FastMap::with_capacity_and_hasher(n, BuildHasherDefault::default());
+        for (q, sig) in signatures.chunks_exact(width).enumerate() {
             let next_id = ids.len();
-            refined[q] = *ids.entry(signature).or_insert(next_id);
+            refined[q] = *ids.entry(sig).or_insert(next_id);
         }
         let new_count = ids.len();
-        block = refined;
+        std::mem::swap(&mut block, &mut refined);
         if new_count == count {
             return block;
         }

@@ -9,7 +9,7 @@ use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{Automaton, Trajectory};
 
-use crate::convert::FloatArray;
+use crate::convert::{vector, FloatArray};
 use crate::errors::map;
 use crate::spec::PySpec;
 
@@ -21,9 +21,6 @@ pub struct PyAutomaton {
     names: Vec<Py<PyString>>,
 }
 
-fn vector<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<FloatArray<'py>> {
-    FloatArray::extract(obj, name, 1, "(n,)")
-}
 
 impl PyAutomaton {
     /// Wraps a built automaton.
@@ -112,7 +109,7 @@ impl PyAutomaton {
     /// The state after reading state vector ``s`` from state ``q``.
     fn step(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<usize> {
         let q = self.state(q)?;
-        map(self.inner.step(q, &vector(s, "s")?.values()))
+        map(self.inner.step(q, &vector(s, "s")?))
     }
 
     /// Steps many automata at once: ``qs`` (B,) ints, ``states`` (B, n) -> (B,) next states.
@@ -175,7 +172,7 @@ impl PyAutomaton {
         let q = self.state(q)?;
         map(self
             .inner
-            .reward(q, &vector(s_next, "s_next")?.values(), c_r, trap_penalty))
+            .reward(q, &vector(s_next, "s_next")?, c_r, trap_penalty))
     }
 
     /// The CNF of the negated trap guard of ``q``: clauses of ``(atom, positive)`` literals
@@ -197,7 +194,7 @@ impl PyAutomaton {
         s: &Bound<'py, PyAny>,
     ) -> PyResult<Vec<(Bound<'py, PyString>, bool, f64)>> {
         let q = self.state(q)?;
-        let kept = map(self.inner.safe_set(q, &vector(s, "s")?.values()))?;
+        let kept = map(self.inner.safe_set(q, &vector(s, "s")?))?;
         Ok(self.kept(py, &kept))
     }
 
@@ -219,7 +216,7 @@ impl PyAutomaton {
         let mut kept = Vec::new();
         let (next, reward) = map(self.inner.advance(
             q,
-            &vector(s_next, "s_next")?.values(),
+            &vector(s_next, "s_next")?,
             c_r,
             trap_penalty,
             &mut kept,

@@ -3,7 +3,7 @@
 
 use std::borrow::Cow;
 
-use numpy::{AllowTypeChange, PyArrayLikeDyn, PyUntypedArrayMethods};
+use numpy::{AllowTypeChange, PyArray1, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
@@ -55,6 +55,20 @@ impl<'py> FloatArray<'py> {
             Err(_) => Cow::Owned(self.array.as_array().iter().copied().collect()),
         }
     }
+}
+
+/// A single state-sized vector `(n,)` for the per-step calls. A contiguous float64 numpy
+/// array is copied straight out (a few dozen bytes; cheaper than registering a borrow with
+/// numpy's borrow checker); anything else goes through [`FloatArray::extract`].
+pub fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
+    if let Ok(array) = obj.cast::<PyArray1<f64>>() {
+        if let Ok(values) = array.to_vec() {
+            return Ok(values);
+        }
+    }
+    Ok(FloatArray::extract(obj, name, 1, "(n,)")?
+        .values()
+        .into_owned())
 }
 
 /// Extracts a list of non-negative dimension indices, naming the bad entry.
