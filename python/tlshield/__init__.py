@@ -1,7 +1,8 @@
 """tlshield: temporal-logic guided safe reinforcement learning.
 
-Write a task as an scTLTL formula over state predicates; tlshield computes its robustness
-(and, in later modules, the automaton, reward and CLF-CBF shield) in a Rust core.
+Write a task as an scTLTL formula over state predicates; tlshield computes its robustness,
+its automaton (FSA-augmented reward, CBF safe sets, CLF goals) and the CLF-CBF shield that
+corrects an RL agent's actions, in a Rust core.
 
 >>> import numpy as np, tlshield
 >>> spec = tlshield.Spec("F low", {"low": tlshield.Halfspace([-1.0], 4.0)})
@@ -12,11 +13,34 @@ Write a task as an scTLTL formula over state predicates; tlshield computes its r
 from tlshield._core import (
     Automaton,
     Ball,
+    FilterResult,
     Halfspace,
+    Shield,
+    SingleIntegrator,
     Spec,
     SpecError,
+    Unicycle,
     __version__,
     formula_atoms,
 )
 
-__all__ = ["Automaton", "Ball", "Halfspace", "Spec", "SpecError", "__version__", "formula_atoms"]
+#: ``Shield.filter_batch`` status codes, by value.
+STATUS = ("solved", "relaxed", "failed")
+#: ``Shield.filter_batch`` solver codes, by value.
+SOLVERS = ("none", "active_set", "clarabel")
+
+__all__ = [
+    "SOLVERS",
+    "STATUS",
+    "Automaton",
+    "Ball",
+    "FilterResult",
+    "Halfspace",
+    "Shield",
+    "SingleIntegrator",
+    "Spec",
+    "SpecError",
+    "Unicycle",
+    "__version__",
+    "formula_atoms",
+]

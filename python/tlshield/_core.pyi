@@ -96,3 +96,82 @@ class Automaton:
     def advance(
         self, q: int, s_next: ArrayLike, c_r: float, trap_penalty: float | None = None
     ) -> tuple[int, float, list[tuple[str, bool, float]]]: ...
+    def goal(self, q: int, s: ArrayLike) -> NDArray[np.float64] | None: ...
+
+@final
+class Unicycle:
+    """The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2)."""
+
+    def __new__(cls, eps: float, x: int = 0, y: int = 1, theta: int = 2) -> Self: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+@final
+class SingleIntegrator:
+    """``ds[pos[i]]/dt = a[i]``: one input per listed state dimension."""
+
+    def __new__(cls, pos: Sequence[int]) -> Self: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+Bound: TypeAlias = float | Sequence[float]
+Dynamics: TypeAlias = Unicycle | SingleIntegrator
+
+@final
+class FilterResult:
+    """The outcome of one ``Shield.filter`` call."""
+
+    @property
+    def action(self) -> NDArray[np.float64]: ...
+    @property
+    def a_cbf(self) -> NDArray[np.float64]: ...
+    @property
+    def a_clf(self) -> NDArray[np.float64]: ...
+    @property
+    def delta(self) -> float: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def slack(self) -> float: ...
+    @property
+    def goal(self) -> NDArray[np.float64] | None: ...
+    @property
+    def solver(self) -> str: ...
+    @property
+    def barriers(self) -> list[tuple[str, float]]: ...
+
+@final
+class Shield:
+    """The TL-CLF-CBF shield (paper Eq. 5D2)."""
+
+    def __new__(
+        cls,
+        spec: Spec | Automaton,
+        dynamics: Dynamics | None,
+        *,
+        alpha: float,
+        c3: float,
+        K: float,
+        cbf_bounds: tuple[Bound, Bound],
+        clf_bounds: tuple[Bound, Bound],
+        action_bounds: tuple[Bound, Bound] | None = None,
+        barriers: Sequence[Predicate] | Mapping[str, Predicate] | None = None,
+        pos: Sequence[int] | None = None,
+        use_cbf: bool = True,
+        use_clf: bool = True,
+        solver: str = "auto",
+        slack_penalty: float = 1e6,
+    ) -> Self: ...
+    def filter(
+        self,
+        s: ArrayLike,
+        q: int,
+        a_rl: ArrayLike,
+        f: ArrayLike | None = None,
+        g: ArrayLike | None = None,
+    ) -> FilterResult: ...
+    def filter_batch(
+        self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike
+    ) -> dict[str, NDArray[np.float64] | NDArray[np.uint8]]: ...
+    @property
+    def num_inputs(self) -> int: ...
+    @property
+    def automaton(self) -> Automaton: ...

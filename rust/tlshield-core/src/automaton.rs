@@ -268,9 +268,9 @@ impl<'f> Obligations<'f> {
             Formula::True | Formula::False | Formula::Atom(_) | Formula::Not(_) => {
                 constant(holds(f, v))
             }
-            Formula::And(parts) => parts
-                .iter()
-                .fold(smallvec![TRUE], |acc, p| dnf_and(&acc, &self.progress(p, v))),
+            Formula::And(parts) => parts.iter().fold(smallvec![TRUE], |acc, p| {
+                dnf_and(&acc, &self.progress(p, v))
+            }),
             Formula::Or(parts) => parts
                 .iter()
                 .fold(SmallVec::new(), |acc, p| dnf_or(acc, &self.progress(p, v))),
@@ -773,36 +773,45 @@ impl Automaton {
 
     /// [`Automaton::goal`] for validated inputs.
     pub fn goal_unchecked(&self, q: usize, s: &[f64]) -> Option<Vec<f64>> {
+        let mut goal = Vec::new();
+        self.goal_into(q, s, &mut goal).then_some(goal)
+    }
+
+    /// [`Automaton::goal`] into a reused buffer, for validated inputs; `false` when there is
+    /// no goal (then `goal` is left empty).
+    pub fn goal_into(&self, q: usize, s: &[f64], goal: &mut Vec<f64>) -> bool {
+        goal.clear();
         let rho = self.atom_rho(s);
-        let (cube, _) = self
+        let Some((cube, _)) = self
             .edges
             .iter()
             .filter(|e| e.src == q && e.dst != q && Some(e.dst) != self.trap)
             .filter_map(|e| best_cube(&e.guard, &rho))
-            .fold(None, cnf::first_max)?;
-        let mut sum: Vec<f64> = Vec::new();
+            .fold(None, cnf::first_max)
+        else {
+            return false;
+        };
         let mut count = 0.0;
         for lit in cube.literals().filter(|l| l.positive) {
             if let Predicate::Ball(ball) = &self.spec.predicates()[lit.atom] {
-                let centre: Vec<f64> = match ball.center() {
-                    Center::Fixed(c) => c.clone(),
-                    Center::Dims(d) => d.iter().map(|&i| s[i]).collect(),
-                };
-                if sum.is_empty() {
-                    sum = centre;
-                } else if sum.len() == centre.len() {
-                    sum.iter_mut().zip(&centre).for_each(|(a, b)| *a += b);
-                } else {
+                let len = ball.pos().len();
+                if count == 0.0 {
+                    goal.resize(len, 0.0);
+                } else if goal.len() != len {
                     continue;
+                }
+                match ball.center() {
+                    Center::Fixed(c) => goal.iter_mut().zip(c).for_each(|(a, b)| *a += b),
+                    Center::Dims(d) => goal.iter_mut().zip(d).for_each(|(a, &i)| *a += s[i]),
                 }
                 count += 1.0;
             }
         }
         if count == 0.0 {
-            return None;
+            return false;
         }
-        sum.iter_mut().for_each(|v| *v /= count);
-        Some(sum)
+        goal.iter_mut().for_each(|v| *v /= count);
+        true
     }
 
     /// Graphviz DOT text: accepting states double circles, the trap filled red.
@@ -860,7 +869,10 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
         for q in 0..n {
             let sig = &mut signatures[q * width..(q + 1) * width];
             sig[0] = block[q] as u32;
-            for (slot, &d) in sig[1..].iter_mut().zip(&table[q * letters..(q + 1) * letters]) {
+            for (slot, &d) in sig[1..]
+                .iter_mut()
+                .zip(&table[q * letters..(q + 1) * letters])
+            {
                 *slot = block[d as usize] as u32;
             }
         }

@@ -121,3 +121,17 @@ pub enum AutomatonError {
     #[error(transparent)]
     Input(#[from] InputError),
 }
+
+/// A problem configuring or calling a shield.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ShieldError {
+    /// A parameter of the shield is invalid (the message names it).
+    #[error("{0}")]
+    Config(String),
+    /// Bad numeric input to a call.
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// A problem with the automaton (e.g. an unknown state id).
+    #[error(transparent)]
+    Automaton(AutomatonError),
+}

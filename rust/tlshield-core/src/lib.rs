@@ -16,6 +16,7 @@
 //! assert_eq!(rho, 1.0); // max(4 - s_t) over the closed window s_0..s_3
 //! ```
 
+pub mod active_set;
 pub mod automaton;
 pub mod cnf;
 pub mod dynamics;
@@ -23,11 +24,16 @@ pub mod error;
 pub mod predicate;
 pub mod qp;
 pub mod robustness;
+pub mod shield;
 pub mod spec;
 
 pub use automaton::{Automaton, Edge};
 pub use dynamics::Dynamics;
-pub use error::{AutomatonError, InputError, SpecError};
+pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
+pub use shield::{
+    BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig, SolvedBy,
+    SolverChoice, Status,
+};
 pub use spec::{Formula, Spec};

@@ -21,7 +21,6 @@ pub struct PyAutomaton {
     names: Vec<Py<PyString>>,
 }
 
-
 impl PyAutomaton {
     /// Wraps a built automaton.
     pub fn new(py: Python<'_>, inner: Arc<Automaton>) -> Self {
@@ -214,14 +213,24 @@ impl PyAutomaton {
     ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, bool, f64)>)> {
         let q = self.state(q)?;
         let mut kept = Vec::new();
-        let (next, reward) = map(self.inner.advance(
-            q,
-            &vector(s_next, "s_next")?,
-            c_r,
-            trap_penalty,
-            &mut kept,
-        ))?;
+        let (next, reward) =
+            map(self
+                .inner
+                .advance(q, &vector(s_next, "s_next")?, c_r, trap_penalty, &mut kept))?;
         Ok((next, reward, self.kept(py, &kept)))
+    }
+
+    /// The CLF goal at ``(s, q)`` (paper Eq. 5B1): among ``q``'s edges to other non-trap
+    /// states the most robust one, in its guard the most robust cube, and the mean centre of
+    /// that cube's positive Ball literals; None when there is none.
+    fn goal<'py>(
+        &self,
+        py: Python<'py>,
+        q: i64,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        let q = self.state(q)?;
+        Ok(map(self.inner.goal(q, &vector(s, "s")?))?.map(|g| g.into_pyarray(py)))
     }
 
     fn __repr__(&self) -> String {

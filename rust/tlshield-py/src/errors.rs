@@ -3,7 +3,7 @@
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::PyErr;
-use tlshield_core::{AutomatonError, InputError, SpecError as CoreSpecError};
+use tlshield_core::{AutomatonError, InputError, ShieldError, SpecError as CoreSpecError};
 
 create_exception!(
     tlshield,
@@ -29,6 +29,12 @@ impl From<InputError> for PyCoreError {
 
 impl From<AutomatonError> for PyCoreError {
     fn from(err: AutomatonError) -> Self {
+        PyCoreError(PyValueError::new_err(err.to_string()))
+    }
+}
+
+impl From<ShieldError> for PyCoreError {
+    fn from(err: ShieldError) -> Self {
         PyCoreError(PyValueError::new_err(err.to_string()))
     }
 }

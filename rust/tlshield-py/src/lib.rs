@@ -7,6 +7,7 @@ mod automaton;
 mod convert;
 mod errors;
 mod predicate;
+mod shield;
 mod spec;
 
 use pyo3::prelude::*;
@@ -28,6 +29,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
+    m.add_class::<shield::PyUnicycle>()?;
+    m.add_class::<shield::PySingleIntegrator>()?;
+    m.add_class::<shield::PyShield>()?;
+    m.add_class::<shield::PyFilterResult>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

@@ -31,7 +31,19 @@ impl PySpec {
     }
 }
 
-fn predicate_of(key: &Bound<'_, PyAny>, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
+impl PySpec {
+    /// The spec's automaton, built on first use and shared afterwards.
+    pub fn shared_automaton(&self) -> PyResult<Arc<Automaton>> {
+        if let Some(aut) = self.automaton.get() {
+            return Ok(aut.clone());
+        }
+        let built = Arc::new(map(Automaton::build(&self.inner))?);
+        Ok(self.automaton.get_or_init(|| built).clone())
+    }
+}
+
+/// A predicate from a Python `Halfspace` or `Ball`; `key` names it in the error.
+pub fn predicate_of(key: &Bound<'_, PyAny>, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
     if let Ok(h) = value.cast::<PyHalfspace>() {
         return Ok(h.get().inner.clone());
     }
@@ -143,12 +155,7 @@ impl PySpec {
 
     /// The finite state automaton of the formula (built once per spec, then shared).
     fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
-        if let Some(aut) = self.automaton.get() {
-            return Ok(PyAutomaton::new(py, aut.clone()));
-        }
-        let built = Arc::new(map(Automaton::build(&self.inner))?);
-        let aut = self.automaton.get_or_init(|| built);
-        Ok(PyAutomaton::new(py, aut.clone()))
+        Ok(PyAutomaton::new(py, self.shared_automaton()?))
     }
 
     fn __str__(&self) -> String {

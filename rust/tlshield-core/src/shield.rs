@@ -1,0 +1,1243 @@
+//! The shield: once per environment step, the TL-CLF-CBF quadratic program of the paper
+//! (Eq. 5D2) corrects the RL action `a_rl`.
+//!
+//! Variables `a_cbf` (m), `a_clf` (m) and `delta`; minimise `|a_cbf|^2 + |a_clf|^2 + K delta`
+//! subject to
+//! - every barrier `h` (the user's barriers, then the CBF safe set of the FSA state, Eq. 5C1):
+//!   `dh/ds (f + g (a_rl + a_cbf + a_clf)) + alpha h >= 0`;
+//! - the CLF row towards the goal of Eq. 5B1, `V = |s[pos] - goal|^2`:
+//!   `dV/ds (f + g (a_rl + a_clf)) + c3 V <= delta`, `delta >= 0`;
+//! - box bounds on `a_cbf` and `a_clf`, and optional actuator limits on the applied action.
+//!
+//! What is off is dropped: no CBF -> no `a_cbf` and no barrier rows; no CLF, or no goal this
+//! step (accepting state, or no positive Ball literal) -> no `a_clf`, `delta` and CLF row.
+//! An infeasible or failed solve is retried with a slack `sigma_i >= 0` on every barrier row
+//! (cost `slack_penalty * sigma_i`): status [`Status::Relaxed`]. If that fails too the
+//! corrections are zero: [`Status::Failed`]. Numbers never come back NaN.
+//!
+//! Solvers: Clarabel is the solver of record; the dense active-set method
+//! ([`crate::active_set`]) serves small problems in microseconds and hands anything it cannot
+//! certify to Clarabel ([`SolverChoice::Auto`]).
+
+use std::sync::{Arc, Mutex};
+
+use rayon::prelude::*;
+
+use crate::active_set::ActiveSetQp;
+use crate::automaton::Automaton;
+use crate::cnf::Literal;
+use crate::dynamics::Dynamics;
+use crate::error::{AutomatonError, InputError, ShieldError};
+use crate::predicate::Predicate;
+use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
+use crate::robustness::check_finite;
+
+/// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`].
+pub const ACTIVE_SET_MAX_VARS: usize = 16;
+
+/// Which QP solver the shield uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolverChoice {
+    /// The active-set path for small problems, Clarabel when it cannot certify a solution.
+    Auto,
+    /// Clarabel only.
+    Clarabel,
+    /// The active-set path only (a problem it cannot solve counts as infeasible).
+    ActiveSet,
+}
+
+impl SolverChoice {
+    /// Parses `"auto"`, `"clarabel"` or `"active_set"`.
+    pub fn parse(name: &str) -> Result<Self, ShieldError> {
+        match name {
+            "auto" => Ok(SolverChoice::Auto),
+            "clarabel" => Ok(SolverChoice::Clarabel),
+            "active_set" => Ok(SolverChoice::ActiveSet),
+            other => Err(ShieldError::Config(format!(
+                "solver = {other:?}: expected \"auto\", \"clarabel\" or \"active_set\""
+            ))),
+        }
+    }
+}
+
+/// How a shield step ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Status {
+    /// The QP was solved as posed.
+    Solved = 0,
+    /// The barriers could not all hold; solved with slack on the barrier rows.
+    Relaxed = 1,
+    /// Even the relaxed problem failed; the corrections are zero.
+    Failed = 2,
+}
+
+impl Status {
+    /// `"solved"`, `"relaxed"` or `"failed"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Solved => "solved",
+            Status::Relaxed => "relaxed",
+            Status::Failed => "failed",
+        }
+    }
+}
+
+/// Which solver produced the answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum SolvedBy {
+    /// No QP (nothing to correct: both CBF and CLF off, or no rows at all), or failed.
+    Nothing = 0,
+    /// The dense active-set path.
+    ActiveSet = 1,
+    /// Clarabel.
+    Clarabel = 2,
+}
+
+impl SolvedBy {
+    /// `"none"`, `"active_set"` or `"clarabel"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolvedBy::Nothing => "none",
+            SolvedBy::ActiveSet => "active_set",
+            SolvedBy::Clarabel => "clarabel",
+        }
+    }
+}
+
+/// Lower and upper bounds per input (length m, finite, `lo <= hi`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bounds {
+    /// Lower bounds.
+    pub lo: Vec<f64>,
+    /// Upper bounds.
+    pub hi: Vec<f64>,
+}
+
+impl Bounds {
+    /// Checks lengths, finiteness and order; `what` names the argument in the message.
+    fn check(&self, what: &str, m: usize) -> Result<(), ShieldError> {
+        if self.lo.len() != m || self.hi.len() != m {
+            return Err(ShieldError::Config(format!(
+                "{what}: expected (lo, hi) with {m} values each (one per input), got {} and {}",
+                self.lo.len(),
+                self.hi.len()
+            )));
+        }
+        for (i, (lo, hi)) in self.lo.iter().zip(&self.hi).enumerate() {
+            if !(lo.is_finite() && hi.is_finite()) {
+                return Err(ShieldError::Config(format!(
+                    "{what}[{i}] = ({lo}, {hi}): bounds must be finite"
+                )));
+            }
+            if lo > hi {
+                return Err(ShieldError::Config(format!(
+                    "{what}[{i}] = ({lo}, {hi}): lower bound above upper bound"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The shield's parameters (names as in the paper).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShieldConfig {
+    /// CBF class-K gain: `dh/dt + alpha h >= 0` (> 0).
+    pub alpha: f64,
+    /// CLF decay rate: `dV/dt + c3 V <= delta` (> 0).
+    pub c3: f64,
+    /// Linear cost on the CLF relaxation `delta` (> 0; an exact penalty once it exceeds the
+    /// CLF row's multiplier).
+    pub k: f64,
+    /// Box on `a_cbf`.
+    pub cbf_bounds: Bounds,
+    /// Box on `a_clf`.
+    pub clf_bounds: Bounds,
+    /// Optional limits on the applied action `a_rl + a_cbf + a_clf`.
+    pub action_bounds: Option<Bounds>,
+    /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
+    pub barriers: Vec<(String, Predicate)>,
+    /// State dimensions the CLF drives to the goal.
+    pub pos: Vec<usize>,
+    /// Whether the CBF part (barriers, safe set, `a_cbf`) is on.
+    pub use_cbf: bool,
+    /// Whether the CLF part (`a_clf`, `delta`) is on.
+    pub use_clf: bool,
+    /// Which solver.
+    pub solver: SolverChoice,
+    /// Cost per unit of barrier slack in the relaxed problem (> 0).
+    pub slack_penalty: f64,
+}
+
+/// Where an enforced barrier comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BarrierSource {
+    /// The user's barrier with this index in [`ShieldConfig::barriers`].
+    User(usize),
+    /// The literal kept from a clause of the FSA state's safe set.
+    SafeSet(Literal),
+}
+
+/// The outcome of one shield step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Filtered {
+    /// The action to apply: `a_rl + a_cbf + a_clf`.
+    pub action: Vec<f64>,
+    /// The safety correction (zeros when the CBF is off).
+    pub a_cbf: Vec<f64>,
+    /// The task correction (zeros when the CLF is off or there is no goal).
+    pub a_clf: Vec<f64>,
+    /// The CLF relaxation (0 when the CLF row holds).
+    pub delta: f64,
+    /// How the step ended.
+    pub status: Status,
+    /// The largest barrier slack (0 unless [`Status::Relaxed`]).
+    pub slack: f64,
+    /// Which solver answered.
+    pub solver: SolvedBy,
+    /// The CLF goal this step, if any.
+    pub goal: Option<Vec<f64>>,
+    /// Every barrier enforced this step and its value `h(s)`.
+    pub barriers: Vec<(BarrierSource, f64)>,
+}
+
+impl Filtered {
+    fn new(m: usize) -> Self {
+        Filtered {
+            action: vec![0.0; m],
+            a_cbf: vec![0.0; m],
+            a_clf: vec![0.0; m],
+            delta: 0.0,
+            status: Status::Solved,
+            slack: 0.0,
+            solver: SolvedBy::Nothing,
+            goal: None,
+            barriers: Vec::new(),
+        }
+    }
+}
+
+/// Reusable buffers and solvers for one thread of shield steps.
+struct Workspace {
+    f: Vec<f64>,
+    g: Vec<f64>,
+    grad: Vec<f64>,
+    safe: Vec<(Literal, f64)>,
+    /// Per barrier: `Lg h` (m values), then the row's right-hand side.
+    lg: Vec<f64>,
+    rhs: Vec<f64>,
+    /// The CLF goal and `Lg V` (m values).
+    goal: Vec<f64>,
+    clf_lg: Vec<f64>,
+    qp: DenseQp,
+    solvers: Solvers,
+    out: Filtered,
+}
+
+/// The two QP solvers and the last solution.
+struct Solvers {
+    solution: QpSolution,
+    active_set: ActiveSetQp,
+    clarabel: ClarabelQp,
+}
+
+impl Solvers {
+    /// Solves `qp` into `self.solution` with the chosen solver.
+    fn solve(&mut self, choice: SolverChoice, qp: &DenseQp) -> SolvedBy {
+        let small = qp.vars() <= ACTIVE_SET_MAX_VARS;
+        match choice {
+            SolverChoice::ActiveSet => {
+                self.active_set.solve_into(qp, &mut self.solution);
+                SolvedBy::ActiveSet
+            }
+            SolverChoice::Auto if small => {
+                self.active_set.solve_into(qp, &mut self.solution);
+                if self.solution.status == QpStatus::Solved {
+                    return SolvedBy::ActiveSet;
+                }
+                self.solution = self.clarabel.solve(qp);
+                SolvedBy::Clarabel
+            }
+            _ => {
+                self.solution = self.clarabel.solve(qp);
+                SolvedBy::Clarabel
+            }
+        }
+    }
+}
+
+impl Workspace {
+    fn new(n: usize, m: usize) -> Self {
+        Workspace {
+            f: vec![0.0; n],
+            g: vec![0.0; n * m],
+            grad: vec![0.0; n],
+            safe: Vec::new(),
+            lg: Vec::new(),
+            rhs: Vec::new(),
+            goal: Vec::new(),
+            clf_lg: Vec::new(),
+            qp: DenseQp {
+                p_diag: Vec::new(),
+                c: Vec::new(),
+                g: Vec::new(),
+                h: Vec::new(),
+            },
+            solvers: Solvers {
+                solution: QpSolution {
+                    status: QpStatus::Failed,
+                    x: Vec::new(),
+                    z: Vec::new(),
+                    iterations: 0,
+                },
+                active_set: ActiveSetQp::new(),
+                clarabel: ClarabelQp::new(),
+            },
+            out: Filtered::new(m),
+        }
+    }
+}
+
+/// Per-call dynamics `f(s)` (length n) and `g(s)` (n x m, row-major), overriding the model.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlAffine<'a> {
+    /// Drift.
+    pub f: &'a [f64],
+    /// Input matrix, row-major.
+    pub g: &'a [f64],
+}
+
+/// Results of [`Shield::filter_batch`], one row per state (`m` values per row where the
+/// quantity is a vector).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BatchOutput {
+    /// Applied actions, `(B, m)` row-major.
+    pub action: Vec<f64>,
+    /// Safety corrections, `(B, m)`.
+    pub a_cbf: Vec<f64>,
+    /// Task corrections, `(B, m)`.
+    pub a_clf: Vec<f64>,
+    /// CLF relaxations, `(B,)`.
+    pub delta: Vec<f64>,
+    /// [`Status`] codes, `(B,)`.
+    pub status: Vec<u8>,
+    /// Largest barrier slack, `(B,)`.
+    pub slack: Vec<f64>,
+    /// [`SolvedBy`] codes, `(B,)`.
+    pub solver: Vec<u8>,
+}
+
+/// The TL-CLF-CBF shield of one task automaton and one dynamics model.
+pub struct Shield {
+    automaton: Arc<Automaton>,
+    dynamics: Option<Dynamics>,
+    config: ShieldConfig,
+    m: usize,
+    /// Smallest state length every part can read.
+    min_dim: usize,
+    /// One workspace per concurrent caller, reused (no allocation in steady state).
+    pool: Mutex<Vec<Workspace>>,
+}
+
+impl std::fmt::Debug for Shield {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Shield")
+            .field("dynamics", &self.dynamics)
+            .field("config", &self.config)
+            .field("inputs", &self.m)
+            .finish()
+    }
+}
+
+fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(ShieldError::Config(format!(
+            "{what} = {value}: expected a finite number > 0"
+        )))
+    }
+}
+
+/// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
+fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
+    let start = qp.g.len();
+    qp.g.resize(start + nv, 0.0);
+    qp.h.push(rhs);
+    &mut qp.g[start..]
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+impl Shield {
+    /// A shield for `automaton`'s task. `dynamics` may be `None` when every call passes
+    /// `f` and `g`; the number of inputs m then comes from the bounds.
+    pub fn new(
+        automaton: Arc<Automaton>,
+        dynamics: Option<Dynamics>,
+        config: ShieldConfig,
+    ) -> Result<Self, ShieldError> {
+        positive("alpha", config.alpha)?;
+        positive("c3", config.c3)?;
+        positive("K", config.k)?;
+        positive("slack_penalty", config.slack_penalty)?;
+        let m = match &dynamics {
+            Some(d) => d.inputs(),
+            None => config.cbf_bounds.lo.len(),
+        };
+        if m == 0 {
+            return Err(ShieldError::Config(
+                "the system has no inputs (bounds are empty)".into(),
+            ));
+        }
+        config.cbf_bounds.check("cbf_bounds", m)?;
+        config.clf_bounds.check("clf_bounds", m)?;
+        if let Some(b) = &config.action_bounds {
+            b.check("action_bounds", m)?;
+        }
+        if config.pos.is_empty()
+            || (1..config.pos.len()).any(|i| config.pos[..i].contains(&config.pos[i]))
+        {
+            return Err(ShieldError::Config(format!(
+                "pos = {:?}: expected at least one distinct state dimension",
+                config.pos
+            )));
+        }
+        let spec = automaton.spec();
+        if config.use_clf {
+            for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
+                if let Predicate::Ball(ball) = p {
+                    if ball.pos().len() != config.pos.len() {
+                        return Err(ShieldError::Config(format!(
+                            "pos has {} dimensions but the goal ball {name:?} has {}; the CLF \
+                             drives s[pos] to ball centres, so they must match",
+                            config.pos.len(),
+                            ball.pos().len()
+                        )));
+                    }
+                }
+            }
+        }
+        let mut min_dim = spec
+            .predicates()
+            .iter()
+            .chain(config.barriers.iter().map(|(_, p)| p))
+            .map(Predicate::min_dim)
+            .max()
+            .unwrap_or(0)
+            .max(config.pos.iter().max().map_or(0, |p| p + 1));
+        if let Some(d) = &dynamics {
+            min_dim = min_dim.max(d.min_dim());
+        }
+        Ok(Shield {
+            automaton,
+            dynamics,
+            config,
+            m,
+            min_dim,
+            pool: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// The automaton whose safe sets and goals the shield uses.
+    pub fn automaton(&self) -> &Arc<Automaton> {
+        &self.automaton
+    }
+
+    /// The parameters.
+    pub fn config(&self) -> &ShieldConfig {
+        &self.config
+    }
+
+    /// Number of inputs m.
+    pub fn inputs(&self) -> usize {
+        self.m
+    }
+
+    /// The dynamics model, if any.
+    pub fn dynamics(&self) -> Option<&Dynamics> {
+        self.dynamics.as_ref()
+    }
+
+    fn with_workspace<R>(&self, n: usize, run: impl FnOnce(&mut Workspace) -> R) -> R {
+        let taken = self.pool.lock().map(|mut p| p.pop()).unwrap_or(None);
+        let mut ws = taken.unwrap_or_else(|| Workspace::new(n, self.m));
+        let result = run(&mut ws);
+        if let Ok(mut pool) = self.pool.lock() {
+            pool.push(ws);
+        }
+        result
+    }
+
+    /// Checks the state length, finiteness and the barrier dimensions.
+    fn check_state(&self, what: &str, s: &[f64]) -> Result<(), ShieldError> {
+        let n = s.len();
+        self.automaton.spec().check_state_len(n)?;
+        if n < self.min_dim {
+            return Err(InputError::Shape {
+                what: format!("{what} length"),
+                expected: format!("at least {} (dynamics, barriers and pos)", self.min_dim),
+                got: n.to_string(),
+            }
+            .into());
+        }
+        for (_, p) in &self.config.barriers {
+            p.check_dim(n)?;
+        }
+        Ok(())
+    }
+
+    fn check_action(&self, what: &str, a: &[f64]) -> Result<(), ShieldError> {
+        if a.len() != self.m {
+            return Err(InputError::Shape {
+                what: format!("{what} length"),
+                expected: format!("{} (one value per input)", self.m),
+                got: a.len().to_string(),
+            }
+            .into());
+        }
+        check_finite(what, a, a.len())?;
+        Ok(())
+    }
+
+    fn check_dynamics(&self, n: usize, fg: Option<ControlAffine<'_>>) -> Result<(), ShieldError> {
+        match fg {
+            None if self.dynamics.is_none() => Err(ShieldError::Config(
+                "this shield has no dynamics model: pass f and g with every call".into(),
+            )),
+            None => Ok(()),
+            Some(ControlAffine { f, g }) => {
+                if f.len() != n {
+                    return Err(InputError::Shape {
+                        what: "f length".into(),
+                        expected: format!("{n} (the state length)"),
+                        got: f.len().to_string(),
+                    }
+                    .into());
+                }
+                if g.len() != n * self.m {
+                    return Err(InputError::Shape {
+                        what: "g size".into(),
+                        expected: format!("{n} x {} (state length x inputs)", self.m),
+                        got: g.len().to_string(),
+                    }
+                    .into());
+                }
+                check_finite("f", f, n)?;
+                check_finite("g", g, self.m)?;
+                Ok(())
+            }
+        }
+    }
+
+    /// One shield step at state `s` in FSA state `q` for the RL action `a_rl`; `fg`
+    /// overrides the dynamics model for this call.
+    pub fn filter(
+        &self,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+    ) -> Result<Filtered, ShieldError> {
+        self.check_state("s", s)?;
+        check_finite("s", s, s.len())?;
+        self.automaton.check_state("q", q as i64)?;
+        self.check_action("a_rl", a_rl)?;
+        self.check_dynamics(s.len(), fg)?;
+        Ok(self.with_workspace(s.len(), |ws| {
+            self.step(ws, s, q, a_rl, fg, true);
+            ws.out.clone()
+        }))
+    }
+
+    /// [`Shield::filter`] for a batch: `states` is `(B, n)` row-major, `qs` `(B,)`, `a_rl`
+    /// `(B, m)`. Rows are processed in parallel; the model's dynamics are used.
+    pub fn filter_batch(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        out: &mut BatchOutput,
+    ) -> Result<(), ShieldError> {
+        let m = self.m;
+        let rows = qs.len();
+        if n == 0 || states.len() != rows * n {
+            return Err(InputError::Shape {
+                what: "states".into(),
+                expected: format!("{rows} rows (one per q) of length n > 0"),
+                got: format!("{} values with n = {n}", states.len()),
+            }
+            .into());
+        }
+        if a_rl.len() != rows * m {
+            return Err(InputError::Shape {
+                what: "a_rl".into(),
+                expected: format!("({rows}, {m})"),
+                got: format!("{} values", a_rl.len()),
+            }
+            .into());
+        }
+        self.check_dynamics(n, None)?;
+        self.check_state("states row", &states[..n.min(states.len())])?;
+        check_finite("states", states, n)?;
+        check_finite("a_rl", a_rl, m)?;
+        for (i, &q) in qs.iter().enumerate() {
+            self.automaton.check_state(&format!("qs[{i}]"), q as i64)?;
+        }
+        out.action.resize(rows * m, 0.0);
+        out.a_cbf.resize(rows * m, 0.0);
+        out.a_clf.resize(rows * m, 0.0);
+        out.delta.resize(rows, 0.0);
+        out.status.resize(rows, 0);
+        out.slack.resize(rows, 0.0);
+        out.solver.resize(rows, 0);
+        // One contiguous chunk of rows per worker thread, each with its own workspace.
+        let chunk = rows.div_ceil(rayon::current_num_threads().max(1)).max(1);
+        states
+            .par_chunks(chunk * n)
+            .zip(qs.par_chunks(chunk))
+            .zip(a_rl.par_chunks(chunk * m))
+            .zip(out.action.par_chunks_mut(chunk * m))
+            .zip(out.a_cbf.par_chunks_mut(chunk * m))
+            .zip(out.a_clf.par_chunks_mut(chunk * m))
+            .zip(out.delta.par_chunks_mut(chunk))
+            .zip(out.status.par_chunks_mut(chunk))
+            .zip(out.slack.par_chunks_mut(chunk))
+            .zip(out.solver.par_chunks_mut(chunk))
+            .for_each(
+                |(((((((((s, q), a), action), a_cbf), a_clf), delta), status), slack), solver)| {
+                    self.with_workspace(n, |ws| {
+                        for (i, &qi) in q.iter().enumerate() {
+                            let rows_m = i * m..(i + 1) * m;
+                            self.step(
+                                ws,
+                                &s[i * n..(i + 1) * n],
+                                qi,
+                                &a[rows_m.clone()],
+                                None,
+                                false,
+                            );
+                            action[rows_m.clone()].copy_from_slice(&ws.out.action);
+                            a_cbf[rows_m.clone()].copy_from_slice(&ws.out.a_cbf);
+                            a_clf[rows_m].copy_from_slice(&ws.out.a_clf);
+                            delta[i] = ws.out.delta;
+                            status[i] = ws.out.status as u8;
+                            slack[i] = ws.out.slack;
+                            solver[i] = ws.out.solver as u8;
+                        }
+                    })
+                },
+            );
+        Ok(())
+    }
+
+    /// The shield step on validated input, result in `ws.out`. `record` keeps the goal and
+    /// the barrier list (the batch path skips them).
+    fn step(
+        &self,
+        ws: &mut Workspace,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+        record: bool,
+    ) {
+        let (n, m) = (s.len(), self.m);
+        let cfg = &self.config;
+        ws.f.resize(n, 0.0);
+        ws.g.resize(n * m, 0.0);
+        ws.grad.resize(n, 0.0);
+        match (fg, &self.dynamics) {
+            (Some(ControlAffine { f, g }), _) => {
+                ws.f.copy_from_slice(f);
+                ws.g.copy_from_slice(g);
+            }
+            (None, Some(d)) => d.eval(s, &mut ws.f, &mut ws.g),
+            (None, None) => unreachable!("checked by check_dynamics"),
+        }
+
+        // Barriers: value h, Lg h and the row's right-hand side Lf h + Lg h . a_rl + alpha h.
+        ws.out.barriers.clear();
+        ws.lg.clear();
+        ws.rhs.clear();
+        if cfg.use_cbf {
+            let spec = self.automaton.spec();
+            self.automaton.safe_set_into(q, s, &mut ws.safe);
+            let user = cfg
+                .barriers
+                .iter()
+                .enumerate()
+                .map(|(i, (_, p))| (BarrierSource::User(i), p, 1.0));
+            let kept = ws.safe.iter().map(|(lit, _)| {
+                let sign = if lit.positive { 1.0 } else { -1.0 };
+                (
+                    BarrierSource::SafeSet(*lit),
+                    &spec.predicates()[lit.atom],
+                    sign,
+                )
+            });
+            for (source, predicate, sign) in user.chain(kept) {
+                let h = sign * predicate.value(s);
+                predicate.gradient_into(s, &mut ws.grad);
+                let lf = sign * dot(&ws.grad, &ws.f);
+                let mut lg_a = 0.0;
+                for (j, a) in a_rl.iter().enumerate() {
+                    let lg = sign * (0..n).map(|k| ws.grad[k] * ws.g[k * m + j]).sum::<f64>();
+                    lg_a += lg * a;
+                    ws.lg.push(lg);
+                }
+                ws.rhs.push(lf + lg_a + cfg.alpha * h);
+                if record {
+                    ws.out.barriers.push((source, h));
+                }
+            }
+        }
+        let barriers = ws.rhs.len();
+
+        // CLF row: V = |s[pos] - goal|^2, row Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
+        // The QP's variable is d = delta - delta_0 (see below).
+        let has_goal = cfg.use_clf && self.automaton.goal_into(q, s, &mut ws.goal);
+        let (mut clf_rhs, mut delta_0) = (0.0, 0.0);
+        ws.clf_lg.clear();
+        ws.clf_lg.resize(m, 0.0);
+        if has_goal {
+            let (mut v, mut lf) = (0.0, 0.0);
+            for (&k, &c) in cfg.pos.iter().zip(&ws.goal) {
+                let e = s[k] - c;
+                v += e * e;
+                lf += 2.0 * e * ws.f[k];
+                for (j, l) in ws.clf_lg.iter_mut().enumerate() {
+                    *l += 2.0 * e * ws.g[k * m + j];
+                }
+            }
+            clf_rhs = -(lf + dot(&ws.clf_lg, a_rl) + cfg.c3 * v);
+            // The CLF bounds give delta a lower bound in closed form; solving for the excess
+            // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
+            // of the order of |a|^2 instead of K * delta. The solution is the same.
+            let best = cfg
+                .clf_bounds
+                .lo
+                .iter()
+                .zip(&cfg.clf_bounds.hi)
+                .zip(&ws.clf_lg)
+                .map(|((lo, hi), l)| (l * lo).min(l * hi))
+                .sum::<f64>();
+            delta_0 = (best - clf_rhs).max(0.0);
+        }
+
+        let cbf_vars = if cfg.use_cbf { m } else { 0 };
+        let clf_vars = if has_goal { m } else { 0 };
+        let vars = cbf_vars + clf_vars + usize::from(has_goal);
+
+        let out = &mut ws.out;
+        out.action.copy_from_slice(a_rl);
+        out.a_cbf.fill(0.0);
+        out.a_clf.fill(0.0);
+        out.delta = 0.0;
+        out.slack = 0.0;
+        out.status = Status::Solved;
+        out.solver = SolvedBy::Nothing;
+        out.goal = (record && has_goal).then(|| ws.goal.clone());
+        if vars == 0 {
+            return;
+        }
+
+        // Assemble G x <= h with x = [a_cbf | a_clf | delta | sigma (relaxed only)].
+        let (lg, rhs, clf_lg) = (&ws.lg, &ws.rhs, &ws.clf_lg);
+        let build = |qp: &mut DenseQp, relaxed: bool| {
+            let slacks = if relaxed { barriers } else { 0 };
+            let nv = vars + slacks;
+            let delta = cbf_vars + clf_vars;
+            qp.p_diag.clear();
+            qp.p_diag.resize(nv, 0.0);
+            qp.p_diag[..delta].fill(2.0);
+            qp.c.clear();
+            qp.c.resize(nv, 0.0);
+            if has_goal {
+                qp.c[delta] = cfg.k;
+            }
+            qp.c[vars..].fill(cfg.slack_penalty);
+            qp.g.clear();
+            qp.h.clear();
+            for b in 0..barriers {
+                let r = push_row(qp, nv, rhs[b]);
+                for j in 0..m {
+                    let l = lg[b * m + j];
+                    if cfg.use_cbf {
+                        r[j] = -l;
+                    }
+                    if has_goal {
+                        r[cbf_vars + j] = -l;
+                    }
+                }
+                if relaxed {
+                    r[vars + b] = -1.0;
+                }
+            }
+            if has_goal {
+                let r = push_row(qp, nv, clf_rhs + delta_0);
+                r[cbf_vars..delta].copy_from_slice(clf_lg);
+                r[delta] = -1.0;
+                push_row(qp, nv, 0.0)[delta] = -1.0;
+            }
+            let groups = [
+                (cfg.use_cbf, 0, &cfg.cbf_bounds),
+                (has_goal, cbf_vars, &cfg.clf_bounds),
+            ];
+            for (on, offset, bounds) in groups {
+                for j in (0..m).filter(|_| on) {
+                    push_row(qp, nv, bounds.hi[j])[offset + j] = 1.0;
+                    push_row(qp, nv, -bounds.lo[j])[offset + j] = -1.0;
+                }
+            }
+            if let Some(bounds) = &cfg.action_bounds {
+                for (sign, limit) in [(1.0, &bounds.hi), (-1.0, &bounds.lo)] {
+                    for j in 0..m {
+                        let r = push_row(qp, nv, sign * (limit[j] - a_rl[j]));
+                        if cfg.use_cbf {
+                            r[j] = sign;
+                        }
+                        if has_goal {
+                            r[cbf_vars + j] = sign;
+                        }
+                    }
+                }
+            }
+            for b in 0..slacks {
+                push_row(qp, nv, 0.0)[vars + b] = -1.0;
+            }
+        };
+
+        build(&mut ws.qp, false);
+        let mut status = Status::Solved;
+        let mut by = ws.solvers.solve(cfg.solver, &ws.qp);
+        if ws.solvers.solution.status != QpStatus::Solved && barriers > 0 {
+            build(&mut ws.qp, true);
+            status = Status::Relaxed;
+            by = ws.solvers.solve(cfg.solver, &ws.qp);
+        }
+        let out = &mut ws.out;
+        let x = &ws.solvers.solution.x;
+        if ws.solvers.solution.status != QpStatus::Solved || x.iter().any(|v| !v.is_finite()) {
+            out.status = Status::Failed;
+            return;
+        }
+        if cfg.use_cbf {
+            out.a_cbf.copy_from_slice(&x[..m]);
+        }
+        if has_goal {
+            out.a_clf.copy_from_slice(&x[cbf_vars..cbf_vars + m]);
+            out.delta = delta_0 + x[cbf_vars + clf_vars].max(0.0);
+        }
+        if status == Status::Relaxed {
+            out.slack = x[vars..].iter().fold(0.0, |a: f64, &b| a.max(b));
+        }
+        for (j, action) in out.action.iter_mut().enumerate() {
+            *action = a_rl[j] + out.a_cbf[j] + out.a_clf[j];
+        }
+        out.status = status;
+        out.solver = by;
+    }
+}
+
+impl From<AutomatonError> for ShieldError {
+    fn from(err: AutomatonError) -> Self {
+        match err {
+            AutomatonError::Input(e) => ShieldError::Input(e),
+            other => ShieldError::Automaton(other),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::Center;
+    use crate::qp::kkt_residual;
+    use crate::spec::Spec;
+    use proptest::prelude::*;
+
+    const TASK: &str = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)";
+    const N: usize = 13;
+    const HALF_WIDTH: f64 = 1.5;
+
+    fn channel(sign: f64) -> Predicate {
+        let mut w = vec![0.0; N];
+        w[0] = sign;
+        w[1] = -sign;
+        Predicate::halfspace(w, HALF_WIDTH).unwrap()
+    }
+
+    fn task() -> Arc<Automaton> {
+        let goal = |k: usize| {
+            Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
+        };
+        let spec = Spec::new(
+            TASK,
+            [
+                ("g1", goal(0)),
+                ("g2", goal(1)),
+                ("g3", goal(2)),
+                ("c1", channel(1.0)),
+                ("c2", channel(-1.0)),
+            ],
+        )
+        .unwrap();
+        Arc::new(Automaton::build(&spec).unwrap())
+    }
+
+    fn bounds(lo: f64, hi: f64) -> Bounds {
+        Bounds {
+            lo: vec![lo; 2],
+            hi: vec![hi; 2],
+        }
+    }
+
+    fn config(solver: SolverChoice) -> ShieldConfig {
+        ShieldConfig {
+            alpha: 2.0,
+            c3: 1.0,
+            k: 1e4,
+            cbf_bounds: bounds(-6.0, 6.0),
+            clf_bounds: bounds(-0.5, 0.5),
+            action_bounds: None,
+            barriers: Vec::new(),
+            pos: vec![0, 1],
+            use_cbf: true,
+            use_clf: true,
+            solver,
+            slack_penalty: 1e6,
+        }
+    }
+
+    fn shield(config: ShieldConfig) -> Shield {
+        Shield::new(
+            task(),
+            Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap()),
+            config,
+        )
+        .unwrap()
+    }
+
+    /// A state in the channel: reference point on the diagonal, goals g1, g2 ahead, g3 far.
+    fn state(x: f64, offset: f64, theta: f64) -> Vec<f64> {
+        let mut s = vec![0.0; N];
+        s[0] = x + offset / 2.0;
+        s[1] = x - offset / 2.0;
+        s[2] = theta;
+        s[3..9].copy_from_slice(&[4.0, 4.0, 4.5, 6.5, 9.0, 9.0]);
+        s[9..13].copy_from_slice(&[20.0, 20.0, 20.0, -20.0]);
+        s
+    }
+
+    /// `dh/dt + alpha h` for the channel constraints at `s` under action `a`.
+    fn channel_margins(s: &[f64], a: &[f64], alpha: f64) -> [f64; 2] {
+        let (sin, cos) = s[2].sin_cos();
+        let dx = cos * a[0] - 0.1 * sin * a[1];
+        let dy = sin * a[0] + 0.1 * cos * a[1];
+        let h1 = s[0] - s[1] + HALF_WIDTH;
+        let h2 = s[1] - s[0] + HALF_WIDTH;
+        [dx - dy + alpha * h1, dy - dx + alpha * h2]
+    }
+
+    #[test]
+    fn pushes_back_at_the_channel_border() {
+        let sh = shield(config(SolverChoice::Auto));
+        // Near c1's border (x - y = -1.4), heading straight out (+y), full speed.
+        let s = state(1.0, -1.4, std::f64::consts::FRAC_PI_2);
+        let q = sh.automaton().step_unchecked(0, &s);
+        let a_rl = [3.0, 0.0];
+        let out = sh.filter(&s, q, &a_rl, None).unwrap();
+        assert_eq!(out.status, Status::Solved);
+        assert_eq!(out.solver, SolvedBy::ActiveSet);
+        let margins = channel_margins(&s, &out.action, 2.0);
+        assert!(margins.iter().all(|&m| m >= -1e-9), "{margins:?}");
+        assert!(
+            channel_margins(&s, &a_rl, 2.0)[0] < 0.0,
+            "the RL action was unsafe"
+        );
+        assert!(out.a_cbf.iter().any(|v| v.abs() > 1e-3));
+        // The channel literals are enforced and the CLF goal is g1's or g2's centre.
+        let kept: Vec<_> = out.barriers.iter().map(|b| b.0).collect();
+        assert!(kept.contains(&BarrierSource::SafeSet(Literal {
+            atom: 3,
+            positive: true
+        })));
+        let goal = out.goal.clone().unwrap();
+        assert!(goal == vec![4.0, 4.0] || goal == vec![4.5, 6.5], "{goal:?}");
+        // Clarabel agrees.
+        let by_clarabel = shield(config(SolverChoice::Clarabel))
+            .filter(&s, q, &a_rl, None)
+            .unwrap();
+        assert_eq!(by_clarabel.solver, SolvedBy::Clarabel);
+        for (a, b) in out.action.iter().zip(&by_clarabel.action) {
+            assert!(
+                (a - b).abs() < 1e-6,
+                "{:?} vs {:?}",
+                out.action,
+                by_clarabel.action
+            );
+        }
+    }
+
+    #[test]
+    fn configurations_drop_what_is_off() {
+        let s = state(1.0, 0.0, 0.3);
+        let q = 0;
+        let a_rl = [0.7, -0.2];
+        let mut cfg = config(SolverChoice::Auto);
+        cfg.use_cbf = false;
+        cfg.use_clf = false;
+        let out = shield(cfg.clone()).filter(&s, q, &a_rl, None).unwrap();
+        assert_eq!(
+            (out.action.clone(), out.solver),
+            (a_rl.to_vec(), SolvedBy::Nothing)
+        );
+        assert!(out.barriers.is_empty() && out.goal.is_none());
+        cfg.use_clf = true;
+        let out = shield(cfg.clone()).filter(&s, q, &a_rl, None).unwrap();
+        assert_eq!(out.a_cbf, vec![0.0, 0.0]);
+        assert!(out.barriers.is_empty() && out.goal.is_some());
+        cfg.use_clf = false;
+        cfg.use_cbf = true;
+        let out = shield(cfg).filter(&s, q, &a_rl, None).unwrap();
+        assert_eq!(out.a_clf, vec![0.0, 0.0]);
+        assert!(out.goal.is_none() && !out.barriers.is_empty());
+    }
+
+    #[test]
+    fn infeasible_barriers_are_relaxed_never_nan() {
+        let mut cfg = config(SolverChoice::Auto);
+        cfg.cbf_bounds = bounds(-0.01, 0.01);
+        cfg.clf_bounds = bounds(-0.01, 0.01);
+        let sh = shield(cfg);
+        // Outside the channel already, heading further out at full speed.
+        let s = state(1.0, -2.0, std::f64::consts::FRAC_PI_2);
+        let out = sh.filter(&s, 0, &[5.0, 0.0], None).unwrap();
+        assert_eq!(out.status, Status::Relaxed);
+        assert!(out.slack > 0.0);
+        assert!(out.action.iter().all(|v| v.is_finite()));
+        // The corrections sit at the bounds that limit them.
+        assert!((out.a_cbf[0] + 0.01).abs() < 1e-6, "{:?}", out.a_cbf);
+    }
+
+    #[test]
+    fn per_call_dynamics_match_the_model() {
+        let sh = shield(config(SolverChoice::Auto));
+        let s = state(2.0, 1.3, -0.4);
+        let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
+        sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
+        let fg = ControlAffine { f: &f, g: &g };
+        let a = sh.filter(&s, 0, &[1.0, 1.0], None).unwrap();
+        let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg)).unwrap();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let sh = shield(config(SolverChoice::Auto));
+        let s = state(1.0, 0.0, 0.0);
+        assert!(sh.filter(&s[..5], 0, &[0.0, 0.0], None).is_err());
+        assert!(sh.filter(&s, 9, &[0.0, 0.0], None).is_err());
+        assert!(sh.filter(&s, 0, &[0.0], None).is_err());
+        assert!(sh.filter(&s, 0, &[f64::NAN, 0.0], None).is_err());
+        let mut bad = s.clone();
+        bad[4] = f64::INFINITY;
+        assert!(sh.filter(&bad, 0, &[0.0, 0.0], None).is_err());
+        let f = vec![0.0; N];
+        let g = vec![0.0; N];
+        assert!(sh
+            .filter(&s, 0, &[0.0, 0.0], Some(ControlAffine { f: &f, g: &g }))
+            .is_err());
+        let no_model = Shield::new(task(), None, config(SolverChoice::Auto)).unwrap();
+        let err = no_model.filter(&s, 0, &[0.0, 0.0], None).unwrap_err();
+        assert!(err.to_string().contains("pass f and g"), "{err}");
+        for broken in [
+            ShieldConfig {
+                alpha: 0.0,
+                ..config(SolverChoice::Auto)
+            },
+            ShieldConfig {
+                k: f64::NAN,
+                ..config(SolverChoice::Auto)
+            },
+            ShieldConfig {
+                cbf_bounds: bounds(1.0, -1.0),
+                ..config(SolverChoice::Auto)
+            },
+            ShieldConfig {
+                clf_bounds: Bounds {
+                    lo: vec![0.0],
+                    hi: vec![1.0],
+                },
+                ..config(SolverChoice::Auto)
+            },
+            ShieldConfig {
+                pos: vec![0, 0],
+                ..config(SolverChoice::Auto)
+            },
+            ShieldConfig {
+                pos: vec![0, 1, 2],
+                ..config(SolverChoice::Auto)
+            },
+        ] {
+            assert!(Shield::new(
+                task(),
+                Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap()),
+                broken
+            )
+            .is_err());
+        }
+        assert!(SolverChoice::parse("osqp").is_err());
+    }
+
+    #[test]
+    fn batch_equals_single_calls() {
+        let sh = shield(config(SolverChoice::Auto));
+        let mut rng = Rng(7);
+        let rows = 37;
+        let mut states = Vec::new();
+        let mut qs = Vec::new();
+        let mut a_rl = Vec::new();
+        for _ in 0..rows {
+            let s = state(
+                rng.uniform(-1.0, 6.0),
+                rng.uniform(-1.6, 1.6),
+                rng.uniform(-3.2, 3.2),
+            );
+            qs.push(sh.automaton().step_unchecked(0, &s));
+            states.extend(s);
+            a_rl.extend([rng.uniform(-2.0, 2.0), rng.uniform(-3.0, 3.0)]);
+        }
+        let mut out = BatchOutput::default();
+        sh.filter_batch(&states, N, &qs, &a_rl, &mut out).unwrap();
+        for i in 0..rows {
+            let single = sh
+                .filter(
+                    &states[i * N..(i + 1) * N],
+                    qs[i],
+                    &a_rl[2 * i..2 * i + 2],
+                    None,
+                )
+                .unwrap();
+            assert_eq!(&out.action[2 * i..2 * i + 2], &single.action[..]);
+            assert_eq!(out.delta[i], single.delta);
+            assert_eq!(out.status[i], single.status as u8);
+            assert_eq!(out.solver[i], single.solver as u8);
+        }
+        assert!(sh
+            .filter_batch(&states, N, &qs[1..], &a_rl, &mut out)
+            .is_err());
+        let mut bad_q = qs.clone();
+        bad_q[3] = 99;
+        let err = sh
+            .filter_batch(&states, N, &bad_q, &a_rl, &mut out)
+            .unwrap_err();
+        assert!(err.to_string().contains("qs[3]"), "{err}");
+    }
+
+    /// xorshift64*, so the simulation is seeded without extra dependencies.
+    struct Rng(u64);
+
+    impl Rng {
+        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+        }
+    }
+
+    /// Forward invariance, measured: the unicycle (Euler, dt = 0.05, alpha dt = 0.1) under
+    /// adversarial random RL actions from random safe starts, 100k steps with the CBF on and
+    /// the channel as user barriers (so it is kept in every FSA state, the trap included).
+    #[test]
+    fn channel_is_forward_invariant_over_100k_steps() {
+        let mut cfg = config(SolverChoice::Auto);
+        cfg.barriers = vec![("c1".into(), channel(1.0)), ("c2".into(), channel(-1.0))];
+        let sh = shield(cfg);
+        let (dt, eps) = (0.05, 0.1);
+        let mut rng = Rng(2024);
+        let (mut min_h, mut relaxed, mut failed, mut by_clarabel, mut steps) =
+            (f64::INFINITY, 0, 0, 0, 0);
+        while steps < 100_000 {
+            let mut s = state(
+                rng.uniform(0.0, 5.0),
+                rng.uniform(-1.45, 1.45),
+                rng.uniform(-3.2, 3.2),
+            );
+            let mut q = sh.automaton().step_unchecked(0, &s);
+            for _ in 0..200 {
+                // Adversarial: random actions over the whole RL range (inside the CBF box).
+                let a_rl = [rng.uniform(-4.0, 4.0), rng.uniform(-5.0, 5.0)];
+                let out = sh.filter(&s, q, &a_rl, None).unwrap();
+                relaxed += usize::from(out.status == Status::Relaxed);
+                failed += usize::from(out.status == Status::Failed);
+                by_clarabel += usize::from(out.solver == SolvedBy::Clarabel);
+                let (sin, cos) = s[2].sin_cos();
+                let (v, w) = (out.action[0], out.action[1]);
+                s[0] += dt * (cos * v - eps * sin * w);
+                s[1] += dt * (sin * v + eps * cos * w);
+                s[2] += dt * w;
+                q = sh.automaton().step_unchecked(q, &s);
+                let h = (s[0] - s[1] + HALF_WIDTH).min(s[1] - s[0] + HALF_WIDTH);
+                min_h = min_h.min(h);
+                steps += 1;
+            }
+        }
+        eprintln!(
+            "forward invariance: {steps} steps, min h = {min_h:.3e}, relaxed {relaxed}, \
+             failed {failed}, Clarabel fallbacks {by_clarabel}"
+        );
+        assert!(min_h >= -1e-9, "min h = {min_h}");
+        assert_eq!((relaxed, failed), (0, 0));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1500))]
+
+        /// Random steps of the case study: the active-set answer equals Clarabel's within
+        /// 1e-6 and satisfies the KKT conditions of the QP it solved; delta = 0 whenever the
+        /// CLF row alone is feasible within the CLF bounds (it does not compete with barriers
+        /// here: a_cbf's wide box can absorb them).
+        #[test]
+        fn active_set_agrees_with_clarabel(
+            x in -1.0..8.0f64,
+            offset in -1.6..1.6f64,
+            theta in -3.2..3.2f64,
+            v in -4.0..4.0f64,
+            w in -8.0..8.0f64,
+            obstacle in -2.0..6.0f64,
+        ) {
+            let mut cfg = config(SolverChoice::Auto);
+            cfg.barriers = vec![(
+                "obstacle".into(),
+                // Stay out of a unit ball around a point near the diagonal.
+                Predicate::ball(vec![0, 1], 0.6, Center::Fixed(vec![obstacle, obstacle + 0.3])).unwrap(),
+            )];
+            // Negated: use a halfspace barrier too so rows vary in count.
+            let auto = shield(cfg.clone());
+            let clarabel = shield(ShieldConfig { solver: SolverChoice::Clarabel, ..cfg });
+            let s = state(x, offset, theta);
+            let q = auto.automaton().step_unchecked(0, &s);
+            let a_rl = [v, w];
+            let a = auto.filter(&s, q, &a_rl, None).unwrap();
+            let b = clarabel.filter(&s, q, &a_rl, None).unwrap();
+            prop_assert_eq!(a.status, b.status);
+            for (p, r) in a.action.iter().zip(&b.action) {
+                prop_assert!((p - r).abs() < 1e-6, "{:?} vs {:?} ({:?})", a.action, b.action, a.solver);
+            }
+            auto.with_workspace(N, |ws| {
+                auto.step(ws, &s, q, &a_rl, None, false);
+                let sol = &ws.solvers.solution;
+                let scale = 1.0 + ws.qp.c.iter().chain(&ws.qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(kkt_residual(&ws.qp, &sol.x, &sol.z) < 1e-7 * scale);
+            });
+        }
+    }
+}

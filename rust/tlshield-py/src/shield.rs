@@ -1,0 +1,481 @@
+//! `Unicycle`, `SingleIntegrator`, `Shield` and its `FilterResult`.
+
+use std::sync::Arc;
+
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
+use tlshield_core::cnf::Literal;
+use tlshield_core::{
+    Automaton, BarrierSource, BatchOutput, Bounds, ControlAffine, Dynamics, Filtered, Predicate,
+    Shield, ShieldConfig, SolverChoice,
+};
+
+use crate::automaton::PyAutomaton;
+use crate::convert::{vector, FloatArray};
+use crate::errors::map;
+use crate::spec::{predicate_of, PySpec};
+
+/// The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2): inputs
+/// ``(a_v, a_theta)``; ``x``, ``y``, ``theta`` are the state dimensions of the reference
+/// point and the heading.
+#[pyclass(name = "Unicycle", module = "tlshield._core", frozen)]
+pub struct PyUnicycle {
+    inner: Dynamics,
+}
+
+#[pymethods]
+impl PyUnicycle {
+    #[new]
+    #[pyo3(signature = (eps, x=0, y=1, theta=2))]
+    fn new(eps: f64, x: usize, y: usize, theta: usize) -> PyResult<Self> {
+        Ok(PyUnicycle {
+            inner: map(Dynamics::unicycle(eps, x, y, theta))?,
+        })
+    }
+
+    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+        eval(py, &self.inner, s)
+    }
+
+    fn __repr__(&self) -> String {
+        match &self.inner {
+            Dynamics::Unicycle { eps, x, y, theta } => {
+                format!("Unicycle(eps={eps}, x={x}, y={y}, theta={theta})")
+            }
+            Dynamics::SingleIntegrator { .. } => unreachable!("PyUnicycle wraps a unicycle"),
+        }
+    }
+}
+
+/// ``ds[pos[i]]/dt = a[i]``: one input per listed state dimension.
+#[pyclass(name = "SingleIntegrator", module = "tlshield._core", frozen)]
+pub struct PySingleIntegrator {
+    inner: Dynamics,
+}
+
+#[pymethods]
+impl PySingleIntegrator {
+    #[new]
+    fn new(pos: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let pos = crate::convert::indices(pos, "pos")?;
+        Ok(PySingleIntegrator {
+            inner: map(Dynamics::single_integrator(pos))?,
+        })
+    }
+
+    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+        eval(py, &self.inner, s)
+    }
+
+    fn __repr__(&self) -> String {
+        match &self.inner {
+            Dynamics::SingleIntegrator { pos } => format!("SingleIntegrator(pos={pos:?})"),
+            Dynamics::Unicycle { .. } => unreachable!("PySingleIntegrator wraps an integrator"),
+        }
+    }
+}
+
+fn eval<'py>(
+    py: Python<'py>,
+    dynamics: &Dynamics,
+    s: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+    let s = vector(s, "s")?;
+    if s.len() < dynamics.min_dim() {
+        return Err(PyValueError::new_err(format!(
+            "s: expected at least {} values for this model, got {}",
+            dynamics.min_dim(),
+            s.len()
+        )));
+    }
+    let (n, m) = (s.len(), dynamics.inputs());
+    let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);
+    dynamics.eval(&s, &mut f, &mut g);
+    let g = numpy::ndarray::Array2::from_shape_vec((n, m), g)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok((f.into_pyarray(py), g.into_pyarray(py)))
+}
+
+/// Bounds from `(lo, hi)`, each a scalar (broadcast to m) or a length-m sequence.
+fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
+    let pair_error = || {
+        PyTypeError::new_err(format!(
+            "{name}: expected a pair (lo, hi) of numbers or of length-{m} sequences"
+        ))
+    };
+    let (lo, hi): (Bound<'_, PyAny>, Bound<'_, PyAny>) = obj.extract().map_err(|_| pair_error())?;
+    let side = |v: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
+        if let Ok(x) = v.extract::<f64>() {
+            return Ok(vec![x; m]);
+        }
+        v.extract::<Vec<f64>>().map_err(|_| pair_error())
+    };
+    Ok(Bounds {
+        lo: side(&lo)?,
+        hi: side(&hi)?,
+    })
+}
+
+/// Barriers from a sequence of predicates (named `h0`, `h1`, ...) or a mapping name ->
+/// predicate.
+fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(String, Predicate)>> {
+    if let Ok(items) = obj.call_method0("items") {
+        let mut out = Vec::new();
+        for item in items.try_iter()? {
+            let (key, value): (Bound<'_, PyAny>, Bound<'_, PyAny>) = item?.extract()?;
+            let name: String = key
+                .extract()
+                .map_err(|_| PyTypeError::new_err("barriers: mapping keys must be names (str)"))?;
+            out.push((name, predicate_of(&key, &value)?));
+        }
+        return Ok(out);
+    }
+    let mut out = Vec::new();
+    let iter = obj.try_iter().map_err(|_| {
+        PyTypeError::new_err(
+            "barriers: expected a sequence of Halfspace/Ball or a mapping name -> predicate",
+        )
+    })?;
+    for (i, item) in iter.enumerate() {
+        let item = item?;
+        let key = i.into_pyobject(obj.py())?.into_any();
+        out.push((format!("h{i}"), predicate_of(&key, &item)?));
+    }
+    Ok(out)
+}
+
+/// The outcome of one ``Shield.filter`` call.
+#[pyclass(name = "FilterResult", module = "tlshield._core", frozen, get_all)]
+pub struct PyFilterResult {
+    /// The action to apply, ``a_rl + a_cbf + a_clf`` (m,).
+    action: Py<PyArray1<f64>>,
+    /// The safety correction (m,); zeros when the CBF is off.
+    a_cbf: Py<PyArray1<f64>>,
+    /// The task correction (m,); zeros when the CLF is off or there is no goal.
+    a_clf: Py<PyArray1<f64>>,
+    /// The CLF relaxation (0 when the CLF condition holds).
+    delta: f64,
+    /// ``"solved"``, ``"relaxed"`` (barrier rows needed slack) or ``"failed"`` (zero
+    /// corrections).
+    status: &'static str,
+    /// The largest barrier slack (0 unless relaxed).
+    slack: f64,
+    /// The CLF goal point (len(pos),) or None.
+    goal: Option<Py<PyArray1<f64>>>,
+    /// Which solver answered: ``"active_set"``, ``"clarabel"`` or ``"none"``.
+    solver: &'static str,
+    /// The barriers enforced this step: ``(name, h(s))``; safe-set literals are named by
+    /// their atom (``"!g3"`` when negated), user barriers by their given name.
+    barriers: Vec<(Py<PyString>, f64)>,
+}
+
+#[pymethods]
+impl PyFilterResult {
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!(
+            "FilterResult(action={}, status={:?}, delta={}, solver={:?})",
+            self.action.bind(py),
+            self.status,
+            self.delta,
+            self.solver
+        )
+    }
+}
+
+/// The TL-CLF-CBF shield (paper Eq. 5D2): corrects an RL action so the FSA state's safe set
+/// and the user's barriers stay positive, and nudges towards the task's next goal.
+#[pyclass(name = "Shield", module = "tlshield._core", frozen)]
+pub struct PyShield {
+    inner: Shield,
+    /// Names of the user barriers, then of every atom (positive, negated), made once.
+    barrier_names: Vec<Py<PyString>>,
+    atom_names: Vec<(Py<PyString>, Py<PyString>)>,
+}
+
+impl PyShield {
+    fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
+        let barriers = out
+            .barriers
+            .iter()
+            .map(|(source, h)| {
+                let name = match source {
+                    BarrierSource::User(i) => &self.barrier_names[*i],
+                    BarrierSource::SafeSet(Literal { atom, positive }) => {
+                        let (pos, neg) = &self.atom_names[*atom];
+                        if *positive {
+                            pos
+                        } else {
+                            neg
+                        }
+                    }
+                };
+                (name.clone_ref(py), *h)
+            })
+            .collect();
+        PyFilterResult {
+            action: out.action.into_pyarray(py).unbind(),
+            a_cbf: out.a_cbf.into_pyarray(py).unbind(),
+            a_clf: out.a_clf.into_pyarray(py).unbind(),
+            delta: out.delta,
+            status: out.status.name(),
+            slack: out.slack,
+            goal: out.goal.map(|g| g.into_pyarray(py).unbind()),
+            solver: out.solver.name(),
+            barriers,
+        }
+    }
+}
+
+fn automaton_of(obj: &Bound<'_, PyAny>) -> PyResult<Arc<Automaton>> {
+    if let Ok(spec) = obj.cast::<PySpec>() {
+        return spec.get().shared_automaton();
+    }
+    if let Ok(aut) = obj.cast::<PyAutomaton>() {
+        return Ok(aut.get().inner.clone());
+    }
+    Err(PyTypeError::new_err(format!(
+        "spec: expected a tlshield.Spec (or its Automaton), got {}",
+        obj.get_type()
+            .name()
+            .map_or_else(|_| "?".into(), |n| n.to_string())
+    )))
+}
+
+fn dynamics_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    if let Ok(d) = obj.cast::<PyUnicycle>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    if let Ok(d) = obj.cast::<PySingleIntegrator>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    Err(PyTypeError::new_err(format!(
+        "dynamics: expected tlshield.Unicycle, tlshield.SingleIntegrator or None (then pass f \
+         and g to every filter call), got {}",
+        obj.get_type()
+            .name()
+            .map_or_else(|_| "?".into(), |n| n.to_string())
+    )))
+}
+
+#[pymethods]
+impl PyShield {
+    #[new]
+    #[pyo3(signature = (
+        spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
+        barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
+        slack_penalty=1e6,
+    ))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        spec: &Bound<'_, PyAny>,
+        dynamics: &Bound<'_, PyAny>,
+        alpha: f64,
+        c3: f64,
+        K: f64,
+        cbf_bounds: &Bound<'_, PyAny>,
+        clf_bounds: &Bound<'_, PyAny>,
+        action_bounds: Option<&Bound<'_, PyAny>>,
+        barriers: Option<&Bound<'_, PyAny>>,
+        pos: Option<&Bound<'_, PyAny>>,
+        use_cbf: bool,
+        use_clf: bool,
+        solver: &str,
+        slack_penalty: f64,
+    ) -> PyResult<Self> {
+        let automaton = automaton_of(spec)?;
+        let dynamics = dynamics_of(dynamics)?;
+        // m from the model, else from the CBF bounds (a scalar pair then means m = 1).
+        let m = match &dynamics {
+            Some(d) => d.inputs(),
+            None => {
+                let (lo, _): (Bound<'_, PyAny>, Bound<'_, PyAny>) = cbf_bounds
+                    .extract()
+                    .map_err(|_| PyTypeError::new_err("cbf_bounds: expected a pair (lo, hi)"))?;
+                lo.len().unwrap_or(1)
+            }
+        };
+        let config = ShieldConfig {
+            alpha,
+            c3,
+            k: K,
+            cbf_bounds: bounds(cbf_bounds, "cbf_bounds", m)?,
+            clf_bounds: bounds(clf_bounds, "clf_bounds", m)?,
+            action_bounds: action_bounds
+                .map(|b| bounds(b, "action_bounds", m))
+                .transpose()?,
+            barriers: barriers
+                .map(self::barriers)
+                .transpose()?
+                .unwrap_or_default(),
+            pos: match pos {
+                Some(p) => crate::convert::indices(p, "pos")?,
+                None => vec![0, 1],
+            },
+            use_cbf,
+            use_clf,
+            solver: map(SolverChoice::parse(solver))?,
+            slack_penalty,
+        };
+        let barrier_names = config
+            .barriers
+            .iter()
+            .map(|(name, _)| PyString::new(py, name).unbind())
+            .collect();
+        let atom_names = automaton
+            .spec()
+            .atoms()
+            .iter()
+            .map(|a| {
+                (
+                    PyString::new(py, a).unbind(),
+                    PyString::new(py, &format!("!{a}")).unbind(),
+                )
+            })
+            .collect();
+        Ok(PyShield {
+            inner: map(Shield::new(automaton, dynamics, config))?,
+            barrier_names,
+            atom_names,
+        })
+    }
+
+    /// One shield step: state ``s`` (n,), FSA state ``q`` (the state after reading ``s``),
+    /// RL action ``a_rl`` (m,). ``f`` (n,) and ``g`` (n, m) override the dynamics model.
+    #[pyo3(signature = (s, q, a_rl, f=None, g=None))]
+    fn filter(
+        &self,
+        py: Python<'_>,
+        s: &Bound<'_, PyAny>,
+        q: i64,
+        a_rl: &Bound<'_, PyAny>,
+        f: Option<&Bound<'_, PyAny>>,
+        g: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyFilterResult> {
+        let s = vector(s, "s")?;
+        let q = map(self.inner.automaton().check_state("q", q))?;
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+            .values()
+            .into_owned();
+        let out = match (f, g) {
+            (None, None) => map(self.inner.filter(&s, q, &a_rl, None))?,
+            (Some(f), Some(g)) => {
+                let f = FloatArray::extract(f, "f", 1, "(n,)")?;
+                let g = FloatArray::extract(g, "g", 2, "(n, m)")?;
+                if g.shape()[1] != self.inner.inputs() {
+                    return Err(PyValueError::new_err(format!(
+                        "g: expected shape (n, {}), got ({}, {})",
+                        self.inner.inputs(),
+                        g.shape()[0],
+                        g.shape()[1]
+                    )));
+                }
+                let fg = ControlAffine {
+                    f: &f.values(),
+                    g: &g.values(),
+                };
+                map(self.inner.filter(&s, q, &a_rl, Some(fg)))?
+            }
+            _ => {
+                return Err(PyValueError::new_err(
+                    "pass both f and g (the control-affine dynamics at s), or neither",
+                ))
+            }
+        };
+        Ok(self.result(py, out))
+    }
+
+    /// Shields a batch: ``states`` (B, n), ``qs`` (B,), ``a_rl`` (B, m), using the dynamics
+    /// model. Parallel over rows with the GIL released. Returns a dict of arrays: ``action``,
+    /// ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,) uint8 codes
+    /// (0 solved, 1 relaxed, 2 failed) and ``solver`` (B,) uint8 codes (0 none, 1 active set,
+    /// 2 Clarabel).
+    fn filter_batch<'py>(
+        &self,
+        py: Python<'py>,
+        states: &Bound<'py, PyAny>,
+        qs: PyArrayLike1<'py, i64, AllowTypeChange>,
+        a_rl: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
+        let (rows, n, m) = (states.shape()[0], states.shape()[1], self.inner.inputs());
+        if qs.len() != rows || a_rl.shape() != [rows, m] {
+            return Err(PyValueError::new_err(format!(
+                "filter_batch: expected qs ({rows},) and a_rl ({rows}, {m}) for {rows} states, \
+                 got qs ({},) and a_rl {}",
+                qs.len(),
+                crate::convert::shape_text(a_rl.shape())
+            )));
+        }
+        let mut qs_usize = Vec::with_capacity(rows);
+        for (i, &q) in qs.as_array().iter().enumerate() {
+            qs_usize.push(map(self
+                .inner
+                .automaton()
+                .check_state(&format!("qs[{i}]"), q))?);
+        }
+        let (values, actions) = (states.values(), a_rl.values());
+        let shield = &self.inner;
+        let mut out = BatchOutput::default();
+        map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, &mut out)))?;
+        let matrix = |v: Vec<f64>| {
+            numpy::ndarray::Array2::from_shape_vec((rows, m), v)
+                .map(|a| a.into_pyarray(py))
+                .map_err(|e| PyValueError::new_err(e.to_string()))
+        };
+        let dict = PyDict::new(py);
+        dict.set_item("action", matrix(out.action)?)?;
+        dict.set_item("a_cbf", matrix(out.a_cbf)?)?;
+        dict.set_item("a_clf", matrix(out.a_clf)?)?;
+        dict.set_item("delta", out.delta.into_pyarray(py))?;
+        dict.set_item("slack", out.slack.into_pyarray(py))?;
+        dict.set_item("status", out.status.into_pyarray(py))?;
+        dict.set_item("solver", out.solver.into_pyarray(py))?;
+        Ok(dict)
+    }
+
+    /// Number of inputs m.
+    #[getter]
+    fn num_inputs(&self) -> usize {
+        self.inner.inputs()
+    }
+
+    /// The automaton whose safe sets and goals the shield uses.
+    #[getter]
+    fn automaton(&self, py: Python<'_>) -> PyAutomaton {
+        PyAutomaton::new(py, self.inner.automaton().clone())
+    }
+
+    fn __repr__(&self) -> String {
+        let c = self.inner.config();
+        format!(
+            "Shield(alpha={}, c3={}, K={}, use_cbf={}, use_clf={}, barriers={}, pos={:?}, inputs={})",
+            c.alpha,
+            c.c3,
+            c.k,
+            c.use_cbf,
+            c.use_clf,
+            c.barriers.len(),
+            c.pos,
+            self.inner.inputs()
+        )
+    }
+}

@@ -1,0 +1,351 @@
+"""The shield from Python: against an independent cvxpy solve of the same QP, the paper's
+configurations, batches, and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import tlshield
+from tests.shield_reference import (
+    ClarabelShield,
+    CvxpyShield,
+    Params,
+    Structure,
+    Task,
+    build_rows,
+)
+from tlshield.envs.channel import STATE_DIM, channel_task_spec
+
+PARAMS = Params()
+TASK = Task()
+
+
+def make_shield(**overrides: object) -> tlshield.Shield:
+    kwargs: dict[str, object] = {
+        "alpha": PARAMS.alpha,
+        "c3": PARAMS.c3,
+        "K": PARAMS.K,
+        "cbf_bounds": PARAMS.cbf,
+        "clf_bounds": PARAMS.clf,
+    }
+    kwargs.update(overrides)
+    return tlshield.Shield(channel_task_spec(), tlshield.Unicycle(0.1), **kwargs)  # type: ignore[arg-type]
+
+
+def state(x: float, offset: float, theta: float, goals: np.ndarray | None = None) -> np.ndarray:
+    """Reference point at distance ``offset`` across the channel's diagonal, goals given or
+    the defaults (g1, g2 ahead in the channel, g3 far along it), obstacles far away."""
+    s = np.zeros(STATE_DIM)
+    s[0], s[1], s[2] = x + offset / 2, x - offset / 2, theta
+    s[3:9] = goals if goals is not None else [4.0, 4.0, 4.5, 6.5, 9.0, 9.0]
+    s[9:13] = [20.0, 20.0, 20.0, -20.0]
+    return s
+
+
+@pytest.fixture(scope="module")
+def shield() -> tlshield.Shield:
+    return make_shield()
+
+
+@pytest.fixture(scope="module")
+def reference(shield: tlshield.Shield) -> tuple[Structure, CvxpyShield, CvxpyShield]:
+    return Structure(shield.automaton), CvxpyShield(PARAMS), CvxpyShield(PARAMS, relaxed=True)
+
+
+instances = st.builds(
+    lambda x, offset, theta, v, w, goals: (state(x, offset, theta, np.array(goals)), v, w),
+    st.floats(-1.0, 10.0),
+    # Inside the channel (|offset| < 1.5), on its border, and a little outside.
+    st.one_of(st.floats(-1.6, 1.6), st.sampled_from([-1.5, 1.5, -1.4999, 1.4999])),
+    st.floats(-math.pi, math.pi),
+    st.floats(-4.0, 4.0),
+    st.floats(-6.0, 6.0),
+    st.lists(st.floats(-1.0, 10.0), min_size=6, max_size=6),
+)
+
+
+@settings(max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(instance=instances, q0=st.sampled_from([0, 3]))
+def test_equals_an_independent_cvxpy_solve(
+    shield: tlshield.Shield,
+    reference: tuple[Structure, CvxpyShield, CvxpyShield],
+    instance: tuple[np.ndarray, float, float],
+    q0: int,
+) -> None:
+    """Thousands of random steps (feasible, on the boundary, outside the channel): the action
+    equals cvxpy's solve of the same QP within 1e-5, and delta = 0 whenever the CLF row alone
+    can hold within the CLF bounds."""
+    structure, cvx, cvx_relaxed = reference
+    s, v, w = instance
+    q = shield.automaton.step(q0, s)
+    a_rl = np.array([v, w])
+    got = shield.filter(s, q, a_rl)
+    rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
+    want = cvx.solve(rows)
+    if want is None:
+        assert got.status == "relaxed", got
+        want = cvx_relaxed.solve(rows)
+        assert want is not None
+    else:
+        assert got.status == "solved", (got, want)
+    a_cbf, a_clf, delta, _ = want
+    np.testing.assert_allclose(got.action, a_rl + a_cbf + a_clf, atol=1e-5, rtol=0)
+    assert abs(got.delta - delta) <= 1e-5 * max(1.0, delta)
+    assert all(np.isfinite(got.action))
+    if rows.delta_0 == 0.0 and got.status == "solved":
+        assert got.delta <= 1e-9, got
+
+
+def test_clarabel_python_baseline_agrees(
+    shield: tlshield.Shield, reference: tuple[Structure, CvxpyShield, CvxpyShield]
+) -> None:
+    """The benchmark's clarabel-python baseline solves the same QP (checked so its timings
+    compare like with like)."""
+    structure = reference[0]
+    baseline = ClarabelShield(PARAMS)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        s = state(rng.uniform(0, 8), rng.uniform(-1.4, 1.4), rng.uniform(-3, 3))
+        q = shield.automaton.step(0, s)
+        a_rl = rng.uniform([-4, -6], [4, 6])
+        rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
+        want = baseline.solve(rows)
+        assert want is not None
+        np.testing.assert_allclose(
+            shield.filter(s, q, a_rl).action, a_rl + want[0] + want[1], atol=1e-5
+        )
+
+
+def test_border_step_is_corrected_and_reported(shield: tlshield.Shield) -> None:
+    s = state(1.0, -1.4, math.pi / 2)  # near c1's wall, heading out
+    q = shield.automaton.step(0, s)
+    out = shield.filter(s, q, [3.0, 0.0])
+    assert out.status == "solved" and out.solver == "active_set"
+    names = [name for name, _ in out.barriers]
+    assert "c1" in names and "c2" in names
+    h_c1 = dict(out.barriers)["c1"]
+    assert h_c1 == pytest.approx(s[0] - s[1] + 1.5)
+    assert out.a_cbf[0] < -0.5  # slows down
+    assert out.goal is not None and out.goal.shape == (2,)
+    np.testing.assert_allclose(out.action, np.array([3.0, 0.0]) + out.a_cbf + out.a_clf)
+    assert "FilterResult" in repr(out)
+
+
+@pytest.mark.parametrize("solver", ["auto", "clarabel", "active_set"])
+def test_solver_choice_is_honoured(solver: str) -> None:
+    sh = make_shield(solver=solver)
+    s = state(1.0, -1.4, math.pi / 2)
+    out = sh.filter(s, sh.automaton.step(0, s), [3.0, 0.0])
+    assert out.solver == {"auto": "active_set"}.get(solver, solver)
+    reference = make_shield(solver="clarabel").filter(s, 0, [3.0, 0.0])
+    np.testing.assert_allclose(out.action, reference.action, atol=1e-6)
+
+
+def test_configurations() -> None:
+    s = state(2.0, 0.3, 0.4)
+    a = np.array([0.5, 0.1])
+    off = make_shield(use_cbf=False, use_clf=False).filter(s, 0, a)
+    assert off.solver == "none" and np.array_equal(off.action, a) and off.barriers == []
+    clf_only = make_shield(use_cbf=False).filter(s, 0, a)
+    assert np.all(clf_only.a_cbf == 0) and clf_only.goal is not None
+    cbf_only = make_shield(use_clf=False).filter(s, 0, a)
+    assert np.all(cbf_only.a_clf == 0) and cbf_only.goal is None and cbf_only.delta == 0
+
+
+def test_infeasible_is_relaxed_with_slack_never_nan() -> None:
+    sh = make_shield(cbf_bounds=(-0.01, 0.01), clf_bounds=(-0.01, 0.01))
+    s = state(1.0, -2.0, math.pi / 2)  # outside the channel, heading further out
+    out = sh.filter(s, 0, [5.0, 0.0])
+    assert out.status == "relaxed" and out.slack > 0
+    assert np.all(np.isfinite(out.action))
+
+
+def test_user_barriers_and_per_call_dynamics() -> None:
+    wall = tlshield.Halfspace([0.0, -1.0] + [0.0] * 11, 3.0)  # y < 3
+    sh = make_shield(barriers={"wall": wall})
+    s = state(2.9, 0.0, math.pi / 2)
+    out = sh.filter(s, 0, [2.0, 0.0])
+    assert dict(out.barriers)["wall"] == pytest.approx(3.0 - s[1])
+    f, g = tlshield.Unicycle(0.1).eval(s)
+    again = sh.filter(s, 0, [2.0, 0.0], f=f, g=g)
+    np.testing.assert_array_equal(out.action, again.action)
+    positional = make_shield(barriers=[wall]).filter(s, 0, [2.0, 0.0])
+    assert dict(positional.barriers)["h0"] == pytest.approx(3.0 - s[1])
+    no_model = tlshield.Shield(
+        channel_task_spec(),
+        None,
+        alpha=2.0,
+        c3=1.0,
+        K=1e4,
+        cbf_bounds=([-6, -6], [6, 6]),
+        clf_bounds=(-0.5, 0.5),
+    )
+    np.testing.assert_allclose(
+        no_model.filter(s, 0, [2.0, 0.0], f=f, g=g).action,
+        make_shield().filter(s, 0, [2.0, 0.0]).action,
+    )
+
+
+def test_single_integrator_keeps_a_disc_invariant() -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[3.0, 0.0])})
+    arena = tlshield.Ball([0, 1], 4.0, center=[0.0, 0.0])
+    sh = tlshield.Shield(
+        spec,
+        tlshield.SingleIntegrator([0, 1]),
+        alpha=5.0,
+        c3=1.0,
+        K=1e4,
+        cbf_bounds=(-10, 10),
+        clf_bounds=(-1, 1),
+        barriers=[arena],
+    )
+    p = np.array([0.0, 3.5])
+    rng = np.random.default_rng(0)
+    for _ in range(400):
+        out = sh.filter(p, 0, rng.uniform(-3, 3, size=2))
+        p = p + 0.02 * out.action
+        assert arena.robustness(p) >= -1e-9
+
+
+def test_batch_equals_single_calls(shield: tlshield.Shield) -> None:
+    rng = np.random.default_rng(11)
+    states = np.stack(
+        [state(rng.uniform(0, 8), rng.uniform(-1.6, 1.6), rng.uniform(-3, 3)) for _ in range(64)]
+    )
+    qs = np.array([shield.automaton.step(0, s) for s in states])
+    a_rl = rng.uniform([-4, -6], [4, 6], size=(64, 2))
+    batch = shield.filter_batch(states, qs, a_rl)
+    assert batch["action"].shape == (64, 2) and batch["status"].dtype == np.uint8
+    for i in range(64):
+        single = shield.filter(states[i], int(qs[i]), a_rl[i])
+        np.testing.assert_array_equal(batch["action"][i], single.action)
+        assert tlshield.STATUS[batch["status"][i]] == single.status
+        assert tlshield.SOLVERS[batch["solver"][i]] == single.solver
+    # Non-contiguous and integer input is accepted.
+    again = shield.filter_batch(states[::2], qs[::2].astype(np.int32), a_rl[::2])
+    np.testing.assert_array_equal(again["action"], batch["action"][::2])
+
+
+def test_same_input_same_output(shield: tlshield.Shield) -> None:
+    s = state(3.0, 1.2, 2.0)
+    first = shield.filter(s, 0, [1.0, -1.0])
+    assert all(
+        np.array_equal(shield.filter(s, 0, [1.0, -1.0]).action, first.action) for _ in range(20)
+    )
+
+
+BAD_CONSTRUCTION = [
+    ({"alpha": 0.0}, ValueError, "alpha"),
+    ({"alpha": float("nan")}, ValueError, "alpha"),
+    ({"K": -1.0}, ValueError, "K"),
+    ({"cbf_bounds": (1.0, -1.0)}, ValueError, "lower bound above upper"),
+    ({"cbf_bounds": ([0.0], [1.0])}, ValueError, "cbf_bounds"),
+    ({"clf_bounds": (0.0, float("inf"))}, ValueError, "finite"),
+    ({"clf_bounds": "wide"}, TypeError, "clf_bounds"),
+    ({"action_bounds": (2.0, 1.0)}, ValueError, "action_bounds"),
+    ({"solver": "osqp"}, ValueError, "solver"),
+    ({"pos": [0, 0]}, ValueError, "pos"),
+    ({"pos": [0, 1, 2]}, ValueError, "pos"),
+    ({"pos": [-1, 1]}, ValueError, "pos"),
+    ({"barriers": [1.0]}, TypeError, "Halfspace"),
+    ({"barriers": 3}, TypeError, "barriers"),
+]
+
+
+@pytest.mark.parametrize(("overrides", "error", "fragment"), BAD_CONSTRUCTION)
+def test_bad_construction(overrides: dict[str, object], error: type, fragment: str) -> None:
+    with pytest.raises(error, match=fragment):
+        make_shield(**overrides)
+
+
+def test_bad_spec_or_dynamics() -> None:
+    with pytest.raises(TypeError, match="Spec"):
+        tlshield.Shield(
+            "F a",
+            tlshield.Unicycle(0.1),
+            alpha=1,
+            c3=1,
+            K=1,
+            cbf_bounds=(-1, 1),
+            clf_bounds=(-1, 1),
+        )
+    with pytest.raises(TypeError, match="dynamics"):
+        tlshield.Shield(
+            channel_task_spec(),
+            "unicycle",
+            alpha=1,
+            c3=1,
+            K=1,
+            cbf_bounds=(-1, 1),
+            clf_bounds=(-1, 1),
+        )
+    with pytest.raises(ValueError, match="eps"):
+        tlshield.Unicycle(0.0)
+    with pytest.raises(ValueError):
+        tlshield.SingleIntegrator([])
+
+
+BAD_CALLS = [
+    (lambda s: (s[:5], 0, [0.0, 0.0]), "length"),
+    (lambda s: (s, 7, [0.0, 0.0]), "state 7"),
+    (lambda s: (s, -1, [0.0, 0.0]), "state -1"),
+    (lambda s: (s, 0, [0.0]), "a_rl"),
+    (lambda s: (s, 0, [float("nan"), 0.0]), "a_rl"),
+    (lambda s: (np.where(np.arange(13) == 4, np.inf, s), 0, [0.0, 0.0]), "finite"),
+    (lambda s: (s, 0, [[0.0, 0.0]]), "a_rl"),
+]
+
+
+@pytest.mark.parametrize(("args", "fragment"), BAD_CALLS)
+def test_bad_calls(shield: tlshield.Shield, args: object, fragment: str) -> None:
+    with pytest.raises(ValueError, match=fragment):
+        shield.filter(*args(state(1.0, 0.0, 0.0)))  # type: ignore[operator]
+
+
+def test_bad_call_types_and_dynamics(shield: tlshield.Shield) -> None:
+    s = state(1.0, 0.0, 0.0)
+    with pytest.raises(TypeError):
+        shield.filter(None, 0, [0.0, 0.0])
+    with pytest.raises(TypeError):
+        shield.filter(["a"] * 13, 0, [0.0, 0.0])
+    f, g = tlshield.Unicycle(0.1).eval(s)
+    with pytest.raises(ValueError, match="both f and g"):
+        shield.filter(s, 0, [0.0, 0.0], f=f)
+    with pytest.raises(ValueError, match="g"):
+        shield.filter(s, 0, [0.0, 0.0], f=f, g=g[:, :1])
+    with pytest.raises(ValueError, match="f"):
+        shield.filter(s, 0, [0.0, 0.0], f=f[:3], g=g)
+    with pytest.raises(ValueError, match="g"):
+        shield.filter(s, 0, [0.0, 0.0], f=f, g=np.full_like(g, np.nan))
+
+
+def test_bad_batches(shield: tlshield.Shield) -> None:
+    states = np.stack([state(1.0, 0.0, 0.0)] * 4)
+    with pytest.raises(ValueError, match="qs"):
+        shield.filter_batch(states, [0, 0, 0], np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="a_rl"):
+        shield.filter_batch(states, [0, 0, 0, 0], np.zeros((4, 3)))
+    with pytest.raises(ValueError, match=r"qs\[2\]"):
+        shield.filter_batch(states, [0, 0, 9, 0], np.zeros((4, 2)))
+    bad = states.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match="states"):
+        shield.filter_batch(bad, [0, 0, 0, 0], np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="states"):
+        shield.filter_batch(states[0], [0], np.zeros((1, 2)))
+
+
+def test_automaton_goal_from_python(shield: tlshield.Shield) -> None:
+    aut = shield.automaton
+    s = state(3.9, 0.0, 0.0)  # next to g1 (4, 4)
+    np.testing.assert_allclose(aut.goal(0, s), [4.0, 4.0])
+    assert aut.goal(aut.accepting[0], s) is None
+    with pytest.raises(ValueError, match="state 99"):
+        aut.goal(99, s)
+    with pytest.raises(ValueError):
+        aut.goal(0, s[:4])
