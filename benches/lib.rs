@@ -1,7 +1,11 @@
 //! Shared fixtures for the criterion benchmarks: the paper's case-study task and seeded
 //! trajectories (a tiny xorshift generator keeps the benches free of extra dependencies).
 
-use tlshield_core::{Center, Predicate, Spec};
+use std::sync::Arc;
+
+use tlshield_core::{
+    Automaton, Bounds, Center, Dynamics, Predicate, Shield, ShieldConfig, SolverChoice, Spec,
+};
 
 /// The paper's task formula (Sec. VI).
 pub const TASK: &str = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)";
@@ -52,4 +56,60 @@ pub fn random_trajectories(count: usize, steps: usize, seed: u64) -> Vec<f64> {
         }
     }
     out
+}
+
+/// The case-study shield (unicycle, eps = 0.1; alpha 2, c3 1, K 1e4; CBF box +-6, CLF box
+/// +-0.5), as `tests/shield_reference.py` and `benches/compare_shield.py` use it.
+pub fn task_shield(automaton: Arc<Automaton>, solver: SolverChoice) -> Shield {
+    let bounds = |v: f64| Bounds {
+        lo: vec![-v; 2],
+        hi: vec![v; 2],
+    };
+    let config = ShieldConfig {
+        alpha: 2.0,
+        c3: 1.0,
+        k: 1e4,
+        cbf_bounds: bounds(6.0),
+        clf_bounds: bounds(0.5),
+        action_bounds: None,
+        barriers: Vec::new(),
+        pos: vec![0, 1],
+        use_cbf: true,
+        use_clf: true,
+        solver,
+        slack_penalty: 1e6,
+    };
+    let unicycle = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
+    Shield::new(automaton, Some(unicycle), config).unwrap()
+}
+
+/// `count` seeded shield steps `(s, q, a_rl)`: the reference point anywhere across the channel
+/// (and a little outside), random heading and goals, RL actions over the whole RL range; `q`
+/// is the FSA state after reading `s` from the initial state.
+pub fn shield_instances(
+    automaton: &Automaton,
+    count: usize,
+    seed: u64,
+) -> Vec<(Vec<f64>, usize, Vec<f64>)> {
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut uniform = move |lo: f64, hi: f64| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    (0..count)
+        .map(|_| {
+            let (along, across) = (uniform(-1.0, 8.0), uniform(-1.6, 1.6));
+            let mut s = vec![
+                along + across / 2.0,
+                along - across / 2.0,
+                uniform(-3.2, 3.2),
+            ];
+            s.extend((0..6).map(|_| uniform(-1.0, 10.0)));
+            s.extend([20.0, 20.0, 20.0, -20.0]);
+            let q = automaton.step_unchecked(automaton.initial(), &s);
+            (s, q, vec![uniform(-4.0, 4.0), uniform(-6.0, 6.0)])
+        })
+        .collect()
 }

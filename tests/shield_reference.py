@@ -91,9 +91,22 @@ class Structure:
             for q in range(automaton.num_states)
         }
         self.progress: dict[int, list[list[Cube]]] = {q: [] for q in range(automaton.num_states)}
+        self.edges: dict[int, list[tuple[int, list[Cube]]]] = {
+            q: [] for q in range(automaton.num_states)
+        }
         for src, dst, guard in automaton.edges():
+            cubes = parse_guard(guard, atoms)
+            self.edges[src].append((dst, cubes))
             if src != dst and dst != automaton.trap:
-                self.progress[src].append(parse_guard(guard, atoms))
+                self.progress[src].append(cubes)
+
+    def next_state(self, q: int, rho: np.ndarray) -> int:
+        """The edge whose guard holds (an atom holds iff its robustness is > 0)."""
+        holds = rho > 0
+        for dst, cubes in self.edges[q]:
+            if any(all(holds[a] == pos for a, pos in cube) for cube in cubes):
+                return dst
+        raise AssertionError(f"no edge of {q} holds")
 
     def safe_set(self, q: int, rho: np.ndarray) -> list[tuple[int, bool]]:
         """Eq. 5C1: per clause the literal with the largest robustness (first on ties)."""

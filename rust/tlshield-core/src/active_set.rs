@@ -3,23 +3,23 @@
 //! microseconds and to hand anything doubtful back to [`ClarabelQp`](crate::qp::ClarabelQp).
 //!
 //! Design:
-//! 1. Rows are scaled to unit norm. A zero row is dropped when `h >= 0` and proves
+//! 1. Rows are scaled to unit norm. A zero row is skipped when `h >= 0` and proves
 //!    infeasibility otherwise.
-//! 2. Identification: the Goldfarb–Idnani dual active-set method (no feasible start needed, its
-//!    working rows stay linearly independent) runs on a strictly convex surrogate. Zero or tiny
-//!    `P_jj` become `eps_j = max(|c_j| / X, 1e-8 p_ref)`, where `X = 1e6 * L` and `L` is the
-//!    problem's length scale. So a linear cost changes by at most about 1e-6 of itself over the
-//!    feasible region. If a violated row is a non-negative combination of the working rows, the
-//!    method stops with a Farkas certificate. The certificate is checked, then `Infeasible` is
-//!    returned.
+//! 2. Identification: Goldfarb–Idnani dual active set (no feasible start, independent working
+//!    rows) on a strictly convex surrogate. Zero or tiny `P_jj` become
+//!    `eps_j = max(|c_j| / X, 1e-8 p_ref)` with `X = 1e6 x length scale`, so a linear cost moves
+//!    by ~1e-6 of itself across the problem. Such variables start pinned at their tightest
+//!    single-variable bound against the cost (delta >= 0), a valid dual start that keeps the
+//!    iterates at the problem's scale. A violated row that is a non-negative combination of
+//!    working rows yields a Farkas certificate, checked, then `Infeasible`.
 //! 3. Polish: the exact KKT system of the ORIGINAL problem on that working set is solved by LU
-//!    with partial pivoting plus one refinement step. A negative multiplier (drop the row) or a
-//!    violated row (add it) corrects the working set, at most a few times.
+//!    with partial pivoting plus one refinement step. A negative multiplier (drop the row) or
+//!    a violated row (add it) corrects the working set, a bounded number of times.
 //! 4. `Solved` is returned only after the KKT conditions of the original data hold to 1e-9
-//!    relative (see `certify`). Everything else is `Failed`: singular systems, cycling,
-//!    iteration limits, more than [`MAX_VARS`] variables, non-finite data.
-//! 5. All dense storage is fixed-capacity nalgebra matrices, and the per-row buffers only grow.
-//!    After the first solve of a shape, [`ActiveSetQp::solve_into`] allocates nothing.
+//!    relative. Anything else is `Failed`: singular systems, cycling, iteration limits,
+//!    n > [`MAX_VARS`], non-finite data.
+//! 5. Dense storage is fixed-capacity nalgebra matrices, and the per-row buffers only grow:
+//!    [`ActiveSetQp::solve_into`] allocates nothing once it has seen the shape.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -34,6 +34,9 @@ const KKT_DIM: usize = 2 * MAX_VARS;
 const REG_RANGE: f64 = 1e6;
 /// Floor of the proximal term, relative to the problem's curvature scale.
 const REG_FLOOR: f64 = 1e-8;
+/// Rows violated by less than this, relative to the largest iterate, end the dual method
+/// (rounding of `b - a'x`); the polish step then settles them exactly.
+const GI_TOL: f64 = 1e-14;
 /// A row whose direction in the free subspace is below this fraction is linearly dependent.
 const DEPENDENT: f64 = 1e-10;
 /// Relative tolerance of the final KKT certificate.
@@ -290,25 +293,23 @@ impl ActiveSetQp {
     fn dual_active_set(&mut self, qp: &DenseQp) -> Result<(), QpStatus> {
         let (n, rows) = (qp.vars(), qp.rows());
         let dense = &mut *self.dense;
-        let mut x0max = 0.0f64;
         for jj in 0..n {
             for ii in 0..n {
                 dense.j[(ii, jj)] = 0.0;
             }
             dense.j[(jj, jj)] = 1.0 / self.preg[jj].sqrt();
             self.x[jj] = -qp.c[jj] / self.preg[jj];
-            x0max = x0max.max(self.x[jj].abs());
         }
         self.q = 0;
-        // Rounding in s = b - a'x is relative to the largest iterate (the surrogate's
-        // unconstrained minimiser can be far out along a linear-cost variable).
-        let tol = 1e-14 * x0max + 1e-12 * self.bmax + f64::MIN_POSITIVE;
+        self.crash(qp);
+        // Rounding in s = b - a'x is relative to the largest iterate.
+        let mut xscale = self.x[..n].iter().fold(self.bmax, |m, v| m.max(v.abs()));
         let max_iter = 20 + 10 * (n + rows) as u64;
         let mut steps = 0u64;
         loop {
             // Step 1: the most violated row not in the working set.
             let mut p = usize::MAX;
-            let mut sp = -tol;
+            let mut sp = -GI_TOL * xscale - f64::MIN_POSITIVE;
             for i in 0..rows {
                 if self.in_set[i] || self.norm[i] == 0.0 {
                     continue;
@@ -330,18 +331,8 @@ impl ActiveSetQp {
                     return Err(QpStatus::Failed);
                 }
                 let q = self.q;
-                let ap = &self.a[p * n..(p + 1) * n];
+                let (dn2, d2n2) = self.direction(p, n);
                 let dense = &mut *self.dense;
-                // d = J' n_p with the ">=" normal n_p = -a_p.
-                let (mut dn2, mut d2n2) = (0.0, 0.0);
-                for jj in 0..n {
-                    let s = -dot_col(&dense.j, jj, ap);
-                    self.d[jj] = s;
-                    dn2 += s * s;
-                    if jj >= q {
-                        d2n2 += s * s;
-                    }
-                }
                 // Primal direction z = J2 d2, dual direction r = R^{-1} d1.
                 for ii in 0..n {
                     self.step[ii] = (q..n).map(|jj| dense.j[(ii, jj)] * self.d[jj]).sum();
@@ -388,6 +379,7 @@ impl ActiveSetQp {
                 let t = t1.min(t2);
                 for ii in 0..n {
                     self.x[ii] += t * self.step[ii];
+                    xscale = xscale.max(self.x[ii].abs());
                 }
                 for k in 0..q {
                     self.u[k] -= t * self.rdir[k];
@@ -403,6 +395,63 @@ impl ActiveSetQp {
                 sp = self.b[p] - dot(&self.a[p * n..(p + 1) * n], &self.x[..n]);
             }
         }
+    }
+
+    /// Crash start: every regularised variable with a linear cost is pinned at its tightest
+    /// single-variable bound row opposing that cost (delta >= 0 in the shield). Bounds on
+    /// distinct variables are independent, and the pinned point is the surrogate's optimum on
+    /// them with multipliers `-(c_j + eps_j x_j) / a_ij >= 0`, so this is a valid dual start. It
+    /// keeps the iterates at the problem's own scale instead of starting from `-c_j / eps_j`.
+    fn crash(&mut self, qp: &DenseQp) {
+        let (n, rows) = (qp.vars(), qp.rows());
+        for jj in 0..n {
+            let c = qp.c[jj];
+            if !(self.preg[jj] > qp.p_diag[jj]) || c == 0.0 {
+                continue;
+            }
+            // Moving against the cost means moving along -sign(c): the tightest bound is the
+            // one with the smallest -sign(c) * bound.
+            let mut best: Option<(usize, f64)> = None;
+            for i in 0..rows {
+                let row = &self.a[i * n..(i + 1) * n];
+                if self.in_set[i] || self.norm[i] == 0.0 || row[jj] * c >= 0.0 {
+                    continue;
+                }
+                if row.iter().enumerate().any(|(k, v)| k != jj && *v != 0.0) {
+                    continue;
+                }
+                let bound = self.b[i] / row[jj];
+                if best.is_none_or(|(_, b)| -c.signum() * bound < -c.signum() * b) {
+                    best = Some((i, bound));
+                }
+            }
+            let Some((i, bound)) = best else { continue };
+            let multiplier = -(c + self.preg[jj] * bound) / self.a[i * n + jj];
+            if !(multiplier > 0.0 && multiplier.is_finite()) {
+                continue;
+            }
+            self.x[jj] = bound;
+            self.direction(i, n);
+            if !self.add_row(i, multiplier, n) {
+                // Cannot happen for independent bounds; fall back to the plain start.
+                return;
+            }
+        }
+    }
+
+    /// `d = J' n_p` for row `p` (its ">=" normal is `-a_p`); returns `|d|^2` and `|d[q..]|^2`.
+    fn direction(&mut self, p: usize, n: usize) -> (f64, f64) {
+        let ap = &self.a[p * n..(p + 1) * n];
+        let (mut dn2, mut d2n2) = (0.0, 0.0);
+        for jj in 0..n {
+            let s = -dot_col(&self.dense.j, jj, ap);
+            self.d[jj] = s;
+            dn2 += s * s;
+            if jj >= self.q {
+                d2n2 += s * s;
+            }
+        }
+        (dn2, d2n2)
     }
 
     /// Adds row `p` with multiplier `up`, using `d = J' n_p`: Givens reflections zero `d[q+1..]`
@@ -645,6 +694,9 @@ impl ActiveSetQp {
             grad[jj] = px + qp.c[jj];
             mag[jj] = px.abs().max(qp.c[jj].abs());
         }
+        if !x.iter().all(|v| v.is_finite()) {
+            return false;
+        }
         let primal_scale = x.iter().fold(self.bmax, |m, v| m.max(v.abs()));
         let tol = KKT_TOL * primal_scale;
         for (i, (row, &h)) in qp.g.chunks_exact(n).zip(&qp.h).enumerate() {
@@ -659,7 +711,7 @@ impl ActiveSetQp {
                 continue;
             }
             let gap = (dot(row, x) - h) / self.norm[i];
-            if gap > tol || (zi > 0.0 && gap < -tol) {
+            if !(gap <= tol) || (zi > 0.0 && !(gap >= -tol)) {
                 return false;
             }
             if zi > 0.0 {

@@ -11,6 +11,12 @@
 //!
 //! What is off is dropped: no CBF -> no `a_cbf` and no barrier rows; no CLF, or no goal this
 //! step (accepting state, or no positive Ball literal) -> no `a_clf`, `delta` and CLF row.
+//!
+//! Formulation detail: the CLF box gives `delta` a closed-form lower bound `delta_0` (the
+//! row's smallest residual over the box, or 0), and the QP solves for `d = delta - delta_0 >= 0`.
+//! Same solution; but the objective stays of the order of `|a|^2` instead of `K delta`, which
+//! keeps an interior-point solver's relative gap (and so the actions) accurate to ~1e-9
+//! instead of ~1e-4 when the CLF row cannot hold.
 //! An infeasible or failed solve is retried with a slack `sigma_i >= 0` on every barrier row
 //! (cost `slack_penalty * sigma_i`): status [`Status::Relaxed`]. If that fails too the
 //! corrections are zero: [`Status::Failed`]. Numbers never come back NaN.
@@ -549,8 +555,29 @@ impl Shield {
         self.check_action("a_rl", a_rl)?;
         self.check_dynamics(s.len(), fg)?;
         Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, true);
+            self.step(ws, s, q, a_rl, fg, true, true);
             ws.out.clone()
+        }))
+    }
+
+    /// The QP [`Shield::filter`] would solve at this step (before any relaxation), for
+    /// inspection and benchmarks. Variables `[a_cbf | a_clf | d]` (parts that are off are
+    /// absent; `d = delta - delta_0`, see the module docs); empty when nothing is corrected.
+    pub fn problem(
+        &self,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+    ) -> Result<DenseQp, ShieldError> {
+        self.check_state("s", s)?;
+        check_finite("s", s, s.len())?;
+        self.automaton.check_state("q", q as i64)?;
+        self.check_action("a_rl", a_rl)?;
+        self.check_dynamics(s.len(), fg)?;
+        Ok(self.with_workspace(s.len(), |ws| {
+            self.step(ws, s, q, a_rl, fg, false, false);
+            ws.qp.clone()
         }))
     }
 
@@ -621,6 +648,7 @@ impl Shield {
                                 &a[rows_m.clone()],
                                 None,
                                 false,
+                                true,
                             );
                             action[rows_m.clone()].copy_from_slice(&ws.out.action);
                             a_cbf[rows_m.clone()].copy_from_slice(&ws.out.a_cbf);
@@ -637,7 +665,8 @@ impl Shield {
     }
 
     /// The shield step on validated input, result in `ws.out`. `record` keeps the goal and
-    /// the barrier list (the batch path skips them).
+    /// the barrier list (the batch path skips them); without `solve` only `ws.qp` is built.
+    #[allow(clippy::too_many_arguments)]
     fn step(
         &self,
         ws: &mut Workspace,
@@ -646,6 +675,7 @@ impl Shield {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
         record: bool,
+        solve: bool,
     ) {
         let (n, m) = (s.len(), self.m);
         let cfg = &self.config;
@@ -744,6 +774,12 @@ impl Shield {
         out.solver = SolvedBy::Nothing;
         out.goal = (record && has_goal).then(|| ws.goal.clone());
         if vars == 0 {
+            ws.qp = DenseQp {
+                p_diag: Vec::new(),
+                c: Vec::new(),
+                g: Vec::new(),
+                h: Vec::new(),
+            };
             return;
         }
 
@@ -814,6 +850,9 @@ impl Shield {
         };
 
         build(&mut ws.qp, false);
+        if !solve {
+            return;
+        }
         let mut status = Status::Solved;
         let mut by = ws.solvers.solve(cfg.solver, &ws.qp);
         if ws.solvers.solution.status != QpStatus::Solved && barriers > 0 {
@@ -1233,7 +1272,7 @@ mod tests {
                 prop_assert!((p - r).abs() < 1e-6, "{:?} vs {:?} ({:?})", a.action, b.action, a.solver);
             }
             auto.with_workspace(N, |ws| {
-                auto.step(ws, &s, q, &a_rl, None, false);
+                auto.step(ws, &s, q, &a_rl, None, false, true);
                 let sol = &ws.solvers.solution;
                 let scale = 1.0 + ws.qp.c.iter().chain(&ws.qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
                 assert!(kkt_residual(&ws.qp, &sol.x, &sol.z) < 1e-7 * scale);
