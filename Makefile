@@ -17,12 +17,14 @@ test: setup
 	cargo test --workspace
 	$(BIN)/python -m pytest
 
-## Benchmarks: criterion, then the Python comparisons (rtamt, argus; ltlf2dfa + mona).
+## Benchmarks: criterion, then the Python comparisons (rtamt, argus; ltlf2dfa + mona; cvxpy,
+## clarabel).
 bench:
 	@EXTRAS=train,test,bench bash scripts/setup.sh
 	cargo bench -p tlshield-bench
 	$(BIN)/python benches/compare_robustness.py
 	$(BIN)/python benches/compare_automaton.py --install-mona
+	$(BIN)/python benches/compare_shield.py
 
 ## Formatting and lints (rustfmt, clippy, ruff, stubtest).
 lint:
