@@ -19,6 +19,9 @@ use crate::convert::{vector, FloatArray};
 use crate::errors::map;
 use crate::spec::{predicate_of, PySpec};
 
+/// `(f, g)` as numpy arrays.
+type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
+
 /// The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2): inputs
 /// ``(a_v, a_theta)``; ``x``, ``y``, ``theta`` are the state dimensions of the reference
 /// point and the heading.
@@ -38,11 +41,7 @@ impl PyUnicycle {
     }
 
     /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(
-        &self,
-        py: Python<'py>,
-        s: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
         eval(py, &self.inner, s)
     }
 
@@ -73,11 +72,7 @@ impl PySingleIntegrator {
     }
 
     /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(
-        &self,
-        py: Python<'py>,
-        s: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
         eval(py, &self.inner, s)
     }
 
@@ -89,11 +84,7 @@ impl PySingleIntegrator {
     }
 }
 
-fn eval<'py>(
-    py: Python<'py>,
-    dynamics: &Dynamics,
-    s: &Bound<'py, PyAny>,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+fn eval<'py>(py: Python<'py>, dynamics: &Dynamics, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
     let s = vector(s, "s")?;
     if s.len() < dynamics.min_dim() {
         return Err(PyValueError::new_err(format!(
