@@ -78,6 +78,7 @@ pub fn task_shield(automaton: Arc<Automaton>, solver: SolverChoice) -> Shield {
         use_clf: true,
         solver,
         slack_penalty: 1e6,
+        margin: 1e-6,
     };
     let unicycle = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
     Shield::new(automaton, Some(unicycle), config).unwrap()

@@ -8,7 +8,7 @@ benches/compare_shield.py.
 
 The QP (DESIGN.md, Eq. 5D2), for the case study's unicycle reference point:
     min |a_cbf|^2 + |a_clf|^2 + K d
-    s.t. -Lg h_i . (a_cbf + a_clf) <= Lf h_i + Lg h_i . a_rl + alpha h_i     (every barrier)
+    s.t. -Lg h_i . (a_cbf + a_clf) <= Lf h_i + Lg h_i . a_rl + alpha (h_i - margin)  (barriers)
          Lg V . a_clf - d <= -(Lf V + Lg V . a_rl + c3 V) + delta_0,  d >= 0
          box bounds on a_cbf, a_clf
 with delta = delta_0 + d, delta_0 = max(0, min over the CLF box of the CLF row's residual).
@@ -151,6 +151,7 @@ class Params:
     cbf: tuple[float, float] = (-6.0, 6.0)
     clf: tuple[float, float] = (-0.5, 0.5)
     slack_penalty: float = 1e6
+    margin: float = 1e-6
 
 
 def build_rows(
@@ -165,7 +166,7 @@ def build_rows(
         h, dh = sign * rho[atom], sign * grad[atom]
         lg = dh @ g
         lg_rows.append(lg)
-        rhs.append(dh @ f + lg @ a_rl + params.alpha * h)
+        rhs.append(dh @ f + lg @ a_rl + params.alpha * (h - params.margin))
     goal_atoms = structure.goal_atoms(q, rho)
     clf_lg = np.zeros(2)
     clf_rhs = delta_0 = 0.0

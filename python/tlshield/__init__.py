@@ -10,6 +10,7 @@ corrects an RL agent's actions, in a Rust core.
 0.5
 """
 
+from tlshield import envs
 from tlshield._core import (
     Automaton,
     Ball,
@@ -42,5 +43,6 @@ __all__ = [
     "SpecError",
     "Unicycle",
     "__version__",
+    "envs",
     "formula_atoms",
 ]

@@ -159,6 +159,7 @@ class Shield:
         use_clf: bool = True,
         solver: str = "auto",
         slack_penalty: float = 1e6,
+        margin: float = 1e-6,
     ) -> Self: ...
     def filter(
         self,

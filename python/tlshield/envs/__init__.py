@@ -1,5 +1,30 @@
-"""Environments and tasks of tlshield (the paper's channel case study)."""
+"""Environments and tasks of tlshield: the paper's channel case study, registered with
+Gymnasium as ``tlshield/Channel-v0`` when ``tlshield`` is imported."""
 
-from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
+import gymnasium as gym
 
-__all__ = ["STATE_DIM", "TASK", "channel_task_spec"]
+from tlshield.envs.channel import (
+    CONFIGS,
+    STATE_DIM,
+    TASK,
+    ChannelConfig,
+    ChannelEnv,
+    channel_shield,
+    channel_task_spec,
+)
+
+ENV_ID = "tlshield/Channel-v0"
+
+if ENV_ID not in gym.registry:
+    gym.register(id=ENV_ID, entry_point="tlshield.envs.channel:ChannelEnv")
+
+__all__ = [
+    "CONFIGS",
+    "ENV_ID",
+    "STATE_DIM",
+    "TASK",
+    "ChannelConfig",
+    "ChannelEnv",
+    "channel_shield",
+    "channel_task_spec",
+]

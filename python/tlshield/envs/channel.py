@@ -1,12 +1,27 @@
 """The paper's case study (Li & Belta, Sec. VI): a channel, three goals, two moving obstacles.
 
 State (13 values): reference point ``x, y``, heading ``theta``, goal centres ``g1, g2, g3``
-(x, y each) and obstacle centres ``o1, o2`` (x, y each).
+(x, y each) and obstacle centres ``o1, o2`` (x, y each). The observation is the state followed
+by the one-hot FSA state; the action is ``(a_v, a_theta)`` of the unicycle's reference point,
+normalised to ``[-1, 1]^2`` (scaled to ``ChannelConfig.rl_bounds``; ``info["shield"]["a_rl"]``
+is in physical units).
+
+Every constant of the environment is a field of :class:`ChannelConfig` (documented there) and
+can be overridden by keyword in ``gymnasium.make("tlshield/Channel-v0", ...)``.
 """
 
 from __future__ import annotations
 
-from tlshield._core import Ball, Halfspace, Spec
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
+from tlshield.wrappers import FsaTracker, shield_info
 
 #: The task: visit g1 or g2, then g3, staying inside the channel until g3 (paper Eq. 6C1).
 TASK = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
@@ -18,6 +33,16 @@ STATE_DIM = 13
 X, Y, THETA = 0, 1, 2
 GOAL_DIMS = ((3, 4), (5, 6), (7, 8))
 OBSTACLE_DIMS = ((9, 10), (11, 12))
+
+#: The four configurations of the paper: which parts of the shield are on.
+CONFIGS = {
+    "rl": (False, False),
+    "rl_cbf": (True, False),
+    "rl_clf": (False, True),
+    "rl_cbf_clf": (True, True),
+}
+
+SQRT2 = math.sqrt(2.0)
 
 
 def channel_task_spec(half_width: float = 1.5, goal_radius: float = 0.5) -> Spec:
@@ -34,3 +59,379 @@ def channel_task_spec(half_width: float = 1.5, goal_radius: float = 0.5) -> Spec
         for k, dims in enumerate(GOAL_DIMS)
     }
     return Spec(TASK, {**goals, "c1": Halfspace(c1, half_width), "c2": Halfspace(c2, half_width)})
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """Every constant of the case study. Lengths in metres, times in seconds, angles in
+    radians. Positions use channel coordinates where convenient: ``u`` along the channel's
+    centre line ``y = x`` from the origin, ``v`` across it (``v = (y - x) / sqrt(2)``)."""
+
+    # --- geometry -------------------------------------------------------------------------
+    #: ``w`` of the channel constraints ``c1: x - y + w > 0``, ``c2: y - x + w > 0``; the
+    #: channel's half-width across is ``w / sqrt(2)`` (1.06 m).
+    half_width: float = 1.5
+    #: Radius of the goal discs g1, g2, g3.
+    goal_radius: float = 0.5
+    #: The arena ``[lo, hi]^2``: the reference point is kept inside (a wall), and rewards are
+    #: bounded because of it.
+    arena: tuple[float, float] = (-3.0, 13.0)
+    #: ``u`` ranges of the goal centres: g1 and g2 first, g3 further along.
+    near_goal_u: tuple[float, float] = (2.5, 5.5)
+    far_goal_u: tuple[float, float] = (7.5, 9.0)
+    #: ``|v|`` range of a goal drawn outside the channel (its whole disc is outside).
+    outside_goal_v: tuple[float, float] = (1.66, 2.5)
+    #: Probability that the second of g1/g2 lies outside the channel (the other and g3 are
+    #: always inside, so every episode is solvable).
+    outside_goal_probability: float = 0.5
+
+    # --- agent ----------------------------------------------------------------------------
+    #: Distance of the reference point ahead of the unicycle's centre (Eq. 6A2).
+    eps: float = 0.1
+    #: Euler step. ``alpha * dt`` must stay <= 1 (discrete-time CBF).
+    dt: float = 0.1
+    #: Episode length in steps (the paper's horizon).
+    horizon: int = 200
+    #: The RL action box (a_v in m/s, a_theta in rad/s): the policy's action space.
+    rl_bounds: tuple[tuple[float, float], tuple[float, float]] = ((-1.0, -2.0), (1.0, 2.0))
+    #: Start: reference point at ``u in [-start_spread, start_spread]``, ``|v| <= start_spread``,
+    #: heading ``pi/4 +- start_heading``.
+    start_spread: float = 0.3
+    start_heading: float = 0.5
+
+    # --- obstacles ------------------------------------------------------------------------
+    #: Collision when the reference point is closer than this to an obstacle centre.
+    obstacle_radius: float = 0.3
+    #: The obstacle reward term is ``w * min(d - safe_distance, 0)``.
+    safe_distance: float = 0.8
+    #: Obstacles oscillate across the channel around ``u`` in this range ...
+    obstacle_u: tuple[float, float] = (3.0, 7.0)
+    #: ... with an amplitude (m) and angular frequency (rad/s) drawn from these ranges.
+    obstacle_amplitude: tuple[float, float] = (1.0, 1.8)
+    obstacle_frequency: tuple[float, float] = (0.3, 0.8)
+
+    # --- reward ---------------------------------------------------------------------------
+    #: Weight of the trap term in Eq. 5A1.
+    c_r: float = 1.0
+    #: Weight of the obstacle term: reward = r_tl + w * min(d - safe_distance, 0).
+    w: float = 1.0
+
+    # --- shield (Eq. 5D2) -----------------------------------------------------------------
+    alpha: float = 2.0
+    c3: float = 1.0
+    K: float = 1e4
+    #: Box on a_cbf: at least the RL box plus the CLF box, so stopping is always feasible.
+    cbf_bounds: tuple[tuple[float, float], tuple[float, float]] = ((-1.5, -3.0), (1.5, 3.0))
+    #: The shield keeps every barrier above this (not just >= 0: an atom holds iff rho > 0).
+    cbf_margin: float = 1e-3
+    #: Box on a_clf: narrow, so the RL action can overpower the CLF (paper Sec. VI-E).
+    clf_bounds: tuple[tuple[float, float], tuple[float, float]] = ((-0.3, -0.6), (0.3, 0.6))
+
+    @property
+    def trap_penalty(self) -> float:
+        """Per-step reward in the trap: no better than the worst task reward reachable outside
+        it (every atom's robustness in the arena is above minus the arena's diagonal)."""
+        lo, hi = self.arena
+        return -max(1.0, self.c_r) * (hi - lo) * SQRT2
+
+    def check(self) -> None:
+        """Raises ValueError naming the first bad constant."""
+        positive = (
+            "half_width",
+            "goal_radius",
+            "eps",
+            "dt",
+            "obstacle_radius",
+            "c_r",
+            "alpha",
+            "c3",
+            "K",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} = {value!r}: expected a finite number > 0")
+        if not (isinstance(self.horizon, int) and self.horizon > 0):
+            raise ValueError(f"horizon = {self.horizon!r}: expected a positive integer")
+        if self.alpha * self.dt > 1.0:
+            raise ValueError(
+                f"alpha * dt = {self.alpha * self.dt:g} > 1: the discrete-time CBF condition "
+                "needs alpha * dt <= 1"
+            )
+        if not (math.isfinite(self.w) and self.w >= 0):
+            raise ValueError(f"w = {self.w!r}: expected a finite number >= 0")
+        lo, hi = np.asarray(self.rl_bounds, dtype=float)
+        if lo.shape != (2,) or hi.shape != (2,) or np.any(lo >= hi):
+            raise ValueError(
+                f"rl_bounds = {self.rl_bounds!r}: expected ((lo_v, lo_w), (hi_v, hi_w))"
+            )
+
+
+def _config(overrides: dict[str, Any]) -> ChannelConfig:
+    names = {f.name for f in fields(ChannelConfig)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise TypeError(f"unknown Channel-v0 parameter(s) {unknown}; known: {sorted(names)}")
+    cfg = replace(ChannelConfig(), **overrides)
+    cfg.check()
+    return cfg
+
+
+def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) -> Shield | None:
+    """The shield of a configuration (None for ``"rl"``)."""
+    use_cbf, use_clf = CONFIGS[config]
+    if not (use_cbf or use_clf):
+        return None
+    return Shield(
+        spec or channel_task_spec(cfg.half_width, cfg.goal_radius),
+        Unicycle(cfg.eps, X, Y, THETA),
+        alpha=cfg.alpha,
+        c3=cfg.c3,
+        K=cfg.K,
+        cbf_bounds=cfg.cbf_bounds,
+        clf_bounds=cfg.clf_bounds,
+        use_cbf=use_cbf,
+        use_clf=use_clf,
+        margin=cfg.cbf_margin,
+    )
+
+
+class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+    """``tlshield/Channel-v0``: the paper's case study as one Gymnasium environment.
+
+    ``config`` picks the shield ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf"). ``evaluation=True``
+    applies the paper's evaluation rules: the CBF is always on, and the episode also ends on a
+    collision. Training: the episode ends on success or at the horizon; violations and
+    collisions are allowed (and cost reward). ``shield_in_env=False`` leaves the shield to a
+    vectorised wrapper (:class:`tlshield.wrappers.ShieldedVecEnv` or ``ShieldedVectorEnv``,
+    with ``action_fn=env.rl_action``), which scales and shields the actions of all
+    sub-environments in one call; ``step`` then takes the applied action in physical units.
+    Any :class:`ChannelConfig` field is a keyword override.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+
+    def __init__(
+        self,
+        config: str = "rl_cbf_clf",
+        evaluation: bool = False,
+        render_mode: str | None = None,
+        shield_in_env: bool = True,
+        **overrides: Any,
+    ) -> None:
+        if config not in CONFIGS:
+            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode = {render_mode!r}: expected 'rgb_array', 'human' or None"
+            )
+        self.cfg = _config(overrides)
+        self.config = config
+        self.evaluation = evaluation
+        self.render_mode = render_mode
+        cfg = self.cfg
+        self.spec_tl = channel_task_spec(cfg.half_width, cfg.goal_radius)
+        shield_config = config
+        if evaluation and not CONFIGS[config][0]:
+            shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+        self.shield = channel_shield(cfg, shield_config, self.spec_tl)
+        self.shield_in_env = shield_in_env
+        automaton = self.spec_tl.automaton()
+        self.tracker = FsaTracker(automaton, cfg.c_r, cfg.trap_penalty)
+        lo, hi = cfg.arena
+        margin = max(cfg.outside_goal_v[1], max(cfg.obstacle_amplitude)) + cfg.goal_radius
+        state_lo = np.full(STATE_DIM, lo - margin)
+        state_hi = np.full(STATE_DIM, hi + margin)
+        state_lo[THETA], state_hi[THETA] = -math.pi, math.pi
+        k = automaton.num_states
+        self.observation_space = gym.spaces.Box(
+            np.concatenate([state_lo, np.zeros(k)]),
+            np.concatenate([state_hi, np.ones(k)]),
+            dtype=np.float64,
+        )
+        # The policy acts in [-1, 1]^2 (what SB3 expects); a_rl = centre + action * half range.
+        rl_lo, rl_hi = (np.asarray(b, dtype=np.float64) for b in cfg.rl_bounds)
+        self._rl_centre, self._rl_half = (rl_hi + rl_lo) / 2, (rl_hi - rl_lo) / 2
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
+        self.state = np.zeros(STATE_DIM)
+        self._obstacles = np.zeros((2, 4))  # per obstacle: u, amplitude, frequency, phase
+        self._t = 0
+        self._trajectory: list[NDArray[np.float64]] = []
+        self._renderer: Any = None
+
+    # --- the world ------------------------------------------------------------------------
+
+    @staticmethod
+    def _xy(u: float, v: float) -> tuple[float, float]:
+        return (u - v) / SQRT2, (u + v) / SQRT2
+
+    def _obstacle_positions(self, t: float) -> NDArray[np.float64]:
+        out = np.empty((2, 2))
+        for i, (u, amplitude, frequency, phase) in enumerate(self._obstacles):
+            out[i] = self._xy(u, amplitude * math.sin(frequency * t + phase))
+        return out
+
+    def _draw_goals(self) -> tuple[NDArray[np.float64], bool]:
+        """g3 and one of g1/g2 inside the channel; the other outside with the configured
+        probability. Returns the (3, 2) centres and whether one lies outside."""
+        cfg, rng = self.cfg, self.np_random
+        inside_v = cfg.half_width / SQRT2 - cfg.goal_radius
+        outside = bool(rng.random() < cfg.outside_goal_probability)
+        k = int(rng.integers(2))
+        while True:
+            us = rng.uniform(*cfg.near_goal_u, size=2)
+            vs = rng.uniform(-inside_v, inside_v, size=2)
+            if outside:
+                vs[k] = rng.choice([-1.0, 1.0]) * rng.uniform(*cfg.outside_goal_v)
+            near = np.array([self._xy(u, v) for u, v in zip(us, vs, strict=True)])
+            if np.linalg.norm(near[0] - near[1]) >= 2 * cfg.goal_radius + 0.2:
+                break
+        far = self._xy(rng.uniform(*cfg.far_goal_u), rng.uniform(-inside_v, inside_v))
+        return np.vstack([near, far]), outside
+
+    def _measure(self, s: NDArray[np.float64]) -> dict[str, Any]:
+        cfg = self.cfg
+        h1 = s[X] - s[Y] + cfg.half_width
+        h2 = s[Y] - s[X] + cfg.half_width
+        d = min(float(np.hypot(*(s[X : Y + 1] - s[a : b + 1]))) for a, b in OBSTACLE_DIMS)
+        return {
+            "constraints": {"c1": float(h1), "c2": float(h2)},
+            "min_obstacle_distance": d,
+            "collision": d < cfg.obstacle_radius,
+            "violation": bool(min(h1, h2) < 0.0),
+        }
+
+    def rl_action(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The RL action ``(a_v, a_theta)`` in physical units of policy actions in
+        ``[-1, 1]^2`` (clipped); works on one action or a batch ``(N, 2)``."""
+        return self._rl_centre + np.clip(action, -1.0, 1.0) * self._rl_half
+
+    def _observe(self) -> NDArray[np.float64]:
+        return np.concatenate([self.state, self.tracker.one_hot()])
+
+    # --- Gymnasium API ------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        super().reset(seed=seed)
+        cfg, rng = self.cfg, self.np_random
+        goals, outside = self._draw_goals()
+        for i in range(2):
+            self._obstacles[i] = (
+                rng.uniform(*cfg.obstacle_u),
+                rng.uniform(*cfg.obstacle_amplitude),
+                rng.uniform(*cfg.obstacle_frequency),
+                rng.uniform(0.0, 2 * math.pi),
+            )
+        s = np.zeros(STATE_DIM)
+        s[X], s[Y] = self._xy(
+            rng.uniform(-cfg.start_spread, cfg.start_spread),
+            rng.uniform(-cfg.start_spread, cfg.start_spread),
+        )
+        s[THETA] = math.pi / 4 + rng.uniform(-cfg.start_heading, cfg.start_heading)
+        for k, (a, b) in enumerate(GOAL_DIMS):
+            s[a], s[b] = goals[k]
+        obstacles = self._obstacle_positions(0.0)
+        for k, (a, b) in enumerate(OBSTACLE_DIMS):
+            s[a], s[b] = obstacles[k]
+        self.state = s
+        self._t = 0
+        self._trajectory = [s[X : Y + 1].copy()]
+        q = self.tracker.reset(s)
+        goal = self.tracker.automaton.goal(q, s)
+        info = {
+            "fsa_state": q,
+            "success": self.tracker.success,
+            "trap": False,
+            "goal_outside_channel": outside,
+            # Whether the goal the CLF heads for first lies outside the channel.
+            "clf_goal_outside": bool(goal is not None and abs(goal[1] - goal[0]) > cfg.half_width),
+            **self._measure(s),
+        }
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), info
+
+    def step(
+        self, action: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
+        cfg = self.cfg
+        a_rl = np.asarray(action, dtype=np.float64).reshape(2)
+        if not np.all(np.isfinite(a_rl)):
+            raise ValueError(f"action {a_rl} is not finite")
+        if self.shield_in_env:
+            a_rl = self.rl_action(a_rl)
+        # else: a vector shield wrapper already scaled, shielded and passed the applied action.
+        s = self.state
+        result = None
+        if self.shield is not None and self.shield_in_env:
+            result = self.shield.filter(s, self.tracker.q, a_rl)
+            applied = result.action
+        else:
+            applied = a_rl
+        # Euler step of the reference point (Eq. 6A2), then the obstacles.
+        v, w = applied
+        sin, cos = math.sin(s[THETA]), math.cos(s[THETA])
+        nxt = s.copy()
+        lo, hi = cfg.arena
+        nxt[X] = min(max(s[X] + cfg.dt * (cos * v - cfg.eps * sin * w), lo), hi)
+        nxt[Y] = min(max(s[Y] + cfg.dt * (sin * v + cfg.eps * cos * w), lo), hi)
+        nxt[THETA] = (s[THETA] + cfg.dt * w + math.pi) % (2 * math.pi) - math.pi
+        self._t += 1
+        obstacles = self._obstacle_positions(self._t * cfg.dt)
+        for k, (a, b) in enumerate(OBSTACLE_DIMS):
+            nxt[a], nxt[b] = obstacles[k]
+        self.state = nxt
+        self._trajectory.append(nxt[X : Y + 1].copy())
+
+        q, r_tl = self.tracker.advance(nxt)
+        measured = self._measure(nxt)
+        r_obstacle = min(measured["min_obstacle_distance"] - cfg.safe_distance, 0.0)
+        reward = r_tl + cfg.w * r_obstacle
+        success = self.tracker.success
+        terminated = success or (self.evaluation and measured["collision"])
+        truncated = self._t >= cfg.horizon and not terminated
+        info = {
+            "fsa_state": q,
+            "success": success,
+            "trap": self.tracker.trapped,
+            "tl_reward": r_tl,
+            **measured,
+            "shield": shield_info(result, a_rl),
+        }
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(), float(reward), bool(terminated), bool(truncated), info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render_mode; pass render_mode='rgb_array'")
+            return None
+        from tlshield.envs.render import ChannelRenderer, Scene
+
+        if self._renderer is None:
+            lo, hi = self.cfg.arena
+            scene = Scene(
+                half_width=self.cfg.half_width,
+                goal_radius=self.cfg.goal_radius,
+                obstacle_radius=self.cfg.obstacle_radius,
+                arena=(lo, hi, lo, hi),
+            )
+            self._renderer = ChannelRenderer(scene)
+        frame = self._renderer.frame(
+            self.state, np.array(self._trajectory), self.tracker.q, self._t, title=self.config
+        )
+        if self.render_mode == "human":
+            self._renderer.show(frame)
+            return None
+        return frame
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def config_dict(self) -> dict[str, Any]:
+        """The configuration this env runs with (for saving alongside results)."""
+        return {"config": self.config, "evaluation": self.evaluation, **asdict(self.cfg)}

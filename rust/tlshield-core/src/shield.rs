@@ -4,7 +4,8 @@
 //! Variables `a_cbf` (m), `a_clf` (m) and `delta`; minimise `|a_cbf|^2 + |a_clf|^2 + K delta`
 //! subject to
 //! - every barrier `h` (the user's barriers, then the CBF safe set of the FSA state, Eq. 5C1):
-//!   `dh/ds (f + g (a_rl + a_cbf + a_clf)) + alpha h >= 0`;
+//!   `dh/ds (f + g (a_rl + a_cbf + a_clf)) + alpha (h - margin) >= 0` (a tiny `margin` keeps
+//!   `h` strictly positive, as the automaton's atoms need);
 //! - the CLF row towards the goal of Eq. 5B1, `V = |s[pos] - goal|^2`:
 //!   `dV/ds (f + g (a_rl + a_clf)) + c3 V <= delta`, `delta >= 0`;
 //! - box bounds on `a_cbf` and `a_clf`, and optional actuator limits on the applied action.
@@ -37,6 +38,9 @@ use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::robustness::check_finite;
+
+/// Batches smaller than this are shielded on the calling thread.
+pub const PARALLEL_MIN_ROWS: usize = 32;
 
 /// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`].
 pub const ACTIVE_SET_MAX_VARS: usize = 16;
@@ -175,6 +179,10 @@ pub struct ShieldConfig {
     pub solver: SolverChoice,
     /// Cost per unit of barrier slack in the relaxed problem (> 0).
     pub slack_penalty: f64,
+    /// Barrier rows enforce `h - margin` (>= 0): the CBF alone keeps `h >= 0`, but an atom
+    /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
+    /// to `h = 0` exactly and count as a violation. Small (default 1e-6 from Python).
+    pub margin: f64,
 }
 
 /// Where an enforced barrier comes from.
@@ -391,6 +399,12 @@ impl Shield {
         positive("c3", config.c3)?;
         positive("K", config.k)?;
         positive("slack_penalty", config.slack_penalty)?;
+        if !(config.margin.is_finite() && config.margin >= 0.0) {
+            return Err(ShieldError::Config(format!(
+                "margin = {}: expected a finite number >= 0",
+                config.margin
+            )));
+        }
         let m = match &dynamics {
             Some(d) => d.inputs(),
             None => config.cbf_bounds.lo.len(),
@@ -623,8 +637,14 @@ impl Shield {
         out.status.resize(rows, 0);
         out.slack.resize(rows, 0.0);
         out.solver.resize(rows, 0);
-        // One contiguous chunk of rows per worker thread, each with its own workspace.
-        let chunk = rows.div_ceil(rayon::current_num_threads().max(1)).max(1);
+        // One contiguous chunk of rows per worker thread, each with its own workspace; small
+        // batches stay on the calling thread (waking the pool costs more than they do).
+        let threads = if rows < PARALLEL_MIN_ROWS {
+            1
+        } else {
+            rayon::current_num_threads().max(1)
+        };
+        let chunk = rows.div_ceil(threads).max(1);
         states
             .par_chunks(chunk * n)
             .zip(qs.par_chunks(chunk))
@@ -721,7 +741,7 @@ impl Shield {
                     lg_a += lg * a;
                     ws.lg.push(lg);
                 }
-                ws.rhs.push(lf + lg_a + cfg.alpha * h);
+                ws.rhs.push(lf + lg_a + cfg.alpha * (h - cfg.margin));
                 if record {
                     ws.out.barriers.push((source, h));
                 }
@@ -951,6 +971,7 @@ mod tests {
             use_clf: true,
             solver,
             slack_penalty: 1e6,
+            margin: 0.0,
         }
     }
 

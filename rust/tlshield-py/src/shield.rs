@@ -271,7 +271,7 @@ impl PyShield {
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
         barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
-        slack_penalty=1e6,
+        slack_penalty=1e6, margin=1e-6,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -290,6 +290,7 @@ impl PyShield {
         use_clf: bool,
         solver: &str,
         slack_penalty: f64,
+        margin: f64,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let dynamics = dynamics_of(dynamics)?;
@@ -324,6 +325,7 @@ impl PyShield {
             use_clf,
             solver: map(SolverChoice::parse(solver))?,
             slack_penalty,
+            margin,
         };
         let barrier_names = config
             .barriers

@@ -1,0 +1,114 @@
+"""Environment steps per second of tlshield/Channel-v0 with and without the shield, single and
+vectorised (SB3 ``DummyVecEnv`` of 8 and 64 environments), in one run.
+
+The vectorised shield is :class:`tlshield.wrappers.ShieldedVecEnv`: one ``filter_batch`` call
+shields every sub-environment. For comparison the table also shows each sub-environment
+shielding itself (one ``filter`` call per environment). Target: the vectorised shield adds at
+most 30% to the step time of the vectorised environment.
+
+Run: ``.venv/bin/python benches/env_speed.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+TARGET_OVERHEAD = 0.30
+
+
+def steps_per_second(step: Callable[[], object], seconds: float) -> float:
+    """Median rate over 5 blocks of about ``seconds / 5`` each."""
+    step()
+    rates = []
+    for _ in range(5):
+        count, start = 0, time.perf_counter()
+        while (elapsed := time.perf_counter() - start) < seconds / 5:
+            step()
+            count += 1
+        rates.append(count / elapsed)
+    return float(np.median(rates))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    seconds = 1.0 if args.quick else 5.0
+
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tlshield.envs import ChannelConfig, ChannelEnv, channel_shield
+    from tlshield.wrappers import ShieldedVecEnv
+
+    rng = np.random.default_rng(0)
+    print("| environment | env steps/s | us per env step | shield overhead |")
+    print("|---|---:|---:|---:|")
+
+    def single(config: str) -> float:
+        env = ChannelEnv(config=config)
+        env.reset(seed=0)
+        actions = rng.uniform(-1, 1, size=(4096, 2))
+        k = [0]
+
+        def step() -> None:
+            k[0] += 1
+            _, _, term, trunc, _ = env.step(actions[k[0] % 4096])
+            if term or trunc:
+                env.reset()
+
+        return steps_per_second(step, seconds)
+
+    base = single("rl")
+    shielded = single("rl_cbf_clf")
+    print(f"| single, no shield | {base:,.0f} | {1e6 / base:.1f} | |")
+    print(
+        f"| single, shield in the env | {shielded:,.0f} | {1e6 / shielded:.1f} | "
+        f"{base / shielded - 1:+.0%} |"
+    )
+
+    verdicts = []
+    for n in (8, 64):
+        actions = rng.uniform(-1, 1, size=(256, n, 2))
+
+        def rate(venv: object) -> float:
+            venv.seed(0)  # type: ignore[attr-defined]
+            venv.reset()  # type: ignore[attr-defined]
+            k = [0]
+
+            def step() -> None:
+                k[0] += 1
+                venv.step(actions[k[0] % 256])  # type: ignore[attr-defined]
+
+            return steps_per_second(step, seconds) * n
+
+        plain = rate(DummyVecEnv([lambda: ChannelEnv(config="rl") for _ in range(n)]))
+        each = rate(DummyVecEnv([lambda: ChannelEnv(config="rl_cbf_clf") for _ in range(n)]))
+        template = ChannelEnv(shield_in_env=False)
+        batched = rate(
+            ShieldedVecEnv(
+                DummyVecEnv([lambda: ChannelEnv(shield_in_env=False) for _ in range(n)]),
+                channel_shield(ChannelConfig(), "rl_cbf_clf"),
+                action_fn=template.rl_action,
+            )
+        )
+        overhead = plain / batched - 1
+        verdicts.append(overhead <= TARGET_OVERHEAD)
+        print(f"| DummyVecEnv x{n}, no shield | {plain:,.0f} | {1e6 / plain:.1f} | |")
+        print(
+            f"| DummyVecEnv x{n}, each env shields itself | {each:,.0f} | {1e6 / each:.1f} | "
+            f"{plain / each - 1:+.0%} |"
+        )
+        print(
+            f"| DummyVecEnv x{n} + ShieldedVecEnv (one `filter_batch`) | {batched:,.0f} | "
+            f"{1e6 / batched:.1f} | {overhead:+.0%} (target <= +{TARGET_OVERHEAD:.0%}"
+            f"{'' if verdicts[-1] else ', MISSED'}) |"
+        )
+    return 0 if all(verdicts) else 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

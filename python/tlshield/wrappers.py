@@ -1,0 +1,314 @@
+"""Gymnasium wrappers that put a temporal-logic task and its shield around any environment.
+
+* :class:`FsaAugmented` appends the one-hot FSA state to the observation and rewards progress
+  through the task automaton (paper Eq. 5A1).
+* :class:`Shielded` filters every action through a :class:`tlshield.Shield` (Eq. 5D2).
+* :class:`ShieldedVecEnv` (Stable-Baselines3 ``VecEnv``) and :class:`ShieldedVectorEnv`
+  (Gymnasium vector API) shield all sub-environments in one ``Shield.filter_batch`` call.
+
+Both single-env wrappers are thin: the automaton bookkeeping lives in :class:`FsaTracker`, the
+shield call in :func:`shield_info`, and the paper's case study (``tlshield/Channel-v0``) is built
+from the same two parts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from tlshield._core import Automaton, FilterResult, Shield, Spec
+
+StateFn = Callable[[Any], NDArray[np.float64]]
+DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+
+def identity_state(obs: Any) -> NDArray[np.float64]:
+    """The default ``state_fn``: the observation is the state vector."""
+    return np.asarray(obs, dtype=np.float64)
+
+
+class FsaTracker:
+    """The task automaton along one episode: the current FSA state and the Eq. 5A1 reward.
+
+    The FSA reads every state: ``reset(s_0)`` sets ``q_0 = step(initial, s_0)`` and
+    ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition. In the
+    trap every step pays ``trap_penalty`` (which must be no better than the worst reward
+    reachable outside it, so that entering the trap never pays).
+    """
+
+    def __init__(self, automaton: Automaton, c_r: float, trap_penalty: float) -> None:
+        if not (np.isfinite(c_r) and c_r > 0):
+            raise ValueError(f"c_r = {c_r}: expected a finite number > 0")
+        if not np.isfinite(trap_penalty):
+            raise ValueError(f"trap_penalty = {trap_penalty}: expected a finite number")
+        self.automaton = automaton
+        self.c_r = float(c_r)
+        self.trap_penalty = float(trap_penalty)
+        self.accepting = frozenset(automaton.accepting)
+        self.q = automaton.initial
+        self._eye = np.eye(automaton.num_states)
+
+    def reset(self, s: NDArray[np.float64]) -> int:
+        self.q = self.automaton.step(self.automaton.initial, s)
+        return self.q
+
+    def advance(self, s_next: NDArray[np.float64]) -> tuple[int, float]:
+        """Moves to the next FSA state; returns it and the reward of the transition."""
+        q_next, reward, _ = self.automaton.advance(self.q, s_next, self.c_r, self.trap_penalty)
+        self.q = q_next
+        return q_next, reward
+
+    @property
+    def success(self) -> bool:
+        return self.q in self.accepting
+
+    @property
+    def trapped(self) -> bool:
+        return self.q == self.automaton.trap
+
+    def one_hot(self, q: int | None = None) -> NDArray[np.float64]:
+        return self._eye[self.q if q is None else q]
+
+
+def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
+    """The ``info["shield"]`` entry of a step (zeros and status ``"off"`` without a shield)."""
+    if result is None:
+        zeros = np.zeros_like(a_rl)
+        return {"a_rl": a_rl, "a_cbf": zeros, "a_clf": zeros, "delta": 0.0, "status": "off"}
+    return {
+        "a_rl": a_rl,
+        "a_cbf": result.a_cbf,
+        "a_clf": result.a_clf,
+        "delta": result.delta,
+        "status": result.status,
+    }
+
+
+class FsaAugmented(gym.Wrapper):
+    """Appends the one-hot FSA state to the observation and rewards the task (Eq. 5A1).
+
+    ``state_fn`` maps the wrapped env's observation to the state vector the spec's predicates
+    read (default: the observation itself). The reward becomes ``r_tl + w * r_env``: ``w = 0``
+    replaces the env's reward, ``w > 0`` augments it. ``info`` gains ``fsa_state``, ``success``
+    (the accepting state is reached), ``trap`` and ``tl_reward``. With
+    ``terminate_on_success`` the episode ends when the task is done.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        spec: Spec,
+        state_fn: StateFn = identity_state,
+        *,
+        c_r: float = 1.0,
+        w: float = 0.0,
+        trap_penalty: float = -100.0,
+        terminate_on_success: bool = True,
+    ) -> None:
+        super().__init__(env)
+        if not isinstance(env.observation_space, gym.spaces.Box):
+            raise TypeError("FsaAugmented needs a Box observation space")
+        self.tracker = FsaTracker(spec.automaton(), c_r, trap_penalty)
+        self.state_fn = state_fn
+        self.w = float(w)
+        self.terminate_on_success = terminate_on_success
+        box = env.observation_space
+        k = self.tracker.automaton.num_states
+        low = np.concatenate([box.low.ravel(), np.zeros(k)])
+        high = np.concatenate([box.high.ravel(), np.ones(k)])
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float64)
+
+    @property
+    def fsa_state(self) -> int:
+        return self.tracker.q
+
+    def _observe(self, obs: Any) -> NDArray[np.float64]:
+        return np.concatenate([np.asarray(obs, dtype=np.float64).ravel(), self.tracker.one_hot()])
+
+    def reset(self, **kwargs: Any) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        q = self.tracker.reset(self.state_fn(obs))
+        info = {**info, "fsa_state": q, "success": self.tracker.success, "trap": False}
+        return self._observe(obs), info
+
+    def step(
+        self, action: Any
+    ) -> tuple[NDArray[np.float64], SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        q, r_tl = self.tracker.advance(self.state_fn(obs))
+        info = {
+            **info,
+            "fsa_state": q,
+            "success": self.tracker.success,
+            "trap": self.tracker.trapped,
+            "tl_reward": r_tl,
+        }
+        terminated = bool(terminated) or (self.terminate_on_success and self.tracker.success)
+        return self._observe(obs), r_tl + self.w * float(reward), terminated, truncated, info
+
+
+class Shielded(gym.Wrapper):
+    """Filters every action through ``shield`` before the wrapped env sees it.
+
+    Must wrap an :class:`FsaAugmented` env (directly or further down): the shield needs the
+    current FSA state. ``state_fn`` maps the observation (as the wrapped env returns it, FSA
+    one-hot included) to the state vector; by default the first ``n`` values. ``dynamics_fn(s)``
+    returns ``(f, g)`` for systems without a built-in model. ``info["shield"]`` carries
+    ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        shield: Shield,
+        state_fn: StateFn | None = None,
+        dynamics_fn: DynamicsFn | None = None,
+    ) -> None:
+        super().__init__(env)
+        try:
+            env.get_wrapper_attr("fsa_state")
+        except AttributeError as err:
+            raise TypeError("Shielded must wrap an FsaAugmented environment") from err
+        self.shield = shield
+        k = shield.automaton.num_states
+        self.state_fn = state_fn or (lambda obs: np.asarray(obs, dtype=np.float64)[:-k])
+        self.dynamics_fn = dynamics_fn
+        self._state: NDArray[np.float64] | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._state = self.state_fn(obs)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        a_rl = np.asarray(action, dtype=np.float64)
+        q = self.env.get_wrapper_attr("fsa_state")
+        if self.dynamics_fn is None:
+            result = self.shield.filter(self._state, q, a_rl)
+        else:
+            f, g = self.dynamics_fn(self._state)
+            result = self.shield.filter(self._state, q, a_rl, f=f, g=g)
+        obs, reward, terminated, truncated, info = self.env.step(result.action)
+        self._state = self.state_fn(obs)
+        info = {**info, "shield": shield_info(result, a_rl)}
+        return obs, reward, terminated, truncated, info
+
+
+def _batch_infos(out: dict[str, Any], a_rl: NDArray[np.float64]) -> list[dict[str, Any]]:
+    """Per-env ``info["shield"]`` of a batch (lists of floats: cheaper than array rows)."""
+    from tlshield import STATUS
+
+    columns = zip(
+        a_rl.tolist(),
+        out["a_cbf"].tolist(),
+        out["a_clf"].tolist(),
+        out["delta"].tolist(),
+        out["status"].tolist(),
+        strict=True,
+    )
+    return [
+        {"a_rl": a, "a_cbf": cbf, "a_clf": clf, "delta": delta, "status": STATUS[status]}
+        for a, cbf, clf, delta, status in columns
+    ]
+
+
+def _rl_actions(actions: Any, action_fn: ActionFn | None) -> NDArray[np.float64]:
+    a = np.asarray(actions, dtype=np.float64)
+    return np.ascontiguousarray(a if action_fn is None else action_fn(a), dtype=np.float64)
+
+
+def _split(obs: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """States and FSA states from a batch of FSA-augmented observations."""
+    return np.ascontiguousarray(obs[:, :-k]), np.argmax(obs[:, -k:], axis=1)
+
+
+ActionFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+class ShieldedVectorEnv(gym.vector.VectorWrapper):
+    """Shields every sub-environment of a Gymnasium vector env in one ``filter_batch`` call.
+
+    The sub-environments are FSA-augmented envs without their own shield whose observation is
+    the state vector followed by the one-hot FSA state, and whose ``step`` takes the applied
+    action (as ``tlshield/Channel-v0`` with ``shield_in_env=False``). ``action_fn`` maps the
+    policy's actions ``(N, m)`` to the RL actions in the shield's units (default: as they
+    are). ``infos["shield"]`` holds one dict per sub-env.
+    """
+
+    def __init__(
+        self, env: gym.vector.VectorEnv, shield: Shield, action_fn: ActionFn | None = None
+    ) -> None:
+        super().__init__(env)
+        self.shield = shield
+        self.action_fn = action_fn
+        self._k = shield.automaton.num_states
+        self._obs: NDArray[np.float64] | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._obs = np.asarray(obs, dtype=np.float64)
+        return obs, info
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        if self._obs is None:
+            raise RuntimeError("call reset() before step()")
+        a_rl = _rl_actions(actions, self.action_fn)
+        states, qs = _split(self._obs, self._k)
+        out = self.shield.filter_batch(states, qs, a_rl)
+        obs, rewards, terminated, truncated, infos = self.env.step(out["action"])
+        self._obs = np.asarray(obs, dtype=np.float64)
+        infos = {**infos, "shield": _batch_infos(out, a_rl)}
+        return obs, rewards, terminated, truncated, infos
+
+
+try:  # Stable-Baselines3 is optional (the `train` extra).
+    from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+except ImportError:  # pragma: no cover - exercised only without SB3
+    VecEnvWrapper = object  # type: ignore[assignment,misc]
+    VecEnv = Any  # type: ignore[assignment,misc]
+
+
+class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc,valid-type]
+    """Stable-Baselines3 ``VecEnv`` wrapper: shields all sub-environments in one
+    ``filter_batch`` call per step (see :class:`ShieldedVectorEnv` for the layout and
+    ``action_fn``). Each sub-env's ``info["shield"]`` carries its correction."""
+
+    def __init__(self, venv: VecEnv, shield: Shield, action_fn: ActionFn | None = None) -> None:
+        if VecEnvWrapper is object:
+            raise ImportError(
+                "ShieldedVecEnv needs stable-baselines3 (pip install tlshield[train])"
+            )
+        super().__init__(venv)
+        self.shield = shield
+        self.action_fn = action_fn
+        self._k = shield.automaton.num_states
+        self._obs: NDArray[np.float64] | None = None
+        self._shield_infos: list[dict[str, Any]] = []
+
+    def reset(self) -> Any:
+        obs = self.venv.reset()
+        self._obs = np.asarray(obs, dtype=np.float64)
+        return obs
+
+    def step_async(self, actions: NDArray[Any]) -> None:
+        if self._obs is None:
+            raise RuntimeError("call reset() before step()")
+        a_rl = _rl_actions(actions, self.action_fn)
+        states, qs = _split(self._obs, self._k)
+        out = self.shield.filter_batch(states, qs, a_rl)
+        self._shield_infos = _batch_infos(out, a_rl)
+        self.venv.step_async(out["action"])
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        # After an episode ends SB3 has already reset that sub-env: obs is its first state.
+        self._obs = np.asarray(obs, dtype=np.float64)
+        for info, shield in zip(infos, self._shield_infos, strict=True):
+            info["shield"] = shield
+        return obs, rewards, dones, infos

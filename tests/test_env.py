@@ -1,0 +1,304 @@
+"""tlshield/Channel-v0 and the wrappers: Gymnasium API, determinism, the shield's effect on
+violations, goal sampling, vectorised shielding, and bad input."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tlshield
+from tlshield.envs import CONFIGS, ENV_ID, ChannelEnv, channel_shield
+from tlshield.envs.channel import GOAL_DIMS, STATE_DIM, ChannelConfig
+from tlshield.wrappers import FsaAugmented, Shielded, ShieldedVecEnv, ShieldedVectorEnv
+
+INFO_KEYS = {
+    "fsa_state",
+    "constraints",
+    "min_obstacle_distance",
+    "success",
+    "collision",
+    "violation",
+    "shield",
+    "trap",
+    "tl_reward",
+}
+
+
+@pytest.mark.parametrize("config", sorted(CONFIGS))
+def test_check_env_passes(config: str) -> None:
+    env = gym.make(ENV_ID, config=config, render_mode="rgb_array")
+    check_env(env.unwrapped)
+    env.close()
+
+
+def test_evaluation_env_passes_check_env_and_forces_the_cbf() -> None:
+    env = gym.make(ENV_ID, config="rl", evaluation=True)
+    check_env(env.unwrapped, skip_render_check=True)
+    shield = env.unwrapped.shield
+    assert shield is not None and "use_cbf=true" in repr(shield)
+
+
+def rollout(env: gym.Env, seed: int, actions: np.ndarray) -> list[np.ndarray]:
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for a in actions:
+        obs, _, term, trunc, _ = env.step(a)
+        out.append(obs)
+        if term or trunc:
+            break
+    return out
+
+
+def test_same_seed_same_episode() -> None:
+    actions = np.random.default_rng(0).uniform(-1, 1, size=(200, 2))
+    first = rollout(gym.make(ENV_ID), 42, actions)
+    second = rollout(gym.make(ENV_ID), 42, actions)
+    assert len(first) == len(second)
+    assert all(np.array_equal(a, b) for a, b in zip(first, second, strict=True))
+    other = rollout(gym.make(ENV_ID), 43, actions)
+    assert not np.array_equal(first[0], other[0])
+
+
+def test_observation_layout_and_info() -> None:
+    env = gym.make(ENV_ID)
+    obs, info = env.reset(seed=0)
+    aut = env.unwrapped.spec_tl.automaton()
+    assert obs.shape == (STATE_DIM + aut.num_states,)
+    assert obs[STATE_DIM:].sum() == 1 and obs[STATE_DIM + info["fsa_state"]] == 1
+    obs, reward, term, trunc, info = env.step(np.zeros(2))
+    assert INFO_KEYS <= set(info)
+    assert set(info["constraints"]) == {"c1", "c2"}
+    s = obs[:STATE_DIM]
+    assert info["constraints"]["c1"] == pytest.approx(s[0] - s[1] + 1.5)
+    assert set(info["shield"]) == {"a_rl", "a_cbf", "a_clf", "delta", "status"}
+    assert isinstance(reward, float) and math.isfinite(reward)
+
+
+def adversarial(env: ChannelEnv, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Full speed towards the nearer wall (turning towards it), half of the time."""
+    if rng.random() < 0.5:
+        return rng.uniform(-1, 1, size=2)
+    x, y, theta = obs[:3]
+    # Outward normal of the nearer wall: c1 (x - y + w) is nearer when x < y.
+    wall = 3 * math.pi / 4 if x - y < 0 else -math.pi / 4
+    heading_error = (wall - theta + math.pi) % (2 * math.pi) - math.pi
+    return np.array([1.0, np.clip(2.0 * heading_error, -1, 1)])
+
+
+def violations(config: str, policy: str, episodes: int = 200) -> tuple[int, float]:
+    env = ChannelEnv(config=config)
+    rng = np.random.default_rng(7)
+    count, min_h = 0, math.inf
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=episode)
+        for _ in range(200):
+            if policy == "random":
+                action = rng.uniform(-1, 1, size=2)
+            else:
+                action = adversarial(env, obs, rng)
+            obs, _, term, trunc, info = env.step(action)
+            count += info["violation"]
+            min_h = min(min_h, *info["constraints"].values())
+            if term or trunc:
+                break
+    return count, min_h
+
+
+@pytest.mark.parametrize("config", ["rl_cbf", "rl_cbf_clf"])
+@pytest.mark.parametrize("policy", ["random", "adversarial"])
+def test_cbf_prevents_every_channel_violation(config: str, policy: str) -> None:
+    """200 episodes of 200 steps: with the CBF on, no state leaves the channel."""
+    count, min_h = violations(config, policy)
+    print(f"{config} {policy}: {count} violations, min h over visited states {min_h:.3e}")
+    assert count == 0 and min_h >= 0.0
+
+
+def test_without_the_cbf_violations_happen() -> None:
+    count, min_h = violations("rl", "adversarial", episodes=50)
+    print(f"rl adversarial: {count} violations, min h {min_h:.3e}")
+    assert count > 0 and min_h < 0
+
+
+def test_goal_draws() -> None:
+    """Every episode is solvable (g3 and one of g1/g2 inside the channel), and the episodes
+    where the CLF-preferred goal lies outside the channel occur."""
+    env = ChannelEnv()
+    w = env.cfg.half_width
+    n, outside, clf_outside = 500, 0, 0
+    for seed in range(n):
+        obs, info = env.reset(seed=seed)
+        centres = [obs[a : b + 1] for a, b in GOAL_DIMS]
+        inside = [abs(c[0] - c[1]) < w - env.cfg.goal_radius * math.sqrt(2) for c in centres]
+        assert inside[2] and (inside[0] or inside[1])
+        outside += info["goal_outside_channel"]
+        clf_outside += info["clf_goal_outside"]
+    print(
+        f"goal outside the channel: {outside / n:.1%}; CLF-preferred goal outside: "
+        f"{clf_outside / n:.1%}"
+    )
+    assert 0.35 < outside / n < 0.65
+    assert clf_outside > 0
+
+
+def test_trap_never_pays_better_than_outside() -> None:
+    env = ChannelEnv(config="rl")
+    rng = np.random.default_rng(1)
+    worst, trapped_steps = math.inf, 0
+    for seed in range(30):
+        env.reset(seed=seed)
+        in_trap = False
+        for _ in range(200):
+            _, _, term, trunc, info = env.step(rng.uniform(-1, 1, size=2))
+            if in_trap:  # a step taken from the trap
+                assert info["tl_reward"] == env.cfg.trap_penalty
+                trapped_steps += 1
+            else:
+                worst = min(worst, info["tl_reward"])
+            in_trap = info["trap"]
+            if term or trunc:
+                break
+    assert trapped_steps > 0
+    assert env.cfg.trap_penalty <= worst
+
+
+def test_overrides_and_bad_input() -> None:
+    env = gym.make(ENV_ID, config="rl_clf", K=1e3, dt=0.05, horizon=10, c_r=2.0)
+    assert env.unwrapped.cfg.horizon == 10 and env.unwrapped.cfg.K == 1e3
+    env.reset(seed=0)
+    steps = 0
+    while True:
+        steps += 1
+        _, _, term, trunc, _ = env.step(np.zeros(2))
+        if term or trunc:
+            break
+    assert steps <= 10
+    with pytest.raises(ValueError, match="config"):
+        ChannelEnv(config="cbf")
+    with pytest.raises(TypeError, match="unknown Channel-v0 parameter"):
+        ChannelEnv(alhpa=1.0)
+    with pytest.raises(ValueError, match="alpha \\* dt"):
+        ChannelEnv(alpha=20.0)
+    with pytest.raises(ValueError, match="dt"):
+        ChannelEnv(dt=-0.1)
+    with pytest.raises(ValueError, match="render_mode"):
+        ChannelEnv(render_mode="ascii")
+    env = ChannelEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="not finite"):
+        env.step(np.array([np.nan, 0.0]))
+    assert ChannelEnv().config_dict()["alpha"] == ChannelConfig().alpha
+
+
+def test_rgb_render() -> None:
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.zeros(2))
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+
+
+# --- the wrappers on someone else's environment ---------------------------------------------
+
+
+class PointEnv(gym.Env):
+    """A 2-D single integrator: reach the disc at (3, 0) while staying in y < 1."""
+
+    observation_space = gym.spaces.Box(-10, 10, shape=(2,), dtype=np.float64)
+    action_space = gym.spaces.Box(-1, 1, shape=(2,), dtype=np.float64)
+
+    def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[Any, dict]:
+        super().reset(seed=seed)
+        self.p = np.array([0.0, 0.5])
+        return self.p.copy(), {}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        self.p = self.p + 0.1 * np.asarray(action)
+        return self.p.copy(), -1.0, False, False, {}
+
+
+def point_spec() -> tlshield.Spec:
+    return tlshield.Spec(
+        "(below U goal)",
+        {
+            "goal": tlshield.Ball([0, 1], 0.3, center=[3.0, 0.0]),
+            "below": tlshield.Halfspace([0.0, -1.0], 1.0),
+        },
+    )
+
+
+def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
+    spec = point_spec()
+    env = FsaAugmented(PointEnv(), spec, c_r=1.0, w=0.5, trap_penalty=-50.0)
+    aut = spec.automaton()
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (2 + aut.num_states,) and info["fsa_state"] == env.fsa_state
+    q = env.fsa_state
+    obs, reward, _, _, info = env.step(np.array([1.0, 0.0]))
+    expected = aut.reward(q, obs[:2], 1.0) + 0.5 * -1.0
+    assert reward == pytest.approx(expected)
+    shield = tlshield.Shield(
+        spec,
+        tlshield.SingleIntegrator([0, 1]),
+        alpha=5.0,
+        c3=1.0,
+        K=1e4,
+        cbf_bounds=(-3, 3),
+        clf_bounds=(-0.5, 0.5),
+    )
+    shielded = Shielded(env, shield)
+    obs, _ = shielded.reset(seed=0)
+    for _ in range(100):
+        obs, _, term, _, info = shielded.step(np.array([0.0, 1.0]))  # straight at the wall
+        assert obs[1] < 1.0 + 1e-9
+        assert info["shield"]["status"] == "solved"
+        if term:
+            break
+    with pytest.raises(TypeError, match="FsaAugmented"):
+        Shielded(PointEnv(), shield)
+
+
+def test_gymnasium_vector_shield_equals_per_env_shield() -> None:
+    n, seeds = 4, [10, 11, 12, 13]
+    vec = gym.vector.SyncVectorEnv([lambda: ChannelEnv(shield_in_env=False) for _ in range(n)])
+    cfg = ChannelConfig()
+    singles = [ChannelEnv() for _ in range(n)]
+    shielded = ShieldedVectorEnv(
+        vec, channel_shield(cfg, "rl_cbf_clf"), action_fn=singles[0].rl_action
+    )
+    obs, _ = shielded.reset(seed=seeds)
+    single_obs = [env.reset(seed=s)[0] for env, s in zip(singles, seeds, strict=True)]
+    np.testing.assert_array_equal(obs, np.stack(single_obs))
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        actions = rng.uniform(-1, 1, size=(n, 2))
+        obs, _, _, _, infos = shielded.step(actions)
+        expected = [env.step(a)[0] for env, a in zip(singles, actions, strict=True)]
+        np.testing.assert_allclose(obs, np.stack(expected), atol=1e-12)
+        assert len(infos["shield"]) == n
+
+
+def test_sb3_vecenv_shield_equals_per_env_shield() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    n = 3
+    venv = DummyVecEnv([lambda: ChannelEnv(shield_in_env=False) for _ in range(n)])
+    venv.seed(5)
+    singles = [ChannelEnv(config="rl_cbf") for _ in range(n)]
+    shielded = ShieldedVecEnv(
+        venv, channel_shield(ChannelConfig(), "rl_cbf"), action_fn=singles[0].rl_action
+    )
+    obs = shielded.reset()
+    expected = np.stack([env.reset(seed=5 + i)[0] for i, env in enumerate(singles)])
+    np.testing.assert_array_equal(obs, expected)
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        actions = rng.uniform(-1, 1, size=(n, 2))
+        obs, _, _, infos = shielded.step(actions)
+        want = np.stack([env.step(a)[0] for env, a in zip(singles, actions, strict=True)])
+        np.testing.assert_allclose(obs, want, atol=1e-12)
+        assert all("shield" in info for info in infos)
