@@ -74,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for n in (8, 64):
         actions = rng.uniform(-1, 1, size=(256, n, 2))
 
-        def rate(venv: object) -> float:
+        def rate(venv: object, actions: np.ndarray = actions, n: int = n) -> float:
             venv.seed(0)  # type: ignore[attr-defined]
             venv.reset()  # type: ignore[attr-defined]
             k = [0]

@@ -70,7 +70,7 @@ def test_observation_layout_and_info() -> None:
     aut = env.unwrapped.spec_tl.automaton()
     assert obs.shape == (STATE_DIM + aut.num_states,)
     assert obs[STATE_DIM:].sum() == 1 and obs[STATE_DIM + info["fsa_state"]] == 1
-    obs, reward, term, trunc, info = env.step(np.zeros(2))
+    obs, reward, _, _, info = env.step(np.zeros(2))
     assert INFO_KEYS <= set(info)
     assert set(info["constraints"]) == {"c1", "c2"}
     s = obs[:STATE_DIM]
