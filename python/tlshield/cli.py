@@ -107,6 +107,94 @@ def _fsa(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive(text: str) -> int:
+    value = int(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text}")
+    return value
+
+
+def _train(args: argparse.Namespace) -> int:
+    from tlshield.training import train
+
+    run = train(
+        args.config,
+        args.seed,
+        args.updates,
+        args.out,
+        clf_schedule=args.clf_schedule,
+        clf_final_scale=args.clf_final_scale,
+        progress=not args.quiet,
+    )
+    print(f"wrote {run} (metrics.csv, model.zip, tb/, config.json)")
+    if args.evaluate:
+        _print_evaluation(_evaluate_run(run, args.trials))
+    return 0
+
+
+def _evaluate_run(run: Path | str, trials: int) -> dict[str, object]:
+    from tlshield.training import evaluate
+
+    return evaluate(run, trials=trials)
+
+
+def _print_evaluation(result: dict[str, object]) -> None:
+    print(
+        f"{result['config']} seed {result['seed']}: success {result['successes']}/"
+        f"{result['trials']} ({result['success_rate']:.0%}), collisions {result['collisions']}, "
+        f"violation steps {result['violation_steps']}"
+    )
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    for run in args.runs:
+        _print_evaluation(_evaluate_run(run, args.trials))
+    return 0
+
+
+def _reproduce(args: argparse.Namespace) -> int:
+    from tlshield.training import reproduce
+
+    root = reproduce(
+        args.out,
+        configs=tuple(args.configs),
+        seeds=tuple(args.seeds),
+        updates=args.updates,
+        trials=args.trials,
+        workers=args.workers,
+        progress=not args.quiet,
+        clf_schedule=args.clf_schedule,
+        clf_final_scale=args.clf_final_scale,
+    )
+    print((root / "results.md").read_text())
+    print(f"figures in {root / 'figures'}")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from tlshield.plots import plot_all, results_table
+
+    for path in plot_all(args.results, args.out):
+        print(f"wrote {path}")
+    print(results_table(args.results))
+    return 0
+
+
+def _add_schedule(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--clf-schedule",
+        choices=("fixed", "linear", "exponential"),
+        default="fixed",
+        help="shrink the CLF bounds as training progresses (default: fixed)",
+    )
+    parser.add_argument(
+        "--clf-final-scale",
+        type=float,
+        default=0.2,
+        help="CLF bound scale at the end of training for a shrinking schedule (default 0.2)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``tlshield`` command."""
     parser = argparse.ArgumentParser(
@@ -127,10 +215,57 @@ def build_parser() -> argparse.ArgumentParser:
     fsa.add_argument("--dot", metavar="PATH", help="write Graphviz DOT text to PATH")
     fsa.add_argument("--png", metavar="PATH", help="render a PNG to PATH (needs graphviz)")
     fsa.set_defaults(handler=_fsa)
+
+    from tlshield.envs.channel import CONFIGS
+
+    train = sub.add_parser("train", help="train PPO on one configuration of the case study")
+    train.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
+    train.add_argument("--updates", type=_positive, default=200, help="PPO updates (1000 steps)")
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--out", required=True, help="run folder to write")
+    train.add_argument("--evaluate", action="store_true", help="evaluate after training")
+    train.add_argument("--trials", type=_positive, default=20, help="evaluation trials")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_schedule(train)
+    train.set_defaults(handler=_train)
+
+    evaluate = sub.add_parser("evaluate", help="evaluate saved runs (CBF on, paper's rules)")
+    evaluate.add_argument("runs", nargs="+", help="run folders")
+    evaluate.add_argument("--trials", type=_positive, default=20)
+    evaluate.set_defaults(handler=_evaluate)
+
+    repro = sub.add_parser(
+        "reproduce", help="all configurations x seeds, then figures and a results table"
+    )
+    repro.add_argument("--out", default="results", help="results folder (default: results)")
+    repro.add_argument("--configs", nargs="+", choices=sorted(CONFIGS), default=list(CONFIGS))
+    repro.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    repro.add_argument("--updates", type=_positive, default=150, help="PPO updates per run")
+    repro.add_argument("--trials", type=_positive, default=20, help="evaluation trials per run")
+    repro.add_argument("--workers", type=_positive, default=2, help="parallel runs")
+    repro.add_argument("--quiet", action="store_true")
+    _add_schedule(repro)
+    repro.set_defaults(handler=_reproduce)
+
+    plot = sub.add_parser("plot", help="figures and the results table from a results folder")
+    plot.add_argument("results", help="results folder (as written by reproduce)")
+    plot.add_argument("--out", help="figures folder (default: RESULTS/figures)")
+    plot.set_defaults(handler=_plot)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tlshield`` and ``python -m tlshield``."""
-    args = build_parser().parse_args(argv)
-    return int(args.handler(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args))
+    except (FileNotFoundError, ValueError) as err:
+        print(f"tlshield {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            f"tlshield {args.command}: interrupted; finished runs and metrics so far are kept",
+            file=sys.stderr,
+        )
+        return 130

@@ -1,0 +1,117 @@
+"""Training, evaluation and the command line, end to end with tiny budgets (real SB3 PPO)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tlshield import cli
+from tlshield.training import METRIC_COLUMNS, clf_scale, evaluate, train
+
+
+def read_metrics(run: Path) -> list[dict[str, str]]:
+    with (run / "metrics.csv").open() as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return train("rl_cbf_clf", 0, 3, tmp_path_factory.mktemp("runs") / "x", progress=False)
+
+
+def test_run_folder_holds_everything(run: Path) -> None:
+    assert {p.name for p in run.iterdir()} >= {"config.json", "metrics.csv", "model.zip", "tb"}
+    rows = read_metrics(run)
+    assert len(rows) == 3 and tuple(rows[0]) == METRIC_COLUMNS
+    assert [int(r["timesteps"]) for r in rows] == [1000, 2000, 3000]
+    assert all(int(r["violations"]) == 0 for r in rows)  # the CBF is on
+    record = json.loads((run / "config.json").read_text())
+    assert record["finished"] and record["config"] == "rl_cbf_clf"
+    assert record["ppo"]["net_arch"] == {"pi": [300, 200, 100], "vf": [300, 200, 100]}
+    assert any((run / "tb").iterdir())
+
+
+def test_evaluation(run: Path) -> None:
+    result = evaluate(run, trials=3)
+    assert result["trials"] == 3 and 0.0 <= result["success_rate"] <= 1.0
+    assert result["violation_steps"] == 0
+    saved = json.loads((run / "evaluation.json").read_text())
+    assert saved == result
+    data = np.load(run / "trajectories.npz")
+    assert data["starts"].shape == (3, 13) and data["lengths"].sum() == len(data["paths"])
+
+
+def test_seeded_runs_are_deterministic(tmp_path: Path) -> None:
+    a = read_metrics(train("rl_cbf", 7, 2, tmp_path / "a", progress=False))
+    b = read_metrics(train("rl_cbf", 7, 2, tmp_path / "b", progress=False))
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]  # noqa: E731
+    assert strip(a) == strip(b)
+
+
+def test_clf_schedules(tmp_path: Path) -> None:
+    assert clf_scale("fixed", 0.7, 0.2) == 1.0
+    assert clf_scale("linear", 1.0, 0.2) == pytest.approx(0.2)
+    assert clf_scale("exponential", 0.5, 0.25) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="schedule"):
+        clf_scale("cosine", 0.5, 0.2)
+    run = train("rl_clf", 1, 3, tmp_path / "s", clf_schedule="linear", progress=False)
+    scales = [float(r["clf_scale"]) for r in read_metrics(run)]
+    assert scales == pytest.approx([1.0, 0.6, 0.2])
+
+
+def test_bad_training_arguments(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="config"):
+        train("rl_cbf_clf_x", 0, 1, tmp_path / "bad")
+    with pytest.raises(ValueError, match="updates"):
+        train("rl", 0, 0, tmp_path / "bad")
+    with pytest.raises(ValueError, match="scale"):
+        train("rl", 0, 1, tmp_path / "bad", clf_final_scale=2.0)
+    with pytest.raises(FileNotFoundError, match="not a tlshield run"):
+        evaluate(tmp_path / "missing")
+    with pytest.raises(ValueError, match="trials"):
+        evaluate(tmp_path, trials=0)
+
+
+def test_cli_help_and_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    for command in ("train", "evaluate", "reproduce", "plot", "fsa"):
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main([command, "--help"])
+        assert exit_info.value.code == 0
+        assert "usage: tlshield " + command in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["train", "--config", "nope", "--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["train", "--updates", "-3", "--out", str(tmp_path)])
+    assert "positive integer" in capsys.readouterr().err
+    assert cli.main(["evaluate", str(tmp_path / "missing")]) == 2
+    assert "not a tlshield run folder" in capsys.readouterr().err
+    assert cli.main(["plot", str(tmp_path / "empty")]) == 2
+
+
+def test_cli_train_and_evaluate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cli_run"
+    code = cli.main(
+        [
+            "train",
+            "--config",
+            "rl",
+            "--updates",
+            "1",
+            "--out",
+            str(out),
+            "--quiet",
+            "--evaluate",
+            "--trials",
+            "2",
+        ]
+    )
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and "success" in printed
+    assert (out / "evaluation.json").is_file()
