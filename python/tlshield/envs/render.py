@@ -40,9 +40,15 @@ _ARROW_LENGTH = 0.6
 #: markers) scale with ``size``, so a frame looks the same at every resolution.
 _INCHES = 4.0
 
+#: The labels of the text box (equal lengths: the numbers follow them in one column), and the
+#: room (characters) the box keeps for the numbers.
+_INFO_LABELS = ("q    = ", "step = ")
+_INFO_DIGITS = 5
+
 _CHANNEL_COLOR = "#1f77b4"
 _GOAL_COLORS = ("#2ca02c", "#ff7f0e", "#9467bd")  # g1 green, g2 orange, g3 purple
 _OBSTACLE_COLOR = "#d62728"
+_OBSTACLE_EDGE = "#7f1010"
 _TRAJECTORY_COLOR = "#333333"
 _AGENT_COLOR = "black"
 
@@ -85,19 +91,36 @@ class ChannelRenderer:
             raise ValueError(f"size = {size!r}: expected at least 64 pixels")
         self.scene = scene
         self.size = int(size)
-        self._fig: Any = None  # matplotlib.figure.Figure, built by _build()
+        # The figure and its artists, built by _build() on the first frame.
+        self._fig: Any = None
+        self._canvas: Any = None
+        self._ax: Any = None
+        self._background: Any = None
+        self._info: Any = None
+        self._values: Any = None
+        self._traj: Any = None
+        self._start: Any = None
+        self._agent: Any = None
+        self._arrow: Any = None
+        self._goals: list[Any] = []
+        self._goal_labels: list[Any] = []
+        self._obstacles: list[Any] = []
+        self._obstacle_labels: list[Any] = []
+        self._moving: list[Any] = []
         self._window: Any = None  # (pyplot figure, AxesImage) of show()
         self._show_disabled = False
+        self._title = ""
 
     # --- building ------------------------------------------------------------------------
 
-    def _build(self) -> None:
-        """Create the figure, the static artists and the background bitmap, and the moving
-        artists (``animated=True``, so the full draw leaves them out)."""
+    def _build(self, title: str) -> None:
+        """Create the figure, the static artists, the moving artists (``animated=True``: a full
+        draw leaves them out) and the background bitmap."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
         from matplotlib.lines import Line2D
         from matplotlib.patches import Circle, FancyArrowPatch, Polygon
+        from matplotlib.transforms import ScaledTranslation
 
         sc = self.scene
         xmin, xmax, ymin, ymax = (float(v) for v in sc.arena)
@@ -130,13 +153,13 @@ class ChannelRenderer:
         )
         ax.add_patch(band)
         for name, offset in (("c1", w), ("c2", -w)):  # c1: y = x + w, c2: y = x - w
-            ax.add_line(
-                Line2D([lo, hi], [lo + offset, hi + offset], color=_CHANNEL_COLOR, lw=0.9, zorder=2)
-            )
+            line = Line2D([lo, hi], [lo + offset, hi + offset], color=_CHANNEL_COLOR, lw=0.9)
+            ax.add_line(line)
             self._label_line(ax, name, offset)
 
-        # Moving artists, in drawing order.
-        traj = Line2D([], [], color=_TRAJECTORY_COLOR, lw=0.9, alpha=0.85, zorder=4, animated=True)
+        # Moving artists. Labels are mathtext markers: drawn as cached paths, several times
+        # cheaper than Text artists.
+        traj = Line2D([], [], color=_TRAJECTORY_COLOR, lw=0.9, alpha=0.85, animated=True)
         start = Line2D(
             [],
             [],
@@ -146,11 +169,8 @@ class ChannelRenderer:
             mfc="white",
             mec=_TRAJECTORY_COLOR,
             mew=0.7,
-            zorder=4,
             animated=True,
         )
-        # Labels are mathtext markers: drawn as cached paths, ~10x cheaper than Text artists.
-        # Each sits just above-right of its disc's upper-right point (offset in points).
         goals, goal_labels = [], []
         for k, color in enumerate(_GOAL_COLORS):
             goals.append(
@@ -161,7 +181,6 @@ class ChannelRenderer:
                     alpha=0.55,
                     edgecolor=color,
                     lw=1.0,
-                    zorder=3,
                     animated=True,
                 )
             )
@@ -173,13 +192,12 @@ class ChannelRenderer:
                     (0.0, 0.0),
                     sc.obstacle_radius,
                     facecolor=_OBSTACLE_COLOR,
-                    edgecolor="#7f1010",
+                    edgecolor=_OBSTACLE_EDGE,
                     lw=0.8,
-                    zorder=3,
                     animated=True,
                 )
             )
-            obstacle_labels.append(self._marker_label(ax, f"o{k + 1}", "#7f1010", 7.5))
+            obstacle_labels.append(self._marker_label(ax, f"o{k + 1}", _OBSTACLE_EDGE, 7.5))
         for patch in (*goals, *obstacles):
             ax.add_patch(patch)
         ax.add_line(traj)
@@ -193,7 +211,6 @@ class ChannelRenderer:
             color=_AGENT_COLOR,
             shrinkA=0.0,
             shrinkB=0.0,
-            zorder=7,
             animated=True,
         )
         ax.add_patch(arrow)
@@ -206,21 +223,27 @@ class ChannelRenderer:
             mfc=_AGENT_COLOR,
             mec="white",
             mew=0.7,
-            zorder=8,
             animated=True,
         )
         ax.add_line(agent)
+
+        # The text box: the box, its labels and the title are static (drawn into the
+        # background, again when the title changes: _set_title); only the numbers move, as a
+        # second text shifted right by the width of the labels. Text widths are advance
+        # based, and the font is monospace, so the numbers line up with the labels.
+        style: dict[str, Any] = {
+            "fontsize": 6.5,
+            "family": "monospace",
+            "ha": "left",
+            "va": "top",
+            "transform": ax.transAxes,
+        }
         info = ax.text(
             0.025,
             0.975,
             "",
-            transform=ax.transAxes,
-            fontsize=6.5,
-            family="monospace",
-            ha="left",
-            va="top",
             zorder=9,
-            animated=True,
+            **style,
             bbox={
                 "boxstyle": "round,pad=0.35",
                 "facecolor": "white",
@@ -229,20 +252,20 @@ class ChannelRenderer:
                 "lw": 0.6,
             },
         )
-
-        canvas.draw()  # the static scene only: animated artists are left out
-        self._fig, self._canvas, self._ax = fig, canvas, ax
-        self._background = canvas.copy_from_bbox(fig.bbox)
-        self._traj, self._start, self._agent, self._arrow, self._info = (
-            traj,
-            start,
-            agent,
-            arrow,
-            info,
+        label_width, _, _ = canvas.get_renderer().get_text_width_height_descent(
+            _INFO_LABELS[0], info.get_fontproperties(), ismath=False
         )
+        style["transform"] = ax.transAxes + ScaledTranslation(
+            label_width / fig.dpi, 0.0, fig.dpi_scale_trans
+        )
+        values = ax.text(0.025, 0.975, "", zorder=10, animated=True, **style)
+
+        self._fig, self._canvas, self._ax = fig, canvas, ax
+        self._traj, self._start, self._agent, self._arrow = traj, start, agent, arrow
+        self._info, self._values = info, values
         self._goals, self._goal_labels = goals, goal_labels
         self._obstacles, self._obstacle_labels = obstacles, obstacle_labels
-        # Draw order of the moving artists (zorder is ignored by draw_artist).
+        # The moving artists in drawing order (draw_artist ignores zorder).
         self._moving = [
             *goals,
             *obstacles,
@@ -252,8 +275,20 @@ class ChannelRenderer:
             *obstacle_labels,
             arrow,
             agent,
-            info,
+            values,
         ]
+        self._set_title(title)
+
+    def _set_title(self, title: str) -> None:
+        """Write the static part of the text box with ``title``, and redraw the background
+        (the static scene: a full draw leaves the animated artists out)."""
+        lines = [label + " " * _INFO_DIGITS for label in _INFO_LABELS]
+        if title:
+            lines.append(title)
+        self._info.set_text("\n".join(lines))
+        self._canvas.draw()
+        self._background = self._canvas.copy_from_bbox(self._fig.bbox)
+        self._title = title
 
     @staticmethod
     def _marker_label(ax: Any, name: str, color: str, size: float) -> Any:
@@ -272,7 +307,6 @@ class ChannelRenderer:
             ms=size,
             mfc=color,
             mec="none",
-            zorder=6,
             animated=True,
             transform=ax.transData + offset,
         )
@@ -335,8 +369,11 @@ class ChannelRenderer:
             traj = np.empty((0, 2))
         if traj.ndim != 2 or traj.shape[1] != 2:
             raise ValueError(f"trajectory has shape {traj.shape}, expected (k, 2)")
+        title = str(title)
         if self._fig is None:
-            self._build()
+            self._build(title)
+        elif title != self._title:
+            self._set_title(title)
 
         x, y, theta = s[_X], s[_Y], s[_THETA]
         for circle, label, (i, j) in zip(self._goals, self._goal_labels, _GOALS, strict=True):
@@ -350,10 +387,7 @@ class ChannelRenderer:
         self._agent.set_data([x], [y])
         tip = (x + _ARROW_LENGTH * math.cos(theta), y + _ARROW_LENGTH * math.sin(theta))
         self._arrow.set_positions((x, y), tip)
-        lines = [f"q    = {int(fsa_state)}", f"step = {int(step)}"]
-        if title:
-            lines.append(str(title))
-        self._info.set_text("\n".join(lines))
+        self._values.set_text(f"{int(fsa_state)}\n{int(step)}")
 
         canvas = self._canvas
         canvas.restore_region(self._background)
@@ -430,6 +464,7 @@ class ChannelRenderer:
 
                 plt.close(self._window[0])
             self._window = None
-        self._fig = None
-        self._canvas = self._ax = self._background = None
+        self._fig = self._canvas = self._ax = self._background = None
+        self._info = self._values = self._traj = self._start = self._agent = self._arrow = None
+        self._goals, self._goal_labels, self._obstacles, self._obstacle_labels = [], [], [], []
         self._moving = []
