@@ -7,7 +7,9 @@ and, after :func:`evaluate`, ``evaluation.json`` and ``trajectories.npz``.
 PPO (documented choices; the paper fixes the networks and the batch): separate policy and value
 MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 1000 steps (5 trajectories of the
 horizon) per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, GAE lambda 0.95;
-clip 0.2; no entropy bonus; CPU, one torch thread (deterministic for a seed).
+clip 0.2; no entropy bonus; CPU, one torch thread (deterministic for a seed). Observations and
+rewards are normalised by running statistics (SB3 ``VecNormalize``, saved as
+``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are in raw units.
 """
 
 from __future__ import annotations
@@ -173,8 +175,11 @@ def train(
     torch.set_num_threads(1)
     run = Path(out)
     run.mkdir(parents=True, exist_ok=True)
-    venv, shielded = make_vec_env(config, seed, overrides)
-    cfg: ChannelConfig = venv.get_attr("cfg", [0])[0]
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    inner, shielded = make_vec_env(config, seed, overrides)
+    cfg: ChannelConfig = inner.get_attr("cfg", [0])[0]
+    venv = VecNormalize(inner, norm_obs=True, norm_reward=True, gamma=PPO_KWARGS["gamma"])
     record = {
         "config": config,
         "seed": seed,
@@ -220,7 +225,8 @@ def train(
                 shielded.shield = channel_shield(_scaled(cfg, self.scale), config)
 
         def _on_step(self) -> bool:
-            metrics.step(self.locals["rewards"], self.locals["dones"], self.locals["infos"])
+            raw = venv.get_original_reward()  # metrics in raw units, not normalised
+            metrics.step(raw, self.locals["dones"], self.locals["infos"])
             return True
 
         def _on_rollout_end(self) -> None:
@@ -261,6 +267,7 @@ def train(
         bar.close()
         csv_file.close()
         model.save(run / "model.zip")
+        venv.save(str(run / "vecnormalize.pkl"))
         record["wall_time"] = time.perf_counter() - start
         (run / "config.json").write_text(json.dumps(record, indent=2))
         venv.close()
@@ -298,12 +305,20 @@ def evaluate(
         model_path = Path(run) / "model.zip"
         if not model_path.is_file():
             raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
+        import pickle
+
         from stable_baselines3 import PPO
 
         model = PPO.load(model_path, device="cpu")
+        stats_path = Path(run) / "vecnormalize.pkl"
+        normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
+        if stats_path.is_file():
+            with stats_path.open("rb") as f:
+                stats = pickle.load(f)
+            normalize = stats.normalize_obs
 
         def policy(obs: np.ndarray) -> np.ndarray:
-            return model.predict(obs, deterministic=True)[0]
+            return model.predict(normalize(obs), deterministic=True)[0]
 
     env = ChannelEnv(config=record["config"], evaluation=True, **record.get("overrides", {}))
     successes = collisions = violation_steps = violating_trials = 0

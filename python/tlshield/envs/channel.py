@@ -106,9 +106,10 @@ class ChannelConfig:
     safe_distance: float = 0.8
     #: Obstacles oscillate across the channel around ``u`` in this range ...
     obstacle_u: tuple[float, float] = (3.0, 7.0)
-    #: ... with an amplitude (m) and angular frequency (rad/s) drawn from these ranges.
-    obstacle_amplitude: tuple[float, float] = (1.0, 1.8)
-    obstacle_frequency: tuple[float, float] = (0.3, 0.8)
+    #: ... with an amplitude (m) and angular frequency (rad/s) drawn from these ranges (top
+    #: speed 0.6 m/s, below the agent's 1 m/s, so a collision is always avoidable).
+    obstacle_amplitude: tuple[float, float] = (0.8, 1.5)
+    obstacle_frequency: tuple[float, float] = (0.2, 0.4)
 
     # --- reward ---------------------------------------------------------------------------
     #: Weight of the trap term in Eq. 5A1.
