@@ -1530,46 +1530,4 @@ mod tests {
             assert_eq!(out, fresh);
         }
     }
-
-    /// A typical shield step, for timing: `cargo test --release -p tlshield-core
-    /// active_set::tests::timing -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn timing_typical_shield_instance() {
-        let mut runner = TestRunner::deterministic();
-        let seeds = prop::collection::vec(0.0..1.0f64, 96);
-        let mut batch = Vec::new();
-        while batch.len() < 200 {
-            let qp = shield_instance(
-                &seeds.new_tree(&mut runner).unwrap().current(),
-                Kind::Feasible,
-            );
-            if qp.rows() == 14 {
-                batch.push(qp);
-            }
-        }
-        let mut solver = ActiveSetQp::new();
-        let mut out = solver.solve(&batch[0]);
-        let reps = 2000;
-        let start = std::time::Instant::now();
-        let mut solved = 0usize;
-        for _ in 0..reps {
-            for qp in &batch {
-                solver.solve_into(std::hint::black_box(qp), &mut out);
-                solved += usize::from(out.status == QpStatus::Solved);
-            }
-        }
-        let per = start.elapsed().as_secs_f64() / (reps * batch.len()) as f64;
-        println!(
-            "5 x 14 shield instance: {:.3} us per solve ({solved} solved)",
-            per * 1e6
-        );
-        let mut clarabel = ClarabelQp::new();
-        let start = std::time::Instant::now();
-        for qp in &batch {
-            let _ = clarabel.solve(qp);
-        }
-        let per = start.elapsed().as_secs_f64() / batch.len() as f64;
-        println!("Clarabel on the same: {:.3} us per solve", per * 1e6);
-    }
 }

@@ -554,6 +554,21 @@ impl Shield {
         }
     }
 
+    /// Validates the arguments of one step.
+    fn check_call(
+        &self,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+    ) -> Result<(), ShieldError> {
+        self.check_state("s", s)?;
+        check_finite("s", s, s.len())?;
+        self.automaton.check_state("q", q as i64)?;
+        self.check_action("a_rl", a_rl)?;
+        self.check_dynamics(s.len(), fg)
+    }
+
     /// One shield step at state `s` in FSA state `q` for the RL action `a_rl`; `fg`
     /// overrides the dynamics model for this call.
     pub fn filter(
@@ -563,11 +578,7 @@ impl Shield {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
     ) -> Result<Filtered, ShieldError> {
-        self.check_state("s", s)?;
-        check_finite("s", s, s.len())?;
-        self.automaton.check_state("q", q as i64)?;
-        self.check_action("a_rl", a_rl)?;
-        self.check_dynamics(s.len(), fg)?;
+        self.check_call(s, q, a_rl, fg)?;
         Ok(self.with_workspace(s.len(), |ws| {
             self.step(ws, s, q, a_rl, fg, true, true);
             ws.out.clone()
@@ -584,11 +595,7 @@ impl Shield {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
     ) -> Result<DenseQp, ShieldError> {
-        self.check_state("s", s)?;
-        check_finite("s", s, s.len())?;
-        self.automaton.check_state("q", q as i64)?;
-        self.check_action("a_rl", a_rl)?;
-        self.check_dynamics(s.len(), fg)?;
+        self.check_call(s, q, a_rl, fg)?;
         Ok(self.with_workspace(s.len(), |ws| {
             self.step(ws, s, q, a_rl, fg, false, false);
             ws.qp.clone()
