@@ -754,11 +754,22 @@ impl Automaton {
     /// [`Automaton::safe_set`] into a reused buffer, for validated inputs.
     pub fn safe_set_into(&self, q: usize, s: &[f64], out: &mut Vec<(Literal, f64)>) {
         out.clear();
-        if self.trap_cnf[q].is_empty() {
-            return;
+        if !self.trap_cnf[q].is_empty() {
+            self.safe_set_from(q, &self.atom_rho(s), out);
         }
-        let rho = self.atom_rho(s);
-        out.extend(cnf::safe_literals(&self.trap_cnf[q], &rho));
+    }
+
+    /// [`Automaton::safe_set_into`] from the atoms' robustness (see
+    /// [`Automaton::atom_robustness`]), so a caller that needs it elsewhere computes it once.
+    pub fn safe_set_from(&self, q: usize, rho: &[f64], out: &mut Vec<(Literal, f64)>) {
+        out.clear();
+        out.extend(cnf::safe_literals(&self.trap_cnf[q], rho));
+    }
+
+    /// The robustness of every atom at `s` (validated input), in a stack buffer: the first
+    /// `spec().atoms().len()` values are meaningful.
+    pub fn atom_robustness(&self, s: &[f64]) -> [f64; MAX_ATOMS] {
+        self.atom_rho(s)
     }
 
     /// The CLF goal of Eq. 5B1 at `(s, q)`: among `q`'s edges to other non-trap states the one
@@ -780,13 +791,17 @@ impl Automaton {
     /// [`Automaton::goal`] into a reused buffer, for validated inputs; `false` when there is
     /// no goal (then `goal` is left empty).
     pub fn goal_into(&self, q: usize, s: &[f64], goal: &mut Vec<f64>) -> bool {
+        self.goal_from(q, s, &self.atom_rho(s), goal)
+    }
+
+    /// [`Automaton::goal_into`] with the atoms' robustness at `s` already computed.
+    pub fn goal_from(&self, q: usize, s: &[f64], rho: &[f64], goal: &mut Vec<f64>) -> bool {
         goal.clear();
-        let rho = self.atom_rho(s);
         let Some((cube, _)) = self
             .edges
             .iter()
             .filter(|e| e.src == q && e.dst != q && Some(e.dst) != self.trap)
-            .filter_map(|e| best_cube(&e.guard, &rho))
+            .filter_map(|e| best_cube(&e.guard, rho))
             .fold(None, cnf::first_max)
         else {
             return false;

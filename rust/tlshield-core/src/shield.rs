@@ -722,24 +722,22 @@ impl Shield {
         ws.out.barriers.clear();
         ws.lg.clear();
         ws.rhs.clear();
+        // The atoms' robustness at s, once for both the safe set and the goal.
+        let rho = self.automaton.atom_robustness(s);
         if cfg.use_cbf {
             let spec = self.automaton.spec();
-            self.automaton.safe_set_into(q, s, &mut ws.safe);
+            self.automaton.safe_set_from(q, &rho, &mut ws.safe);
             let user = cfg
                 .barriers
                 .iter()
                 .enumerate()
-                .map(|(i, (_, p))| (BarrierSource::User(i), p, 1.0));
-            let kept = ws.safe.iter().map(|(lit, _)| {
+                .map(|(i, (_, p))| (BarrierSource::User(i), p, 1.0, p.value(s)));
+            let kept = ws.safe.iter().map(|&(lit, h)| {
                 let sign = if lit.positive { 1.0 } else { -1.0 };
-                (
-                    BarrierSource::SafeSet(*lit),
-                    &spec.predicates()[lit.atom],
-                    sign,
-                )
+                let predicate = &spec.predicates()[lit.atom];
+                (BarrierSource::SafeSet(lit), predicate, sign, h)
             });
-            for (source, predicate, sign) in user.chain(kept) {
-                let h = sign * predicate.value(s);
+            for (source, predicate, sign, h) in user.chain(kept) {
                 predicate.gradient_into(s, &mut ws.grad);
                 let lf = sign * dot(&ws.grad, &ws.f);
                 let mut lg_a = 0.0;
@@ -758,7 +756,7 @@ impl Shield {
 
         // CLF row: V = |s[pos] - goal|^2, row Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
         // The QP's variable is d = delta - delta_0 (see below).
-        let has_goal = cfg.use_clf && self.automaton.goal_into(q, s, &mut ws.goal);
+        let has_goal = cfg.use_clf && self.automaton.goal_from(q, s, &rho, &mut ws.goal);
         let (mut clf_rhs, mut delta_0) = (0.0, 0.0);
         ws.clf_lg.clear();
         ws.clf_lg.resize(m, 0.0);
