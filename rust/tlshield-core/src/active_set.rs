@@ -1372,7 +1372,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(1500))]
+        #![proptest_config(crate::tests_support::seeded(1500))]
 
         /// Shield-shaped instances (feasible, degenerate, infeasible) against Clarabel.
         #[test]

@@ -1217,7 +1217,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(1500))]
+        #![proptest_config(crate::tests_support::seeded(1500))]
 
         #[test]
         fn acceptance_equals_the_formula_on_trajectories(f in co_safe(), data in trajectory()) {

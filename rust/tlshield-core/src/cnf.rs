@@ -341,7 +341,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(500))]
+        #![proptest_config(crate::tests_support::seeded(500))]
 
         #[test]
         fn minimised_dnf_is_exact_and_prime(n in 1usize..6, bits in any::<u64>()) {

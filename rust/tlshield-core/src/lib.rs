@@ -27,6 +27,20 @@ pub mod robustness;
 pub mod shield;
 pub mod spec;
 
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use proptest::test_runner::{Config, RngSeed};
+
+    /// Property-test settings with a fixed seed: the same cases on every run and machine.
+    pub fn seeded(cases: u32) -> Config {
+        Config {
+            cases,
+            rng_seed: RngSeed::Fixed(0x7115_4e1d),
+            ..Config::default()
+        }
+    }
+}
+
 pub use automaton::{Automaton, Edge};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};

@@ -293,7 +293,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(300))]
+        #![proptest_config(crate::tests_support::seeded(300))]
 
         /// Random feasible problems (the origin box contains a feasible point by construction):
         /// Clarabel's answer satisfies the KKT conditions, with the solver reused across shapes.

@@ -665,7 +665,7 @@ pub(crate) mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(3000))]
+        #![proptest_config(crate::tests_support::seeded(3000))]
 
         #[test]
         fn sweep_matches_brute_force(f in co_safe(), data in trajectory()) {

@@ -922,7 +922,7 @@ impl From<AutomatonError> for ShieldError {
 mod tests {
     use super::*;
     use crate::predicate::Center;
-    use crate::qp::kkt_residual;
+    use crate::qp::{kkt_residual, ClarabelQp};
     use crate::spec::Spec;
     use proptest::prelude::*;
 
@@ -1273,12 +1273,14 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(1500))]
+        #![proptest_config(crate::tests_support::seeded(1500))]
 
-        /// Random steps of the case study: the active-set answer equals Clarabel's within
-        /// 1e-6 and satisfies the KKT conditions of the QP it solved; delta = 0 whenever the
-        /// CLF row alone is feasible within the CLF bounds (it does not compete with barriers
-        /// here: a_cbf's wide box can absorb them).
+        /// Random steps of the case study with an extra user barrier (stay within 0.6 of a
+        /// point near the diagonal, often impossible, so many steps are relaxed): both paths
+        /// agree on the status; the active set's answer satisfies the KKT conditions of the QP
+        /// it solved; and the actions agree within 1e-6, or, where Clarabel's interior-point
+        /// answer is the less accurate one (measured: up to ~2e-5 on a few instances), ours
+        /// has the lower objective and the two differ by less than 1e-4.
         #[test]
         fn active_set_agrees_with_clarabel(
             x in -1.0..8.0f64,
@@ -1290,11 +1292,9 @@ mod tests {
         ) {
             let mut cfg = config(SolverChoice::Auto);
             cfg.barriers = vec![(
-                "obstacle".into(),
-                // Stay out of a unit ball around a point near the diagonal.
+                "near".into(),
                 Predicate::ball(vec![0, 1], 0.6, Center::Fixed(vec![obstacle, obstacle + 0.3])).unwrap(),
             )];
-            // Negated: use a halfspace barrier too so rows vary in count.
             let auto = shield(cfg.clone());
             let clarabel = shield(ShieldConfig { solver: SolverChoice::Clarabel, ..cfg });
             let s = state(x, offset, theta);
@@ -1303,14 +1303,18 @@ mod tests {
             let a = auto.filter(&s, q, &a_rl, None).unwrap();
             let b = clarabel.filter(&s, q, &a_rl, None).unwrap();
             prop_assert_eq!(a.status, b.status);
-            for (p, r) in a.action.iter().zip(&b.action) {
-                prop_assert!((p - r).abs() < 1e-6, "{:?} vs {:?} ({:?})", a.action, b.action, a.solver);
-            }
+            let gap = a.action.iter().zip(&b.action).fold(0.0f64, |m, (p, r)| m.max((p - r).abs()));
             auto.with_workspace(N, |ws| {
                 auto.step(ws, &s, q, &a_rl, None, false, true);
-                let sol = &ws.solvers.solution;
-                let scale = 1.0 + ws.qp.c.iter().chain(&ws.qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
-                assert!(kkt_residual(&ws.qp, &sol.x, &sol.z) < 1e-7 * scale);
+                let (qp, ours) = (&ws.qp, &ws.solvers.solution);
+                let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);
+                if gap >= 1e-6 {
+                    let theirs = ClarabelQp::new().solve(qp);
+                    let (o, t) = (qp.objective(&ours.x), qp.objective(&theirs.x));
+                    assert!(o <= t + 1e-9 * (1.0 + t.abs()), "objective {o} vs Clarabel {t}");
+                    assert!(gap < 1e-4, "{:?} vs {:?}", a.action, b.action);
+                }
             });
         }
     }
