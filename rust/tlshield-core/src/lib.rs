@@ -27,6 +27,17 @@ pub mod robustness;
 pub mod shield;
 pub mod spec;
 
+pub use automaton::{Automaton, Edge};
+pub use dynamics::Dynamics;
+pub use error::{AutomatonError, InputError, ShieldError, SpecError};
+pub use predicate::{Ball, Center, Halfspace, Predicate};
+pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
+pub use shield::{
+    BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig, SolvedBy,
+    SolverChoice, Status,
+};
+pub use spec::{Formula, Spec};
+
 #[cfg(test)]
 pub(crate) mod tests_support {
     use proptest::test_runner::{Config, RngSeed};
@@ -40,14 +51,3 @@ pub(crate) mod tests_support {
         }
     }
 }
-
-pub use automaton::{Automaton, Edge};
-pub use dynamics::Dynamics;
-pub use error::{AutomatonError, InputError, ShieldError, SpecError};
-pub use predicate::{Ball, Center, Halfspace, Predicate};
-pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
-pub use shield::{
-    BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig, SolvedBy,
-    SolverChoice, Status,
-};
-pub use spec::{Formula, Spec};
