@@ -30,6 +30,8 @@ INFO_KEYS = {
 
 
 @pytest.mark.parametrize("config", sorted(CONFIGS))
+# check_env also renders in "human" mode; without a display the renderer says so once.
+@pytest.mark.filterwarnings("ignore:ChannelRenderer.show")
 def test_check_env_passes(config: str) -> None:
     env = gym.make(ENV_ID, config=config, render_mode="rgb_array")
     check_env(env.unwrapped)
