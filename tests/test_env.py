@@ -304,3 +304,16 @@ def test_sb3_vecenv_shield_equals_per_env_shield() -> None:
         want = np.stack([env.step(a)[0] for env, a in zip(singles, actions, strict=True)])
         np.testing.assert_allclose(obs, want, atol=1e-12)
         assert all("shield" in info for info in infos)
+
+
+def test_obstacles_in_the_task_option() -> None:
+    """Beyond the paper: with the obstacles in the formula, the CBF safe set keeps the agent
+    out of them as well as in the channel."""
+    env = ChannelEnv(obstacles_in_task=True)
+    check_env(env, skip_render_check=True)
+    env.reset(seed=0)
+    assert {"o1", "o2"} <= set(env.spec_tl.atoms)
+    out = env.shield.filter(env.state, env.tracker.q, np.zeros(2))
+    names = [name for name, _ in out.barriers]
+    assert {"c1", "c2", "!o1", "!o2"} <= set(names)
+    assert ChannelEnv().spec_tl.atoms == ["g1", "g2", "g3", "c1", "c2"]

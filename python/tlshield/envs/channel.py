@@ -45,11 +45,20 @@ CONFIGS = {
 SQRT2 = math.sqrt(2.0)
 
 
-def channel_task_spec(half_width: float = 1.5, goal_radius: float = 0.5) -> Spec:
+#: The task with the obstacles in the formula (an option beyond the paper): the obstacles
+#: must be avoided until g3, so the CBF safe set keeps the agent out of them too.
+TASK_WITH_OBSTACLES = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2 & !o1 & !o2) U g3)"
+
+
+def channel_task_spec(
+    half_width: float = 1.5, goal_radius: float = 0.5, obstacle_radius: float | None = None
+) -> Spec:
     """The task spec over the 13-value state.
 
     Goals are balls of ``goal_radius`` around centres read from the state; the channel is
     ``c1: x - y + w > 0`` and ``c2: y - x + w > 0`` with ``w = half_width`` (paper Sec. VI).
+    With ``obstacle_radius`` the formula is :data:`TASK_WITH_OBSTACLES`, ``o1``/``o2`` being
+    balls of that radius around the obstacle centres.
     """
     c1 = [0.0] * STATE_DIM
     c1[X], c1[Y] = 1.0, -1.0
@@ -58,7 +67,14 @@ def channel_task_spec(half_width: float = 1.5, goal_radius: float = 0.5) -> Spec
         f"g{k + 1}": Ball(pos=[X, Y], radius=goal_radius, center_dims=list(dims))
         for k, dims in enumerate(GOAL_DIMS)
     }
-    return Spec(TASK, {**goals, "c1": Halfspace(c1, half_width), "c2": Halfspace(c2, half_width)})
+    channel = {"c1": Halfspace(c1, half_width), "c2": Halfspace(c2, half_width)}
+    if obstacle_radius is None:
+        return Spec(TASK, {**goals, **channel})
+    obstacles = {
+        f"o{k + 1}": Ball(pos=[X, Y], radius=obstacle_radius, center_dims=list(dims))
+        for k, dims in enumerate(OBSTACLE_DIMS)
+    }
+    return Spec(TASK_WITH_OBSTACLES, {**goals, **channel, **obstacles})
 
 
 @dataclass(frozen=True)
@@ -110,6 +126,10 @@ class ChannelConfig:
     #: speed 0.6 m/s, below the agent's 1 m/s, so a collision is always avoidable).
     obstacle_amplitude: tuple[float, float] = (0.8, 1.5)
     obstacle_frequency: tuple[float, float] = (0.2, 0.4)
+
+    #: Beyond the paper: put the obstacles in the formula (``TASK_WITH_OBSTACLES``), so the
+    #: CBF also keeps the agent out of them (ignoring their motion, which it does not know).
+    obstacles_in_task: bool = False
 
     # --- reward ---------------------------------------------------------------------------
     #: Weight of the trap term in Eq. 5A1.
@@ -168,6 +188,12 @@ class ChannelConfig:
             )
 
 
+def task_spec(cfg: ChannelConfig) -> Spec:
+    """The task spec a configuration runs with."""
+    radius = cfg.obstacle_radius if cfg.obstacles_in_task else None
+    return channel_task_spec(cfg.half_width, cfg.goal_radius, radius)
+
+
 def _config(overrides: dict[str, Any]) -> ChannelConfig:
     names = {f.name for f in fields(ChannelConfig)}
     unknown = sorted(set(overrides) - names)
@@ -184,7 +210,7 @@ def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) ->
     if not (use_cbf or use_clf):
         return None
     return Shield(
-        spec or channel_task_spec(cfg.half_width, cfg.goal_radius),
+        spec or task_spec(cfg),
         Unicycle(cfg.eps, X, Y, THETA),
         alpha=cfg.alpha,
         c3=cfg.c3,
@@ -231,7 +257,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self.evaluation = evaluation
         self.render_mode = render_mode
         cfg = self.cfg
-        self.spec_tl = channel_task_spec(cfg.half_width, cfg.goal_radius)
+        self.spec_tl = task_spec(cfg)
         shield_config = config
         if evaluation and not CONFIGS[config][0]:
             shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
