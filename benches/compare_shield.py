@@ -79,15 +79,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tlshield.envs.channel import channel_task_spec
 
     params, task = Params(), Task()
-    shield = tlshield.Shield(
-        channel_task_spec(),
-        tlshield.Unicycle(task.eps),
-        alpha=params.alpha,
-        c3=params.c3,
-        K=params.K,
-        cbf_bounds=params.cbf,
-        clf_bounds=params.clf,
-    )
+
+    def make_shield(solver: str = "auto") -> tlshield.Shield:
+        return tlshield.Shield(
+            channel_task_spec(),
+            tlshield.Unicycle(task.eps),
+            alpha=params.alpha,
+            c3=params.c3,
+            K=params.K,
+            cbf_bounds=params.cbf,
+            clf_bounds=params.clf,
+            margin=params.margin,
+            solver=solver,
+        )
+
+    shield = make_shield()
     aut = shield.automaton
     structure = Structure(aut)
     cvx, clar = CvxpyShield(params), ClarabelShield(params)
@@ -142,16 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     medians["numpy + clarabel"] = measure(python_step(clar), timed, budget, 5)[0]
     solver_only = {}
     for name in ("active_set", "clarabel"):
-        sh = tlshield.Shield(
-            channel_task_spec(),
-            tlshield.Unicycle(task.eps),
-            alpha=params.alpha,
-            c3=params.c3,
-            K=params.K,
-            cbf_bounds=params.cbf,
-            clf_bounds=params.clf,
-            solver=name,
-        )
+        sh = make_shield(name)
         solver_only[name] = measure(
             lambda item, sh=sh: sh.filter(item[0], aut.step(q0, item[0]), item[1]),
             timed,
