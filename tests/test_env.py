@@ -193,7 +193,6 @@ def test_overrides_and_bad_input() -> None:
     env.reset(seed=0)
     with pytest.raises(ValueError, match="not finite"):
         env.step(np.array([np.nan, 0.0]))
-    assert ChannelEnv().config_dict()["alpha"] == ChannelConfig().alpha
 
 
 def test_rgb_render() -> None:

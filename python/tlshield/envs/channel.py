@@ -13,7 +13,7 @@ can be overridden by keyword in ``gymnasium.make("tlshield/Channel-v0", ...)``.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -258,6 +258,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self.render_mode = render_mode
         cfg = self.cfg
         self.spec_tl = task_spec(cfg)
+        self._channel_atoms = (self.spec_tl.atoms.index("c1"), self.spec_tl.atoms.index("c2"))
         shield_config = config
         if evaluation and not CONFIGS[config][0]:
             shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
@@ -318,8 +319,9 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     def _measure(self, s: NDArray[np.float64]) -> dict[str, Any]:
         cfg = self.cfg
-        h1 = s[X] - s[Y] + cfg.half_width
-        h2 = s[Y] - s[X] + cfg.half_width
+        # The channel constraints as the task's own predicates evaluate them.
+        rho = self.spec_tl.atom_robustness(s)
+        h1, h2 = rho[self._channel_atoms[0]], rho[self._channel_atoms[1]]
         d = min(float(np.hypot(*(s[X : Y + 1] - s[a : b + 1]))) for a, b in OBSTACLE_DIMS)
         return {
             "constraints": {"c1": float(h1), "c2": float(h2)},
@@ -458,7 +460,3 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-    def config_dict(self) -> dict[str, Any]:
-        """The configuration this env runs with (for saving alongside results)."""
-        return {"config": self.config, "evaluation": self.evaluation, **asdict(self.cfg)}
