@@ -17,7 +17,7 @@ fn shield(c: &mut Criterion) {
     let auto = task_shield(automaton.clone(), SolverChoice::Auto);
     let problems: Vec<_> = instances
         .iter()
-        .map(|(s, q, a)| auto.problem(s, *q, a, None).unwrap())
+        .map(|(s, q, a)| auto.problem(s, *q, a, None, None).unwrap())
         .filter(|p| p.vars() > 0)
         .collect();
 
@@ -59,7 +59,7 @@ fn shield(c: &mut Criterion) {
             b.iter(|| {
                 k += 1;
                 let (s, q, a) = &instances[k % instances.len()];
-                sh.filter(black_box(s), *q, a, None).unwrap().status
+                sh.filter(black_box(s), *q, a, None, None).unwrap().status
             })
         });
     }

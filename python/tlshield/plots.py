@@ -134,6 +134,8 @@ class Run:
     trajectories: tuple[NDArray[np.float64], list[NDArray[np.float64]]] | None
     #: The whole config.json.
     record: dict[str, Any] = field(default_factory=dict)
+    #: One ``(length, 4)`` path of the two obstacle centres per trial (None when missing).
+    obstacle_paths: list[NDArray[np.float64]] | None = None
 
     @property
     def updates(self) -> int:
@@ -213,6 +215,22 @@ def _read_trajectories(
     return starts, list(paths)
 
 
+def _read_obstacle_paths(path: Path, lengths: list[int]) -> list[NDArray[np.float64]] | None:
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as data:
+            if "obstacle_paths" not in data:
+                return None
+            flat = np.asarray(data["obstacle_paths"], dtype=np.float64)
+    except (OSError, ValueError) as err:
+        warnings.warn(f"{path}: unreadable ({err}); ignoring it", RuntimeWarning, stacklevel=3)
+        return None
+    if flat.ndim != 2 or flat.shape[1] != 4 or len(flat) != sum(lengths):
+        return None
+    return list(np.split(flat, np.cumsum(lengths)[:-1])) if lengths else []
+
+
 def _load_run(folder: Path) -> Run | None:
     record = _read_json(folder / "config.json")
     if record is None or "config" not in record:
@@ -221,14 +239,17 @@ def _load_run(folder: Path) -> Run | None:
         seed = int(record.get("seed", 0))
     except (TypeError, ValueError):
         seed = 0
+    trajectories = _read_trajectories(folder / "trajectories.npz")
+    lengths = [len(p) for p in trajectories[1]] if trajectories else []
     return Run(
         path=folder,
         config=str(record["config"]),
         seed=seed,
         metrics=_read_metrics(folder / "metrics.csv"),
         evaluation=_read_json(folder / "evaluation.json"),
-        trajectories=_read_trajectories(folder / "trajectories.npz"),
+        trajectories=trajectories,
         record=record,
+        obstacle_paths=_read_obstacle_paths(folder / "trajectories.npz", lengths),
     )
 
 
@@ -590,9 +611,19 @@ def _plot_success_rates(groups: dict[str, list[Run]], path: Path) -> Path:
 
 
 def _trial_outcome(run: Run, start: NDArray[np.float64], path: NDArray[np.float64]) -> str:
-    """How the trial ended: success (the path satisfies the task), collision (it ended early
-    otherwise) or time-out."""
+    """How the trial ended, as the evaluation recorded it (success, collision or time-out).
+    Older runs without per-trial records: re-derived from the path with the obstacles as they
+    were at the start."""
     env = run.env
+    outcomes = (run.evaluation or {}).get("outcomes")
+    if outcomes:
+        first = outcomes[0]
+        steps = first.get("steps", len(path) - 1)
+        if first.get("success"):
+            return f"success in {steps} steps"
+        if first.get("collision"):
+            return f"collision at step {steps}"
+        return f"time-out ({steps} steps)"
     traj = np.tile(start[:STATE_DIM], (len(path), 1))
     traj[:, :2] = path
     steps = len(path) - 1
@@ -692,10 +723,16 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
                 )
             )
             ax.text(*centre_k, f"g{k + 1}", ha="center", va="center", fontsize=9, weight="bold")
-        for dims in OBSTACLE_DIMS:
+        moving = run.obstacle_paths[0] if run.obstacle_paths else None
+        for k, dims in enumerate(OBSTACLE_DIMS):
+            where = start[list(dims)] if moving is None else moving[-1, 2 * k : 2 * k + 2]
+            if moving is not None:
+                ax.plot(
+                    moving[:, 2 * k], moving[:, 2 * k + 1], color=_OBSTACLE_COLOR, lw=1.0, ls=":"
+                )
             ax.add_patch(
                 Circle(
-                    start[list(dims)],
+                    where,
                     cenv.obstacle_radius,
                     facecolor="none",
                     edgecolor=_OBSTACLE_COLOR,
@@ -724,7 +761,10 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
         ),
         Patch(facecolor=_GOAL_COLOR, alpha=0.45, label="goals g1, g2, g3"),
         Patch(
-            facecolor="none", edgecolor=_OBSTACLE_COLOR, hatch="////", label="obstacles at t = 0"
+            facecolor="none",
+            edgecolor=_OBSTACLE_COLOR,
+            hatch="////",
+            label="obstacles at the end (dotted: their paths)",
         ),
         Line2D([], [], ls="none", marker="o", ms=7, mfc="white", mec="black", label="start"),
         Line2D([], [], ls="none", marker="X", ms=9, mfc="0.6", mec="black", label="end"),

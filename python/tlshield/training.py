@@ -4,12 +4,16 @@ A run folder holds ``config.json`` (what it ran with), ``metrics.csv`` (one row 
 written as it goes, so an interrupted run stays readable), ``tb/`` (TensorBoard), ``model.zip``
 and, after :func:`evaluate`, ``evaluation.json`` and ``trajectories.npz``.
 
-PPO (documented choices; the paper fixes the networks and the batch): separate policy and value
-MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 1000 steps (5 trajectories of the
-horizon) per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, GAE lambda 0.95;
-clip 0.2; no entropy bonus; CPU, one torch thread (deterministic for a seed). Observations and
-rewards are normalised by running statistics (SB3 ``VecNormalize``, saved as
-``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are in raw units.
+PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
+and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
+per update; 10 epochs of minibatches of 250; Adam 3e-4); ``"default"`` is what the ablation in
+the README chose. Both: gamma 0.99, GAE lambda 0.95, clip 0.2, CPU, one torch thread
+(deterministic for a seed). Observations and rewards are normalised by running statistics (SB3
+``VecNormalize``, saved as ``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are
+in raw units.
+
+Evaluation reset seeds start at :data:`EVAL_SEED` (10,000 + trial); training environments
+are seeded from the run seed (``seed * 1000 + env index``), so the two never meet.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs.channel import CONFIGS, STATE_DIM, ChannelConfig, ChannelEnv, channel_shield
+from tlshield.envs.channel import CONFIGS, ChannelConfig, ChannelEnv, channel_shield
 
 #: Columns of metrics.csv, in order.
 METRIC_COLUMNS = (
@@ -46,20 +50,46 @@ METRIC_COLUMNS = (
     "wall_time",
 )
 
-N_ENVS = 5
-N_STEPS = 200
-PPO_KWARGS: dict[str, Any] = {
-    "n_steps": N_STEPS,
-    "batch_size": 250,
-    "n_epochs": 10,
-    "learning_rate": 3e-4,
-    "gamma": 0.99,
-    "gae_lambda": 0.95,
-    "clip_range": 0.2,
-    "ent_coef": 0.0,
+#: PPO settings by preset: environments, SB3 PPO keywords and the networks.
+PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {
+        "n_envs": 5,
+        "ppo": {
+            "n_steps": 200,
+            "batch_size": 250,
+            "n_epochs": 10,
+            "learning_rate": 3e-4,
+            "gamma": 0.99,
+            "gae_lambda": 0.95,
+            "clip_range": 0.2,
+            "ent_coef": 0.0,
+        },
+        "net_arch": {"pi": [300, 200, 100], "vf": [300, 200, 100]},
+    },
+    "default": {
+        "n_envs": 8,
+        "ppo": {
+            "n_steps": 128,
+            "batch_size": 256,
+            "n_epochs": 5,
+            "learning_rate": 3e-4,
+            "gamma": 0.99,
+            "gae_lambda": 0.95,
+            "clip_range": 0.2,
+            "ent_coef": 0.0,
+        },
+        "net_arch": {"pi": [64, 64], "vf": [64, 64]},
+    },
 }
-NET_ARCH = {"pi": [300, 200, 100], "vf": [300, 200, 100]}
+#: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
+EVAL_SEED = 10_000
 SCHEDULES = ("fixed", "linear", "exponential")
+
+
+def steps_per_update(preset: str) -> int:
+    """Environment steps in one PPO update of a preset."""
+    p = PRESETS[preset]
+    return int(p["n_envs"] * p["ppo"]["n_steps"])
 
 
 def clf_scale(schedule: str, progress: float, final: float) -> float:
@@ -82,7 +112,11 @@ def _scaled(cfg: ChannelConfig, scale: float) -> ChannelConfig:
     )
 
 
-def _check_run_args(config: str, updates: int, schedule: str, final_scale: float) -> None:
+def _check_run_args(
+    config: str, updates: int, schedule: str, final_scale: float, preset: str = "default"
+) -> None:
+    if preset not in PRESETS:
+        raise ValueError(f"preset {preset!r}: expected one of {', '.join(PRESETS)}")
     if config not in CONFIGS:
         raise ValueError(f"config {config!r}: expected one of {', '.join(CONFIGS)}")
     if not (isinstance(updates, int) and updates > 0):
@@ -93,26 +127,15 @@ def _check_run_args(config: str, updates: int, schedule: str, final_scale: float
         raise ValueError(f"final CLF scale {final_scale!r}: expected a number in (0, 1]")
 
 
-def make_vec_env(config: str, seed: int, overrides: dict[str, Any]) -> tuple[Any, Any]:
-    """The training VecEnv (shielded in one batch call when the config has a shield) and the
-    ShieldedVecEnv wrapper (or None)."""
+def make_vec_env(config: str, seed: int, overrides: dict[str, Any], n_envs: int) -> Any:
+    """The training VecEnv: ``n_envs`` Channel-v0 copies, each shielding its own steps (the
+    shield needs each env's measured obstacle motion; at 3 us a call, batching 8 rows would
+    save nothing), seeded ``seed * 1000 + i``."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from tlshield.wrappers import ShieldedVecEnv
-
-    has_shield = any(CONFIGS[config])
-    venv = DummyVecEnv(
-        [
-            (lambda: ChannelEnv(config=config, shield_in_env=not has_shield, **overrides))
-            for _ in range(N_ENVS)
-        ]
-    )
-    venv.seed(seed)
-    if not has_shield:
-        return venv, None
-    template = venv.envs[0]
-    wrapper = ShieldedVecEnv(venv, template.shield, action_fn=template.rl_action)
-    return wrapper, wrapper
+    venv = DummyVecEnv([(lambda: ChannelEnv(config=config, **overrides)) for _ in range(n_envs)])
+    venv.seed(seed * 1000)
+    return venv
 
 
 class _Metrics:
@@ -162,11 +185,17 @@ def train(
     clf_schedule: str = "fixed",
     clf_final_scale: float = 0.2,
     progress: bool = True,
+    preset: str = "default",
     **overrides: Any,
 ) -> Path:
-    """Trains PPO on one configuration; returns the run folder. Ctrl-C stops cleanly: the
-    metrics so far and the model are kept (``config.json`` then says ``"interrupted": true``)."""
-    _check_run_args(config, updates, clf_schedule, clf_final_scale)
+    """Trains PPO on one configuration; returns the run folder. ``overrides`` are
+    :class:`ChannelConfig` fields. Ctrl-C stops cleanly: the metrics so far and the model are
+    kept (``config.json`` then says ``"interrupted": true``)."""
+    _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
+    spec = PRESETS[preset]
+    ppo_kwargs, n_envs, net_arch = spec["ppo"], spec["n_envs"], spec["net_arch"]
+    # The progress reward is shaped for the discount PPO uses.
+    overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -177,17 +206,18 @@ def train(
     run.mkdir(parents=True, exist_ok=True)
     from stable_baselines3.common.vec_env import VecNormalize
 
-    inner, shielded = make_vec_env(config, seed, overrides)
+    inner = make_vec_env(config, seed, overrides, n_envs)
     cfg: ChannelConfig = inner.get_attr("cfg", [0])[0]
-    venv = VecNormalize(inner, norm_obs=True, norm_reward=True, gamma=PPO_KWARGS["gamma"])
+    venv = VecNormalize(inner, norm_obs=True, norm_reward=True, gamma=ppo_kwargs["gamma"])
     record = {
         "config": config,
         "seed": seed,
         "updates": updates,
+        "preset": preset,
         "clf_schedule": clf_schedule,
         "clf_final_scale": clf_final_scale,
-        "n_envs": N_ENVS,
-        "ppo": {**PPO_KWARGS, "net_arch": NET_ARCH, "activation": "ReLU"},
+        "n_envs": n_envs,
+        "ppo": {**ppo_kwargs, "net_arch": net_arch, "activation": "ReLU"},
         "env": asdict(cfg),
         "overrides": overrides,
         "interrupted": False,
@@ -201,11 +231,11 @@ def train(
         seed=seed,
         device="cpu",
         verbose=0,
-        policy_kwargs={"net_arch": NET_ARCH, "activation_fn": torch.nn.ReLU},
-        **PPO_KWARGS,
+        policy_kwargs={"net_arch": net_arch, "activation_fn": torch.nn.ReLU},
+        **ppo_kwargs,
     )
     model.set_logger(configure(str(run / "tb"), ["tensorboard"]))
-    metrics = _Metrics(N_ENVS, PPO_KWARGS["gamma"])
+    metrics = _Metrics(n_envs, ppo_kwargs["gamma"])
     csv_file = (run / "metrics.csv").open("w", newline="")
     writer = csv.DictWriter(csv_file, fieldnames=METRIC_COLUMNS)
     writer.writeheader()
@@ -221,8 +251,8 @@ def train(
 
         def _on_rollout_start(self) -> None:
             self.scale = clf_scale(clf_schedule, self.update / max(updates - 1, 1), clf_final_scale)
-            if shielded is not None and CONFIGS[config][1] and clf_schedule != "fixed":
-                shielded.shield = channel_shield(_scaled(cfg, self.scale), config)
+            if CONFIGS[config][1] and clf_schedule != "fixed":
+                inner.set_attr("shield", channel_shield(_scaled(cfg, self.scale), config))
 
         def _on_step(self) -> bool:
             raw = venv.get_original_reward()  # metrics in raw units, not normalised
@@ -259,7 +289,7 @@ def train(
             bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=row["violations"])
 
     try:
-        model.learn(total_timesteps=updates * N_ENVS * N_STEPS, callback=Callback())
+        model.learn(total_timesteps=updates * n_envs * ppo_kwargs["n_steps"], callback=Callback())
         record["finished"] = True
     except KeyboardInterrupt:
         record["interrupted"] = True
@@ -292,57 +322,55 @@ def load_run(run: str | Path) -> dict[str, Any]:
 
 def evaluate(
     run: str | Path,
-    trials: int = 20,
-    seed: int = 10_000,
+    trials: int = 100,
+    seed: int = EVAL_SEED,
     policy: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, Any]:
     """The paper's evaluation of a trained run: CBF always on; an episode ends at the horizon,
-    on success or on collision. Writes evaluation.json and trajectories.npz into the run."""
+    on success or on collision. All trials run side by side (one batched policy call per
+    step); ``policy`` maps a batch of observations ``(N, d)`` to actions ``(N, 2)``. Trial
+    ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
+    trial: reset seed, success, collision, steps, violating steps) and ``trajectories.npz``
+    (each trial's start state, agent path and obstacle paths)."""
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
     record = load_run(run)
     if policy is None:
-        model_path = Path(run) / "model.zip"
-        if not model_path.is_file():
-            raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
-        import pickle
-
-        from stable_baselines3 import PPO
-
-        model = PPO.load(model_path, device="cpu")
-        stats_path = Path(run) / "vecnormalize.pkl"
-        normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
-        if stats_path.is_file():
-            with stats_path.open("rb") as f:
-                stats = pickle.load(f)
-            normalize = stats.normalize_obs
-
-        def policy(obs: np.ndarray) -> np.ndarray:
-            return model.predict(normalize(obs), deterministic=True)[0]
-
-    env = ChannelEnv(config=record["config"], evaluation=True, **record.get("overrides", {}))
-    successes = collisions = violation_steps = violating_trials = 0
-    steps_to_success: list[int] = []
-    paths: list[np.ndarray] = []
-    starts: list[np.ndarray] = []
-    for trial in range(trials):
-        obs, _ = env.reset(seed=seed + trial)
-        starts.append(obs[:STATE_DIM].copy())
-        path = [obs[:2].copy()]
-        violated = False
-        for t in range(env.cfg.horizon):
-            obs, _, terminated, truncated, info = env.step(policy(obs))
-            path.append(obs[:2].copy())
-            violation_steps += info["violation"]
-            violated |= info["violation"]
+        policy = _saved_policy(Path(run))
+    envs = [
+        ChannelEnv(config=record["config"], evaluation=True, **record.get("overrides", {}))
+        for _ in range(trials)
+    ]
+    obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(envs)])
+    starts = np.stack([env.state.copy() for env in envs])
+    paths = [[env.state[:2].copy()] for env in envs]
+    obstacle_paths = [[env.state[9:13].copy()] for env in envs]
+    outcomes = [
+        {"reset_seed": seed + i, "success": False, "collision": False, "steps": 0, "violations": 0}
+        for i in range(trials)
+    ]
+    active = list(range(trials))
+    for t in range(envs[0].cfg.horizon):
+        if not active:
+            break
+        actions = np.asarray(policy(obs[active]), dtype=np.float64).reshape(len(active), -1)
+        still = []
+        for i, action in zip(active, actions, strict=True):
+            o, _, terminated, truncated, info = envs[i].step(action)
+            obs[i] = o
+            paths[i].append(envs[i].state[:2].copy())
+            obstacle_paths[i].append(envs[i].state[9:13].copy())
+            out = outcomes[i]
+            out["violations"] += int(info["violation"])
+            out["steps"] = t + 1
             if terminated or truncated:
-                successes += info["success"]
-                collisions += info["collision"]
-                if info["success"]:
-                    steps_to_success.append(t + 1)
-                break
-        violating_trials += violated
-        paths.append(np.array(path))
+                out["success"] = bool(info["success"])
+                out["collision"] = bool(info["collision"])
+            else:
+                still.append(i)
+        active = still
+    successes = sum(o["success"] for o in outcomes)
+    steps_to_success = [o["steps"] for o in outcomes if o["success"]]
     result = {
         "config": record["config"],
         "seed": record["seed"],
@@ -350,24 +378,54 @@ def evaluate(
         "eval_seed": seed,
         "success_rate": successes / trials,
         "successes": successes,
-        "collisions": collisions,
-        "violation_steps": violation_steps,
-        "violating_trials": violating_trials,
+        "collisions": sum(o["collision"] for o in outcomes),
+        "violation_steps": sum(o["violations"] for o in outcomes),
+        "violating_trials": sum(o["violations"] > 0 for o in outcomes),
         "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
+        "outcomes": outcomes,
     }
     Path(run, "evaluation.json").write_text(json.dumps(result, indent=2))
     np.savez_compressed(
         Path(run, "trajectories.npz"),
-        starts=np.array(starts),
+        starts=starts,
         lengths=np.array([len(p) for p in paths]),
-        paths=np.concatenate(paths),
+        paths=np.concatenate([np.array(p) for p in paths]),
+        obstacle_paths=np.concatenate([np.array(p) for p in obstacle_paths]),
     )
     return result
+
+
+def _saved_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
+    """The trained policy of a run folder (deterministic), with its observation statistics."""
+    model_path = run / "model.zip"
+    if not model_path.is_file():
+        raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
+    import pickle
+
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.set_num_threads(1)
+    model = PPO.load(model_path, device="cpu")
+    stats_path = run / "vecnormalize.pkl"
+    normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
+    if stats_path.is_file():
+        with stats_path.open("rb") as f:
+            stats = pickle.load(f)
+        normalize = stats.normalize_obs
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        return model.predict(normalize(obs), deterministic=True)[0]
+
+    return policy
 
 
 def _run_one(job: tuple[str, int, int, str, int, dict[str, Any]]) -> str:
     """One (config, seed) of a reproduction: train, then evaluate (a worker process)."""
     config, seed, updates, folder, trials, options = job
+    import torch
+
+    torch.set_num_threads(1)
     train(config, seed, updates, folder, progress=False, **options)
     evaluate(folder, trials=trials)
     return folder
@@ -378,8 +436,8 @@ def reproduce(
     *,
     configs: tuple[str, ...] = tuple(CONFIGS),
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 150,
-    trials: int = 20,
+    updates: int = 100,
+    trials: int = 100,
     workers: int = 2,
     progress: bool = True,
     **options: Any,
@@ -393,6 +451,7 @@ def reproduce(
             updates,
             options.get("clf_schedule", "fixed"),
             options.get("clf_final_scale", 0.2),
+            options.get("preset", "default"),
         )
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")

@@ -1,7 +1,7 @@
 """Gymnasium wrappers that put a temporal-logic task and its shield around any environment.
 
 * :class:`FsaAugmented` appends the one-hot FSA state to the observation and rewards progress
-  through the task automaton (paper Eq. 5A1).
+  through the task automaton (the progress reward by default, or the paper's Eq. 5A1).
 * :class:`Shielded` filters every action through a :class:`tlshield.Shield` (Eq. 5D2).
 * :class:`ShieldedVecEnv` (Stable-Baselines3 ``VecEnv``) and :class:`ShieldedVectorEnv`
   (Gymnasium vector API) shield all sub-environments in one ``Shield.filter_batch`` call.
@@ -13,14 +13,14 @@ from the same two parts.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, Shield, Spec
+from tlshield._core import Automaton, FilterResult, ProgressReward, Shield, Spec
 
 StateFn = Callable[[Any], NDArray[np.float64]]
 DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
@@ -31,34 +31,60 @@ def identity_state(obs: Any) -> NDArray[np.float64]:
     return np.asarray(obs, dtype=np.float64)
 
 
+#: The task rewards a tracker can pay: the progress reward or the paper's Eq. 5A1.
+REWARDS = ("progress", "paper")
+
+
 class FsaTracker:
-    """The task automaton along one episode: the current FSA state and the Eq. 5A1 reward.
+    """The task automaton along one episode: the current FSA state and the task reward.
 
     The FSA reads every state: ``reset(s_0)`` sets ``q_0 = step(initial, s_0)`` and
-    ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition. In the
-    trap every step pays ``trap_penalty`` (which must be no better than the worst reward
-    reachable outside it, so that entering the trap never pays).
+    ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition.
+
+    With ``progress`` (a :class:`tlshield.ProgressReward` of the same automaton, from
+    ``automaton.progress_reward(...)``) the reward is the progress-aware one: reaching
+    acceptance out-earns not reaching it, entering a state closer to acceptance never lowers
+    the potential, Eq. 5A1 shapes within a state, and the trap (``progress.trap_penalty``) is
+    worst. Without it the reward is the paper's Eq. 5A1, and every step in the trap pays
+    ``trap_penalty`` (which must be no better than the worst reward reachable outside it, so
+    that entering the trap never pays).
     """
 
-    def __init__(self, automaton: Automaton, c_r: float, trap_penalty: float) -> None:
+    def __init__(
+        self,
+        automaton: Automaton,
+        c_r: float,
+        trap_penalty: float,
+        progress: ProgressReward | None = None,
+    ) -> None:
         if not (np.isfinite(c_r) and c_r > 0):
             raise ValueError(f"c_r = {c_r}: expected a finite number > 0")
         if not np.isfinite(trap_penalty):
             raise ValueError(f"trap_penalty = {trap_penalty}: expected a finite number")
+        if progress is not None and len(progress.ranks) != automaton.num_states:
+            raise ValueError("progress: a ProgressReward of another automaton")
         self.automaton = automaton
         self.c_r = float(c_r)
-        self.trap_penalty = float(trap_penalty)
+        self.progress = progress
+        self.trap_penalty = float(trap_penalty if progress is None else progress.trap_penalty)
         self.accepting = frozenset(automaton.accepting)
         self.q = automaton.initial
+        self.phi = 0.0
         self._eye = np.eye(automaton.num_states)
 
     def reset(self, s: NDArray[np.float64]) -> int:
         self.q = self.automaton.step(self.automaton.initial, s)
+        self.phi = 0.0  # the progress reward's episodes start from Phi = 0
         return self.q
 
     def advance(self, s_next: NDArray[np.float64]) -> tuple[int, float]:
         """Moves to the next FSA state; returns it and the reward of the transition."""
-        q_next, reward, _ = self.automaton.advance(self.q, s_next, self.c_r, self.trap_penalty)
+        if self.progress is not None:
+            q_next, reward, self.phi = self.progress.advance(self.q, self.phi, s_next)
+        else:
+            q_next, reward, _ = self.automaton.advance(
+                self.q, s_next, self.c_r, self.trap_penalty
+            )
         self.q = q_next
         return q_next, reward
 
@@ -89,13 +115,17 @@ def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[
 
 
 class FsaAugmented(gym.Wrapper):
-    """Appends the one-hot FSA state to the observation and rewards the task (Eq. 5A1).
+    """Appends the one-hot FSA state to the observation and rewards the task.
 
     ``state_fn`` maps the wrapped env's observation to the state vector the spec's predicates
     read (default: the observation itself). The reward becomes ``r_tl + w * r_env``: ``w = 0``
     replaces the env's reward, ``w > 0`` augments it. ``info`` gains ``fsa_state``, ``success``
     (the accepting state is reached), ``trap`` and ``tl_reward``. With
     ``terminate_on_success`` the episode ends when the task is done.
+
+    ``reward="progress"`` (default) pays the progress-aware reward
+    (:class:`tlshield.ProgressReward`, built with ``gamma``, ``scale``, ``exclusive`` and the
+    other keywords in ``progress``); ``reward="paper"`` pays Eq. 5A1 with ``trap_penalty``.
     """
 
     def __init__(
@@ -108,11 +138,28 @@ class FsaAugmented(gym.Wrapper):
         w: float = 0.0,
         trap_penalty: float = -100.0,
         terminate_on_success: bool = True,
+        reward: str = "progress",
+        gamma: float = 0.99,
+        scale: float = 1.0,
+        exclusive: Sequence[Sequence[str]] = (),
+        **progress: Any,
     ) -> None:
         super().__init__(env)
         if not isinstance(env.observation_space, gym.spaces.Box):
             raise TypeError("FsaAugmented needs a Box observation space")
-        self.tracker = FsaTracker(spec.automaton(), c_r, trap_penalty)
+        if reward not in REWARDS:
+            raise ValueError(f"reward = {reward!r}: expected one of {REWARDS}")
+        automaton = spec.automaton()
+        shaped = None
+        if reward == "progress":
+            shaped = automaton.progress_reward(
+                gamma=gamma,
+                scale=scale,
+                c_r=c_r,
+                exclusive=[list(g) for g in exclusive],
+                **progress,
+            )
+        self.tracker = FsaTracker(automaton, c_r, trap_penalty, shaped)
         self.state_fn = state_fn
         self.w = float(w)
         self.terminate_on_success = terminate_on_success
@@ -157,8 +204,10 @@ class Shielded(gym.Wrapper):
     Must wrap an :class:`FsaAugmented` env (directly or further down): the shield needs the
     current FSA state. ``state_fn`` maps the observation (as the wrapped env returns it, FSA
     one-hot included) to the state vector; by default the first ``n`` values. ``dynamics_fn(s)``
-    returns ``(f, g)`` for systems without a built-in model. ``info["shield"]`` carries
-    ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``.
+    returns ``(f, g)`` for systems without a built-in model. ``drift_fn(s)`` returns the
+    measured motion of state dimensions the agent does not control (moving obstacles), added
+    to ``f`` (see ``Shield.filter``). ``info["shield"]`` carries ``a_rl``, ``a_cbf``,
+    ``a_clf``, ``delta`` and ``status``.
     """
 
     def __init__(
@@ -167,6 +216,7 @@ class Shielded(gym.Wrapper):
         shield: Shield,
         state_fn: StateFn | None = None,
         dynamics_fn: DynamicsFn | None = None,
+        drift_fn: StateFn | None = None,
     ) -> None:
         super().__init__(env)
         try:
@@ -177,6 +227,7 @@ class Shielded(gym.Wrapper):
         k = shield.automaton.num_states
         self.state_fn = state_fn or (lambda obs: np.asarray(obs, dtype=np.float64)[:-k])
         self.dynamics_fn = dynamics_fn
+        self.drift_fn = drift_fn
         self._state: NDArray[np.float64] | None = None
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
@@ -189,11 +240,12 @@ class Shielded(gym.Wrapper):
             raise RuntimeError("call reset() before step()")
         a_rl = np.asarray(action, dtype=np.float64)
         q = self.env.get_wrapper_attr("fsa_state")
+        drift = None if self.drift_fn is None else self.drift_fn(self._state)
         if self.dynamics_fn is None:
-            result = self.shield.filter(self._state, q, a_rl)
+            result = self.shield.filter(self._state, q, a_rl, drift=drift)
         else:
             f, g = self.dynamics_fn(self._state)
-            result = self.shield.filter(self._state, q, a_rl, f=f, g=g)
+            result = self.shield.filter(self._state, q, a_rl, f=f, g=g, drift=drift)
         obs, reward, terminated, truncated, info = self.env.step(result.action)
         self._state = self.state_fn(obs)
         info = {**info, "shield": shield_info(result, a_rl)}

@@ -1,10 +1,14 @@
 """The paper's case study (Li & Belta, Sec. VI): a channel, three goals, two moving obstacles.
 
 State (13 values): reference point ``x, y``, heading ``theta``, goal centres ``g1, g2, g3``
-(x, y each) and obstacle centres ``o1, o2`` (x, y each). The observation is the state followed
-by the one-hot FSA state; the action is ``(a_v, a_theta)`` of the unicycle's reference point,
-normalised to ``[-1, 1]^2`` (scaled to ``ChannelConfig.rl_bounds``; ``info["shield"]["a_rl"]``
-is in physical units).
+(x, y each) and obstacle centres ``o1, o2`` (x, y each). The action is ``(a_v, a_theta)`` of
+the unicycle's reference point, normalised to ``[-1, 1]^2`` (scaled to
+``ChannelConfig.rl_bounds``; ``info["shield"]["a_rl"]`` is in physical units).
+
+Observation (``ChannelConfig.observation``): ``"relative"`` (default, 18 values + the one-hot
+FSA state): ``cos theta, sin theta``, the two channel constraints ``c1, c2``, the goals and
+the obstacles relative to the agent, and the obstacles' velocities measured from their last
+two positions; ``"paper"``: the 13 state values followed by the one-hot FSA state.
 
 Every constant of the environment is a field of :class:`ChannelConfig` (documented there) and
 can be overridden by keyword in ``gymnasium.make("tlshield/Channel-v0", ...)``.
@@ -33,6 +37,11 @@ STATE_DIM = 13
 X, Y, THETA = 0, 1, 2
 GOAL_DIMS = ((3, 4), (5, 6), (7, 8))
 OBSTACLE_DIMS = ((9, 10), (11, 12))
+
+#: Observation layouts (see the module docs).
+OBSERVATIONS = ("relative", "paper")
+#: Length of the relative observation before the one-hot FSA state.
+RELATIVE_DIM = 18
 
 #: The four configurations of the paper: which parts of the shield are on.
 CONFIGS = {
@@ -130,12 +139,36 @@ class ChannelConfig:
     #: Beyond the paper: put the obstacles in the formula (``TASK_WITH_OBSTACLES``), so the
     #: CBF also keeps the agent out of them (ignoring their motion, which it does not know).
     obstacles_in_task: bool = False
+    #: Beyond the paper: the obstacles are barriers of the shield (``h = |p - o| -
+    #: barrier_radius``) whose centres move with the velocity the environment measured from
+    #: their last two positions (``Shield.filter(..., drift=...)``).
+    obstacle_barrier: bool = True
+    #: Radius kept around each obstacle centre by the moving-obstacle barrier.
+    barrier_radius: float = 0.45
+
+    # --- observation ----------------------------------------------------------------------
+    #: ``"relative"`` or ``"paper"`` (see the module docs).
+    observation: str = "relative"
 
     # --- reward ---------------------------------------------------------------------------
+    #: ``"progress"`` (the progress-aware task reward, :class:`tlshield.ProgressReward`) or
+    #: ``"paper"`` (Eq. 5A1 with ``trap_penalty``).
+    reward: str = "progress"
+    #: The discount the progress reward is consistent with (the trainer's gamma).
+    gamma: float = 0.99
+    #: Eq. 5A1 scale of the progress reward's potential (m): its shaping is clipped beyond.
+    progress_scale: float = 2.0
+    #: Paid on finishing the task (progress reward): large enough that a finisher slowed down
+    #: by the obstacles still out-earns a parker (checked on 20 seeds in the tests).
+    bonus: float = 5.0
     #: Weight of the trap term in Eq. 5A1.
     c_r: float = 1.0
-    #: Weight of the obstacle term: reward = r_tl + w * min(d - safe_distance, 0).
-    w: float = 1.0
+    #: Weight of the obstacle term: reward = r_tl + w * min(d - safe_distance, 0)
+    #: - collision_penalty * [d < obstacle_radius].
+    w: float = 0.05
+    #: Paid on every step in collision (training does not end on a collision, so barging
+    #: through an obstacle must cost more than the detour around it).
+    collision_penalty: float = 1.0
 
     # --- shield (Eq. 5D2) -----------------------------------------------------------------
     alpha: float = 2.0
@@ -150,8 +183,9 @@ class ChannelConfig:
 
     @property
     def trap_penalty(self) -> float:
-        """Per-step reward in the trap: no better than the worst task reward reachable outside
-        it (every atom's robustness in the arena is above minus the arena's diagonal)."""
+        """Per-step Eq. 5A1 reward in the trap: no better than the worst task reward reachable
+        outside it (every atom's robustness in the arena is above minus the arena's diagonal).
+        The progress reward has its own (``ProgressReward.trap_penalty``)."""
         lo, hi = self.arena
         return -max(1.0, self.c_r) * (hi - lo) * SQRT2
 
@@ -181,6 +215,22 @@ class ChannelConfig:
             )
         if not (math.isfinite(self.w) and self.w >= 0):
             raise ValueError(f"w = {self.w!r}: expected a finite number >= 0")
+        for name, value, allowed in (
+            ("observation", self.observation, OBSERVATIONS),
+            ("reward", self.reward, ("progress", "paper")),
+        ):
+            if value not in allowed:
+                raise ValueError(f"{name} = {value!r}: expected one of {allowed}")
+        if not (0.0 < self.gamma <= 1.0):
+            raise ValueError(f"gamma = {self.gamma!r}: expected a discount in (0, 1]")
+        for name in ("progress_scale", "barrier_radius"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} = {value!r}: expected a finite number > 0")
+        for name in ("bonus", "collision_penalty"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} = {value!r}: expected a finite number >= 0")
         lo, hi = np.asarray(self.rl_bounds, dtype=float)
         if lo.shape != (2,) or hi.shape != (2,) or np.any(lo >= hi):
             raise ValueError(
@@ -204,6 +254,25 @@ def _config(overrides: dict[str, Any]) -> ChannelConfig:
     return cfg
 
 
+#: The paper's settings (its reward and 13-value observation, no moving-obstacle barrier).
+PAPER_ENV = {
+    "reward": "paper",
+    "observation": "paper",
+    "obstacle_barrier": False,
+    "w": 1.0,
+    "collision_penalty": 0.0,
+}
+
+
+def obstacle_barriers(cfg: ChannelConfig) -> dict[str, Ball]:
+    """The moving-obstacle barriers: keep the reference point out of a disc of
+    ``barrier_radius`` around each obstacle centre (read from the state)."""
+    return {
+        f"!o{k + 1}": Ball(pos=[X, Y], radius=cfg.barrier_radius, center_dims=list(dims))
+        for k, dims in enumerate(OBSTACLE_DIMS)
+    }
+
+
 def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``)."""
     use_cbf, use_clf = CONFIGS[config]
@@ -220,6 +289,7 @@ def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) ->
         use_cbf=use_cbf,
         use_clf=use_clf,
         margin=cfg.cbf_margin,
+        barriers=obstacle_barriers(cfg) if cfg.obstacle_barrier else None,
     )
 
 
@@ -265,16 +335,32 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self.shield = channel_shield(cfg, shield_config, self.spec_tl)
         self.shield_in_env = shield_in_env
         automaton = self.spec_tl.automaton()
-        self.tracker = FsaTracker(automaton, cfg.c_r, cfg.trap_penalty)
+        progress = None
+        if cfg.reward == "progress":
+            # Goal discs never overlap (the draw keeps them apart), so one state cannot count as
+            # reaching two goals: g3 is two transitions away from the start, not one.
+            progress = automaton.progress_reward(
+                gamma=cfg.gamma,
+                scale=cfg.progress_scale,
+                bonus=cfg.bonus,
+                c_r=cfg.c_r,
+                exclusive=[["g1", "g2", "g3"]],
+            )
+        self.tracker = FsaTracker(automaton, cfg.c_r, cfg.trap_penalty, progress)
         lo, hi = cfg.arena
         margin = max(cfg.outside_goal_v[1], max(cfg.obstacle_amplitude)) + cfg.goal_radius
-        state_lo = np.full(STATE_DIM, lo - margin)
-        state_hi = np.full(STATE_DIM, hi + margin)
-        state_lo[THETA], state_hi[THETA] = -math.pi, math.pi
         k = automaton.num_states
+        if cfg.observation == "paper":
+            obs_lo = np.full(STATE_DIM, lo - margin)
+            obs_hi = np.full(STATE_DIM, hi + margin)
+            obs_lo[THETA], obs_hi[THETA] = -math.pi, math.pi
+        else:
+            span = (hi - lo + 2 * margin) * SQRT2
+            obs_lo, obs_hi = np.full(RELATIVE_DIM, -span), np.full(RELATIVE_DIM, span)
+            obs_lo[:2], obs_hi[:2] = -1.0, 1.0
         self.observation_space = gym.spaces.Box(
-            np.concatenate([state_lo, np.zeros(k)]),
-            np.concatenate([state_hi, np.ones(k)]),
+            np.concatenate([obs_lo, np.zeros(k)]),
+            np.concatenate([obs_hi, np.ones(k)]),
             dtype=np.float64,
         )
         # The policy acts in [-1, 1]^2 (what SB3 expects); a_rl = centre + action * half range.
@@ -282,6 +368,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._rl_centre, self._rl_half = (rl_hi + rl_lo) / 2, (rl_hi - rl_lo) / 2
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
         self.state = np.zeros(STATE_DIM)
+        #: The measured motion of the obstacle dimensions (finite differences), for the shield.
+        self.drift = np.zeros(STATE_DIM)
         self._obstacles = np.zeros((2, 4))  # per obstacle: u, amplitude, frequency, phase
         self._t = 0
         self._trajectory: list[NDArray[np.float64]] = []
@@ -336,7 +424,19 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         return self._rl_centre + np.clip(action, -1.0, 1.0) * self._rl_half
 
     def _observe(self) -> NDArray[np.float64]:
-        return np.concatenate([self.state, self.tracker.one_hot()])
+        s = self.state
+        if self.cfg.observation == "paper":
+            return np.concatenate([s, self.tracker.one_hot()])
+        p = s[X : Y + 1]
+        w = self.cfg.half_width
+        obs = np.empty(RELATIVE_DIM + len(self.tracker.one_hot()))
+        obs[0], obs[1] = math.cos(s[THETA]), math.sin(s[THETA])
+        obs[2], obs[3] = s[X] - s[Y] + w, s[Y] - s[X] + w
+        obs[4:10] = (s[3:9].reshape(3, 2) - p).ravel()
+        obs[10:14] = (s[9:13].reshape(2, 2) - p).ravel()
+        obs[14:18] = self.drift[9:13]
+        obs[RELATIVE_DIM:] = self.tracker.one_hot()
+        return obs
 
     # --- Gymnasium API ------------------------------------------------------------------------
 
@@ -364,6 +464,10 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         obstacles = self._obstacle_positions(0.0)
         for k, (a, b) in enumerate(OBSTACLE_DIMS):
             s[a], s[b] = obstacles[k]
+        # Velocity measured from the positions one step before the start and at the start.
+        before = self._obstacle_positions(-cfg.dt)
+        self.drift = np.zeros(STATE_DIM)
+        self.drift[9:13] = ((obstacles - before) / cfg.dt).ravel()
         self.state = s
         self._t = 0
         self._trajectory = [s[X : Y + 1].copy()]
@@ -395,7 +499,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         s = self.state
         result = None
         if self.shield is not None and self.shield_in_env:
-            result = self.shield.filter(s, self.tracker.q, a_rl)
+            drift = self.drift if self.cfg.obstacle_barrier else None
+            result = self.shield.filter(s, self.tracker.q, a_rl, drift=drift)
             applied = result.action
         else:
             applied = a_rl
@@ -411,13 +516,15 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         obstacles = self._obstacle_positions(self._t * cfg.dt)
         for k, (a, b) in enumerate(OBSTACLE_DIMS):
             nxt[a], nxt[b] = obstacles[k]
+        self.drift = np.zeros(STATE_DIM)
+        self.drift[9:13] = (nxt[9:13] - s[9:13]) / cfg.dt
         self.state = nxt
         self._trajectory.append(nxt[X : Y + 1].copy())
 
         q, r_tl = self.tracker.advance(nxt)
         measured = self._measure(nxt)
         r_obstacle = min(measured["min_obstacle_distance"] - cfg.safe_distance, 0.0)
-        reward = r_tl + cfg.w * r_obstacle
+        reward = r_tl + cfg.w * r_obstacle - cfg.collision_penalty * measured["collision"]
         success = self.tracker.success
         terminated = success or (self.evaluation and measured["collision"])
         truncated = self._t >= cfg.horizon and not terminated

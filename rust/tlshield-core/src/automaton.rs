@@ -728,6 +728,25 @@ impl Automaton {
         self.reward_from(q, &rho[..self.spec.atoms().len()], c_r)
     }
 
+    /// The Eq. 5A1 value of being in `q` at a state whose atoms have robustness `rho`
+    /// (validated inputs; 0 in an accepting state). The progress reward uses it as the
+    /// within-state part of its potential.
+    pub fn task_signal_from(&self, q: usize, rho: &[f64], c_r: f64) -> f64 {
+        self.reward_from(q, rho, c_r)
+    }
+
+    /// The atoms' robustness at `s` after checking its length and finiteness.
+    pub fn checked_atom_robustness(&self, s: &[f64]) -> Result<[f64; MAX_ATOMS], InputError> {
+        self.check_vector(s)?;
+        Ok(self.atom_rho(s))
+    }
+
+    /// The successor of `q` given the atoms' robustness at the state read (validated).
+    #[inline]
+    pub fn step_rho(&self, q: usize, rho: &[f64]) -> usize {
+        self.table[q * self.letters + Self::valuation(rho)] as usize
+    }
+
     fn reward_from(&self, q: usize, rho: &[f64], c_r: f64) -> f64 {
         if self.accepting[q] {
             return 0.0;

@@ -22,6 +22,7 @@ pub mod cnf;
 pub mod dynamics;
 pub mod error;
 pub mod predicate;
+pub mod progress;
 pub mod qp;
 pub mod robustness;
 pub mod shield;
@@ -31,10 +32,11 @@ pub use automaton::{Automaton, Edge};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
+pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 pub use shield::{
-    BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig, SolvedBy,
-    SolverChoice, Status,
+    Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig,
+    SolvedBy, SolverChoice, Status,
 };
 pub use spec::{Formula, Spec};
 

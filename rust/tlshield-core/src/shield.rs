@@ -45,6 +45,38 @@ pub const PARALLEL_MIN_ROWS: usize = 32;
 /// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`].
 pub const ACTIVE_SET_MAX_VARS: usize = 16;
 
+/// A user barrier: `h = rho(predicate)` (`positive`) or `h = -rho(predicate)` (keep out of
+/// the predicate's region, e.g. a moving obstacle's disc), kept above the margin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Barrier {
+    /// Its name in results.
+    pub name: String,
+    /// The predicate whose robustness (or its negation) is the barrier.
+    pub predicate: Predicate,
+    /// `false`: the barrier is the predicate's negation.
+    pub positive: bool,
+}
+
+impl Barrier {
+    /// `h = rho(predicate)`.
+    pub fn inside(name: impl Into<String>, predicate: Predicate) -> Self {
+        Barrier {
+            name: name.into(),
+            predicate,
+            positive: true,
+        }
+    }
+
+    /// `h = -rho(predicate)`: stay out of the predicate's region.
+    pub fn outside(name: impl Into<String>, predicate: Predicate) -> Self {
+        Barrier {
+            name: name.into(),
+            predicate,
+            positive: false,
+        }
+    }
+}
+
 /// Which QP solver the shield uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SolverChoice {
@@ -168,7 +200,7 @@ pub struct ShieldConfig {
     /// Optional limits on the applied action `a_rl + a_cbf + a_clf`.
     pub action_bounds: Option<Bounds>,
     /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
-    pub barriers: Vec<(String, Predicate)>,
+    pub barriers: Vec<Barrier>,
     /// State dimensions the CLF drives to the goal.
     pub pos: Vec<usize>,
     /// Whether the CBF part (barriers, safe set, `a_cbf`) is on.
@@ -383,6 +415,20 @@ fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
     &mut qp.g[start..]
 }
 
+/// Checks a drift of `rows` rows of length `n`.
+fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
+    if d.len() != rows * n {
+        return Err(InputError::Shape {
+            what: "drift".into(),
+            expected: format!("{rows} x {n} (one value per state dimension)"),
+            got: format!("{} values", d.len()),
+        }
+        .into());
+    }
+    check_finite("drift", d, n)?;
+    Ok(())
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -445,7 +491,7 @@ impl Shield {
         let mut min_dim = spec
             .predicates()
             .iter()
-            .chain(config.barriers.iter().map(|(_, p)| p))
+            .chain(config.barriers.iter().map(|b| &b.predicate))
             .map(Predicate::min_dim)
             .max()
             .unwrap_or(0)
@@ -505,8 +551,8 @@ impl Shield {
             }
             .into());
         }
-        for (_, p) in &self.config.barriers {
-            p.check_dim(n)?;
+        for b in &self.config.barriers {
+            b.predicate.check_dim(n)?;
         }
         Ok(())
     }
@@ -561,26 +607,35 @@ impl Shield {
         q: usize,
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
     ) -> Result<(), ShieldError> {
         self.check_state("s", s)?;
         check_finite("s", s, s.len())?;
         self.automaton.check_state("q", q as i64)?;
         self.check_action("a_rl", a_rl)?;
-        self.check_dynamics(s.len(), fg)
+        self.check_dynamics(s.len(), fg)?;
+        if let Some(d) = drift {
+            check_drift(d, s.len(), 1)?;
+        }
+        Ok(())
     }
 
     /// One shield step at state `s` in FSA state `q` for the RL action `a_rl`; `fg`
-    /// overrides the dynamics model for this call.
+    /// overrides the dynamics model for this call. `drift` (length n) is added to `f`: the
+    /// motion, measured for this step, of state dimensions the agent does not control (moving
+    /// obstacles or goals read through `center_dims`), so a barrier on them sees
+    /// `dh/dt = grad h . (f + drift + g a)`.
     pub fn filter(
         &self,
         s: &[f64],
         q: usize,
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
     ) -> Result<Filtered, ShieldError> {
-        self.check_call(s, q, a_rl, fg)?;
+        self.check_call(s, q, a_rl, fg, drift)?;
         Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, true, true);
+            self.step(ws, s, q, a_rl, fg, drift, true, true);
             ws.out.clone()
         }))
     }
@@ -594,22 +649,25 @@ impl Shield {
         q: usize,
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
     ) -> Result<DenseQp, ShieldError> {
-        self.check_call(s, q, a_rl, fg)?;
+        self.check_call(s, q, a_rl, fg, drift)?;
         Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, false, false);
+            self.step(ws, s, q, a_rl, fg, drift, false, false);
             ws.qp.clone()
         }))
     }
 
     /// [`Shield::filter`] for a batch: `states` is `(B, n)` row-major, `qs` `(B,)`, `a_rl`
-    /// `(B, m)`. Rows are processed in parallel; the model's dynamics are used.
+    /// `(B, m)`, `drift` (optional) `(B, n)`. Rows are processed in parallel; the model's
+    /// dynamics are used.
     pub fn filter_batch(
         &self,
         states: &[f64],
         n: usize,
         qs: &[usize],
         a_rl: &[f64],
+        drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
         let m = self.m;
@@ -634,6 +692,9 @@ impl Shield {
         self.check_state("states row", &states[..n.min(states.len())])?;
         check_finite("states", states, n)?;
         check_finite("a_rl", a_rl, m)?;
+        if let Some(d) = drift {
+            check_drift(d, n, rows)?;
+        }
         for (i, &q) in qs.iter().enumerate() {
             self.automaton.check_state(&format!("qs[{i}]"), q as i64)?;
         }
@@ -652,6 +713,7 @@ impl Shield {
             rayon::current_num_threads().max(1)
         };
         let chunk = rows.div_ceil(threads).max(1);
+        let drift_rows = drift.unwrap_or(&[]);
         states
             .par_chunks(chunk * n)
             .zip(qs.par_chunks(chunk))
@@ -663,17 +725,26 @@ impl Shield {
             .zip(out.status.par_chunks_mut(chunk))
             .zip(out.slack.par_chunks_mut(chunk))
             .zip(out.solver.par_chunks_mut(chunk))
+            .enumerate()
             .for_each(
-                |(((((((((s, q), a), action), a_cbf), a_clf), delta), status), slack), solver)| {
+                |(
+                    c,
+                    (((((((((s, q), a), action), a_cbf), a_clf), delta), status), slack), solver),
+                )| {
                     self.with_workspace(n, |ws| {
                         for (i, &qi) in q.iter().enumerate() {
                             let rows_m = i * m..(i + 1) * m;
+                            let d = drift.map(|_| {
+                                let start = (c * chunk + i) * n;
+                                &drift_rows[start..start + n]
+                            });
                             self.step(
                                 ws,
                                 &s[i * n..(i + 1) * n],
                                 qi,
                                 &a[rows_m.clone()],
                                 None,
+                                d,
                                 false,
                                 true,
                             );
@@ -701,6 +772,7 @@ impl Shield {
         q: usize,
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
         record: bool,
         solve: bool,
     ) {
@@ -717,6 +789,11 @@ impl Shield {
             (None, Some(d)) => d.eval(s, &mut ws.f, &mut ws.g),
             (None, None) => unreachable!("checked by check_dynamics"),
         }
+        if let Some(d) = drift {
+            for (f, d) in ws.f.iter_mut().zip(d) {
+                *f += d;
+            }
+        }
 
         // Barriers: value h, Lg h and the row's right-hand side Lf h + Lg h . a_rl + alpha h.
         ws.out.barriers.clear();
@@ -727,11 +804,15 @@ impl Shield {
         if cfg.use_cbf {
             let spec = self.automaton.spec();
             self.automaton.safe_set_from(q, &rho, &mut ws.safe);
-            let user = cfg
-                .barriers
-                .iter()
-                .enumerate()
-                .map(|(i, (_, p))| (BarrierSource::User(i), p, 1.0, p.value(s)));
+            let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
+                let sign = if b.positive { 1.0 } else { -1.0 };
+                (
+                    BarrierSource::User(i),
+                    &b.predicate,
+                    sign,
+                    sign * b.predicate.value(s),
+                )
+            });
             let kept = ws.safe.iter().map(|&(lit, h)| {
                 let sign = if lit.positive { 1.0 } else { -1.0 };
                 let predicate = &spec.predicates()[lit.atom];
@@ -1017,7 +1098,7 @@ mod tests {
         let s = state(1.0, -1.4, std::f64::consts::FRAC_PI_2);
         let q = sh.automaton().step_unchecked(0, &s);
         let a_rl = [3.0, 0.0];
-        let out = sh.filter(&s, q, &a_rl, None).unwrap();
+        let out = sh.filter(&s, q, &a_rl, None, None).unwrap();
         assert_eq!(out.status, Status::Solved);
         assert_eq!(out.solver, SolvedBy::ActiveSet);
         let margins = channel_margins(&s, &out.action, 2.0);
@@ -1037,7 +1118,7 @@ mod tests {
         assert!(goal == vec![4.0, 4.0] || goal == vec![4.5, 6.5], "{goal:?}");
         // Clarabel agrees.
         let by_clarabel = shield(config(SolverChoice::Clarabel))
-            .filter(&s, q, &a_rl, None)
+            .filter(&s, q, &a_rl, None, None)
             .unwrap();
         assert_eq!(by_clarabel.solver, SolvedBy::Clarabel);
         for (a, b) in out.action.iter().zip(&by_clarabel.action) {
@@ -1058,19 +1139,23 @@ mod tests {
         let mut cfg = config(SolverChoice::Auto);
         cfg.use_cbf = false;
         cfg.use_clf = false;
-        let out = shield(cfg.clone()).filter(&s, q, &a_rl, None).unwrap();
+        let out = shield(cfg.clone())
+            .filter(&s, q, &a_rl, None, None)
+            .unwrap();
         assert_eq!(
             (out.action.clone(), out.solver),
             (a_rl.to_vec(), SolvedBy::Nothing)
         );
         assert!(out.barriers.is_empty() && out.goal.is_none());
         cfg.use_clf = true;
-        let out = shield(cfg.clone()).filter(&s, q, &a_rl, None).unwrap();
+        let out = shield(cfg.clone())
+            .filter(&s, q, &a_rl, None, None)
+            .unwrap();
         assert_eq!(out.a_cbf, vec![0.0, 0.0]);
         assert!(out.barriers.is_empty() && out.goal.is_some());
         cfg.use_clf = false;
         cfg.use_cbf = true;
-        let out = shield(cfg).filter(&s, q, &a_rl, None).unwrap();
+        let out = shield(cfg).filter(&s, q, &a_rl, None, None).unwrap();
         assert_eq!(out.a_clf, vec![0.0, 0.0]);
         assert!(out.goal.is_none() && !out.barriers.is_empty());
     }
@@ -1083,12 +1168,63 @@ mod tests {
         let sh = shield(cfg);
         // Outside the channel already, heading further out at full speed.
         let s = state(1.0, -2.0, std::f64::consts::FRAC_PI_2);
-        let out = sh.filter(&s, 0, &[5.0, 0.0], None).unwrap();
+        let out = sh.filter(&s, 0, &[5.0, 0.0], None, None).unwrap();
         assert_eq!(out.status, Status::Relaxed);
         assert!(out.slack > 0.0);
         assert!(out.action.iter().all(|v| v.is_finite()));
         // The corrections sit at the bounds that limit them.
         assert!((out.a_cbf[0] + 0.01).abs() < 1e-6, "{:?}", out.a_cbf);
+    }
+
+    #[test]
+    fn drift_adds_to_the_model_and_batches_agree() {
+        let sh = shield(config(SolverChoice::Auto));
+        let s = state(2.0, 1.3, -0.4);
+        let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
+        sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
+        let drift: Vec<f64> = (0..N).map(|k| 0.1 * k as f64 - 0.3).collect();
+        let moved: Vec<f64> = f.iter().zip(&drift).map(|(a, b)| a + b).collect();
+        let fg = ControlAffine { f: &moved, g: &g };
+        let a = sh.filter(&s, 0, &[1.0, 1.0], None, Some(&drift)).unwrap();
+        let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg), None).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a.barriers, Vec::new());
+        // Batch rows with drift equal single calls with the same drift.
+        let rows = 40;
+        let states: Vec<f64> = (0..rows)
+            .flat_map(|i| state(0.1 * i as f64, 0.05 * i as f64, 0.3))
+            .collect();
+        let drifts: Vec<f64> = (0..rows * N)
+            .map(|k| ((k * 7919) % 13) as f64 * 0.05 - 0.3)
+            .collect();
+        let qs = vec![0usize; rows];
+        let a_rl: Vec<f64> = (0..rows)
+            .flat_map(|i| [1.0, -0.5 + 0.02 * i as f64])
+            .collect();
+        let mut out = BatchOutput::default();
+        sh.filter_batch(&states, N, &qs, &a_rl, Some(&drifts), &mut out)
+            .unwrap();
+        for i in 0..rows {
+            let single = sh
+                .filter(
+                    &states[i * N..(i + 1) * N],
+                    0,
+                    &a_rl[2 * i..2 * i + 2],
+                    None,
+                    Some(&drifts[i * N..(i + 1) * N]),
+                )
+                .unwrap();
+            assert_eq!(&out.action[2 * i..2 * i + 2], &single.action[..]);
+        }
+        assert!(sh
+            .filter(&s, 0, &[1.0, 1.0], None, Some(&drift[1..]))
+            .is_err());
+        let mut nan = drift.clone();
+        nan[3] = f64::NAN;
+        assert!(sh.filter(&s, 0, &[1.0, 1.0], None, Some(&nan)).is_err());
+        assert!(sh
+            .filter_batch(&states, N, &qs, &a_rl, Some(&drifts[N..]), &mut out)
+            .is_err());
     }
 
     #[test]
@@ -1098,8 +1234,8 @@ mod tests {
         let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
         sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
         let fg = ControlAffine { f: &f, g: &g };
-        let a = sh.filter(&s, 0, &[1.0, 1.0], None).unwrap();
-        let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg)).unwrap();
+        let a = sh.filter(&s, 0, &[1.0, 1.0], None, None).unwrap();
+        let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg), None).unwrap();
         assert_eq!(a, b);
     }
 
@@ -1107,20 +1243,26 @@ mod tests {
     fn bad_input_is_an_error() {
         let sh = shield(config(SolverChoice::Auto));
         let s = state(1.0, 0.0, 0.0);
-        assert!(sh.filter(&s[..5], 0, &[0.0, 0.0], None).is_err());
-        assert!(sh.filter(&s, 9, &[0.0, 0.0], None).is_err());
-        assert!(sh.filter(&s, 0, &[0.0], None).is_err());
-        assert!(sh.filter(&s, 0, &[f64::NAN, 0.0], None).is_err());
+        assert!(sh.filter(&s[..5], 0, &[0.0, 0.0], None, None).is_err());
+        assert!(sh.filter(&s, 9, &[0.0, 0.0], None, None).is_err());
+        assert!(sh.filter(&s, 0, &[0.0], None, None).is_err());
+        assert!(sh.filter(&s, 0, &[f64::NAN, 0.0], None, None).is_err());
         let mut bad = s.clone();
         bad[4] = f64::INFINITY;
-        assert!(sh.filter(&bad, 0, &[0.0, 0.0], None).is_err());
+        assert!(sh.filter(&bad, 0, &[0.0, 0.0], None, None).is_err());
         let f = vec![0.0; N];
         let g = vec![0.0; N];
         assert!(sh
-            .filter(&s, 0, &[0.0, 0.0], Some(ControlAffine { f: &f, g: &g }))
+            .filter(
+                &s,
+                0,
+                &[0.0, 0.0],
+                Some(ControlAffine { f: &f, g: &g }),
+                None
+            )
             .is_err());
         let no_model = Shield::new(task(), None, config(SolverChoice::Auto)).unwrap();
-        let err = no_model.filter(&s, 0, &[0.0, 0.0], None).unwrap_err();
+        let err = no_model.filter(&s, 0, &[0.0, 0.0], None, None).unwrap_err();
         assert!(err.to_string().contains("pass f and g"), "{err}");
         for broken in [
             ShieldConfig {
@@ -1180,13 +1322,15 @@ mod tests {
             a_rl.extend([rng.uniform(-2.0, 2.0), rng.uniform(-3.0, 3.0)]);
         }
         let mut out = BatchOutput::default();
-        sh.filter_batch(&states, N, &qs, &a_rl, &mut out).unwrap();
+        sh.filter_batch(&states, N, &qs, &a_rl, None, &mut out)
+            .unwrap();
         for i in 0..rows {
             let single = sh
                 .filter(
                     &states[i * N..(i + 1) * N],
                     qs[i],
                     &a_rl[2 * i..2 * i + 2],
+                    None,
                     None,
                 )
                 .unwrap();
@@ -1196,12 +1340,12 @@ mod tests {
             assert_eq!(out.solver[i], single.solver as u8);
         }
         assert!(sh
-            .filter_batch(&states, N, &qs[1..], &a_rl, &mut out)
+            .filter_batch(&states, N, &qs[1..], &a_rl, None, &mut out)
             .is_err());
         let mut bad_q = qs.clone();
         bad_q[3] = 99;
         let err = sh
-            .filter_batch(&states, N, &bad_q, &a_rl, &mut out)
+            .filter_batch(&states, N, &bad_q, &a_rl, None, &mut out)
             .unwrap_err();
         assert!(err.to_string().contains("qs[3]"), "{err}");
     }
@@ -1225,7 +1369,10 @@ mod tests {
     #[test]
     fn channel_is_forward_invariant_over_100k_steps() {
         let mut cfg = config(SolverChoice::Auto);
-        cfg.barriers = vec![("c1".into(), channel(1.0)), ("c2".into(), channel(-1.0))];
+        cfg.barriers = vec![
+            Barrier::inside("c1", channel(1.0)),
+            Barrier::inside("c2", channel(-1.0)),
+        ];
         let sh = shield(cfg);
         let (dt, eps) = (0.05, 0.1);
         let mut rng = Rng(2024);
@@ -1249,7 +1396,7 @@ mod tests {
                     rng.uniform(-4.0, 4.0)
                 };
                 let a_rl = [a_v, rng.uniform(-5.0, 5.0)];
-                let out = sh.filter(&s, q, &a_rl, None).unwrap();
+                let out = sh.filter(&s, q, &a_rl, None, None).unwrap();
                 relaxed += usize::from(out.status == Status::Relaxed);
                 failed += usize::from(out.status == Status::Failed);
                 by_clarabel += usize::from(out.solver == SolvedBy::Clarabel);
@@ -1291,8 +1438,8 @@ mod tests {
             obstacle in -2.0..6.0f64,
         ) {
             let mut cfg = config(SolverChoice::Auto);
-            cfg.barriers = vec![(
-                "near".into(),
+            cfg.barriers = vec![Barrier::inside(
+                "near",
                 Predicate::ball(vec![0, 1], 0.6, Center::Fixed(vec![obstacle, obstacle + 0.3])).unwrap(),
             )];
             let auto = shield(cfg.clone());
@@ -1300,12 +1447,12 @@ mod tests {
             let s = state(x, offset, theta);
             let q = auto.automaton().step_unchecked(0, &s);
             let a_rl = [v, w];
-            let a = auto.filter(&s, q, &a_rl, None).unwrap();
-            let b = clarabel.filter(&s, q, &a_rl, None).unwrap();
+            let a = auto.filter(&s, q, &a_rl, None, None).unwrap();
+            let b = clarabel.filter(&s, q, &a_rl, None, None).unwrap();
             prop_assert_eq!(a.status, b.status);
             let gap = a.action.iter().zip(&b.action).fold(0.0f64, |m, (p, r)| m.max((p - r).abs()));
             auto.with_workspace(N, |ws| {
-                auto.step(ws, &s, q, &a_rl, None, false, true);
+                auto.step(ws, &s, q, &a_rl, None, None, false, true);
                 let (qp, ours) = (&ws.qp, &ws.solvers.solution);
                 let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
                 assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);

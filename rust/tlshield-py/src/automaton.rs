@@ -7,10 +7,11 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
-use tlshield_core::{Automaton, Trajectory};
+use tlshield_core::{Automaton, ProgressParams, Trajectory};
 
 use crate::convert::{vector, FloatArray};
 use crate::errors::map;
+use crate::progress::PyProgressReward;
 use crate::spec::PySpec;
 
 /// The finite state automaton of an scTLTL spec (see ``Spec.automaton()``).
@@ -231,6 +232,31 @@ impl PyAutomaton {
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
         let q = self.state(q)?;
         Ok(map(self.inner.goal(q, &vector(s, "s")?))?.map(|g| g.into_pyarray(py)))
+    }
+
+    /// The progress-aware task reward of this automaton (see ``ProgressReward``): ``gamma``
+    /// the training discount, ``scale`` a bound on how negative Eq. 5A1 gets, ``exclusive``
+    /// groups of atoms that never hold together.
+    #[pyo3(signature = (*, gamma=0.99, scale=1.0, step_cost=None, bonus=1.0, c_r=1.0, exclusive=Vec::new()))]
+    #[allow(clippy::too_many_arguments)]
+    fn progress_reward(
+        &self,
+        gamma: f64,
+        scale: f64,
+        step_cost: Option<f64>,
+        bonus: f64,
+        c_r: f64,
+        exclusive: Vec<Vec<String>>,
+    ) -> PyResult<PyProgressReward> {
+        let params = ProgressParams {
+            gamma,
+            scale,
+            step_cost,
+            bonus,
+            c_r,
+            exclusive: Vec::new(),
+        };
+        PyProgressReward::build(self.inner.clone(), params, &exclusive)
     }
 
     fn __repr__(&self) -> String {

@@ -7,6 +7,7 @@ mod automaton;
 mod convert;
 mod errors;
 mod predicate;
+mod progress;
 mod shield;
 mod spec;
 
@@ -29,6 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
+    m.add_class::<progress::PyProgressReward>()?;
     m.add_class::<shield::PyUnicycle>()?;
     m.add_class::<shield::PySingleIntegrator>()?;
     m.add_class::<shield::PyShield>()?;

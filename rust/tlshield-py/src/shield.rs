@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use tlshield_core::cnf::Literal;
 use tlshield_core::{
-    Automaton, BarrierSource, BatchOutput, Bounds, ControlAffine, Dynamics, Filtered, Predicate,
+    Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Dynamics, Filtered,
     Shield, ShieldConfig, SolverChoice,
 };
 
@@ -122,8 +122,8 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
 }
 
 /// Barriers from a sequence of predicates (named `h0`, `h1`, ...) or a mapping name ->
-/// predicate.
-fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(String, Predicate)>> {
+/// predicate; a name starting with `!` keeps the state out of the predicate's region.
+fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
     if let Ok(items) = obj.call_method0("items") {
         let mut out = Vec::new();
         for item in items.try_iter()? {
@@ -131,7 +131,12 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(String, Predicate)>> {
             let name: String = key
                 .extract()
                 .map_err(|_| PyTypeError::new_err("barriers: mapping keys must be names (str)"))?;
-            out.push((name, predicate_of(&key, &value)?));
+            let predicate = predicate_of(&key, &value)?;
+            out.push(if name.starts_with('!') {
+                Barrier::outside(name, predicate)
+            } else {
+                Barrier::inside(name, predicate)
+            });
         }
         return Ok(out);
     }
@@ -144,7 +149,7 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(String, Predicate)>> {
     for (i, item) in iter.enumerate() {
         let item = item?;
         let key = i.into_pyobject(obj.py())?.into_any();
-        out.push((format!("h{i}"), predicate_of(&key, &item)?));
+        out.push(Barrier::inside(format!("h{i}"), predicate_of(&key, &item)?));
     }
     Ok(out)
 }
@@ -330,7 +335,7 @@ impl PyShield {
         let barrier_names = config
             .barriers
             .iter()
-            .map(|(name, _)| PyString::new(py, name).unbind())
+            .map(|b| PyString::new(py, &b.name).unbind())
             .collect();
         let atom_names = automaton
             .spec()
@@ -352,7 +357,10 @@ impl PyShield {
 
     /// One shield step: state ``s`` (n,), FSA state ``q`` (the state after reading ``s``),
     /// RL action ``a_rl`` (m,). ``f`` (n,) and ``g`` (n, m) override the dynamics model.
-    #[pyo3(signature = (s, q, a_rl, f=None, g=None))]
+    /// ``drift`` (n,) is added to ``f``: the motion measured for this step of state
+    /// dimensions the agent does not control (e.g. moving obstacles read by ``center_dims``).
+    #[pyo3(signature = (s, q, a_rl, f=None, g=None, drift=None))]
+    #[allow(clippy::too_many_arguments)]
     fn filter(
         &self,
         py: Python<'_>,
@@ -361,14 +369,17 @@ impl PyShield {
         a_rl: &Bound<'_, PyAny>,
         f: Option<&Bound<'_, PyAny>>,
         g: Option<&Bound<'_, PyAny>>,
+        drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
         let s = vector(s, "s")?;
+        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+        let drift = drift.as_deref();
         let q = map(self.inner.automaton().check_state("q", q))?;
         let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
             .values()
             .into_owned();
         let out = match (f, g) {
-            (None, None) => map(self.inner.filter(&s, q, &a_rl, None))?,
+            (None, None) => map(self.inner.filter(&s, q, &a_rl, None, drift))?,
             (Some(f), Some(g)) => {
                 let f = FloatArray::extract(f, "f", 1, "(n,)")?;
                 let g = FloatArray::extract(g, "g", 2, "(n, m)")?;
@@ -384,7 +395,7 @@ impl PyShield {
                     f: &f.values(),
                     g: &g.values(),
                 };
-                map(self.inner.filter(&s, q, &a_rl, Some(fg)))?
+                map(self.inner.filter(&s, q, &a_rl, Some(fg), drift))?
             }
             _ => {
                 return Err(PyValueError::new_err(
@@ -399,15 +410,30 @@ impl PyShield {
     /// model. Parallel over rows with the GIL released. Returns a dict of arrays: ``action``,
     /// ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,) uint8 codes
     /// (0 solved, 1 relaxed, 2 failed) and ``solver`` (B,) uint8 codes (0 none, 1 active set,
-    /// 2 Clarabel).
+    /// 2 Clarabel). ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
+    #[pyo3(signature = (states, qs, a_rl, drift=None))]
     fn filter_batch<'py>(
         &self,
         py: Python<'py>,
         states: &Bound<'py, PyAny>,
         qs: PyArrayLike1<'py, i64, AllowTypeChange>,
         a_rl: &Bound<'py, PyAny>,
+        drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
+        let drift = drift
+            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
+            .transpose()?;
+        if let Some(d) = &drift {
+            if d.shape() != states.shape() {
+                return Err(PyValueError::new_err(format!(
+                    "filter_batch: drift must have the shape of states {}, got {}",
+                    crate::convert::shape_text(states.shape()),
+                    crate::convert::shape_text(d.shape())
+                )));
+            }
+        }
+        let drift_values = drift.as_ref().map(|d| d.values());
         let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
         let (rows, n, m) = (states.shape()[0], states.shape()[1], self.inner.inputs());
         if qs.len() != rows || a_rl.shape() != [rows, m] {
@@ -428,7 +454,8 @@ impl PyShield {
         let (values, actions) = (states.values(), a_rl.values());
         let shield = &self.inner;
         let mut out = BatchOutput::default();
-        map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, &mut out)))?;
+        let drift = drift_values.as_deref();
+        map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, drift, &mut out)))?;
         let matrix = |v: Vec<f64>| {
             numpy::ndarray::Array2::from_shape_vec((rows, m), v)
                 .map(|a| a.into_pyarray(py))

@@ -1,0 +1,535 @@
+//! A progress-aware task reward for any formula (beyond the paper; Eq. 5A1 stays the
+//! reference).
+//!
+//! Eq. 5A1 alone pays dawdling: its scale changes with the FSA state (about 0 just outside the
+//! first goal, about `-dist(next goal)` after entering it, 0 at acceptance), so parking outside
+//! a goal out-earns finishing. Here the Eq. 5A1 value becomes the within-state part of a
+//! potential over (state, FSA state), as in reward machines' automaton-distance shaping
+//! (Camacho et al. 2019):
+//!
+//! - `rank(q)`: fewest transitions from `q` to acceptance over *admissible* valuations (atoms
+//!   declared mutually exclusive never hold together: two disjoint goal discs), 0 at
+//!   acceptance, `None` for the trap;
+//! - `Phi(s, q) = -rank(q) + squash(sigma_q(s))`, `sigma_q` the Eq. 5A1 value of being at `s`
+//!   in `q` and `squash(x) = min(x, 0) / (scale + |min(x, 0)|)` in (-1, 0]: strictly increasing
+//!   below 0 (slope `1 / scale` at the goal's edge, so the shaping never goes flat as a clip
+//!   would); `Phi = 0` at acceptance. The bands `(-rank - 1, -rank]` never overlap the next
+//!   state's, so entering a state closer to acceptance never lowers `Phi`;
+//! - the reward of a step `(s, q) -> (s', q')` is `gamma * Phi(s', q') - Phi(s, q) - step_cost`,
+//!   plus `bonus` on entering acceptance; `trap_penalty` on every step in the trap; 0 on steps
+//!   that stay accepting. An episode starts from `Phi = 0` (the first step pays the whole
+//!   distance), so returns telescope to `gamma^T Phi_T - step_cost * sum gamma^t (+ bonus)`:
+//!   reaching acceptance out-earns not reaching it for every pair of trajectories over any
+//!   horizon, whatever the starts;
+//! - `step_cost > (1 - gamma) * (max rank + 1)` makes standing still cost: with pure potential
+//!   shaping and `Phi < 0`, parking would pay `(1 - gamma) |Phi| > 0` per step.
+
+use crate::automaton::Automaton;
+use crate::error::{AutomatonError, InputError};
+
+/// Parameters of [`ProgressReward`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProgressParams {
+    /// The training discount the shaping is consistent with, in (0, 1].
+    pub gamma: f64,
+    /// Robustness scale of the squash `x / (scale + |x|)`: Eq. 5A1 at `-scale` sits halfway
+    /// down its band. Smaller values shape harder near the goals, larger ones further away.
+    pub scale: f64,
+    /// Cost of every step outside acceptance; `None` picks `2 (1 - gamma) (max rank + 1)`.
+    pub step_cost: Option<f64>,
+    /// Paid once, on entering acceptance (>= 0).
+    pub bonus: f64,
+    /// Weight of the trap term inside Eq. 5A1.
+    pub c_r: f64,
+    /// Groups of atom indices of which at most one holds at a time (bitmasks).
+    pub exclusive: Vec<u32>,
+}
+
+impl Default for ProgressParams {
+    fn default() -> Self {
+        ProgressParams {
+            gamma: 0.99,
+            scale: 1.0,
+            step_cost: None,
+            bonus: 1.0,
+            c_r: 1.0,
+            exclusive: Vec::new(),
+        }
+    }
+}
+
+/// The progress reward of one automaton (see the module docs).
+#[derive(Debug, Clone)]
+pub struct ProgressReward {
+    ranks: Vec<Option<u32>>,
+    max_rank: u32,
+    gamma: f64,
+    scale: f64,
+    step_cost: f64,
+    bonus: f64,
+    c_r: f64,
+    trap_penalty: f64,
+}
+
+fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
+    if value.is_finite() && value >= lo {
+        return Ok(());
+    }
+    Err(InputError::Shape {
+        what: what.into(),
+        expected: format!("a finite number >= {lo}"),
+        got: value.to_string(),
+    })
+}
+
+/// Fewest transitions from each state to acceptance, reading only valuations in which no two
+/// atoms of one `exclusive` group hold (`None`: acceptance is unreachable, e.g. the trap).
+pub fn ranks(automaton: &Automaton, exclusive: &[u32]) -> Vec<Option<u32>> {
+    let n = automaton.num_states();
+    let letters = 1usize << automaton.spec().atoms().len();
+    let admissible: Vec<usize> = (0..letters)
+        .filter(|&v| exclusive.iter().all(|&g| (v as u32 & g).count_ones() <= 1))
+        .collect();
+    let mut rank: Vec<Option<u32>> = (0..n)
+        .map(|q| automaton.is_accepting(q).then_some(0))
+        .collect();
+    // Bellman-Ford over at most n rounds: the graph is small (states x admissible letters).
+    for _ in 0..n {
+        let mut changed = false;
+        for q in 0..n {
+            let best = admissible
+                .iter()
+                .filter_map(|&v| {
+                    let d = automaton.step_valuation(q, v);
+                    (d != q).then(|| rank[d].map(|r| r + 1)).flatten()
+                })
+                .min();
+            if let Some(b) = best {
+                if rank[q].is_none_or(|r| b < r) {
+                    rank[q] = Some(b);
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    rank
+}
+
+impl ProgressReward {
+    /// The progress reward of `automaton`'s task.
+    pub fn new(automaton: &Automaton, params: &ProgressParams) -> Result<Self, AutomatonError> {
+        if !(params.gamma > 0.0 && params.gamma <= 1.0) {
+            return Err(InputError::Shape {
+                what: "gamma".into(),
+                expected: "a discount in (0, 1]".into(),
+                got: params.gamma.to_string(),
+            }
+            .into());
+        }
+        if !(params.scale.is_finite() && params.scale > 0.0) {
+            return Err(InputError::Shape {
+                what: "scale".into(),
+                expected: "a finite number > 0".into(),
+                got: params.scale.to_string(),
+            }
+            .into());
+        }
+        finite_at_least("bonus", params.bonus, 0.0)?;
+        if !(params.c_r.is_finite() && params.c_r > 0.0) {
+            return Err(InputError::Shape {
+                what: "c_r".into(),
+                expected: "a finite weight > 0".into(),
+                got: params.c_r.to_string(),
+            }
+            .into());
+        }
+        let atoms = automaton.spec().atoms().len();
+        for &g in &params.exclusive {
+            if atoms < 32 && g >> atoms != 0 {
+                return Err(InputError::Shape {
+                    what: "exclusive".into(),
+                    expected: format!("groups of atom indices below {atoms}"),
+                    got: format!("{g:#b}"),
+                }
+                .into());
+            }
+        }
+        let ranks = ranks(automaton, &params.exclusive);
+        let max_rank = ranks.iter().flatten().copied().max().unwrap_or(0);
+        // The least cost per step that makes standing still lose: (1 - gamma) * |Phi|max.
+        let least = (1.0 - params.gamma) * f64::from(max_rank + 1);
+        let step_cost = match params.step_cost {
+            Some(c) => {
+                finite_at_least("step_cost", c, 0.0)?;
+                c
+            }
+            None => 2.0 * least,
+        };
+        // Below every reward reachable outside the trap: gamma * Phi' - Phi - c >= -(K+1) - c.
+        let trap_penalty = -(f64::from(max_rank) + 2.0) - step_cost;
+        Ok(ProgressReward {
+            ranks,
+            max_rank,
+            gamma: params.gamma,
+            scale: params.scale,
+            step_cost,
+            bonus: params.bonus,
+            c_r: params.c_r,
+            trap_penalty,
+        })
+    }
+
+    /// Transitions to acceptance per state (`None`: unreachable).
+    pub fn ranks(&self) -> &[Option<u32>] {
+        &self.ranks
+    }
+
+    /// The step cost in force (given or chosen).
+    pub fn step_cost(&self) -> f64 {
+        self.step_cost
+    }
+
+    /// The per-step reward in the trap (worse than any step outside it).
+    pub fn trap_penalty(&self) -> f64 {
+        self.trap_penalty
+    }
+
+    /// The discount the shaping is consistent with.
+    pub fn gamma(&self) -> f64 {
+        self.gamma
+    }
+
+    /// The potential `Phi(s, q)` from the atoms' robustness at `s` (validated inputs). States
+    /// without a path to acceptance sit one band below the farthest state that has one.
+    pub fn potential_from(&self, automaton: &Automaton, q: usize, rho: &[f64]) -> f64 {
+        if automaton.is_accepting(q) {
+            return 0.0;
+        }
+        let rank = self.ranks[q].unwrap_or(self.max_rank + 1);
+        let sigma = automaton.task_signal_from(q, rho, self.c_r).min(0.0);
+        // -inf (a `false` guard) squashes to the band's floor, not to -inf / inf = NaN.
+        let squashed = if sigma.is_finite() {
+            sigma / (self.scale - sigma)
+        } else {
+            -1.0
+        };
+        -f64::from(rank) + squashed
+    }
+
+    /// The reward of the step `q -> q_next` given `Phi` before (`phi`; 0 at an episode's
+    /// start) and after (`phi_next`).
+    pub fn reward(
+        &self,
+        automaton: &Automaton,
+        q: usize,
+        q_next: usize,
+        phi: f64,
+        phi_next: f64,
+    ) -> f64 {
+        if Some(q_next) == automaton.trap() {
+            self.trap_penalty
+        } else if automaton.is_accepting(q) {
+            0.0
+        } else if automaton.is_accepting(q_next) {
+            -phi - self.step_cost + self.bonus
+        } else {
+            self.gamma * phi_next - phi - self.step_cost
+        }
+    }
+
+    /// One step from `(q, phi)` into `s_next` (validated here): `(q_next, reward, phi_next)`.
+    pub fn advance(
+        &self,
+        automaton: &Automaton,
+        q: usize,
+        phi: f64,
+        s_next: &[f64],
+    ) -> Result<(usize, f64, f64), AutomatonError> {
+        let q = automaton.check_state("q", q as i64)?;
+        if self.ranks.len() != automaton.num_states() {
+            return Err(InputError::Shape {
+                what: "automaton".into(),
+                expected: format!(
+                    "the one the reward was built for ({} states)",
+                    self.ranks.len()
+                ),
+                got: format!("{} states", automaton.num_states()),
+            }
+            .into());
+        }
+        if !phi.is_finite() {
+            return Err(InputError::NonFinite {
+                what: "phi".into(),
+                value: phi,
+            }
+            .into());
+        }
+        let rho = automaton.checked_atom_robustness(s_next)?;
+        let rho = &rho[..automaton.spec().atoms().len()];
+        let q_next = automaton.step_rho(q, rho);
+        let phi_next = self.potential_from(automaton, q_next, rho);
+        Ok((
+            q_next,
+            self.reward(automaton, q, q_next, phi, phi_next),
+            phi_next,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robustness::tests::{co_safe, spec_for};
+    use crate::{Center, Predicate, Spec};
+    use proptest::prelude::*;
+
+    fn channel_like() -> Automaton {
+        // Two goal discs on a line and a wall: (F a | F b) & F c & (!c U (a | b)) & (w U c).
+        let ball = |c: f64| Predicate::ball(vec![0], 0.5, Center::Fixed(vec![c])).unwrap();
+        let spec = Spec::new(
+            "(F a | F b) & F c & (!c U (a | b)) & (w U c)",
+            [
+                ("a", ball(2.0)),
+                ("b", ball(-2.0)),
+                ("c", ball(5.0)),
+                ("w", Predicate::halfspace(vec![-1.0], 8.0).unwrap()),
+            ],
+        )
+        .unwrap();
+        Automaton::build(&spec).unwrap()
+    }
+
+    #[test]
+    fn exclusive_goals_rank_the_subgoal_state_between() {
+        let aut = channel_like();
+        let atoms = aut.spec().atoms().to_vec();
+        let bit = |name: &str| 1u32 << atoms.iter().position(|a| a == name).unwrap();
+        let loose = ranks(&aut, &[]);
+        let tight = ranks(&aut, &[bit("a") | bit("b") | bit("c")]);
+        let q0 = aut.initial();
+        // Without exclusivity a single valuation can satisfy a and c at once.
+        assert_eq!(loose[q0], Some(1));
+        assert_eq!(tight[q0], Some(2));
+        assert_eq!(aut.trap().map(|t| tight[t]), Some(None));
+    }
+
+    #[test]
+    fn bad_parameters_are_errors() {
+        let aut = channel_like();
+        for p in [
+            ProgressParams {
+                gamma: 0.0,
+                ..Default::default()
+            },
+            ProgressParams {
+                gamma: 1.5,
+                ..Default::default()
+            },
+            ProgressParams {
+                scale: 0.0,
+                ..Default::default()
+            },
+            ProgressParams {
+                bonus: -1.0,
+                ..Default::default()
+            },
+            ProgressParams {
+                step_cost: Some(f64::NAN),
+                ..Default::default()
+            },
+            ProgressParams {
+                c_r: 0.0,
+                ..Default::default()
+            },
+            ProgressParams {
+                exclusive: vec![1 << 9],
+                ..Default::default()
+            },
+        ] {
+            assert!(ProgressReward::new(&aut, &p).is_err(), "{p:?}");
+        }
+        let r = ProgressReward::new(&aut, &ProgressParams::default()).unwrap();
+        assert!(r.advance(&aut, 0, f64::NAN, &[0.0]).is_err());
+        assert!(r.advance(&aut, 99, 0.0, &[0.0]).is_err());
+        assert!(r.advance(&aut, 0, 0.0, &[f64::INFINITY]).is_err());
+    }
+
+    /// Rewards and FSA states of a trajectory (rows of 3), the episode starting from Phi = 0.
+    fn rollout(
+        aut: &Automaton,
+        r: &ProgressReward,
+        data: &[f64],
+    ) -> (Vec<f64>, Vec<usize>, Vec<f64>) {
+        let q0 = aut.step(aut.initial(), &data[..3]).unwrap();
+        let (mut q, mut phi) = (q0, 0.0);
+        let (mut rewards, mut qs, mut phis) = (vec![], vec![q0], vec![]);
+        for s in data.chunks(3).skip(1) {
+            let (qn, rew, pn) = r.advance(aut, q, phi, s).unwrap();
+            rewards.push(rew);
+            qs.push(qn);
+            phis.push(pn);
+            if aut.is_accepting(qn) {
+                break; // training ends the episode on success
+            }
+            q = qn;
+            phi = pn;
+        }
+        (rewards, qs, phis)
+    }
+
+    fn discounted(rewards: &[f64], gamma: f64) -> f64 {
+        rewards.iter().rev().fold(0.0, |g, r| r + gamma * g)
+    }
+
+    fn trajectories() -> impl Strategy<Value = Vec<Vec<f64>>> {
+        let value = prop_oneof![(-2i32..=2).prop_map(|v| v as f64 * 0.5), -2.0..2.0f64];
+        prop::collection::vec(prop::collection::vec(value, 3 * 12), 2..10)
+    }
+
+    proptest! {
+        #![proptest_config(crate::tests_support::seeded(400))]
+
+        /// (a) Any accepting trajectory out-earns any non-accepting one over the horizon, and
+        /// (d) a trajectory entering the trap earns less than any that never does.
+        #[test]
+        fn accepting_beats_not_accepting_and_the_trap_is_worst(
+            f in co_safe(), trajs in trajectories(), gamma in 0.9..1.0f64, bonus in 0.0..2.0f64
+        ) {
+            let spec = spec_for(&f);
+            let aut = Automaton::build(&spec).unwrap();
+            let params = ProgressParams { gamma, scale: 2.0, bonus, ..Default::default() };
+            let r = ProgressReward::new(&aut, &params).unwrap();
+            let horizon = 11; // every trajectory has 12 states = 11 steps
+            let (mut acc, mut non, mut trapped) = (vec![], vec![], vec![]);
+            for data in &trajs {
+                let (rewards, qs, _) = rollout(&aut, &r, data);
+                let g = discounted(&rewards, gamma);
+                let last = *qs.last().unwrap();
+                if aut.is_accepting(last) {
+                    acc.push(g);
+                } else if qs.iter().any(|&q| Some(q) == aut.trap()) {
+                    trapped.push(g);
+                } else {
+                    prop_assert_eq!(rewards.len(), horizon);
+                    non.push(g);
+                }
+            }
+            for a in &acc {
+                for b in non.iter().chain(&trapped) {
+                    prop_assert!(a > b, "accepting {a} <= non-accepting {b}");
+                }
+            }
+            // A trap step pays less than any step outside it.
+            for data in &trajs {
+                let (rewards, qs, _) = rollout(&aut, &r, data);
+                for (k, rew) in rewards.iter().enumerate() {
+                    if Some(qs[k + 1]) != aut.trap() {
+                        prop_assert!(*rew > r.trap_penalty());
+                    }
+                }
+            }
+        }
+
+        /// (b) Entering a state closer to acceptance never lowers Phi (bands ordered by rank)
+        /// and pays at least what staying would have paid at the same s'.
+        /// (c) Within one FSA state the reward orders next states by Eq. 5A1.
+        #[test]
+        fn progress_never_lowers_and_shaping_ranks_states(
+            f in co_safe(), data in prop::collection::vec(-2.0..2.0f64, 3 * 12), gamma in 0.9..1.0f64
+        ) {
+            let spec = spec_for(&f);
+            let aut = Automaton::build(&spec).unwrap();
+            let params = ProgressParams { gamma, scale: 2.0, ..Default::default() };
+            let r = ProgressReward::new(&aut, &params).unwrap();
+            let n_atoms = spec.atoms().len();
+            let states: Vec<&[f64]> = data.chunks(3).collect();
+            let (mut q, mut phi) = (aut.step(aut.initial(), states[0]).unwrap(), 0.0);
+            for s in &states[1..] {
+                let rho = aut.atom_robustness(s);
+                let rho = &rho[..n_atoms];
+                let (qn, rew, pn) = r.advance(&aut, q, phi, s).unwrap();
+                let rank = |q: usize| r.ranks()[q];
+                if let (Some(a), Some(b)) = (rank(q), rank(qn)) {
+                    if b < a && !aut.is_accepting(qn) {
+                        let stay = r.potential_from(&aut, q, rho);
+                        prop_assert!(pn >= stay, "Phi {pn} < staying {stay}");
+                        prop_assert!(rew >= gamma * stay - phi - r.step_cost() - 1e-12);
+                    }
+                }
+                if aut.is_accepting(qn) { break; }
+                q = qn;
+                phi = pn;
+            }
+            // Bands: every Phi of a state is above every Phi of a state with a larger rank.
+            for q1 in 0..aut.num_states() {
+                for q2 in 0..aut.num_states() {
+                    if let (Some(a), Some(b)) = (r.ranks()[q1], r.ranks()[q2]) {
+                        if a < b {
+                            let hi = r.potential_from(&aut, q2, &[100.0; 16][..n_atoms]);
+                            let lo = r.potential_from(&aut, q1, &[-100.0; 16][..n_atoms]);
+                            prop_assert!(lo >= hi, "rank {a}: {lo} < rank {b}: {hi}");
+                        }
+                    }
+                }
+            }
+            // (c) two next states that stay in q are ordered as Eq. 5A1 orders them.
+            let q = aut.step(aut.initial(), states[0]).unwrap();
+            if !aut.is_accepting(q) && Some(q) != aut.trap() {
+                let mut stay = vec![];
+                for s in &states[1..] {
+                    if aut.step(q, s).unwrap() == q {
+                        let (_, rew, _) = r.advance(&aut, q, -0.5, s).unwrap();
+                        let rho = aut.atom_robustness(s);
+                        let sigma = aut.task_signal_from(q, &rho[..n_atoms], 1.0);
+                        stay.push((sigma.min(0.0), rew));
+                    }
+                }
+                for (s1, r1) in &stay {
+                    for (s2, r2) in &stay {
+                        if s1 > s2 { prop_assert!(r1 > r2); }
+                        if s1 == s2 { prop_assert!((r1 - r2).abs() < 1e-12); }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn parking_loses_to_finishing_on_the_channel_like_task() {
+        // A 1-D walk: a at 2, c at 5. Finish: walk 0 -> 2 -> 5. Park: walk to 1.4 and stay.
+        let aut = channel_like();
+        let atoms = aut.spec().atoms().to_vec();
+        let bit = |name: &str| 1u32 << atoms.iter().position(|a| a == name).unwrap();
+        let params = ProgressParams {
+            scale: 10.0,
+            exclusive: vec![bit("a") | bit("b") | bit("c")],
+            ..Default::default()
+        };
+        let r = ProgressReward::new(&aut, &params).unwrap();
+        let run = |path: &[f64]| {
+            let (mut q, mut phi) = (aut.step(aut.initial(), &path[..1]).unwrap(), 0.0);
+            let mut rewards = vec![];
+            for s in &path[1..] {
+                let (qn, rew, pn) = r.advance(&aut, q, phi, &[*s]).unwrap();
+                rewards.push(rew);
+                if aut.is_accepting(qn) {
+                    break;
+                }
+                q = qn;
+                phi = pn;
+            }
+            discounted(&rewards, 0.99)
+        };
+        let finish: Vec<f64> = (0..=60).map(|k| k as f64 * 0.1).collect();
+        let park: Vec<f64> = (0..=200).map(|k| (k as f64 * 0.1).min(1.4)).collect();
+        assert!(
+            run(&finish) > run(&park) + 1.0,
+            "{} vs {}",
+            run(&finish),
+            run(&park)
+        );
+    }
+}

@@ -1,0 +1,114 @@
+//! `ProgressReward`: the progress-aware task reward of an automaton (core `progress`).
+
+use std::sync::Arc;
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use tlshield_core::{Automaton, ProgressParams, ProgressReward};
+
+use crate::convert::vector;
+use crate::errors::map;
+
+/// The progress-aware task reward of an automaton (beyond the paper's Eq. 5A1): a potential
+/// ``Phi(s, q) = -rank(q) + x / (scale + |x|)`` with ``x = min(eq5a1(s, q), 0)`` (``rank``:
+/// fewest transitions to acceptance), the step reward ``gamma * Phi' - Phi - step_cost``, ``bonus`` on entering
+/// acceptance, ``trap_penalty`` in the trap. Episodes start from ``Phi = 0``. ``exclusive``:
+/// groups of atom names of which at most one holds at a time (disjoint goal regions), so one
+/// state cannot count as reaching two goals. ``step_cost=None`` picks
+/// ``2 (1 - gamma) (max rank + 1)``, the least that makes standing still lose, doubled.
+/// Made by ``Automaton.progress_reward``.
+#[pyclass(name = "ProgressReward", module = "tlshield._core", frozen)]
+pub struct PyProgressReward {
+    automaton: Arc<Automaton>,
+    inner: ProgressReward,
+}
+
+impl PyProgressReward {
+    /// The progress reward of `automaton` (see ``Automaton.progress_reward``).
+    pub fn build(
+        automaton: Arc<Automaton>,
+        params: ProgressParams,
+        exclusive: &[Vec<String>],
+    ) -> PyResult<Self> {
+        let atoms = automaton.spec().atoms();
+        let mut groups = Vec::with_capacity(exclusive.len());
+        for group in exclusive {
+            let mut mask = 0u32;
+            for name in group {
+                let Some(i) = atoms.iter().position(|a| a == name) else {
+                    return Err(PyValueError::new_err(format!(
+                        "exclusive: unknown atom {name:?}; the automaton's atoms are {atoms:?}"
+                    )));
+                };
+                mask |= 1 << i;
+            }
+            groups.push(mask);
+        }
+        let params = ProgressParams {
+            exclusive: groups,
+            ..params
+        };
+        let inner = map(ProgressReward::new(&automaton, &params))?;
+        Ok(PyProgressReward { automaton, inner })
+    }
+}
+
+#[pymethods]
+impl PyProgressReward {
+    /// Fewest transitions from each state to acceptance (None: unreachable, e.g. the trap).
+    #[getter]
+    fn ranks(&self) -> Vec<Option<u32>> {
+        self.inner.ranks().to_vec()
+    }
+
+    /// The cost of every step outside acceptance (given or chosen).
+    #[getter]
+    fn step_cost(&self) -> f64 {
+        self.inner.step_cost()
+    }
+
+    /// The reward of every step in the trap (below any step outside it).
+    #[getter]
+    fn trap_penalty(&self) -> f64 {
+        self.inner.trap_penalty()
+    }
+
+    /// The discount the shaping is consistent with.
+    #[getter]
+    fn gamma(&self) -> f64 {
+        self.inner.gamma()
+    }
+
+    /// ``Phi(s, q)``.
+    fn potential(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let q = map(self.automaton.check_state("q", q))?;
+        let rho = map(self.automaton.checked_atom_robustness(&vector(s, "s")?))?;
+        let n = self.automaton.spec().atoms().len();
+        Ok(self.inner.potential_from(&self.automaton, q, &rho[..n]))
+    }
+
+    /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
+    /// episode with ``q = automaton.step(automaton.initial, s_0)`` and ``phi = 0``.
+    fn advance(&self, q: i64, phi: f64, s_next: &Bound<'_, PyAny>) -> PyResult<(usize, f64, f64)> {
+        let q = map(self.automaton.check_state("q", q))?;
+        map(self
+            .inner
+            .advance(&self.automaton, q, phi, &vector(s_next, "s_next")?))
+    }
+
+    fn __repr__(&self) -> String {
+        let ranks: Vec<String> = self
+            .inner
+            .ranks()
+            .iter()
+            .map(|r| r.map_or("None".into(), |r| r.to_string()))
+            .collect();
+        format!(
+            "ProgressReward(ranks=[{}], gamma={}, step_cost={}, trap_penalty={})",
+            ranks.join(", "),
+            self.inner.gamma(),
+            self.inner.step_cost(),
+            self.inner.trap_penalty()
+        )
+    }
+}
