@@ -349,3 +349,46 @@ def test_automaton_goal_from_python(shield: tlshield.Shield) -> None:
         aut.goal(99, s)
     with pytest.raises(ValueError):
         aut.goal(0, s[:4])
+
+
+def obstacle_shield() -> tlshield.Shield:
+    """The channel shield with obstacle 1 as an outside barrier (``"!o1"``)."""
+    ball = tlshield.Ball([0, 1], 0.5, center_dims=[9, 10])
+    return make_shield(barriers={"!o1": ball}, use_clf=False)
+
+
+def test_outside_barrier_and_drift_match_an_explicit_f() -> None:
+    sh = obstacle_shield()
+    s = state(2.0, 0.0, math.pi / 4)
+    s[9:11] = [3.0, 3.0]  # 1.41 m ahead on the centre line
+    a_rl = np.array([1.0, 0.0])
+    drift = np.zeros(STATE_DIM)
+    drift[9:11] = [-0.6, -0.6]  # coming straight at the agent
+    out = sh.filter(s, 0, a_rl, drift=drift)
+    h = dict(out.barriers)["!o1"]
+    assert h == pytest.approx(math.hypot(1.0, 1.0) - 0.5)
+    f, g = tlshield.Unicycle(0.1).eval(s)
+    explicit = sh.filter(s, 0, a_rl, f=f + drift, g=g)
+    np.testing.assert_array_equal(out.action, explicit.action)
+    # The row: d/dt |p - o| = u . (p_dot - o_dot) >= -alpha (h - margin). Without the drift
+    # the shield would let the agent drive on at full speed; with it, it brakes.
+    still = sh.filter(s, 0, a_rl)
+    assert still.action[0] > out.action[0] + 0.1
+    u = (s[:2] - s[9:11]) / np.linalg.norm(s[:2] - s[9:11])
+    p_dot = g[:2] @ out.action
+    assert u @ (p_dot - drift[9:11]) >= -PARAMS.alpha * (h - 1e-6) - 1e-7
+    batch = sh.filter_batch(
+        np.stack([s, s]), [0, 0], np.stack([a_rl, a_rl]), np.stack([drift, drift])
+    )
+    np.testing.assert_array_equal(batch["action"][1], out.action)
+
+
+def test_bad_drift_is_a_clear_error() -> None:
+    sh = obstacle_shield()
+    s = state(2.0, 0.0, 0.5)
+    with pytest.raises(ValueError, match="drift"):
+        sh.filter(s, 0, np.zeros(2), drift=np.zeros(3))
+    with pytest.raises(ValueError, match="drift"):
+        sh.filter(s, 0, np.zeros(2), drift=np.full(STATE_DIM, np.nan))
+    with pytest.raises(ValueError, match="drift"):
+        sh.filter_batch(np.stack([s, s]), [0, 0], np.zeros((2, 2)), np.zeros((1, STATE_DIM)))

@@ -97,6 +97,31 @@ class Automaton:
         self, q: int, s_next: ArrayLike, c_r: float, trap_penalty: float | None = None
     ) -> tuple[int, float, list[tuple[str, bool, float]]]: ...
     def goal(self, q: int, s: ArrayLike) -> NDArray[np.float64] | None: ...
+    def progress_reward(
+        self,
+        *,
+        gamma: float = 0.99,
+        scale: float = 1.0,
+        step_cost: float | None = None,
+        bonus: float = 1.0,
+        c_r: float = 1.0,
+        exclusive: Sequence[Sequence[str]] = ...,
+    ) -> ProgressReward: ...
+
+@final
+class ProgressReward:
+    """The progress-aware task reward of an automaton (see ``Automaton.progress_reward``)."""
+
+    @property
+    def ranks(self) -> list[int | None]: ...
+    @property
+    def step_cost(self) -> float: ...
+    @property
+    def trap_penalty(self) -> float: ...
+    @property
+    def gamma(self) -> float: ...
+    def potential(self, q: int, s: ArrayLike) -> float: ...
+    def advance(self, q: int, phi: float, s_next: ArrayLike) -> tuple[int, float, float]: ...
 
 @final
 class Unicycle:
@@ -153,7 +178,9 @@ class Shield:
         cbf_bounds: tuple[Bound, Bound],
         clf_bounds: tuple[Bound, Bound],
         action_bounds: tuple[Bound, Bound] | None = None,
-        barriers: Sequence[Predicate] | Mapping[str, Predicate] | None = None,
+        barriers: Sequence[Predicate]
+        | Mapping[str, Predicate | tuple[Predicate, float]]
+        | None = None,
         pos: Sequence[int] | None = None,
         use_cbf: bool = True,
         use_clf: bool = True,
@@ -168,9 +195,10 @@ class Shield:
         a_rl: ArrayLike,
         f: ArrayLike | None = None,
         g: ArrayLike | None = None,
+        drift: ArrayLike | None = None,
     ) -> FilterResult: ...
     def filter_batch(
-        self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike
+        self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike, drift: ArrayLike | None = None
     ) -> dict[str, NDArray[np.float64] | NDArray[np.uint8]]: ...
     @property
     def num_inputs(self) -> int: ...

@@ -125,6 +125,7 @@ def _train(args: argparse.Namespace) -> int:
         clf_schedule=args.clf_schedule,
         clf_final_scale=args.clf_final_scale,
         progress=not args.quiet,
+        **_preset_options(args),
     )
     print(f"wrote {run} (metrics.csv, model.zip, tb/, config.json)")
     if args.evaluate:
@@ -165,9 +166,25 @@ def _reproduce(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         clf_schedule=args.clf_schedule,
         clf_final_scale=args.clf_final_scale,
+        **_preset_options(args),
     )
     print((root / "results.md").read_text())
     print(f"figures in {root / 'figures'}")
+    return 0
+
+
+def _ablation(args: argparse.Namespace) -> int:
+    from tlshield.training import ablation
+
+    root = ablation(
+        args.out,
+        seeds=tuple(args.seeds),
+        updates=args.updates,
+        trials=args.trials,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
+    print((root / "ablation.md").read_text())
     return 0
 
 
@@ -178,6 +195,26 @@ def _plot(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     print(results_table(args.results))
     return 0
+
+
+def _preset_options(args: argparse.Namespace) -> dict[str, object]:
+    """``--preset paper`` trains with the paper's PPO settings and its environment (Eq. 5A1
+    reward, 13-value observation, no moving-obstacle barrier)."""
+    from tlshield.envs.channel import PAPER_ENV
+
+    if args.preset == "paper":
+        return {"preset": "paper", **PAPER_ENV}
+    return {"preset": args.preset}
+
+
+def _add_preset(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--preset",
+        choices=("default", "paper"),
+        default="default",
+        help="default: tlshield's settings (README ablation); paper: the paper's PPO, reward, "
+        "observation and obstacles",
+    )
 
 
 def _add_schedule(parser: argparse.ArgumentParser) -> None:
@@ -220,18 +257,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     train = sub.add_parser("train", help="train PPO on one configuration of the case study")
     train.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
-    train.add_argument("--updates", type=_positive, default=200, help="PPO updates (1000 steps)")
+    train.add_argument(
+        "--updates", type=_positive, default=250, help="PPO updates (1024 steps each by default)"
+    )
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--out", required=True, help="run folder to write")
     train.add_argument("--evaluate", action="store_true", help="evaluate after training")
-    train.add_argument("--trials", type=_positive, default=20, help="evaluation trials")
+    train.add_argument("--trials", type=_positive, default=100, help="evaluation trials")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_schedule(train)
+    _add_preset(train)
     train.set_defaults(handler=_train)
 
     evaluate = sub.add_parser("evaluate", help="evaluate saved runs (CBF on, paper's rules)")
     evaluate.add_argument("runs", nargs="+", help="run folders")
-    evaluate.add_argument("--trials", type=_positive, default=20)
+    evaluate.add_argument("--trials", type=_positive, default=100)
     evaluate.set_defaults(handler=_evaluate)
 
     repro = sub.add_parser(
@@ -240,12 +280,24 @@ def build_parser() -> argparse.ArgumentParser:
     repro.add_argument("--out", default="results", help="results folder (default: results)")
     repro.add_argument("--configs", nargs="+", choices=sorted(CONFIGS), default=list(CONFIGS))
     repro.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    repro.add_argument("--updates", type=_positive, default=150, help="PPO updates per run")
-    repro.add_argument("--trials", type=_positive, default=20, help="evaluation trials per run")
+    repro.add_argument("--updates", type=_positive, default=250, help="PPO updates per run")
+    repro.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
     repro.add_argument("--workers", type=_positive, default=2, help="parallel runs")
     repro.add_argument("--quiet", action="store_true")
     _add_schedule(repro)
+    _add_preset(repro)
     repro.set_defaults(handler=_reproduce)
+
+    abl = sub.add_parser(
+        "ablation", help="rl_cbf_clf from the paper's settings to the defaults, one change a row"
+    )
+    abl.add_argument("--out", default="results_ablation", help="folder (default: results_ablation)")
+    abl.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    abl.add_argument("--updates", type=_positive, default=250, help="PPO updates per run")
+    abl.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
+    abl.add_argument("--workers", type=_positive, default=2, help="parallel runs")
+    abl.add_argument("--quiet", action="store_true")
+    abl.set_defaults(handler=_ablation)
 
     plot = sub.add_parser("plot", help="figures and the results table from a results folder")
     plot.add_argument("results", help="results folder (as written by reproduce)")

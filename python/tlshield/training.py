@@ -70,8 +70,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "n_envs": 8,
         "ppo": {
             "n_steps": 128,
-            "batch_size": 256,
-            "n_epochs": 5,
+            "batch_size": 512,
+            "n_epochs": 10,
             "learning_rate": 3e-4,
             "gamma": 0.99,
             "gae_lambda": 0.95,
@@ -186,6 +186,7 @@ def train(
     clf_final_scale: float = 0.2,
     progress: bool = True,
     preset: str = "default",
+    ppo: dict[str, Any] | None = None,
     **overrides: Any,
 ) -> Path:
     """Trains PPO on one configuration; returns the run folder. ``overrides`` are
@@ -193,7 +194,7 @@ def train(
     kept (``config.json`` then says ``"interrupted": true``)."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     spec = PRESETS[preset]
-    ppo_kwargs, n_envs, net_arch = spec["ppo"], spec["n_envs"], spec["net_arch"]
+    ppo_kwargs, n_envs, net_arch = {**spec["ppo"], **(ppo or {})}, spec["n_envs"], spec["net_arch"]
     # The progress reward is shaped for the discount PPO uses.
     overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
     import torch
@@ -306,10 +307,10 @@ def train(
     return run
 
 
-def _progress_bar(total: int, desc: str, enabled: bool) -> Any:
+def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") -> Any:
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, desc=desc, unit="update", disable=not enabled, leave=False)
+    return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, leave=False)
 
 
 def load_run(run: str | Path) -> dict[str, Any]:
@@ -436,7 +437,7 @@ def reproduce(
     *,
     configs: tuple[str, ...] = tuple(CONFIGS),
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 100,
+    updates: int = 250,
     trials: int = 100,
     workers: int = 2,
     progress: bool = True,
@@ -464,7 +465,17 @@ def reproduce(
             done = (folder / "evaluation.json").is_file() and _finished(folder, updates)
             if not done:
                 jobs.append((config, seed, updates, str(folder), trials, options))
-    bar = _progress_bar(len(jobs), "runs", progress)
+    _run_jobs(jobs, workers, progress)
+    from tlshield.plots import plot_all, results_table
+
+    plot_all(root)
+    (root / "results.md").write_text(results_table(root) + "\n")
+    return root
+
+
+def _run_jobs(jobs: list[Any], workers: int, progress: bool) -> None:
+    """Trains and evaluates each job, ``workers`` processes at a time."""
+    bar = _progress_bar(len(jobs), "runs", progress, unit="run")
     try:
         if workers > 1 and len(jobs) > 1:
             import multiprocessing as mp
@@ -478,11 +489,72 @@ def reproduce(
                 bar.update(1)
     finally:
         bar.close()
-    from tlshield.plots import plot_all, results_table
 
-    plot_all(root)
-    (root / "results.md").write_text(results_table(root) + "\n")
+
+def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
+    """From the paper's settings, one change at a time, to tlshield's defaults."""
+    from tlshield.envs.channel import PAPER_ENV
+
+    paper = {"preset": "paper", **PAPER_ENV}
+    reward = {**paper, "reward": "progress", "w": 0.05, "collision_penalty": 1.0}
+    observation = {**reward, "observation": "relative"}
+    barrier = {**observation, "obstacle_barrier": True}
+    return [
+        ("paper settings (Eq. 5A1, 13-value obs., paper PPO)", paper),
+        ("+ progress reward", reward),
+        ("+ relative observation", observation),
+        ("+ moving-obstacle barrier", barrier),
+        ("+ default PPO preset (= tlshield's defaults)", {"preset": "default"}),
+    ]
+
+
+def ablation(
+    out: str | Path,
+    *,
+    config: str = "rl_cbf_clf",
+    seeds: tuple[int, ...] = (0, 1),
+    updates: int = 250,
+    trials: int = 100,
+    workers: int = 2,
+    progress: bool = True,
+) -> Path:
+    """The README's ablation: each row adds one change to the one before (see
+    :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
+    Finished rows are kept, so an interrupted ablation resumes."""
+    _check_run_args(config, updates, "fixed", 0.2)
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    rows = _ablation_rows()
+    jobs = []
+    for k, (_, options) in enumerate(rows):
+        for seed in seeds:
+            folder = root / f"row{k}_s{seed}"
+            if not ((folder / "evaluation.json").is_file() and _finished(folder, updates)):
+                jobs.append((config, seed, updates, str(folder), trials, options))
+    _run_jobs(jobs, workers, progress)
+    lines = [
+        f"| change ({config}, {len(seeds)} seeds x {trials} trials) | eval success per seed "
+        "| mean | eval collisions | train violations | train min obstacle distance | relaxed |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for k, (label, _) in enumerate(rows):
+        evals = [json.loads((root / f"row{k}_s{s}" / "evaluation.json").read_text()) for s in seeds]
+        metrics = [_read_metric_rows(root / f"row{k}_s{s}" / "metrics.csv") for s in seeds]
+        rates = [e["success_rate"] for e in evals]
+        lines.append(
+            f"| {label} | {' / '.join(f'{r:.2f}' for r in rates)} | {np.mean(rates):.2f} "
+            f"| {sum(e['collisions'] for e in evals)} "
+            f"| {sum(int(sum(r['violations'] for r in m)) for m in metrics)} "
+            f"| {min(min(r['min_obstacle_distance'] for r in m) for m in metrics):.2f} "
+            f"| {sum(int(sum(r['relaxed'] for r in m)) for m in metrics)} |"
+        )
+    (root / "ablation.md").write_text("\n".join(lines) + "\n")
     return root
+
+
+def _read_metric_rows(path: Path) -> list[dict[str, float]]:
+    with path.open() as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 def _finished(folder: Path, updates: int) -> bool:

@@ -82,9 +82,7 @@ class FsaTracker:
         if self.progress is not None:
             q_next, reward, self.phi = self.progress.advance(self.q, self.phi, s_next)
         else:
-            q_next, reward, _ = self.automaton.advance(
-                self.q, s_next, self.c_r, self.trap_penalty
-            )
+            q_next, reward, _ = self.automaton.advance(self.q, s_next, self.c_r, self.trap_penalty)
         self.q = q_next
         return q_next, reward
 

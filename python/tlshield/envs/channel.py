@@ -145,6 +145,9 @@ class ChannelConfig:
     obstacle_barrier: bool = True
     #: Radius kept around each obstacle centre by the moving-obstacle barrier.
     barrier_radius: float = 0.45
+    #: Whether the shield is told the obstacles' measured velocity (off: the barrier treats
+    #: them as standing still at each step, for comparison).
+    obstacle_drift: bool = True
 
     # --- observation ----------------------------------------------------------------------
     #: ``"relative"`` or ``"paper"`` (see the module docs).
@@ -264,11 +267,19 @@ PAPER_ENV = {
 }
 
 
-def obstacle_barriers(cfg: ChannelConfig) -> dict[str, Ball]:
+#: Slack weight of the obstacle barriers: when the channel and an obstacle cannot both hold,
+#: the obstacle's row gives way, never the task's channel.
+OBSTACLE_SLACK_WEIGHT = 1e-3
+
+
+def obstacle_barriers(cfg: ChannelConfig) -> dict[str, tuple[Ball, float]]:
     """The moving-obstacle barriers: keep the reference point out of a disc of
     ``barrier_radius`` around each obstacle centre (read from the state)."""
     return {
-        f"!o{k + 1}": Ball(pos=[X, Y], radius=cfg.barrier_radius, center_dims=list(dims))
+        f"!o{k + 1}": (
+            Ball(pos=[X, Y], radius=cfg.barrier_radius, center_dims=list(dims)),
+            OBSTACLE_SLACK_WEIGHT,
+        )
         for k, dims in enumerate(OBSTACLE_DIMS)
     }
 
@@ -370,6 +381,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self.state = np.zeros(STATE_DIM)
         #: The measured motion of the obstacle dimensions (finite differences), for the shield.
         self.drift = np.zeros(STATE_DIM)
+        #: The barrier slack of the last shielded step (> 0 only when the QP was relaxed).
+        self.last_slack = 0.0
         self._obstacles = np.zeros((2, 4))  # per obstacle: u, amplitude, frequency, phase
         self._t = 0
         self._trajectory: list[NDArray[np.float64]] = []
@@ -499,8 +512,9 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         s = self.state
         result = None
         if self.shield is not None and self.shield_in_env:
-            drift = self.drift if self.cfg.obstacle_barrier else None
+            drift = self.drift if self.cfg.obstacle_drift else None
             result = self.shield.filter(s, self.tracker.q, a_rl, drift=drift)
+            self.last_slack = result.slack
             applied = result.action
         else:
             applied = a_rl

@@ -55,6 +55,10 @@ pub struct Barrier {
     pub predicate: Predicate,
     /// `false`: the barrier is the predicate's negation.
     pub positive: bool,
+    /// Scales this row's slack cost when the QP has to be relaxed (safe-set rows: 1). A
+    /// barrier with a smaller weight gives way first: e.g. a moving obstacle's row rather
+    /// than the task's channel.
+    pub slack_weight: f64,
 }
 
 impl Barrier {
@@ -64,6 +68,7 @@ impl Barrier {
             name: name.into(),
             predicate,
             positive: true,
+            slack_weight: 1.0,
         }
     }
 
@@ -73,6 +78,15 @@ impl Barrier {
             name: name.into(),
             predicate,
             positive: false,
+            slack_weight: 1.0,
+        }
+    }
+
+    /// The same barrier with slack weight `weight` (see [`Barrier::slack_weight`]).
+    pub fn with_slack_weight(self, weight: f64) -> Self {
+        Barrier {
+            slack_weight: weight,
+            ..self
         }
     }
 }
@@ -271,9 +285,10 @@ struct Workspace {
     g: Vec<f64>,
     grad: Vec<f64>,
     safe: Vec<(Literal, f64)>,
-    /// Per barrier: `Lg h` (m values), then the row's right-hand side.
+    /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
     lg: Vec<f64>,
     rhs: Vec<f64>,
+    weights: Vec<f64>,
     /// The CLF goal and `Lg V` (m values).
     goal: Vec<f64>,
     clf_lg: Vec<f64>,
@@ -323,6 +338,7 @@ impl Workspace {
             safe: Vec::new(),
             lg: Vec::new(),
             rhs: Vec::new(),
+            weights: Vec::new(),
             goal: Vec::new(),
             clf_lg: Vec::new(),
             qp: DenseQp {
@@ -450,6 +466,12 @@ impl Shield {
                 "margin = {}: expected a finite number >= 0",
                 config.margin
             )));
+        }
+        for b in &config.barriers {
+            positive(
+                &format!("slack weight of barrier {:?}", b.name),
+                b.slack_weight,
+            )?;
         }
         let m = match &dynamics {
             Some(d) => d.inputs(),
@@ -799,6 +821,7 @@ impl Shield {
         ws.out.barriers.clear();
         ws.lg.clear();
         ws.rhs.clear();
+        ws.weights.clear();
         // The atoms' robustness at s, once for both the safe set and the goal.
         let rho = self.automaton.atom_robustness(s);
         if cfg.use_cbf {
@@ -806,19 +829,22 @@ impl Shield {
             self.automaton.safe_set_from(q, &rho, &mut ws.safe);
             let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
                 let sign = if b.positive { 1.0 } else { -1.0 };
+                let h = sign * b.predicate.value(s);
                 (
                     BarrierSource::User(i),
                     &b.predicate,
                     sign,
-                    sign * b.predicate.value(s),
+                    h,
+                    b.slack_weight,
                 )
             });
             let kept = ws.safe.iter().map(|&(lit, h)| {
                 let sign = if lit.positive { 1.0 } else { -1.0 };
                 let predicate = &spec.predicates()[lit.atom];
-                (BarrierSource::SafeSet(lit), predicate, sign, h)
+                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0)
             });
-            for (source, predicate, sign, h) in user.chain(kept) {
+            for (source, predicate, sign, h, weight) in user.chain(kept) {
+                ws.weights.push(weight);
                 predicate.gradient_into(s, &mut ws.grad);
                 let lf = sign * dot(&ws.grad, &ws.f);
                 let mut lg_a = 0.0;
@@ -890,7 +916,7 @@ impl Shield {
         }
 
         // Assemble G x <= h with x = [a_cbf | a_clf | delta | sigma (relaxed only)].
-        let (lg, rhs, clf_lg) = (&ws.lg, &ws.rhs, &ws.clf_lg);
+        let (lg, rhs, clf_lg, weights) = (&ws.lg, &ws.rhs, &ws.clf_lg, &ws.weights);
         let build = |qp: &mut DenseQp, relaxed: bool| {
             let slacks = if relaxed { barriers } else { 0 };
             let nv = vars + slacks;
@@ -903,7 +929,9 @@ impl Shield {
             if has_goal {
                 qp.c[delta] = cfg.k;
             }
-            qp.c[vars..].fill(cfg.slack_penalty);
+            for (c, w) in qp.c[vars..].iter_mut().zip(weights) {
+                *c = cfg.slack_penalty * w;
+            }
             qp.g.clear();
             qp.h.clear();
             for b in 0..barriers {
@@ -1174,6 +1202,42 @@ mod tests {
         assert!(out.action.iter().all(|v| v.is_finite()));
         // The corrections sit at the bounds that limit them.
         assert!((out.a_cbf[0] + 0.01).abs() < 1e-6, "{:?}", out.a_cbf);
+    }
+
+    #[test]
+    fn a_light_barrier_gives_way_first_when_relaxed() {
+        // The reference point hugs wall c1 (h = 0.05) heading out; a user barrier that wants
+        // it 2 m further out cannot hold together with the channel.
+        let s = state(1.0, -HALF_WIDTH + 0.05, -std::f64::consts::FRAC_PI_4);
+        let mut out_w = vec![0.0; N];
+        out_w[0] = -1.0;
+        out_w[1] = 1.0;
+        let away = Predicate::halfspace(out_w, -(HALF_WIDTH + 2.0)).unwrap();
+        let run = |weight: f64| {
+            let mut cfg = config(SolverChoice::Auto);
+            cfg.use_clf = false;
+            cfg.barriers = vec![Barrier::inside("away", away.clone()).with_slack_weight(weight)];
+            let sh = shield(cfg);
+            let q = sh.automaton().step_unchecked(0, &s);
+            sh.filter(&s, q, &[0.0, 0.0], None, None).unwrap()
+        };
+        let light = run(1e-3);
+        assert_eq!(light.status, Status::Relaxed);
+        // The channel row holds: its rate keeps h_c1 above the margin's decay.
+        let sh = shield(config(SolverChoice::Auto));
+        let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
+        sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
+        let grad = [1.0, -1.0];
+        let rate = |a: &[f64]| {
+            (0..2)
+                .map(|k| grad[k] * (f[k] + g[k * 2] * a[0] + g[k * 2 + 1] * a[1]))
+                .sum::<f64>()
+        };
+        let h = s[0] - s[1] + HALF_WIDTH;
+        assert!(rate(&light.action) + 2.0 * h >= -1e-7, "{light:?} {}", rate(&light.action));
+        let mut bad = config(SolverChoice::Auto);
+        bad.barriers = vec![Barrier::inside("away", away).with_slack_weight(0.0)];
+        assert!(Shield::new(task(), None, bad).is_err());
     }
 
     #[test]

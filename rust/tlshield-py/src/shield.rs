@@ -122,7 +122,8 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
 }
 
 /// Barriers from a sequence of predicates (named `h0`, `h1`, ...) or a mapping name ->
-/// predicate; a name starting with `!` keeps the state out of the predicate's region.
+/// predicate or `(predicate, slack weight)`; a name starting with `!` keeps the state out of
+/// the predicate's region.
 fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
     if let Ok(items) = obj.call_method0("items") {
         let mut out = Vec::new();
@@ -131,12 +132,17 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
             let name: String = key
                 .extract()
                 .map_err(|_| PyTypeError::new_err("barriers: mapping keys must be names (str)"))?;
+            let (value, weight) = match value.extract::<(Bound<'_, PyAny>, f64)>() {
+                Ok((p, w)) => (p, w),
+                Err(_) => (value, 1.0),
+            };
             let predicate = predicate_of(&key, &value)?;
-            out.push(if name.starts_with('!') {
+            let barrier = if name.starts_with('!') {
                 Barrier::outside(name, predicate)
             } else {
                 Barrier::inside(name, predicate)
-            });
+            };
+            out.push(barrier.with_slack_weight(weight));
         }
         return Ok(out);
     }

@@ -1,0 +1,168 @@
+"""The progress-aware task reward: its Python API, bad input, and the reward-loophole checks
+on Channel-v0 with scripted policies (finish vs. park, barge vs. go around, the trap)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.scripted import discounted_return, finish, first_goal, park, towards
+from tlshield import Ball, Spec
+from tlshield.envs.channel import OBSTACLE_DIMS, ChannelConfig, ChannelEnv, task_spec
+from tlshield.wrappers import FsaTracker
+
+
+def automaton():
+    return task_spec(ChannelConfig()).automaton()
+
+
+def test_ranks_count_transitions_with_exclusive_goals() -> None:
+    aut = automaton()
+    loose = aut.progress_reward()
+    tight = aut.progress_reward(exclusive=[["g1", "g2", "g3"]])
+    q0, acc, trap = aut.initial, aut.accepting[0], aut.trap
+    assert tight.ranks[q0] == 2 and loose.ranks[q0] == 1
+    assert tight.ranks[acc] == 0 and tight.ranks[trap] is None
+    # The default step cost makes standing still lose: 2 (1 - gamma) (max rank + 1).
+    assert tight.step_cost == pytest.approx(2 * 0.01 * 3)
+    assert tight.trap_penalty < -3 - tight.step_cost
+    assert "ranks=[2, None, 0, 1]" in repr(tight)
+
+
+def test_potential_and_advance_agree() -> None:
+    aut = automaton()
+    r = aut.progress_reward(gamma=0.9, scale=2.0, exclusive=[["g1", "g2", "g3"]])
+    s = np.zeros(13)
+    s[3:9] = [3.0, 3.0, 2.0, 4.0, 8.0, 8.0]
+    s2 = s.copy()
+    s2[:2] = [0.5, 0.5]
+    q = aut.step(aut.initial, s)
+    phi = r.potential(q, s)
+    assert -3.0 < phi <= -2.0
+    q2, reward, phi2 = r.advance(q, phi, s2)
+    assert q2 == q and phi2 == pytest.approx(r.potential(q, s2))
+    assert reward == pytest.approx(0.9 * phi2 - phi - r.step_cost)
+    assert phi2 > phi  # closer to g1
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"gamma": 0.0}, "gamma"),
+        ({"gamma": 1.5}, "gamma"),
+        ({"scale": -1.0}, "scale"),
+        ({"bonus": -1.0}, "bonus"),
+        ({"step_cost": math.nan}, "step_cost"),
+        ({"exclusive": [["g1", "nope"]]}, 'unknown atom "nope"'),
+    ],
+)
+def test_bad_parameters_raise(kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        automaton().progress_reward(**kwargs)
+
+
+def test_bad_calls_raise() -> None:
+    r = automaton().progress_reward()
+    with pytest.raises(ValueError, match="phi"):
+        r.advance(0, math.nan, np.zeros(13))
+    with pytest.raises(ValueError):
+        r.advance(99, 0.0, np.zeros(13))
+    with pytest.raises(ValueError):
+        r.potential(0, np.zeros(3))
+    with pytest.raises(ValueError, match="another automaton"):
+        other = Spec("F g", {"g": Ball(pos=[0, 1], radius=1.0, center=[0.0, 0.0])}).automaton()
+        FsaTracker(other, 1.0, -1.0, r)
+
+
+@pytest.mark.parametrize("config", ["rl", "rl_cbf", "rl_cbf_clf"])
+def test_finishing_out_earns_parking_on_every_seed(config: str) -> None:
+    env = ChannelEnv(config=config)
+    for seed in range(20):
+        done, ok, _ = discounted_return(env, finish, seed)
+        parked, parked_ok, _ = discounted_return(env, park, seed)
+        assert ok and not parked_ok
+        assert done > parked, f"seed {seed}: finish {done:.2f} <= park {parked:.2f}"
+
+
+def test_the_paper_reward_pays_parking() -> None:
+    """The loophole the progress reward closes, measured on Eq. 5A1 itself."""
+    env = ChannelEnv(config="rl", reward="paper")
+    wins = sum(
+        discounted_return(env, park, s)[0] > discounted_return(env, finish, s)[0] for s in range(20)
+    )
+    assert wins == 20
+
+
+def _static_obstacle_on_the_way(env: ChannelEnv, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Resets, then freezes obstacle 1 halfway to the first goal and moves obstacle 2 away."""
+    env.reset(seed=seed)
+    p, g = env.state[:2].copy(), first_goal(env)
+    middle = (p + g) / 2
+    # (u, amplitude, frequency, phase): frequency 0 stands still at v = amplitude.
+    u, v = (middle[0] + middle[1]) / math.sqrt(2), (middle[1] - middle[0]) / math.sqrt(2)
+    env._obstacles[0] = (u, v, 0.0, math.pi / 2)
+    env._obstacles[1] = (50.0, 0.0, 0.0, 0.0)
+    for k, (a, b) in enumerate(OBSTACLE_DIMS):
+        env.state[a : b + 1] = env._obstacle_positions(0.0)[k]
+    env.drift[:] = 0.0
+    return middle, g
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_barging_through_an_obstacle_never_out_earns_going_around(seed: int) -> None:
+    gamma = 0.99
+    returns = {}
+    for way in ("barge", "around"):
+        env = ChannelEnv(config="rl")
+        middle, g = _static_obstacle_on_the_way(env, seed)
+        p = env.state[:2].copy()
+        d = (g - p) / np.linalg.norm(g - p)
+        side = np.array([-d[1], d[0]])
+        # Pass on the side nearer the channel's centre line, 0.7 m from the obstacle.
+        waypoint = min((middle + 0.7 * side, middle - 0.7 * side), key=lambda w: abs(w[1] - w[0]))
+        detour = [waypoint, g] if way == "around" else [g]
+        total, discount, collisions = 0.0, 1.0, 0
+        for _ in range(env.cfg.horizon):
+            if env.tracker.q == env.tracker.automaton.initial:
+                while len(detour) > 1 and np.linalg.norm(env.state[:2] - detour[0]) < 0.15:
+                    detour.pop(0)
+                action = towards(env, detour[0])
+            else:
+                action = towards(env, env.state[7:9])
+            _, reward, terminated, truncated, info = env.step(action)
+            total += discount * reward
+            discount *= gamma
+            collisions += info["collision"]
+            if terminated or truncated:
+                break
+        assert info["success"], way
+        returns[way] = (total, collisions)
+    (barge, hits), (around, missed) = returns["barge"], returns["around"]
+    assert hits > 0 and missed == 0
+    assert around > barge, f"around {around:.2f} <= barge {barge:.2f}"
+
+
+@pytest.mark.parametrize("reward", ["progress", "paper"])
+def test_trap_never_pays_better_than_outside(reward: str) -> None:
+    env = ChannelEnv(config="rl", reward=reward)
+    rng = np.random.default_rng(1)
+    worst, trapped_steps = math.inf, 0
+    penalty = env.tracker.trap_penalty
+    for seed in range(30):
+        env.reset(seed=seed)
+        in_trap = False
+        for _ in range(200):
+            _, _, term, trunc, info = env.step(rng.uniform(-1, 1, size=2))
+            if in_trap or (info["trap"] and reward == "progress"):
+                # Eq. 5A1 pays the step entering the trap from its source state.
+                assert info["tl_reward"] == penalty
+                trapped_steps += 1
+            elif not info["trap"]:
+                worst = min(worst, info["tl_reward"])
+            in_trap = info["trap"]
+            if term or trunc:
+                break
+    assert trapped_steps > 0
+    assert penalty <= worst
