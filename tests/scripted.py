@@ -58,9 +58,11 @@ def park(env: ChannelEnv) -> np.ndarray:
 
 
 def discounted_return(
-    env: ChannelEnv, policy: Policy, seed: int, gamma: float = 0.99
+    env: ChannelEnv, policy: Policy, seed: int, gamma: float | None = None
 ) -> tuple[float, bool, int]:
-    """``(discounted return, success, collision steps)`` of one episode."""
+    """``(discounted return, success, collision steps)`` of one episode, discounted with the
+    environment's training discount unless ``gamma`` is given."""
+    gamma = env.cfg.gamma if gamma is None else gamma
     env.reset(seed=seed)
     total, discount, collisions, info = 0.0, 1.0, 0, {"success": False}
     for _ in range(env.cfg.horizon):

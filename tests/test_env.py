@@ -89,9 +89,16 @@ def test_observation_layout_and_info(observation: str) -> None:
     else:
         assert obs[0] == pytest.approx(math.cos(s[2])) and obs[1] == pytest.approx(math.sin(s[2]))
         assert obs[2] == pytest.approx(info["constraints"]["c1"])
-        np.testing.assert_allclose(obs[4:6], s[3:5] - s[:2])  # g1 relative to the agent
-        np.testing.assert_allclose(obs[10:12], s[9:11] - s[:2])  # o1 relative to the agent
-        np.testing.assert_allclose(obs[14:18], env.unwrapped.drift[9:13])
+        # In the agent's frame: x ahead, y to the left.
+        c, si = math.cos(s[2]), math.sin(s[2])
+        frame = np.array([[c, si], [-si, c]])
+        np.testing.assert_allclose(obs[4:6], frame @ (s[3:5] - s[:2]))  # g1
+        np.testing.assert_allclose(obs[10:12], frame @ (s[9:11] - s[:2]))  # o1
+        np.testing.assert_allclose(obs[14:16], frame @ env.unwrapped.drift[9:11])
+        goal = env.unwrapped.tracker.automaton.goal(info["fsa_state"], s)
+        np.testing.assert_allclose(obs[18:20], frame @ (goal - s[:2]))
+        ahead = s[:2] + 2.0 * np.array([c, si])  # a point 2 m straight ahead reads (2, 0)
+        np.testing.assert_allclose(frame @ (ahead - s[:2]), [2.0, 0.0], atol=1e-12)
     assert set(info["shield"]) == {"a_rl", "a_cbf", "a_clf", "delta", "status"}
     assert isinstance(reward, float) and math.isfinite(reward)
 

@@ -31,7 +31,10 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("results")
     for config in CONFIGS:
         for seed in SEEDS:
-            run = train(config, seed, UPDATES, root / f"{config}_s{seed}", progress=False)
+            # The paper preset's updates are whole episodes, so every update has a return.
+            run = train(
+                config, seed, UPDATES, root / f"{config}_s{seed}", progress=False, preset="paper"
+            )
             evaluate(run, trials=TRIALS)
     return root
 

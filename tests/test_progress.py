@@ -25,10 +25,13 @@ def test_ranks_count_transitions_with_exclusive_goals() -> None:
     q0, acc, trap = aut.initial, aut.accepting[0], aut.trap
     assert tight.ranks[q0] == 2 and loose.ranks[q0] == 1
     assert tight.ranks[acc] == 0 and tight.ranks[trap] is None
-    # The default step cost makes standing still lose: 2 (1 - gamma) (max rank + 1).
-    assert tight.step_cost == pytest.approx(2 * 0.01 * 3)
+    # Defaults: step cost (1 - gamma) (max rank + 1); bonus (max rank + 1) gamma^(1 - T).
+    assert tight.step_cost == pytest.approx(0.01 * 3)
+    assert tight.bonus == pytest.approx(3 * 0.99 ** (1 - 200))
     assert tight.trap_penalty < -3 - tight.step_cost
     assert "ranks=[2, None, 0, 1]" in repr(tight)
+    # Shorter episodes or a longer discount need a smaller bonus.
+    assert aut.progress_reward(horizon=50).bonus < loose.bonus
 
 
 def test_potential_and_advance_agree() -> None:
@@ -43,7 +46,7 @@ def test_potential_and_advance_agree() -> None:
     assert -3.0 < phi <= -2.0
     q2, reward, phi2 = r.advance(q, phi, s2)
     assert q2 == q and phi2 == pytest.approx(r.potential(q, s2))
-    assert reward == pytest.approx(0.9 * phi2 - phi - r.step_cost)
+    assert reward == pytest.approx(phi2 - phi - r.step_cost)
     assert phi2 > phi  # closer to g1
 
 
@@ -54,6 +57,9 @@ def test_potential_and_advance_agree() -> None:
         ({"gamma": 1.5}, "gamma"),
         ({"scale": -1.0}, "scale"),
         ({"bonus": -1.0}, "bonus"),
+        ({"bonus": 5.0}, "finishing out-earns not finishing"),
+        ({"horizon": 0}, "horizon"),
+        ({"horizon": -5}, "horizon"),
         ({"step_cost": math.nan}, "step_cost"),
         ({"exclusive": [["g1", "nope"]]}, 'unknown atom "nope"'),
     ],
@@ -112,7 +118,7 @@ def _static_obstacle_on_the_way(env: ChannelEnv, seed: int) -> tuple[np.ndarray,
 
 @pytest.mark.parametrize("seed", range(10))
 def test_barging_through_an_obstacle_never_out_earns_going_around(seed: int) -> None:
-    gamma = 0.99
+    gamma = ChannelConfig().gamma
     returns = {}
     for way in ("barge", "around"):
         env = ChannelEnv(config="rl")

@@ -101,9 +101,10 @@ class Automaton:
         self,
         *,
         gamma: float = 0.99,
+        horizon: int = 200,
         scale: float = 1.0,
         step_cost: float | None = None,
-        bonus: float = 1.0,
+        bonus: float | None = None,
         c_r: float = 1.0,
         exclusive: Sequence[Sequence[str]] = ...,
     ) -> ProgressReward: ...
@@ -116,6 +117,8 @@ class ProgressReward:
     def ranks(self) -> list[int | None]: ...
     @property
     def step_cost(self) -> float: ...
+    @property
+    def bonus(self) -> float: ...
     @property
     def trap_penalty(self) -> float: ...
     @property

@@ -258,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     train = sub.add_parser("train", help="train PPO on one configuration of the case study")
     train.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
     train.add_argument(
-        "--updates", type=_positive, default=250, help="PPO updates (1024 steps each by default)"
+        "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"
     )
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--out", required=True, help="run folder to write")
@@ -280,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     repro.add_argument("--out", default="results", help="results folder (default: results)")
     repro.add_argument("--configs", nargs="+", choices=sorted(CONFIGS), default=list(CONFIGS))
     repro.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    repro.add_argument("--updates", type=_positive, default=250, help="PPO updates per run")
+    repro.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
     repro.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
     repro.add_argument("--workers", type=_positive, default=2, help="parallel runs")
     repro.add_argument("--quiet", action="store_true")
@@ -293,7 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     abl.add_argument("--out", default="results_ablation", help="folder (default: results_ablation)")
     abl.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    abl.add_argument("--updates", type=_positive, default=250, help="PPO updates per run")
+    abl.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
     abl.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
     abl.add_argument("--workers", type=_positive, default=2, help="parallel runs")
     abl.add_argument("--quiet", action="store_true")

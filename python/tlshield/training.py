@@ -68,12 +68,15 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
     "default": {
         "n_envs": 8,
+        # The learning rate decays linearly to 0 (without it the policy found the task and then
+        # lost it again within the same run, measured).
+        "lr_schedule": "linear",
         "ppo": {
             "n_steps": 128,
             "batch_size": 512,
             "n_epochs": 10,
             "learning_rate": 3e-4,
-            "gamma": 0.99,
+            "gamma": 0.999,
             "gae_lambda": 0.95,
             "clip_range": 0.2,
             "ent_coef": 0.0,
@@ -195,6 +198,7 @@ def train(
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     spec = PRESETS[preset]
     ppo_kwargs, n_envs, net_arch = {**spec["ppo"], **(ppo or {})}, spec["n_envs"], spec["net_arch"]
+    log_std_init = float(ppo_kwargs.pop("log_std_init", spec.get("log_std_init", 0.0)))
     # The progress reward is shaped for the discount PPO uses.
     overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
     import torch
@@ -218,7 +222,13 @@ def train(
         "clf_schedule": clf_schedule,
         "clf_final_scale": clf_final_scale,
         "n_envs": n_envs,
-        "ppo": {**ppo_kwargs, "net_arch": net_arch, "activation": "ReLU"},
+        "ppo": {
+            **ppo_kwargs,
+            "lr_schedule": spec.get("lr_schedule", "constant"),
+            "log_std_init": log_std_init,
+            "net_arch": net_arch,
+            "activation": "ReLU",
+        },
         "env": asdict(cfg),
         "overrides": overrides,
         "interrupted": False,
@@ -226,14 +236,22 @@ def train(
     }
     (run / "config.json").write_text(json.dumps(record, indent=2))
 
+    learning_rate: Any = ppo_kwargs["learning_rate"]
+    if spec.get("lr_schedule") == "linear":
+        start_lr = float(learning_rate)
+        learning_rate = lambda remaining: start_lr * remaining  # noqa: E731
     model = PPO(
         "MlpPolicy",
         venv,
         seed=seed,
         device="cpu",
         verbose=0,
-        policy_kwargs={"net_arch": net_arch, "activation_fn": torch.nn.ReLU},
-        **ppo_kwargs,
+        policy_kwargs={
+            "net_arch": net_arch,
+            "activation_fn": torch.nn.ReLU,
+            "log_std_init": log_std_init,
+        },
+        **{**ppo_kwargs, "learning_rate": learning_rate},
     )
     model.set_logger(configure(str(run / "tb"), ["tensorboard"]))
     metrics = _Metrics(n_envs, ppo_kwargs["gamma"])
@@ -437,7 +455,7 @@ def reproduce(
     *,
     configs: tuple[str, ...] = tuple(CONFIGS),
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 250,
+    updates: int = 300,
     trials: int = 100,
     workers: int = 2,
     progress: bool = True,
@@ -513,7 +531,7 @@ def ablation(
     *,
     config: str = "rl_cbf_clf",
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 250,
+    updates: int = 300,
     trials: int = 100,
     workers: int = 2,
     progress: bool = True,

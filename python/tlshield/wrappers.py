@@ -122,8 +122,8 @@ class FsaAugmented(gym.Wrapper):
     ``terminate_on_success`` the episode ends when the task is done.
 
     ``reward="progress"`` (default) pays the progress-aware reward
-    (:class:`tlshield.ProgressReward`, built with ``gamma``, ``scale``, ``exclusive`` and the
-    other keywords in ``progress``); ``reward="paper"`` pays Eq. 5A1 with ``trap_penalty``.
+    (:class:`tlshield.ProgressReward`, built with ``gamma``, ``horizon``, ``scale``,
+    ``exclusive`` and the other keywords in ``progress``); ``reward="paper"`` pays Eq. 5A1 with ``trap_penalty``.
     """
 
     def __init__(
@@ -138,6 +138,7 @@ class FsaAugmented(gym.Wrapper):
         terminate_on_success: bool = True,
         reward: str = "progress",
         gamma: float = 0.99,
+        horizon: int = 200,
         scale: float = 1.0,
         exclusive: Sequence[Sequence[str]] = (),
         **progress: Any,
@@ -152,6 +153,7 @@ class FsaAugmented(gym.Wrapper):
         if reward == "progress":
             shaped = automaton.progress_reward(
                 gamma=gamma,
+                horizon=horizon,
                 scale=scale,
                 c_r=c_r,
                 exclusive=[list(g) for g in exclusive],

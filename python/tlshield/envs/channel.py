@@ -5,10 +5,12 @@ State (13 values): reference point ``x, y``, heading ``theta``, goal centres ``g
 the unicycle's reference point, normalised to ``[-1, 1]^2`` (scaled to
 ``ChannelConfig.rl_bounds``; ``info["shield"]["a_rl"]`` is in physical units).
 
-Observation (``ChannelConfig.observation``): ``"relative"`` (default, 18 values + the one-hot
+Observation (``ChannelConfig.observation``): ``"relative"`` (default, 20 values + the one-hot
 FSA state): ``cos theta, sin theta``, the two channel constraints ``c1, c2``, the goals and
-the obstacles relative to the agent, and the obstacles' velocities measured from their last
-two positions; ``"paper"``: the 13 state values followed by the one-hot FSA state.
+the obstacles relative to the agent and the obstacles' velocities (measured from their last
+two positions) and the automaton's next goal (Eq. 5B1, zero in acceptance), all in the
+agent's frame (x ahead, y to the left); ``"paper"``: the 13 state values followed by the
+one-hot FSA state.
 
 Every constant of the environment is a field of :class:`ChannelConfig` (documented there) and
 can be overridden by keyword in ``gymnasium.make("tlshield/Channel-v0", ...)``.
@@ -41,7 +43,7 @@ OBSTACLE_DIMS = ((9, 10), (11, 12))
 #: Observation layouts (see the module docs).
 OBSERVATIONS = ("relative", "paper")
 #: Length of the relative observation before the one-hot FSA state.
-RELATIVE_DIM = 18
+RELATIVE_DIM = 20
 
 #: The four configurations of the paper: which parts of the shield are on.
 CONFIGS = {
@@ -157,13 +159,14 @@ class ChannelConfig:
     #: ``"progress"`` (the progress-aware task reward, :class:`tlshield.ProgressReward`) or
     #: ``"paper"`` (Eq. 5A1 with ``trap_penalty``).
     reward: str = "progress"
-    #: The discount the progress reward is consistent with (the trainer's gamma).
-    gamma: float = 0.99
+    #: The discount the progress reward's bonus is sized for (the trainer's gamma).
+    gamma: float = 0.999
     #: Eq. 5A1 scale of the progress reward's potential (m): its shaping is clipped beyond.
     progress_scale: float = 2.0
-    #: Paid on finishing the task (progress reward): large enough that a finisher slowed down
-    #: by the obstacles still out-earns a parker (checked on 20 seeds in the tests).
-    bonus: float = 5.0
+    #: Paid on finishing the task (progress reward); None: the least bonus that makes every
+    #: trajectory finishing within the horizon out-earn every one that does not, times a margin
+    #: (``ProgressReward.bonus``).
+    bonus: float | None = None
     #: Weight of the trap term in Eq. 5A1.
     c_r: float = 1.0
     #: Weight of the obstacle term: reward = r_tl + w * min(d - safe_distance, 0)
@@ -172,6 +175,11 @@ class ChannelConfig:
     #: Paid on every step in collision (training does not end on a collision, so barging
     #: through an obstacle must cost more than the detour around it).
     collision_penalty: float = 1.0
+    #: Paid per step as ``intervention_penalty * |a_cbf|^2`` (physical units) when the shield
+    #: runs inside the environment: without it an agent pressing into a wall sees every action
+    #: corrected to the same motion, so nothing teaches it to stop pushing (measured: PPO
+    #: found the task, then settled against the wall).
+    intervention_penalty: float = 0.05
 
     # --- shield (Eq. 5D2) -----------------------------------------------------------------
     alpha: float = 2.0
@@ -230,8 +238,10 @@ class ChannelConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} = {value!r}: expected a finite number > 0")
-        for name in ("bonus", "collision_penalty"):
+        for name in ("bonus", "collision_penalty", "intervention_penalty"):
             value = getattr(self, name)
+            if name == "bonus" and value is None:
+                continue
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} = {value!r}: expected a finite number >= 0")
         lo, hi = np.asarray(self.rl_bounds, dtype=float)
@@ -264,6 +274,8 @@ PAPER_ENV = {
     "obstacle_barrier": False,
     "w": 1.0,
     "collision_penalty": 0.0,
+    "intervention_penalty": 0.0,
+    "gamma": 0.99,
 }
 
 
@@ -352,6 +364,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             # reaching two goals: g3 is two transitions away from the start, not one.
             progress = automaton.progress_reward(
                 gamma=cfg.gamma,
+                horizon=cfg.horizon,
                 scale=cfg.progress_scale,
                 bonus=cfg.bonus,
                 c_r=cfg.c_r,
@@ -445,9 +458,16 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         obs = np.empty(RELATIVE_DIM + len(self.tracker.one_hot()))
         obs[0], obs[1] = math.cos(s[THETA]), math.sin(s[THETA])
         obs[2], obs[3] = s[X] - s[Y] + w, s[Y] - s[X] + w
-        obs[4:10] = (s[3:9].reshape(3, 2) - p).ravel()
-        obs[10:14] = (s[9:13].reshape(2, 2) - p).ravel()
-        obs[14:18] = self.drift[9:13]
+        # Goals, obstacles and obstacle velocities in the agent's frame (x ahead, y left):
+        # "ahead" and "to the left" map straight onto a_v and a_theta.
+        c, si = obs[0], obs[1]
+        frame = np.array([[c, si], [-si, c]])
+        obs[4:10] = ((s[3:9].reshape(3, 2) - p) @ frame.T).ravel()
+        obs[10:14] = ((s[9:13].reshape(2, 2) - p) @ frame.T).ravel()
+        obs[14:18] = (self.drift[9:13].reshape(2, 2) @ frame.T).ravel()
+        # The task's next goal as the automaton picks it (Eq. 5B1), zero when there is none.
+        goal = self.tracker.automaton.goal(self.tracker.q, s)
+        obs[18:20] = 0.0 if goal is None else frame @ (goal - p)
         obs[RELATIVE_DIM:] = self.tracker.one_hot()
         return obs
 
@@ -539,6 +559,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         measured = self._measure(nxt)
         r_obstacle = min(measured["min_obstacle_distance"] - cfg.safe_distance, 0.0)
         reward = r_tl + cfg.w * r_obstacle - cfg.collision_penalty * measured["collision"]
+        if result is not None:
+            reward -= cfg.intervention_penalty * float(result.a_cbf @ result.a_cbf)
         success = self.tracker.success
         terminated = success or (self.evaluation and measured["collision"])
         truncated = self._t >= cfg.horizon and not terminated

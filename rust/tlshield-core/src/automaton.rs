@@ -735,6 +735,54 @@ impl Automaton {
         self.reward_from(q, rho, c_r)
     }
 
+    /// [`Automaton::task_signal_from`] over the cubes of `D_q` that can hold where they lead:
+    /// a cube whose positive Ball literal (a goal) has its centre violating one of the cube's
+    /// other literals (e.g. a goal disc wholly outside the channel the cube also requires) is
+    /// left out, so the shaping does not pull towards a goal the task cannot take. When every
+    /// cube is left out, all count (the plain Eq. 5A1 value). Validated inputs.
+    pub fn reachable_signal_from(&self, q: usize, s: &[f64], rho: &[f64], c_r: f64) -> f64 {
+        if self.accepting[q] {
+            return 0.0;
+        }
+        let mut at_goal: SmallVec<[f64; 32]> = SmallVec::from_slice(s);
+        let mut best = f64::NEG_INFINITY;
+        let mut any = false;
+        for cube in &self.progress[q] {
+            let ball = cube
+                .literals()
+                .find_map(|l| match &self.spec.predicates()[l.atom] {
+                    Predicate::Ball(b) if l.positive => Some((l.atom, b)),
+                    _ => None,
+                });
+            if let Some((atom, ball)) = ball {
+                at_goal.copy_from_slice(s);
+                for (k, &i) in ball.pos().iter().enumerate() {
+                    at_goal[i] = match ball.center() {
+                        Center::Fixed(c) => c[k],
+                        Center::Dims(d) => s[d[k]],
+                    };
+                }
+                let blocked = cube.literals().filter(|l| l.atom != atom).any(|l| {
+                    let value = self.spec.predicates()[l.atom].value(&at_goal);
+                    (if l.positive { value } else { -value }) < 0.0
+                });
+                if blocked {
+                    continue;
+                }
+            }
+            any = true;
+            best = best.max(cube.robustness(rho));
+        }
+        if !any {
+            return self.reward_from(q, rho, c_r);
+        }
+        if self.trap_cnf[q].is_empty() {
+            best
+        } else {
+            best.min(c_r * cnf::cnf_robustness(&self.trap_cnf[q], rho))
+        }
+    }
+
     /// The atoms' robustness at `s` after checking its length and finiteness.
     pub fn checked_atom_robustness(&self, s: &[f64]) -> Result<[f64; MAX_ATOMS], InputError> {
         self.check_vector(s)?;

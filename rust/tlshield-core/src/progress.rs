@@ -5,40 +5,50 @@
 //! first goal, about `-dist(next goal)` after entering it, 0 at acceptance), so parking outside
 //! a goal out-earns finishing. Here the Eq. 5A1 value becomes the within-state part of a
 //! potential over (state, FSA state), as in reward machines' automaton-distance shaping
-//! (Camacho et al. 2019):
+//! (Camacho et al. 2019), plus a terminal reward:
 //!
 //! - `rank(q)`: fewest transitions from `q` to acceptance over *admissible* valuations (atoms
 //!   declared mutually exclusive never hold together: two disjoint goal discs), 0 at
 //!   acceptance, `None` for the trap;
 //! - `Phi(s, q) = -rank(q) + squash(sigma_q(s))`, `sigma_q` the Eq. 5A1 value of being at `s`
-//!   in `q` and `squash(x) = min(x, 0) / (scale + |min(x, 0)|)` in (-1, 0]: strictly increasing
+//!   in `q` over the guard cubes whose goal can hold where it is (a goal disc outside the
+//!   channel that its cube also requires does not pull; see
+//!   [`Automaton::reachable_signal_from`]), and `squash(x) = min(x, 0) / (scale + |min(x, 0)|)` in (-1, 0]: strictly increasing
 //!   below 0 (slope `1 / scale` at the goal's edge, so the shaping never goes flat as a clip
 //!   would); `Phi = 0` at acceptance. The bands `(-rank - 1, -rank]` never overlap the next
 //!   state's, so entering a state closer to acceptance never lowers `Phi`;
-//! - the reward of a step `(s, q) -> (s', q')` is `gamma * Phi(s', q') - Phi(s, q) - step_cost`,
-//!   plus `bonus` on entering acceptance; `trap_penalty` on every step in the trap; 0 on steps
-//!   that stay accepting. An episode starts from `Phi = 0` (the first step pays the whole
-//!   distance), so returns telescope to `gamma^T Phi_T - step_cost * sum gamma^t (+ bonus)`:
-//!   reaching acceptance out-earns not reaching it for every pair of trajectories over any
-//!   horizon, whatever the starts;
-//! - `step_cost > (1 - gamma) * (max rank + 1)` makes standing still cost: with pure potential
-//!   shaping and `Phi < 0`, parking would pay `(1 - gamma) |Phi| > 0` per step.
-
+//! - the reward of a step `(s, q) -> (s', q')` is the progress `Phi(s', q') - Phi(s, q)` minus
+//!   `step_cost`, plus `bonus` on entering acceptance; `trap_penalty` on every step in the
+//!   trap; 0 on steps that stay accepting. An episode starts from `Phi = 0` (the first step
+//!   pays the whole distance to go). Standing still costs exactly `step_cost` a step.
+//!
+//! Why undiscounted differences and a bonus: with `gamma * Phi' - Phi` (classic potential
+//! shaping) every return telescopes to its end point, so reaching a sub-goal and stopping
+//! there earns the same as never moving (measured: PPO then never finds the task). The
+//! progress `Phi' - Phi` pays a sub-goal when it is reached. Summation by parts bounds what the
+//! shaping can add over any trajectory by `max rank + 1`, so with the horizon `T` known a bonus
+//! `bonus > (max rank + 1) (gamma^(1 - T) - 1) - 1` makes every trajectory that reaches
+//! acceptance out-earn every one that does not, whatever the starts; the default bonus is
+//! `(max rank + 1) gamma^(1 - T)`.
 use crate::automaton::Automaton;
 use crate::error::{AutomatonError, InputError};
 
 /// Parameters of [`ProgressReward`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProgressParams {
-    /// The training discount the shaping is consistent with, in (0, 1].
+    /// The training discount, in (0, 1].
     pub gamma: f64,
     /// Robustness scale of the squash `x / (scale + |x|)`: Eq. 5A1 at `-scale` sits halfway
     /// down its band. Smaller values shape harder near the goals, larger ones further away.
     pub scale: f64,
-    /// Cost of every step outside acceptance; `None` picks `2 (1 - gamma) (max rank + 1)`.
+    /// Cost of every step outside acceptance; `None` picks `(1 - gamma) (max rank + 1)`.
     pub step_cost: Option<f64>,
-    /// Paid once, on entering acceptance (>= 0).
-    pub bonus: f64,
+    /// Paid once, on entering acceptance; `None` picks `(max rank + 1) gamma^(1 - horizon)`.
+    /// A bonus too small to make finishing within the horizon out-earn not finishing is an
+    /// error.
+    pub bonus: Option<f64>,
+    /// Episode length in steps, for the bonus.
+    pub horizon: u32,
     /// Weight of the trap term inside Eq. 5A1.
     pub c_r: f64,
     /// Groups of atom indices of which at most one holds at a time (bitmasks).
@@ -51,7 +61,8 @@ impl Default for ProgressParams {
             gamma: 0.99,
             scale: 1.0,
             step_cost: None,
-            bonus: 1.0,
+            bonus: None,
+            horizon: 200,
             c_r: 1.0,
             exclusive: Vec::new(),
         }
@@ -137,7 +148,14 @@ impl ProgressReward {
             }
             .into());
         }
-        finite_at_least("bonus", params.bonus, 0.0)?;
+        if params.horizon == 0 {
+            return Err(InputError::Shape {
+                what: "horizon".into(),
+                expected: "a positive number of steps".into(),
+                got: "0".into(),
+            }
+            .into());
+        }
         if !(params.c_r.is_finite() && params.c_r > 0.0) {
             return Err(InputError::Shape {
                 what: "c_r".into(),
@@ -159,24 +177,46 @@ impl ProgressReward {
         }
         let ranks = ranks(automaton, &params.exclusive);
         let max_rank = ranks.iter().flatten().copied().max().unwrap_or(0);
-        // The least cost per step that makes standing still lose: (1 - gamma) * |Phi|max.
-        let least = (1.0 - params.gamma) * f64::from(max_rank + 1);
+        let band = f64::from(max_rank + 1);
         let step_cost = match params.step_cost {
             Some(c) => {
                 finite_at_least("step_cost", c, 0.0)?;
                 c
             }
-            None => 2.0 * least,
+            None => (1.0 - params.gamma) * band,
         };
-        // Below every reward reachable outside the trap: gamma * Phi' - Phi - c >= -(K+1) - c.
-        let trap_penalty = -(f64::from(max_rank) + 2.0) - step_cost;
+        // gamma^(1 - T): how much the last step's bonus is discounted over the horizon.
+        let stretch = params.gamma.powi(1 - params.horizon as i32);
+        let least_bonus = band * (stretch - 1.0) - 1.0;
+        let bonus = match params.bonus {
+            Some(b) => {
+                finite_at_least("bonus", b, 0.0)?;
+                if b <= least_bonus {
+                    return Err(InputError::Shape {
+                        what: "bonus".into(),
+                        expected: format!(
+                            "more than {least_bonus:.4} (max rank + 1 = {band}, gamma {}, horizon \
+                             {}), so that finishing out-earns not finishing",
+                            params.gamma, params.horizon
+                        ),
+                        got: b.to_string(),
+                    }
+                    .into());
+                }
+                b
+            }
+            None => band * stretch,
+        };
+        // Every step outside the trap pays at least -(K + 1) - c; a trap step pays less, and
+        // enough less (times gamma^(1 - T)) that entering it even at the last step loses.
+        let trap_penalty = -(band + 1.0 + step_cost) * stretch;
         Ok(ProgressReward {
             ranks,
             max_rank,
             gamma: params.gamma,
             scale: params.scale,
             step_cost,
-            bonus: params.bonus,
+            bonus,
             c_r: params.c_r,
             trap_penalty,
         })
@@ -192,24 +232,32 @@ impl ProgressReward {
         self.step_cost
     }
 
+    /// The bonus in force (given or chosen).
+    pub fn bonus(&self) -> f64 {
+        self.bonus
+    }
+
     /// The per-step reward in the trap (worse than any step outside it).
     pub fn trap_penalty(&self) -> f64 {
         self.trap_penalty
     }
 
-    /// The discount the shaping is consistent with.
+    /// The training discount the bonus is sized for.
     pub fn gamma(&self) -> f64 {
         self.gamma
     }
 
-    /// The potential `Phi(s, q)` from the atoms' robustness at `s` (validated inputs). States
-    /// without a path to acceptance sit one band below the farthest state that has one.
-    pub fn potential_from(&self, automaton: &Automaton, q: usize, rho: &[f64]) -> f64 {
+    /// The potential `Phi(s, q)` at `s` with the atoms' robustness `rho` there (validated
+    /// inputs). States without a path to acceptance sit one band below the farthest state
+    /// that has one.
+    pub fn potential_from(&self, automaton: &Automaton, q: usize, s: &[f64], rho: &[f64]) -> f64 {
         if automaton.is_accepting(q) {
             return 0.0;
         }
         let rank = self.ranks[q].unwrap_or(self.max_rank + 1);
-        let sigma = automaton.task_signal_from(q, rho, self.c_r).min(0.0);
+        let sigma = automaton
+            .reachable_signal_from(q, s, rho, self.c_r)
+            .min(0.0);
         // -inf (a `false` guard) squashes to the band's floor, not to -inf / inf = NaN.
         let squashed = if sigma.is_finite() {
             sigma / (self.scale - sigma)
@@ -236,7 +284,7 @@ impl ProgressReward {
         } else if automaton.is_accepting(q_next) {
             -phi - self.step_cost + self.bonus
         } else {
-            self.gamma * phi_next - phi - self.step_cost
+            phi_next - phi - self.step_cost
         }
     }
 
@@ -270,7 +318,7 @@ impl ProgressReward {
         let rho = automaton.checked_atom_robustness(s_next)?;
         let rho = &rho[..automaton.spec().atoms().len()];
         let q_next = automaton.step_rho(q, rho);
-        let phi_next = self.potential_from(automaton, q_next, rho);
+        let phi_next = self.potential_from(automaton, q_next, s_next, rho);
         Ok((
             q_next,
             self.reward(automaton, q, q_next, phi, phi_next),
@@ -317,6 +365,29 @@ mod tests {
     }
 
     #[test]
+    fn a_goal_the_task_cannot_take_does_not_pull() {
+        // b's disc (around 9) lies beyond the wall x < 8 that the task keeps until c.
+        let ball = |c: f64| Predicate::ball(vec![0], 0.5, Center::Fixed(vec![c])).unwrap();
+        let spec = Spec::new(
+            "(F a | F b) & F c & (!c U (a | b)) & (w U c)",
+            [
+                ("a", ball(2.0)),
+                ("b", ball(9.0)),
+                ("c", ball(5.0)),
+                ("w", Predicate::halfspace(vec![-1.0], 8.0).unwrap()),
+            ],
+        )
+        .unwrap();
+        let aut = Automaton::build(&spec).unwrap();
+        let q0 = aut.step(aut.initial(), &[7.5]).unwrap();
+        let rho = aut.atom_robustness(&[7.5]);
+        let rho = &rho[..4];
+        // Eq. 5A1 follows the nearer goal b (0.5 - 1.5); the reachable signal follows a.
+        assert!((aut.task_signal_from(q0, rho, 1.0) + 1.0).abs() < 1e-12);
+        assert!((aut.reachable_signal_from(q0, &[7.5], rho, 1.0) + 5.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn bad_parameters_are_errors() {
         let aut = channel_like();
         for p in [
@@ -333,7 +404,15 @@ mod tests {
                 ..Default::default()
             },
             ProgressParams {
-                bonus: -1.0,
+                bonus: Some(-1.0),
+                ..Default::default()
+            },
+            ProgressParams {
+                bonus: Some(1.0),
+                ..Default::default()
+            },
+            ProgressParams {
+                horizon: 0,
                 ..Default::default()
             },
             ProgressParams {
@@ -396,13 +475,21 @@ mod tests {
         /// (d) a trajectory entering the trap earns less than any that never does.
         #[test]
         fn accepting_beats_not_accepting_and_the_trap_is_worst(
-            f in co_safe(), trajs in trajectories(), gamma in 0.9..1.0f64, bonus in 0.0..2.0f64
+            f in co_safe(), trajs in trajectories(), gamma in 0.8..1.0f64, tight in any::<bool>()
         ) {
             let spec = spec_for(&f);
             let aut = Automaton::build(&spec).unwrap();
-            let params = ProgressParams { gamma, scale: 2.0, bonus, ..Default::default() };
-            let r = ProgressReward::new(&aut, &params).unwrap();
             let horizon = 11; // every trajectory has 12 states = 11 steps
+            let params = ProgressParams { gamma, scale: 2.0, horizon, ..Default::default() };
+            let mut r = ProgressReward::new(&aut, &params).unwrap();
+            if tight {
+                // The least bonus the guarantee allows (just above the bound).
+                let band = f64::from(r.ranks().iter().flatten().max().copied().unwrap_or(0) + 1);
+                let least = band * (gamma.powi(1 - horizon as i32) - 1.0) - 1.0;
+                let bonus = Some(least.max(0.0) + 1e-9);
+                r = ProgressReward::new(&aut, &ProgressParams { bonus, ..params }).unwrap();
+            }
+            let horizon = horizon as usize;
             let (mut acc, mut non, mut trapped) = (vec![], vec![], vec![]);
             for data in &trajs {
                 let (rewards, qs, _) = rollout(&aut, &r, data);
@@ -420,6 +507,11 @@ mod tests {
             for a in &acc {
                 for b in non.iter().chain(&trapped) {
                     prop_assert!(a > b, "accepting {a} <= non-accepting {b}");
+                }
+            }
+            for n in &non {
+                for b in &trapped {
+                    prop_assert!(n > b, "never trapped {n} <= trapped {b}");
                 }
             }
             // A trap step pays less than any step outside it.
@@ -454,9 +546,9 @@ mod tests {
                 let rank = |q: usize| r.ranks()[q];
                 if let (Some(a), Some(b)) = (rank(q), rank(qn)) {
                     if b < a && !aut.is_accepting(qn) {
-                        let stay = r.potential_from(&aut, q, rho);
+                        let stay = r.potential_from(&aut, q, s, rho);
                         prop_assert!(pn >= stay, "Phi {pn} < staying {stay}");
-                        prop_assert!(rew >= gamma * stay - phi - r.step_cost() - 1e-12);
+                        prop_assert!(rew >= stay - phi - r.step_cost() - 1e-12);
                     }
                 }
                 if aut.is_accepting(qn) { break; }
@@ -468,8 +560,8 @@ mod tests {
                 for q2 in 0..aut.num_states() {
                     if let (Some(a), Some(b)) = (r.ranks()[q1], r.ranks()[q2]) {
                         if a < b {
-                            let hi = r.potential_from(&aut, q2, &[100.0; 16][..n_atoms]);
-                            let lo = r.potential_from(&aut, q1, &[-100.0; 16][..n_atoms]);
+                            let hi = r.potential_from(&aut, q2, states[0], &[100.0; 16][..n_atoms]);
+                            let lo = r.potential_from(&aut, q1, states[0], &[-100.0; 16][..n_atoms]);
                             prop_assert!(lo >= hi, "rank {a}: {lo} < rank {b}: {hi}");
                         }
                     }
@@ -483,7 +575,7 @@ mod tests {
                     if aut.step(q, s).unwrap() == q {
                         let (_, rew, _) = r.advance(&aut, q, -0.5, s).unwrap();
                         let rho = aut.atom_robustness(s);
-                        let sigma = aut.task_signal_from(q, &rho[..n_atoms], 1.0);
+                        let sigma = aut.reachable_signal_from(q, s, &rho[..n_atoms], 1.0);
                         stay.push((sigma.min(0.0), rew));
                     }
                 }

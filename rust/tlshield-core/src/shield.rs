@@ -1234,7 +1234,11 @@ mod tests {
                 .sum::<f64>()
         };
         let h = s[0] - s[1] + HALF_WIDTH;
-        assert!(rate(&light.action) + 2.0 * h >= -1e-7, "{light:?} {}", rate(&light.action));
+        assert!(
+            rate(&light.action) + 2.0 * h >= -1e-7,
+            "{light:?} {}",
+            rate(&light.action)
+        );
         let mut bad = config(SolverChoice::Auto);
         bad.barriers = vec![Barrier::inside("away", away).with_slack_weight(0.0)];
         assert!(Shield::new(task(), None, bad).is_err());

@@ -235,24 +235,34 @@ impl PyAutomaton {
     }
 
     /// The progress-aware task reward of this automaton (see ``ProgressReward``): ``gamma``
-    /// the training discount, ``scale`` a bound on how negative Eq. 5A1 gets, ``exclusive``
-    /// groups of atoms that never hold together.
-    #[pyo3(signature = (*, gamma=0.99, scale=1.0, step_cost=None, bonus=1.0, c_r=1.0, exclusive=Vec::new()))]
+    /// the training discount, ``horizon`` the episode length (the default ``bonus`` is sized
+    /// so that finishing within it out-earns not finishing), ``scale`` the Eq. 5A1 value at
+    /// which the within-state shaping is halfway down its band, ``exclusive`` groups of atoms
+    /// that never hold together.
+    #[pyo3(signature = (*, gamma=0.99, horizon=200, scale=1.0, step_cost=None, bonus=None, c_r=1.0, exclusive=Vec::new()))]
     #[allow(clippy::too_many_arguments)]
     fn progress_reward(
         &self,
         gamma: f64,
+        horizon: i64,
         scale: f64,
         step_cost: Option<f64>,
-        bonus: f64,
+        bonus: Option<f64>,
         c_r: f64,
         exclusive: Vec<Vec<String>>,
     ) -> PyResult<PyProgressReward> {
+        let horizon = u32::try_from(horizon)
+            .ok()
+            .filter(|h| *h > 0)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!("horizon = {horizon}: expected a positive integer"))
+            })?;
         let params = ProgressParams {
             gamma,
             scale,
             step_cost,
             bonus,
+            horizon,
             c_r,
             exclusive: Vec::new(),
         };

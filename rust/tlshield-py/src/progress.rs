@@ -11,11 +11,12 @@ use crate::errors::map;
 
 /// The progress-aware task reward of an automaton (beyond the paper's Eq. 5A1): a potential
 /// ``Phi(s, q) = -rank(q) + x / (scale + |x|)`` with ``x = min(eq5a1(s, q), 0)`` (``rank``:
-/// fewest transitions to acceptance), the step reward ``gamma * Phi' - Phi - step_cost``, ``bonus`` on entering
-/// acceptance, ``trap_penalty`` in the trap. Episodes start from ``Phi = 0``. ``exclusive``:
-/// groups of atom names of which at most one holds at a time (disjoint goal regions), so one
-/// state cannot count as reaching two goals. ``step_cost=None`` picks
-/// ``2 (1 - gamma) (max rank + 1)``, the least that makes standing still lose, doubled.
+/// fewest transitions to acceptance), the step reward ``Phi' - Phi - step_cost``, ``bonus``
+/// on entering acceptance, ``trap_penalty`` in the trap. Episodes start from ``Phi = 0``.
+/// ``exclusive``: groups of atom names of which at most one holds at a time (disjoint goal
+/// regions), so one state cannot count as reaching two goals. ``step_cost=None`` picks
+/// ``(1 - gamma) (max rank + 1)``; ``bonus=None`` picks ``(max rank + 1) gamma^(1 - horizon)``,
+/// enough that any trajectory finishing within the horizon out-earns any that does not.
 /// Made by ``Automaton.progress_reward``.
 #[pyclass(name = "ProgressReward", module = "tlshield._core", frozen)]
 pub struct PyProgressReward {
@@ -67,6 +68,12 @@ impl PyProgressReward {
         self.inner.step_cost()
     }
 
+    /// The bonus paid on entering acceptance (given or chosen).
+    #[getter]
+    fn bonus(&self) -> f64 {
+        self.inner.bonus()
+    }
+
     /// The reward of every step in the trap (below any step outside it).
     #[getter]
     fn trap_penalty(&self) -> f64 {
@@ -82,9 +89,10 @@ impl PyProgressReward {
     /// ``Phi(s, q)``.
     fn potential(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<f64> {
         let q = map(self.automaton.check_state("q", q))?;
-        let rho = map(self.automaton.checked_atom_robustness(&vector(s, "s")?))?;
+        let s = vector(s, "s")?;
+        let rho = map(self.automaton.checked_atom_robustness(&s))?;
         let n = self.automaton.spec().atoms().len();
-        Ok(self.inner.potential_from(&self.automaton, q, &rho[..n]))
+        Ok(self.inner.potential_from(&self.automaton, q, &s, &rho[..n]))
     }
 
     /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
@@ -104,10 +112,11 @@ impl PyProgressReward {
             .map(|r| r.map_or("None".into(), |r| r.to_string()))
             .collect();
         format!(
-            "ProgressReward(ranks=[{}], gamma={}, step_cost={}, trap_penalty={})",
+            "ProgressReward(ranks=[{}], gamma={}, step_cost={}, bonus={}, trap_penalty={})",
             ranks.join(", "),
             self.inner.gamma(),
             self.inner.step_cost(),
+            self.inner.bonus(),
             self.inner.trap_penalty()
         )
     }
