@@ -24,15 +24,37 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_run_folder_holds_everything(run: Path) -> None:
-    assert {p.name for p in run.iterdir()} >= {"config.json", "metrics.csv", "model.zip", "tb"}
+    files = {p.name for p in run.iterdir()}
+    assert files >= {"config.json", "metrics.csv", "model.zip", "last_model.zip", "tb"}
     rows = read_metrics(run)
     assert len(rows) == 3 and tuple(rows[0]) == METRIC_COLUMNS
-    assert [int(r["timesteps"]) for r in rows] == [1000, 2000, 3000]
+    assert [int(r["timesteps"]) for r in rows] == [1024, 2048, 3072]
     assert all(int(r["violations"]) == 0 for r in rows)  # the CBF is on
     record = json.loads((run / "config.json").read_text())
     assert record["finished"] and record["config"] == "rl_cbf_clf"
-    assert record["ppo"]["net_arch"] == {"pi": [300, 200, 100], "vf": [300, 200, 100]}
+    assert record["preset"] == "default" and record["n_envs"] == 8
+    assert record["ppo"]["net_arch"] == {"pi": [64, 64], "vf": [64, 64]}
+    assert record["env"]["gamma"] == record["ppo"]["gamma"] == 0.999
+    assert "kept" not in record  # no validation within 3 updates: the last policy is kept
     assert any((run / "tb").iterdir())
+
+
+def test_paper_preset_and_validation(tmp_path: Path) -> None:
+    from tlshield.envs.channel import PAPER_ENV
+    from tlshield.training import PRESETS
+
+    paper = train("rl_cbf", 1, 1, tmp_path / "p", progress=False, preset="paper", **PAPER_ENV)
+    record = json.loads((paper / "config.json").read_text())
+    assert record["ppo"]["net_arch"] == {"pi": [300, 200, 100], "vf": [300, 200, 100]}
+    assert record["n_envs"] == 5 and read_metrics(paper)[0]["timesteps"] == "1000"
+    assert record["env"]["reward"] == "paper" and record["env"]["gamma"] == 0.99
+    every = PRESETS["default"]["validate_every"]
+    checked = train("rl_cbf_clf", 2, every, tmp_path / "v", progress=False)
+    record = json.loads((checked / "config.json").read_text())
+    rows = read_metrics(checked)
+    assert record["kept"]["update"] == every
+    assert float(rows[-1]["validation_success"]) == record["kept"]["validation_success"]
+    assert all(r["validation_success"] == "nan" for r in rows[:-1])
 
 
 def test_evaluation(run: Path) -> None:
@@ -43,6 +65,11 @@ def test_evaluation(run: Path) -> None:
     assert saved == result
     data = np.load(run / "trajectories.npz")
     assert data["starts"].shape == (3, 13) and data["lengths"].sum() == len(data["paths"])
+    assert data["obstacle_paths"].shape == (len(data["paths"]), 4)
+    outcomes = result["outcomes"]
+    assert [o["reset_seed"] for o in outcomes] == [10_000, 10_001, 10_002]
+    assert sum(o["success"] for o in outcomes) == result["successes"]
+    assert [o["steps"] + 1 for o in outcomes] == data["lengths"].tolist()
 
 
 def test_seeded_runs_are_deterministic(tmp_path: Path) -> None:
