@@ -42,6 +42,7 @@ def first_goal(env: ChannelEnv) -> np.ndarray:
 
 
 def finish(env: ChannelEnv) -> np.ndarray:
+    """Drives straight to the first goal, then straight to g3."""
     if env.tracker.q == env.tracker.automaton.initial:
         return towards(env, first_goal(env))
     return towards(env, env.state[7:9])

@@ -363,7 +363,7 @@ def test_outside_barrier_and_drift_match_an_explicit_f() -> None:
     s[9:11] = [3.0, 3.0]  # 1.41 m ahead on the centre line
     a_rl = np.array([1.0, 0.0])
     drift = np.zeros(STATE_DIM)
-    drift[9:11] = [-0.6, -0.6]  # coming straight at the agent
+    drift[9:11] = [-1.0, -1.0]  # coming straight at the agent at 1.4 m/s
     out = sh.filter(s, 0, a_rl, drift=drift)
     h = dict(out.barriers)["!o1"]
     assert h == pytest.approx(math.hypot(1.0, 1.0) - 0.5)

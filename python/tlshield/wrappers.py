@@ -123,7 +123,8 @@ class FsaAugmented(gym.Wrapper):
 
     ``reward="progress"`` (default) pays the progress-aware reward
     (:class:`tlshield.ProgressReward`, built with ``gamma``, ``horizon``, ``scale``,
-    ``exclusive`` and the other keywords in ``progress``); ``reward="paper"`` pays Eq. 5A1 with ``trap_penalty``.
+    ``exclusive`` and the other keywords in ``progress``); ``reward="paper"`` pays Eq. 5A1
+    with ``trap_penalty``.
     """
 
     def __init__(
