@@ -444,10 +444,18 @@ def _no_data(ax: Any, text: str) -> None:
     )
 
 
-def _update_axis(ax: Any) -> None:
+def _training_of(groups: dict[str, list[Run]]) -> tuple[int, float]:
+    """Environment steps per update and the discount of the runs (their config.json)."""
+    record = next(iter(groups.values()))[0].record
+    ppo = record.get("ppo", {})
+    steps = int(record.get("n_envs", 5)) * int(ppo.get("n_steps", 200))
+    return steps, float(ppo.get("gamma", 0.99))
+
+
+def _update_axis(ax: Any, steps: int) -> None:
     from matplotlib.ticker import MaxNLocator
 
-    ax.set_xlabel("PPO update (1 update = 1000 environment steps)")
+    ax.set_xlabel(f"PPO update (1 update = {steps} environment steps)")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.grid(True, color="0.9", linewidth=0.6)
     ax.set_axisbelow(True)
@@ -507,7 +515,7 @@ def _curves_figure(
                 ax.set_ylim(lo, hi)
         if ymin is not None and any_curve:
             ax.set_ylim(bottom=ymin)
-        _update_axis(ax)
+        _update_axis(ax, _training_of(groups)[0])
         if len(columns) > 1:
             ax.set_title(panel)
     axes[0].set_ylabel(ylabel)
@@ -528,7 +536,7 @@ def _plot_learning_curves(groups: dict[str, list[Run]], path: Path) -> Path:
     return _curves_figure(
         groups,
         [("return_mean", "")],
-        r"discounted episode return ($\gamma$ = 0.99)",
+        rf"discounted episode return ($\gamma$ = {_training_of(groups)[1]:g})",
         "Learning curves: mean ± std over seeds",
         path,
     )

@@ -579,11 +579,13 @@ def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
     reward = {**paper, "reward": "progress", "w": 0.05, "collision_penalty": 1.0}
     observation = {**reward, "observation": "relative"}
     barrier = {**observation, "obstacle_barrier": True}
+    intervention = {**barrier, "intervention_penalty": 0.05}
     return [
         ("paper settings (Eq. 5A1, 13-value obs., paper PPO)", paper),
         ("+ progress reward", reward),
-        ("+ relative observation", observation),
+        ("+ relative body-frame observation", observation),
         ("+ moving-obstacle barrier", barrier),
+        ("+ intervention penalty", intervention),
         ("+ default PPO preset (= tlshield's defaults)", {"preset": "default"}),
     ]
 
