@@ -102,12 +102,6 @@ VALIDATION_SEED = 20_000
 SCHEDULES = ("fixed", "linear", "exponential")
 
 
-def steps_per_update(preset: str) -> int:
-    """Environment steps in one PPO update of a preset."""
-    p = PRESETS[preset]
-    return int(p["n_envs"] * p["ppo"]["n_steps"])
-
-
 def clf_scale(schedule: str, progress: float, final: float) -> float:
     """Scale of the CLF bounds at ``progress`` in [0, 1] of training (the paper's suggested
     improvement: trust the CLF less as the policy learns). ``final`` is the scale at the end."""
