@@ -580,7 +580,10 @@ def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
         ("+ relative body-frame observation", observation),
         ("+ moving-obstacle barrier", barrier),
         ("+ intervention penalty", intervention),
-        ("+ default PPO preset (= tlshield's defaults)", {"preset": "default"}),
+        (
+            "default PPO preset, no intervention penalty (= tlshield's defaults)",
+            {"preset": "default"},
+        ),
     ]
 
 
