@@ -9,11 +9,12 @@ validation episodes for the default preset, the last one otherwise), ``last_mode
 
 PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
 and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
-per update; 10 epochs of minibatches of 250; Adam 3e-4); ``"default"`` is what the ablation in
-the README chose. Both: gamma 0.99, GAE lambda 0.95, clip 0.2, CPU, one torch thread
-(deterministic for a seed). Observations and rewards are normalised by running statistics (SB3
-``VecNormalize``, saved as ``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are
-in raw units.
+per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, clip 0.2); ``"default"`` is
+what the ablation in the README chose (8 environments x 128 steps, minibatches of 512, gamma
+0.999, clip 0.1, a linearly decaying learning rate, 64-64 networks, the best validated
+checkpoint kept). Both: GAE lambda 0.95, CPU, one torch thread (deterministic for a seed).
+Observations and rewards are normalised by running statistics (SB3 ``VecNormalize``, saved as
+``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are in raw units.
 
 Evaluation reset seeds start at :data:`EVAL_SEED` (10,000 + trial); training environments
 are seeded from the run seed (``seed * 1000 + env index``), so the two never meet.
