@@ -3,37 +3,9 @@
 
 use std::sync::Arc;
 
-use tlshield_core::{
-    Automaton, Bounds, Center, Dynamics, Predicate, Shield, ShieldConfig, SolverChoice, Spec,
-};
+use tlshield_core::{Automaton, Bounds, Dynamics, Shield, ShieldConfig, SolverChoice};
 
-/// The paper's task formula (Sec. VI).
-pub const TASK: &str = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)";
-
-/// State length of the case study: x, y, theta, three goal centres, two obstacle centres.
-pub const STATE_DIM: usize = 13;
-
-/// The task spec with Ball goals read from the state and Halfspace channel constraints.
-pub fn task_spec() -> Spec {
-    let goal = |k: usize| {
-        Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
-    };
-    let mut c1 = vec![0.0; STATE_DIM];
-    c1[0] = 1.0;
-    c1[1] = -1.0;
-    let c2: Vec<f64> = c1.iter().map(|v| -v).collect();
-    Spec::new(
-        TASK,
-        [
-            ("g1", goal(0)),
-            ("g2", goal(1)),
-            ("g3", goal(2)),
-            ("c1", Predicate::halfspace(c1, 1.5).unwrap()),
-            ("c2", Predicate::halfspace(c2, 1.5).unwrap()),
-        ],
-    )
-    .unwrap()
-}
+pub use tlshield_core::fixtures::{task_spec, STATE_DIM, TASK};
 
 /// `count` random-walk trajectories of `steps` states each, flattened `(count, steps, 13)`.
 pub fn random_trajectories(count: usize, steps: usize, seed: u64) -> Vec<f64> {

@@ -15,6 +15,14 @@ def formula_atoms(formula: str) -> list[str]:
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""
 
+class AutomatonError(ValueError):
+    """A problem building or using an automaton (too many atoms, an unknown state, a reward
+    asked of the trap)."""
+
+class ShieldError(ValueError):
+    """A problem configuring or calling a shield (a bad parameter, a state or action that does
+    not fit it)."""
+
 @final
 class Halfspace:
     """Half-space predicate ``rho(s) = w . s + b`` (holds iff > 0)."""
@@ -132,6 +140,8 @@ class Unicycle:
 
     def __new__(cls, eps: float, x: int = 0, y: int = 1, theta: int = 2) -> Self: ...
     def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
 @final
 class SingleIntegrator:
@@ -139,6 +149,8 @@ class SingleIntegrator:
 
     def __new__(cls, pos: Sequence[int]) -> Self: ...
     def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
 Bound: TypeAlias = float | Sequence[float]
 Dynamics: TypeAlias = Unicycle | SingleIntegrator

@@ -296,6 +296,12 @@ def obstacle_barriers(cfg: ChannelConfig) -> dict[str, tuple[Ball, float]]:
     }
 
 
+def channel_model(cfg: ChannelConfig) -> Unicycle:
+    """The unicycle reference point of the case study (Eq. 6A2): the environment's plant and
+    the shield's model."""
+    return Unicycle(cfg.eps, X, Y, THETA)
+
+
 def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``)."""
     use_cbf, use_clf = CONFIGS[config]
@@ -303,7 +309,7 @@ def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) ->
         return None
     return Shield(
         spec or task_spec(cfg),
-        Unicycle(cfg.eps, X, Y, THETA),
+        channel_model(cfg),
         alpha=cfg.alpha,
         c3=cfg.c3,
         K=cfg.K,
@@ -355,6 +361,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         shield_config = config
         if evaluation and not CONFIGS[config][0]:
             shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+        #: The plant; the shield is built on the same model.
+        self.model = channel_model(cfg)
         self.shield = channel_shield(cfg, shield_config, self.spec_tl)
         self.shield_in_env = shield_in_env
         automaton = self.spec_tl.automaton()
@@ -538,14 +546,13 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             applied = result.action
         else:
             applied = a_rl
-        # Euler step of the reference point (Eq. 6A2), then the obstacles.
-        v, w = applied
-        sin, cos = math.sin(s[THETA]), math.cos(s[THETA])
-        nxt = s.copy()
+        # Euler step of the reference point (Eq. 6A2) through the shield's own model (one model
+        # of the dynamics), held in the arena, heading wrapped; then the obstacles.
+        nxt = self.model.step(s, applied, cfg.dt)
         lo, hi = cfg.arena
-        nxt[X] = min(max(s[X] + cfg.dt * (cos * v - cfg.eps * sin * w), lo), hi)
-        nxt[Y] = min(max(s[Y] + cfg.dt * (sin * v + cfg.eps * cos * w), lo), hi)
-        nxt[THETA] = (s[THETA] + cfg.dt * w + math.pi) % (2 * math.pi) - math.pi
+        nxt[X] = min(max(nxt[X], lo), hi)
+        nxt[Y] = min(max(nxt[Y], lo), hi)
+        nxt[THETA] = (nxt[THETA] + math.pi) % (2 * math.pi) - math.pi
         self._t += 1
         obstacles = self._obstacle_positions(self._t * cfg.dt)
         for k, (a, b) in enumerate(OBSTACLE_DIMS):
@@ -566,6 +573,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         truncated = self._t >= cfg.horizon and not terminated
         info = {
             "fsa_state": q,
+            "action": np.asarray(applied, dtype=np.float64),
             "success": success,
             "trap": self.tracker.trapped,
             "tl_reward": r_tl,

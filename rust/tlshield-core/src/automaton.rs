@@ -16,9 +16,11 @@ use smallvec::{smallvec, SmallVec};
 
 use crate::cnf::{self, Cube, Literal};
 use crate::error::{AutomatonError, InputError};
+use crate::formula::Formula;
 use crate::predicate::{Center, Predicate};
-use crate::robustness::{check_finite, Trajectory};
-use crate::spec::{Formula, Spec};
+use crate::robustness::Trajectory;
+use crate::spec::Spec;
+use crate::validate::check_finite;
 
 /// Most atoms an automaton supports (its alphabet has `2^atoms` letters).
 pub const MAX_ATOMS: usize = 16;
@@ -342,7 +344,10 @@ impl Automaton {
     pub fn build(spec: &Spec) -> Result<Self, AutomatonError> {
         let n = spec.atoms().len();
         if n > MAX_ATOMS {
-            return Err(AutomatonError::TooManyAtoms(n));
+            return Err(AutomatonError::TooManyAtoms {
+                atoms: n,
+                max: MAX_ATOMS,
+            });
         }
         let letters = 1usize << n;
 
@@ -379,6 +384,7 @@ impl Automaton {
                             return Err(AutomatonError::TooLarge {
                                 states: residuals.len() + 1,
                                 letters,
+                                max: MAX_TRANSITIONS,
                             });
                         }
                         ids.insert(succ.clone(), residuals.len());
@@ -701,7 +707,7 @@ impl Automaton {
         if c_r.is_finite() && c_r > 0.0 {
             return Ok(());
         }
-        Err(InputError::Shape {
+        Err(InputError::Value {
             what: "c_r".into(),
             expected: "a finite weight > 0".into(),
             got: c_r.to_string(),
@@ -976,7 +982,7 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::robustness::tests::{co_safe, spec_for, trajectory};
+    use crate::fixtures::{co_safe, spec_for, trajectory};
     use crate::spec::Spec;
     use proptest::prelude::*;
 
@@ -992,25 +998,7 @@ mod tests {
     }
 
     fn task() -> Automaton {
-        let goal = |k: usize| {
-            Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
-        };
-        let mut c1 = vec![0.0; 13];
-        c1[0] = 1.0;
-        c1[1] = -1.0;
-        let c2: Vec<f64> = c1.iter().map(|v| -v).collect();
-        let spec = Spec::new(
-            "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)",
-            [
-                ("g1", goal(0)),
-                ("g2", goal(1)),
-                ("g3", goal(2)),
-                ("c1", Predicate::halfspace(c1, 1.5).unwrap()),
-                ("c2", Predicate::halfspace(c2, 1.5).unwrap()),
-            ],
-        )
-        .unwrap();
-        Automaton::build(&spec).unwrap()
+        crate::fixtures::task_automaton()
     }
 
     fn edge_list(aut: &Automaton) -> Vec<(usize, usize, String)> {

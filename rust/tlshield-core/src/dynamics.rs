@@ -2,6 +2,7 @@
 //! unicycle reference point of the paper (Eq. 6A2), or `f`, `g` supplied by the caller.
 
 use crate::error::InputError;
+use crate::validate::check_finite;
 
 /// A built-in control-affine model over a state of length `n` with `m` inputs.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,7 +30,7 @@ impl Dynamics {
     /// A single integrator on `pos` (non-empty, distinct dimensions).
     pub fn single_integrator(pos: Vec<usize>) -> Result<Self, InputError> {
         if pos.is_empty() || (1..pos.len()).any(|i| pos[..i].contains(&pos[i])) {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "SingleIntegrator pos".into(),
                 expected: "at least one distinct state dimension".into(),
                 got: format!("{pos:?}"),
@@ -41,7 +42,7 @@ impl Dynamics {
     /// The unicycle reference point; `eps` finite and > 0, `x`, `y`, `theta` distinct.
     pub fn unicycle(eps: f64, x: usize, y: usize, theta: usize) -> Result<Self, InputError> {
         if !(eps.is_finite() && eps > 0.0) {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "Unicycle eps".into(),
                 expected: "a finite distance > 0".into(),
                 got: eps.to_string(),
@@ -70,6 +71,75 @@ impl Dynamics {
         match self {
             Dynamics::SingleIntegrator { pos } => pos.iter().max().map_or(0, |m| m + 1),
             Dynamics::Unicycle { x, y, theta, .. } => *x.max(y).max(theta) + 1,
+        }
+    }
+
+    /// Checks a state for this model: at least [`Dynamics::min_dim`] values, all finite.
+    pub fn check_state(&self, s: &[f64]) -> Result<(), InputError> {
+        if s.len() < self.min_dim() {
+            return Err(InputError::Shape {
+                what: "s".into(),
+                expected: format!("at least {} values for this model", self.min_dim()),
+                got: s.len().to_string(),
+            });
+        }
+        check_finite("s", s, s.len())
+    }
+
+    /// [`Dynamics::euler_step`] after checking `s`, `a` (m finite values) and `dt` (finite,
+    /// > 0); returns the next state.
+    pub fn checked_euler_step(
+        &self,
+        s: &[f64],
+        a: &[f64],
+        dt: f64,
+    ) -> Result<Vec<f64>, InputError> {
+        self.check_state(s)?;
+        if a.len() != self.inputs() {
+            return Err(InputError::Shape {
+                what: "a".into(),
+                expected: format!("{} values (one per input)", self.inputs()),
+                got: a.len().to_string(),
+            });
+        }
+        check_finite("a", a, a.len())?;
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(InputError::Value {
+                what: "dt".into(),
+                expected: "a finite time step > 0".into(),
+                got: dt.to_string(),
+            });
+        }
+        let mut out = vec![0.0; s.len()];
+        self.euler_step(s, a, dt, &mut out);
+        Ok(out)
+    }
+
+    /// Writes `ds/dt = f(s) + g(s) a` into `out` (length n) without building `f` and `g`;
+    /// equal to them by construction and by test. `a` has length m.
+    pub fn derivative(&self, s: &[f64], a: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        match self {
+            Dynamics::SingleIntegrator { pos } => {
+                for (&p, &ai) in pos.iter().zip(a) {
+                    out[p] = ai;
+                }
+            }
+            Dynamics::Unicycle { eps, x, y, theta } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*x] = cos * a[0] - eps * sin * a[1];
+                out[*y] = sin * a[0] + eps * cos * a[1];
+                out[*theta] = a[1];
+            }
+        }
+    }
+
+    /// One explicit Euler step `out = s + dt (f(s) + g(s) a)`: the plant that environments
+    /// built on this model integrate, so the plant and the shield's model are one code.
+    pub fn euler_step(&self, s: &[f64], a: &[f64], dt: f64, out: &mut [f64]) {
+        self.derivative(s, a, out);
+        for (o, &si) in out.iter_mut().zip(s) {
+            *o = si + dt * *o;
         }
     }
 
@@ -120,5 +190,32 @@ mod tests {
         assert!(Dynamics::unicycle(0.1, 0, 0, 2).is_err());
         assert!(Dynamics::single_integrator(vec![]).is_err());
         assert!(Dynamics::single_integrator(vec![1, 1]).is_err());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(500))]
+
+        #[test]
+        fn euler_step_is_s_plus_dt_f_plus_g_a(
+            s in proptest::collection::vec(-4.0..4.0f64, 5),
+            a in proptest::collection::vec(-3.0..3.0f64, 2),
+            dt in 0.001..0.5f64,
+        ) {
+            for model in [
+                Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
+                Dynamics::unicycle(0.3, 3, 4, 0).unwrap(),
+                Dynamics::single_integrator(vec![1, 4]).unwrap(),
+            ] {
+                let m = model.inputs();
+                let (mut f, mut g, mut out) = (vec![0.0; 5], vec![0.0; 5 * m], vec![0.0; 5]);
+                model.eval(&s, &mut f, &mut g);
+                model.euler_step(&s, &a[..m], dt, &mut out);
+                for i in 0..5 {
+                    let gi: f64 = (0..m).map(|j| g[i * m + j] * a[j]).sum();
+                    let want = s[i] + dt * (f[i] + gi);
+                    proptest::prop_assert!((out[i] - want).abs() <= 1e-12 * (1.0 + want.abs()));
+                }
+            }
+        }
     }
 }

@@ -63,7 +63,7 @@ impl SpecError {
 /// A problem with numeric input data: shapes, non-finite values, out-of-range indices.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum InputError {
-    /// An array has the wrong size along some axis.
+    /// An array has the wrong size along some axis (value-range problems are [`InputError::Value`]).
     #[error("{what}: expected {expected}, got {got}")]
     Shape {
         /// Which argument and axis.
@@ -71,6 +71,16 @@ pub enum InputError {
         /// The size that was expected (may describe a range, e.g. "at least 3").
         expected: String,
         /// The size that was given.
+        got: String,
+    },
+    /// A value outside its valid range (a parameter, an index or a setting).
+    #[error("{what}: expected {expected}, got {got}")]
+    Value {
+        /// Which argument.
+        what: String,
+        /// What the valid values are.
+        expected: String,
+        /// The value that was given.
         got: String,
     },
     /// An input value is NaN or infinite.
@@ -87,19 +97,25 @@ pub enum InputError {
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum AutomatonError {
     /// The alphabet is the set of atom valuations; more than this many atoms is refused.
-    #[error("the formula has {0} atoms; automata support at most {max}", max = crate::automaton::MAX_ATOMS)]
-    TooManyAtoms(usize),
+    #[error("the formula has {atoms} atoms; automata support at most {max}")]
+    TooManyAtoms {
+        /// Atoms of the formula.
+        atoms: usize,
+        /// The supported maximum.
+        max: usize,
+    },
     /// The automaton grew past the supported size.
     #[error(
         "the automaton is too large: {states} states x {letters} letters exceeds {max} transitions \
-         (use fewer atoms)",
-        max = crate::automaton::MAX_TRANSITIONS
+         (use fewer atoms)"
     )]
     TooLarge {
         /// States reached so far.
         states: usize,
         /// Letters (2^atoms).
         letters: usize,
+        /// The supported maximum of transitions.
+        max: usize,
     },
     /// The formula has more distinct temporal subformulas than the construction supports.
     #[error("the formula has more than {0} distinct temporal subformulas")]

@@ -21,16 +21,21 @@ pub mod automaton;
 pub mod cnf;
 pub mod dynamics;
 pub mod error;
+#[cfg(any(test, feature = "fixtures"))]
+pub mod fixtures;
+pub mod formula;
 pub mod predicate;
 pub mod progress;
 pub mod qp;
 pub mod robustness;
 pub mod shield;
 pub mod spec;
+pub mod validate;
 
 pub use automaton::{Automaton, Edge};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
+pub use formula::Formula;
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
@@ -38,7 +43,7 @@ pub use shield::{
     Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig,
     SolvedBy, SolverChoice, Status,
 };
-pub use spec::{Formula, Spec};
+pub use spec::Spec;
 
 #[cfg(test)]
 pub(crate) mod tests_support {

@@ -170,14 +170,14 @@ impl Predicate {
     /// Robustness at state `s` after checking its length and that it is finite.
     pub fn robustness(&self, s: &[f64]) -> Result<f64, InputError> {
         self.check_dim(s.len())?;
-        crate::robustness::check_finite("s", s, s.len())?;
+        crate::validate::check_finite("s", s, s.len())?;
         Ok(self.value(s))
     }
 
     /// Gradient at state `s` after checking its length and that it is finite.
     pub fn gradient(&self, s: &[f64]) -> Result<Vec<f64>, InputError> {
         self.check_dim(s.len())?;
-        crate::robustness::check_finite("s", s, s.len())?;
+        crate::validate::check_finite("s", s, s.len())?;
         let mut out = vec![0.0; s.len()];
         self.gradient_into(s, &mut out);
         Ok(out)

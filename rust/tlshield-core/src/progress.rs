@@ -86,7 +86,7 @@ fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
     if value.is_finite() && value >= lo {
         return Ok(());
     }
-    Err(InputError::Shape {
+    Err(InputError::Value {
         what: what.into(),
         expected: format!("a finite number >= {lo}"),
         got: value.to_string(),
@@ -133,7 +133,7 @@ impl ProgressReward {
     /// The progress reward of `automaton`'s task.
     pub fn new(automaton: &Automaton, params: &ProgressParams) -> Result<Self, AutomatonError> {
         if !(params.gamma > 0.0 && params.gamma <= 1.0) {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "gamma".into(),
                 expected: "a discount in (0, 1]".into(),
                 got: params.gamma.to_string(),
@@ -141,7 +141,7 @@ impl ProgressReward {
             .into());
         }
         if !(params.scale.is_finite() && params.scale > 0.0) {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "scale".into(),
                 expected: "a finite number > 0".into(),
                 got: params.scale.to_string(),
@@ -149,7 +149,7 @@ impl ProgressReward {
             .into());
         }
         if params.horizon == 0 {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "horizon".into(),
                 expected: "a positive number of steps".into(),
                 got: "0".into(),
@@ -157,7 +157,7 @@ impl ProgressReward {
             .into());
         }
         if !(params.c_r.is_finite() && params.c_r > 0.0) {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "c_r".into(),
                 expected: "a finite weight > 0".into(),
                 got: params.c_r.to_string(),
@@ -167,7 +167,7 @@ impl ProgressReward {
         let atoms = automaton.spec().atoms().len();
         for &g in &params.exclusive {
             if atoms < 32 && g >> atoms != 0 {
-                return Err(InputError::Shape {
+                return Err(InputError::Value {
                     what: "exclusive".into(),
                     expected: format!("groups of atom indices below {atoms}"),
                     got: format!("{g:#b}"),
@@ -192,7 +192,7 @@ impl ProgressReward {
             Some(b) => {
                 finite_at_least("bonus", b, 0.0)?;
                 if b <= least_bonus {
-                    return Err(InputError::Shape {
+                    return Err(InputError::Value {
                         what: "bonus".into(),
                         expected: format!(
                             "more than {least_bonus:.4} (max rank + 1 = {band}, gamma {}, horizon \
@@ -298,7 +298,7 @@ impl ProgressReward {
     ) -> Result<(usize, f64, f64), AutomatonError> {
         let q = automaton.check_state("q", q as i64)?;
         if self.ranks.len() != automaton.num_states() {
-            return Err(InputError::Shape {
+            return Err(InputError::Value {
                 what: "automaton".into(),
                 expected: format!(
                     "the one the reward was built for ({} states)",
@@ -330,7 +330,7 @@ impl ProgressReward {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::robustness::tests::{co_safe, spec_for};
+    use crate::fixtures::{co_safe, spec_for};
     use crate::{Center, Predicate, Spec};
     use proptest::prelude::*;
 

@@ -15,8 +15,9 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use crate::error::InputError;
+use crate::formula::Formula;
 use crate::predicate::Predicate;
-use crate::spec::{Formula, Spec};
+use crate::validate::{check_finite, first_non_finite};
 
 /// One instruction of a compiled formula; operands are indices of earlier instructions.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -240,7 +241,7 @@ impl<'a> Trajectory<'a> {
 pub struct TrajectoryBatch<'a> {
     data: &'a [f64],
     steps: usize,
-    dim: usize,
+    pub(crate) dim: usize,
 }
 
 impl<'a> TrajectoryBatch<'a> {
@@ -291,7 +292,7 @@ impl<'a> TrajectoryBatch<'a> {
 
     /// Applies `f` to every trajectory in parallel, checking each one's values just before
     /// evaluating it (while it is in cache).
-    fn map<V, F>(&self, fill: V, f: F) -> Result<Vec<V>, InputError>
+    pub(crate) fn map<V, F>(&self, fill: V, f: F) -> Result<Vec<V>, InputError>
     where
         V: Copy + Send,
         F: Fn(Trajectory<'_>, &mut Scratch) -> V + Sync,
@@ -324,37 +325,6 @@ impl<'a> TrajectoryBatch<'a> {
             Some(i) => Err(self.non_finite(i)),
             None => Ok(out),
         }
-    }
-}
-
-/// Index of the first NaN or infinity. Scans blocks with a branch-free fold (vectorised) and
-/// only searches inside a block that failed.
-pub fn first_non_finite(data: &[f64]) -> Option<usize> {
-    const BLOCK: usize = 64;
-    data.chunks(BLOCK).enumerate().find_map(|(k, block)| {
-        if block.iter().fold(true, |ok, v| ok & v.is_finite()) {
-            None
-        } else {
-            block
-                .iter()
-                .position(|v| !v.is_finite())
-                .map(|i| k * BLOCK + i)
-        }
-    })
-}
-
-/// Reports the first non-finite value of a row-major array as `name[row, col]`.
-pub(crate) fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), InputError> {
-    match first_non_finite(data) {
-        None => Ok(()),
-        Some(i) if data.len() == dim => Err(InputError::NonFinite {
-            what: format!("{name}[{i}]"),
-            value: data[i],
-        }),
-        Some(i) => Err(InputError::NonFinite {
-            what: format!("{name}[{}, {}]", i / dim, i % dim),
-            value: data[i],
-        }),
     }
 }
 
@@ -423,11 +393,16 @@ fn until_at_start<S: Semantics>(a: &[S::Value], b: &[S::Value]) -> S::Value {
 }
 
 /// Evaluates the compiled formula over `traj` and returns its value at `t = 0`.
-fn evaluate<S: Semantics>(spec: &Spec, traj: Trajectory<'_>, scratch: &mut Scratch) -> S::Value
+fn evaluate<S: Semantics>(
+    program: &Program,
+    predicates: &[Predicate],
+    traj: Trajectory<'_>,
+    scratch: &mut Scratch,
+) -> S::Value
 where
     Scratch: Buffer<S::Value>,
 {
-    let Program { ops, full } = &spec.program;
+    let Program { ops, full } = program;
     let len = traj.len();
     let last = len - 1;
     let (values, reals) = scratch.buffers();
@@ -447,7 +422,7 @@ where
                         data: traj.state(0),
                         dim: traj.dim,
                     };
-                    S::atom_values(&spec.predicates()[k], first, &mut rest[..1], reals);
+                    S::atom_values(&predicates[k], first, &mut rest[..1], reals);
                     rest[0]
                 }
                 Op::Not(a) => S::not(slot(a)[0]),
@@ -465,7 +440,7 @@ where
         match *op {
             Op::True => out.fill(S::TOP),
             Op::False => out.fill(S::BOTTOM),
-            Op::Atom(k) => S::atom_values(&spec.predicates()[k], traj, out, reals),
+            Op::Atom(k) => S::atom_values(&predicates[k], traj, out, reals),
             Op::Not(a) => {
                 for (o, &x) in out.iter_mut().zip(slot(a)) {
                     *o = S::not(x);
@@ -499,53 +474,33 @@ where
     values[(ops.len() - 1) * len]
 }
 
-impl Spec {
-    fn check_trajectory(&self, traj: &Trajectory<'_>) -> Result<(), InputError> {
-        self.check_state_len(traj.dim())
-    }
+/// Robustness at `t = 0` of a compiled formula over `traj` (closed window); the caller has
+/// checked the state length.
+pub(crate) fn robustness(
+    program: &Program,
+    predicates: &[Predicate],
+    traj: Trajectory<'_>,
+    scratch: &mut Scratch,
+) -> f64 {
+    evaluate::<Quantitative>(program, predicates, traj, scratch)
+}
 
-    /// Robustness `rho(s_0..s_T, phi)` at `t = 0` (closed window).
-    pub fn robustness(&self, traj: Trajectory<'_>) -> Result<f64, InputError> {
-        self.robustness_with(traj, &mut Scratch::default())
-    }
-
-    /// [`Spec::robustness`] reusing `scratch` (no allocation after the first call).
-    pub fn robustness_with(
-        &self,
-        traj: Trajectory<'_>,
-        scratch: &mut Scratch,
-    ) -> Result<f64, InputError> {
-        self.check_trajectory(&traj)?;
-        Ok(evaluate::<Quantitative>(self, traj, scratch))
-    }
-
-    /// Boolean satisfaction of the whole trajectory (an atom holds iff its robustness is > 0).
-    pub fn satisfied(&self, traj: Trajectory<'_>) -> Result<bool, InputError> {
-        self.check_trajectory(&traj)?;
-        Ok(evaluate::<Boolean>(self, traj, &mut Scratch::default()))
-    }
-
-    /// Robustness of every trajectory of a batch, in parallel (rayon).
-    pub fn robustness_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<f64>, InputError> {
-        self.check_state_len(batch.dim)?;
-        batch.map(0.0, |traj, scratch| {
-            evaluate::<Quantitative>(self, traj, scratch)
-        })
-    }
-
-    /// Boolean satisfaction of every trajectory of a batch, in parallel (rayon).
-    pub fn satisfied_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<bool>, InputError> {
-        self.check_state_len(batch.dim)?;
-        batch.map(false, |traj, scratch| {
-            evaluate::<Boolean>(self, traj, scratch)
-        })
-    }
+/// Boolean satisfaction of a compiled formula over `traj`; the caller has checked the length.
+pub(crate) fn satisfied(
+    program: &Program,
+    predicates: &[Predicate],
+    traj: Trajectory<'_>,
+    scratch: &mut Scratch,
+) -> bool {
+    evaluate::<Boolean>(program, predicates, traj, scratch)
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
+    use crate::fixtures::{co_safe, spec_for, trajectory, NAMES};
     use crate::predicate::Center;
+    use crate::spec::Spec;
     use proptest::prelude::*;
 
     /// Direct transcription of the semantics (DESIGN.md), O(T^2) per operator: the oracle.
@@ -598,70 +553,6 @@ pub(crate) mod tests {
                 brute_bool(spec, b, traj, u) && (t..u).all(|v| brute_bool(spec, a, traj, v))
             }),
         }
-    }
-
-    const NAMES: [&str; 4] = ["p", "q", "r", "ball"];
-
-    fn predicates() -> Vec<(&'static str, Predicate)> {
-        let axis = |k: usize| {
-            let mut w = vec![0.0; 3];
-            w[k] = 1.0;
-            Predicate::halfspace(w, 0.0).unwrap()
-        };
-        vec![
-            ("p", axis(0)),
-            ("q", axis(1)),
-            ("r", axis(2)),
-            (
-                "ball",
-                Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.5, -0.5])).unwrap(),
-            ),
-        ]
-    }
-
-    fn propositional() -> impl Strategy<Value = Formula> {
-        let leaf = prop_oneof![
-            8 => (0..NAMES.len()).prop_map(Formula::Atom),
-            1 => Just(Formula::True),
-            1 => Just(Formula::False),
-        ];
-        leaf.prop_recursive(3, 12, 3, |inner| {
-            prop_oneof![
-                inner.clone().prop_map(|a| Formula::Not(Box::new(a))),
-                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::and(vec![a, b])),
-                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::or(vec![a, b])),
-                (inner.clone(), inner)
-                    .prop_map(|(a, b)| Formula::Implies(Box::new(a), Box::new(b))),
-            ]
-        })
-    }
-
-    /// Random syntactically co-safe formulas.
-    pub(crate) fn co_safe() -> impl Strategy<Value = Formula> {
-        propositional().prop_recursive(4, 24, 3, |inner| {
-            prop_oneof![
-                propositional().prop_map(|a| Formula::Not(Box::new(a))),
-                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::and(vec![a, b])),
-                (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::or(vec![a, b])),
-                (propositional(), inner.clone())
-                    .prop_map(|(a, b)| Formula::Implies(Box::new(a), Box::new(b))),
-                (inner.clone(), inner.clone())
-                    .prop_map(|(a, b)| Formula::Until(Box::new(a), Box::new(b))),
-                inner.clone().prop_map(|a| Formula::Eventually(Box::new(a))),
-                inner.prop_map(|a| Formula::Next(Box::new(a))),
-            ]
-        })
-    }
-
-    /// Trajectories on a coarse grid (so ties and exact zeros happen) or continuous values.
-    pub(crate) fn trajectory() -> impl Strategy<Value = Vec<f64>> {
-        let value = prop_oneof![(-2i32..=2).prop_map(|v| v as f64 * 0.5), -2.0..2.0f64];
-        (1usize..8).prop_flat_map(move |steps| prop::collection::vec(value.clone(), steps * 3))
-    }
-
-    pub(crate) fn spec_for(f: &Formula) -> Spec {
-        let names: Vec<String> = NAMES.iter().map(|s| s.to_string()).collect();
-        Spec::new(&f.display(&names).to_string(), predicates()).unwrap()
     }
 
     proptest! {

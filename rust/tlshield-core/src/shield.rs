@@ -37,7 +37,7 @@ use crate::dynamics::Dynamics;
 use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
-use crate::robustness::check_finite;
+use crate::validate::check_finite;
 
 /// Batches smaller than this are shielded on the calling thread.
 pub const PARALLEL_MIN_ROWS: usize = 32;
@@ -520,6 +520,26 @@ impl Shield {
             .max(config.pos.iter().max().map_or(0, |p| p + 1));
         if let Some(d) = &dynamics {
             min_dim = min_dim.max(d.min_dim());
+        }
+        // Where a predicate fixes the state length, an index past it can never be read: say so
+        // here rather than at the first filter call.
+        let fixed = spec
+            .state_dim()
+            .or_else(|| config.barriers.iter().find_map(|b| b.predicate.exact_dim()));
+        if let Some(n) = fixed {
+            if let Some(&p) = config.pos.iter().find(|&&p| p >= n) {
+                return Err(ShieldError::Config(format!(
+                    "pos = {:?}: dimension {p} is past the state length {n} that the \
+                     predicates fix",
+                    config.pos
+                )));
+            }
+            if min_dim > n {
+                return Err(ShieldError::Config(format!(
+                    "the shield reads {min_dim} state values (model, barriers) but the predicates fix \
+                     the state length at {n}"
+                )));
+            }
         }
         Ok(Shield {
             automaton,
@@ -1032,36 +1052,12 @@ mod tests {
     use super::*;
     use crate::predicate::Center;
     use crate::qp::{kkt_residual, ClarabelQp};
-    use crate::spec::Spec;
     use proptest::prelude::*;
 
-    const TASK: &str = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)";
-    const N: usize = 13;
-    const HALF_WIDTH: f64 = 1.5;
-
-    fn channel(sign: f64) -> Predicate {
-        let mut w = vec![0.0; N];
-        w[0] = sign;
-        w[1] = -sign;
-        Predicate::halfspace(w, HALF_WIDTH).unwrap()
-    }
+    use crate::fixtures::{channel, task_automaton, HALF_WIDTH, STATE_DIM as N};
 
     fn task() -> Arc<Automaton> {
-        let goal = |k: usize| {
-            Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k])).unwrap()
-        };
-        let spec = Spec::new(
-            TASK,
-            [
-                ("g1", goal(0)),
-                ("g2", goal(1)),
-                ("g3", goal(2)),
-                ("c1", channel(1.0)),
-                ("c2", channel(-1.0)),
-            ],
-        )
-        .unwrap();
-        Arc::new(Automaton::build(&spec).unwrap())
+        Arc::new(task_automaton())
     }
 
     fn bounds(lo: f64, hi: f64) -> Bounds {
@@ -1242,6 +1238,21 @@ mod tests {
         let mut bad = config(SolverChoice::Auto);
         bad.barriers = vec![Barrier::inside("away", away).with_slack_weight(0.0)];
         assert!(Shield::new(task(), None, bad).is_err());
+    }
+
+    #[test]
+    fn indices_past_the_fixed_state_length_are_rejected_at_construction() {
+        // The channel halfspaces fix n = 13: pos 99 or a model reading past it cannot work.
+        let mut far = config(SolverChoice::Auto);
+        far.pos = vec![0, 99];
+        let err = Shield::new(task(), None, far).unwrap_err().to_string();
+        assert!(err.contains("99") && err.contains("13"), "{err}");
+        let model = Dynamics::unicycle(0.1, 0, 1, 20).unwrap();
+        let err = Shield::new(task(), Some(model), config(SolverChoice::Auto))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("21") && err.contains("13"), "{err}");
+        assert!(Shield::new(task(), None, config(SolverChoice::Auto)).is_ok());
     }
 
     #[test]

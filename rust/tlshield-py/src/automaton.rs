@@ -14,6 +14,16 @@ use crate::errors::map;
 use crate::progress::PyProgressReward;
 use crate::spec::PySpec;
 
+/// `Spec.automaton()` lives here, next to the type it returns, so that the spec module does not
+/// depend on the automaton module (a second `#[pymethods]` block of `PySpec`).
+#[pymethods]
+impl PySpec {
+    /// The finite state automaton of the formula (built once per spec, then shared).
+    fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
+        Ok(PyAutomaton::new(py, self.shared_automaton()?))
+    }
+}
+
 /// The finite state automaton of an scTLTL spec (see ``Spec.automaton()``).
 #[pyclass(name = "Automaton", module = "tlshield._core", frozen)]
 pub struct PyAutomaton {

@@ -1,15 +1,36 @@
-//! Core errors -> Python exceptions. Every caller error is a `ValueError` (or subclass).
+//! Core errors -> Python exceptions. Every caller error is a `ValueError`: `SpecError`,
+//! `AutomatonError` and `ShieldError` for their concerns, plain `ValueError` for bad numeric
+//! input outside them.
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::PyErr;
-use tlshield_core::{AutomatonError, InputError, ShieldError, SpecError as CoreSpecError};
+use tlshield_core::{
+    AutomatonError as CoreAutomatonError, InputError, ShieldError as CoreShieldError,
+    SpecError as CoreSpecError,
+};
 
 create_exception!(
     tlshield,
     SpecError,
     PyValueError,
     "A formula that does not parse or is not scTLTL, or predicates that do not fit it."
+);
+
+create_exception!(
+    tlshield,
+    AutomatonError,
+    PyValueError,
+    "A problem building or using an automaton (too many atoms, an unknown state, a reward asked \
+     of the trap)."
+);
+
+create_exception!(
+    tlshield,
+    ShieldError,
+    PyValueError,
+    "A problem configuring or calling a shield (a bad parameter, a state or action that does not \
+     fit it)."
 );
 
 /// Newtype so core errors can convert into `PyErr` (orphan rule).
@@ -27,15 +48,22 @@ impl From<InputError> for PyCoreError {
     }
 }
 
-impl From<AutomatonError> for PyCoreError {
-    fn from(err: AutomatonError) -> Self {
-        PyCoreError(PyValueError::new_err(err.to_string()))
+impl From<CoreAutomatonError> for PyCoreError {
+    fn from(err: CoreAutomatonError) -> Self {
+        match err {
+            CoreAutomatonError::Input(input) => input.into(),
+            other => PyCoreError(AutomatonError::new_err(other.to_string())),
+        }
     }
 }
 
-impl From<ShieldError> for PyCoreError {
-    fn from(err: ShieldError) -> Self {
-        PyCoreError(PyValueError::new_err(err.to_string()))
+impl From<CoreShieldError> for PyCoreError {
+    fn from(err: CoreShieldError) -> Self {
+        match err {
+            CoreShieldError::Input(input) => input.into(),
+            CoreShieldError::Automaton(aut) => aut.into(),
+            other => PyCoreError(ShieldError::new_err(other.to_string())),
+        }
     }
 }
 

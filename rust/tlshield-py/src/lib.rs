@@ -5,6 +5,7 @@
 
 mod automaton;
 mod convert;
+mod dynamics;
 mod errors;
 mod predicate;
 mod progress;
@@ -26,13 +27,18 @@ fn formula_atoms(formula: &str) -> PyResult<Vec<String>> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("SpecError", m.py().get_type::<errors::SpecError>())?;
+    m.add(
+        "AutomatonError",
+        m.py().get_type::<errors::AutomatonError>(),
+    )?;
+    m.add("ShieldError", m.py().get_type::<errors::ShieldError>())?;
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
     m.add_class::<progress::PyProgressReward>()?;
-    m.add_class::<shield::PyUnicycle>()?;
-    m.add_class::<shield::PySingleIntegrator>()?;
+    m.add_class::<dynamics::PyUnicycle>()?;
+    m.add_class::<dynamics::PySingleIntegrator>()?;
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;

@@ -2,9 +2,7 @@
 
 use std::sync::Arc;
 
-use numpy::{
-    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyUntypedArrayMethods,
-};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
@@ -16,90 +14,9 @@ use tlshield_core::{
 
 use crate::automaton::PyAutomaton;
 use crate::convert::{vector, FloatArray};
+use crate::dynamics::{PySingleIntegrator, PyUnicycle};
 use crate::errors::map;
 use crate::spec::{predicate_of, PySpec};
-
-/// `(f, g)` as numpy arrays.
-type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
-
-/// The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2): inputs
-/// ``(a_v, a_theta)``; ``x``, ``y``, ``theta`` are the state dimensions of the reference
-/// point and the heading.
-#[pyclass(name = "Unicycle", module = "tlshield._core", frozen)]
-pub struct PyUnicycle {
-    inner: Dynamics,
-}
-
-#[pymethods]
-impl PyUnicycle {
-    #[new]
-    #[pyo3(signature = (eps, x=0, y=1, theta=2))]
-    fn new(eps: f64, x: usize, y: usize, theta: usize) -> PyResult<Self> {
-        Ok(PyUnicycle {
-            inner: map(Dynamics::unicycle(eps, x, y, theta))?,
-        })
-    }
-
-    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
-        eval(py, &self.inner, s)
-    }
-
-    fn __repr__(&self) -> String {
-        match &self.inner {
-            Dynamics::Unicycle { eps, x, y, theta } => {
-                format!("Unicycle(eps={eps}, x={x}, y={y}, theta={theta})")
-            }
-            Dynamics::SingleIntegrator { .. } => unreachable!("PyUnicycle wraps a unicycle"),
-        }
-    }
-}
-
-/// ``ds[pos[i]]/dt = a[i]``: one input per listed state dimension.
-#[pyclass(name = "SingleIntegrator", module = "tlshield._core", frozen)]
-pub struct PySingleIntegrator {
-    inner: Dynamics,
-}
-
-#[pymethods]
-impl PySingleIntegrator {
-    #[new]
-    fn new(pos: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let pos = crate::convert::indices(pos, "pos")?;
-        Ok(PySingleIntegrator {
-            inner: map(Dynamics::single_integrator(pos))?,
-        })
-    }
-
-    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
-        eval(py, &self.inner, s)
-    }
-
-    fn __repr__(&self) -> String {
-        match &self.inner {
-            Dynamics::SingleIntegrator { pos } => format!("SingleIntegrator(pos={pos:?})"),
-            Dynamics::Unicycle { .. } => unreachable!("PySingleIntegrator wraps an integrator"),
-        }
-    }
-}
-
-fn eval<'py>(py: Python<'py>, dynamics: &Dynamics, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
-    let s = vector(s, "s")?;
-    if s.len() < dynamics.min_dim() {
-        return Err(PyValueError::new_err(format!(
-            "s: expected at least {} values for this model, got {}",
-            dynamics.min_dim(),
-            s.len()
-        )));
-    }
-    let (n, m) = (s.len(), dynamics.inputs());
-    let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);
-    dynamics.eval(&s, &mut f, &mut g);
-    let g = numpy::ndarray::Array2::from_shape_vec((n, m), g)
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
-    Ok((f.into_pyarray(py), g.into_pyarray(py)))
-}
 
 /// Bounds from `(lo, hi)`, each a scalar (broadcast to m) or a length-m sequence.
 fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {

@@ -8,8 +8,6 @@ use std::sync::{Arc, OnceLock};
 
 use tlshield_core::{Automaton, Predicate, Spec, Trajectory, TrajectoryBatch};
 
-use crate::automaton::PyAutomaton;
-
 use crate::convert::FloatArray;
 use crate::errors::map;
 use crate::predicate::{to_python, PyBall, PyHalfspace};
@@ -151,11 +149,6 @@ impl PySpec {
         let spec = &self.inner;
         let out = py.detach(|| spec.robustness_batch(batch));
         Ok(map(out)?.into_pyarray(py))
-    }
-
-    /// The finite state automaton of the formula (built once per spec, then shared).
-    fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
-        Ok(PyAutomaton::new(py, self.shared_automaton()?))
     }
 
     fn __str__(&self) -> String {
