@@ -37,21 +37,7 @@ pub fn task_shield(automaton: Arc<Automaton>, solver: SolverChoice) -> Shield {
         lo: vec![-v; 2],
         hi: vec![v; 2],
     };
-    let config = ShieldConfig {
-        alpha: 2.0,
-        c3: 1.0,
-        k: 1e4,
-        cbf_bounds: bounds(6.0),
-        clf_bounds: bounds(0.5),
-        action_bounds: None,
-        barriers: Vec::new(),
-        pos: vec![0, 1],
-        use_cbf: true,
-        use_clf: true,
-        solver,
-        slack_penalty: 1e6,
-        margin: 1e-6,
-    };
+    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(6.0), bounds(0.5)).with_solver(solver);
     let unicycle = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
     Shield::new(automaton, Some(unicycle), config).unwrap()
 }
@@ -81,7 +67,7 @@ pub fn shield_instances(
             ];
             s.extend((0..6).map(|_| uniform(-1.0, 10.0)));
             s.extend([20.0, 20.0, 20.0, -20.0]);
-            let q = automaton.step_unchecked(automaton.initial(), &s);
+            let q = automaton.read(&s).unwrap().step(automaton.initial());
             (s, q, vec![uniform(-4.0, 4.0), uniform(-6.0, 6.0)])
         })
         .collect()

@@ -23,9 +23,11 @@ fn automaton(c: &mut Criterion) {
             let s = rows[k % rows.len()];
             k += 1;
             let q = if k % 2 == 0 { 0 } else { 3 };
-            let next = aut.step_unchecked(q, black_box(s));
-            let reward = aut.reward_unchecked(q, s, 1.0);
-            aut.safe_set_into(q, s, &mut safe);
+            // The read checks the state (length, finiteness) once and computes the atoms once.
+            let reading = aut.read(black_box(s)).unwrap();
+            let next = reading.step(q);
+            let reward = reading.reward(q, 1.0);
+            reading.safe_set(q, &mut safe);
             (next, reward, safe.len())
         })
     });

@@ -251,31 +251,6 @@ pub fn cnf_robustness(clauses: &[Vec<Literal>], atom_rho: &[f64]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Fold step keeping the first item with the largest score: `iter.fold(None, first_max)`.
-/// Ties keep the earlier item, so choices are deterministic.
-pub fn first_max<T>(best: Option<(T, f64)>, cur: (T, f64)) -> Option<(T, f64)> {
-    match best {
-        Some(b) if b.1 >= cur.1 => Some(b),
-        _ => Some(cur),
-    }
-}
-
-/// Eq. 5C1 with argmax: per clause the literal with the LARGEST robustness (the first one on
-/// ties) and that robustness. The paper prints argmin, which would keep e.g. "be inside g3" for
-/// the clause (g3 | c1); argmax keeps the literal that holds with the largest margin.
-pub fn safe_literals<'a>(
-    clauses: &'a [Vec<Literal>],
-    atom_rho: &'a [f64],
-) -> impl Iterator<Item = (Literal, f64)> + 'a {
-    clauses.iter().map(move |clause| {
-        clause
-            .iter()
-            .map(|l| (*l, l.robustness(atom_rho)))
-            .fold(None, first_max)
-            .expect("clauses are never empty")
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -317,27 +292,6 @@ mod tests {
         let cubes = minimise(&[1, 2, 3], 2);
         assert_eq!(dnf_robustness(&cubes, &rho), 0.5);
         assert_eq!(cnf_robustness(&complement_cnf(&cubes), &rho), -0.5);
-        let kept: Vec<_> = safe_literals(&complement_cnf(&cubes), &rho).collect();
-        assert_eq!(
-            kept[0],
-            (
-                Literal {
-                    atom: 0,
-                    positive: false
-                },
-                -0.5
-            )
-        );
-        assert_eq!(
-            kept[1],
-            (
-                Literal {
-                    atom: 1,
-                    positive: false
-                },
-                2.0
-            )
-        );
     }
 
     proptest! {

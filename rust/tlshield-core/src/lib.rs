@@ -32,7 +32,7 @@ pub mod shield;
 pub mod spec;
 pub mod validate;
 
-pub use automaton::{Automaton, Edge};
+pub use automaton::{Automaton, Edge, Reading};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use formula::Formula;

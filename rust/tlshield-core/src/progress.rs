@@ -13,7 +13,7 @@
 //! - `Phi(s, q) = -rank(q) + squash(sigma_q(s))`, `sigma_q` the Eq. 5A1 value of being at `s`
 //!   in `q` over the guard cubes whose goal can hold where it is (a goal disc outside the
 //!   channel that its cube also requires does not pull; see
-//!   [`Automaton::reachable_signal_from`]), and `squash(x) = min(x, 0) / (scale + |min(x, 0)|)` in (-1, 0]: strictly increasing
+//!   [`Reading::reachable_reward`]), and `squash(x) = min(x, 0) / (scale + |min(x, 0)|)` in (-1, 0]: strictly increasing
 //!   below 0 (slope `1 / scale` at the goal's edge, so the shaping never goes flat as a clip
 //!   would); `Phi = 0` at acceptance. The bands `(-rank - 1, -rank]` never overlap the next
 //!   state's, so entering a state closer to acceptance never lowers `Phi`;
@@ -30,7 +30,7 @@
 //! `bonus > (max rank + 1) (gamma^(1 - T) - 1) - 1` makes every trajectory that reaches
 //! acceptance out-earn every one that does not, whatever the starts; the default bonus is
 //! `(max rank + 1) gamma^(1 - T)`.
-use crate::automaton::Automaton;
+use crate::automaton::{Automaton, Reading};
 use crate::error::{AutomatonError, InputError};
 
 /// Parameters of [`ProgressReward`].
@@ -247,17 +247,15 @@ impl ProgressReward {
         self.gamma
     }
 
-    /// The potential `Phi(s, q)` at `s` with the atoms' robustness `rho` there (validated
-    /// inputs). States without a path to acceptance sit one band below the farthest state
-    /// that has one.
-    pub fn potential_from(&self, automaton: &Automaton, q: usize, s: &[f64], rho: &[f64]) -> f64 {
-        if automaton.is_accepting(q) {
+    /// The potential `Phi(s, q)` at the state read by `reading`, a reading of the automaton the
+    /// reward was built for. States without a path to acceptance sit one band below the
+    /// farthest state that has one.
+    pub fn potential(&self, reading: &Reading<'_>, q: usize) -> f64 {
+        if reading.automaton().is_accepting(q) {
             return 0.0;
         }
         let rank = self.ranks[q].unwrap_or(self.max_rank + 1);
-        let sigma = automaton
-            .reachable_signal_from(q, s, rho, self.c_r)
-            .min(0.0);
+        let sigma = reading.reachable_reward(q, self.c_r).min(0.0);
         // -inf (a `false` guard) squashes to the band's floor, not to -inf / inf = NaN.
         let squashed = if sigma.is_finite() {
             sigma / (self.scale - sigma)
@@ -315,10 +313,9 @@ impl ProgressReward {
             }
             .into());
         }
-        let rho = automaton.checked_atom_robustness(s_next)?;
-        let rho = &rho[..automaton.spec().atoms().len()];
-        let q_next = automaton.step_rho(q, rho);
-        let phi_next = self.potential_from(automaton, q_next, s_next, rho);
+        let reading = automaton.read(s_next)?;
+        let q_next = reading.step(q);
+        let phi_next = self.potential(&reading, q_next);
         Ok((
             q_next,
             self.reward(automaton, q, q_next, phi, phi_next),
@@ -380,11 +377,10 @@ mod tests {
         .unwrap();
         let aut = Automaton::build(&spec).unwrap();
         let q0 = aut.step(aut.initial(), &[7.5]).unwrap();
-        let rho = aut.atom_robustness(&[7.5]);
-        let rho = &rho[..4];
+        let reading = aut.read(&[7.5]).unwrap();
         // Eq. 5A1 follows the nearer goal b (0.5 - 1.5); the reachable signal follows a.
-        assert!((aut.task_signal_from(q0, rho, 1.0) + 1.0).abs() < 1e-12);
-        assert!((aut.reachable_signal_from(q0, &[7.5], rho, 1.0) + 5.0).abs() < 1e-12);
+        assert!((reading.reward(q0, 1.0) + 1.0).abs() < 1e-12);
+        assert!((reading.reachable_reward(q0, 1.0) + 5.0).abs() < 1e-12);
     }
 
     #[test]
@@ -536,17 +532,14 @@ mod tests {
             let aut = Automaton::build(&spec).unwrap();
             let params = ProgressParams { gamma, scale: 2.0, ..Default::default() };
             let r = ProgressReward::new(&aut, &params).unwrap();
-            let n_atoms = spec.atoms().len();
             let states: Vec<&[f64]> = data.chunks(3).collect();
             let (mut q, mut phi) = (aut.step(aut.initial(), states[0]).unwrap(), 0.0);
             for s in &states[1..] {
-                let rho = aut.atom_robustness(s);
-                let rho = &rho[..n_atoms];
                 let (qn, rew, pn) = r.advance(&aut, q, phi, s).unwrap();
                 let rank = |q: usize| r.ranks()[q];
                 if let (Some(a), Some(b)) = (rank(q), rank(qn)) {
                     if b < a && !aut.is_accepting(qn) {
-                        let stay = r.potential_from(&aut, q, s, rho);
+                        let stay = r.potential(&aut.read(s).unwrap(), q);
                         prop_assert!(pn >= stay, "Phi {pn} < staying {stay}");
                         prop_assert!(rew >= stay - phi - r.step_cost() - 1e-12);
                     }
@@ -555,15 +548,15 @@ mod tests {
                 q = qn;
                 phi = pn;
             }
-            // Bands: every Phi of a state is above every Phi of a state with a larger rank.
-            for q1 in 0..aut.num_states() {
-                for q2 in 0..aut.num_states() {
-                    if let (Some(a), Some(b)) = (r.ranks()[q1], r.ranks()[q2]) {
-                        if a < b {
-                            let hi = r.potential_from(&aut, q2, states[0], &[100.0; 16][..n_atoms]);
-                            let lo = r.potential_from(&aut, q1, states[0], &[-100.0; 16][..n_atoms]);
-                            prop_assert!(lo >= hi, "rank {a}: {lo} < rank {b}: {hi}");
-                        }
+            // Bands: a state of rank k has Phi in [-(k + 1), -k], so every Phi of a state is
+            // at least every Phi of a state with a larger rank.
+            for s in &states {
+                let reading = aut.read(s).unwrap();
+                for q in 0..aut.num_states() {
+                    if let (Some(k), false) = (r.ranks()[q], aut.is_accepting(q)) {
+                        let phi = r.potential(&reading, q);
+                        let k = f64::from(k);
+                        prop_assert!((-(k + 1.0)..=-k).contains(&phi), "rank {k}: Phi {phi}");
                     }
                 }
             }
@@ -574,8 +567,7 @@ mod tests {
                 for s in &states[1..] {
                     if aut.step(q, s).unwrap() == q {
                         let (_, rew, _) = r.advance(&aut, q, -0.5, s).unwrap();
-                        let rho = aut.atom_robustness(s);
-                        let sigma = aut.reachable_signal_from(q, s, &rho[..n_atoms], 1.0);
+                        let sigma = aut.read(s).unwrap().reachable_reward(q, 1.0);
                         stay.push((sigma.min(0.0), rew));
                     }
                 }

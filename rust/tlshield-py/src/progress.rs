@@ -90,9 +90,7 @@ impl PyProgressReward {
     fn potential(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<f64> {
         let q = map(self.automaton.check_state("q", q))?;
         let s = vector(s, "s")?;
-        let rho = map(self.automaton.checked_atom_robustness(&s))?;
-        let n = self.automaton.spec().atoms().len();
-        Ok(self.inner.potential_from(&self.automaton, q, &s, &rho[..n]))
+        Ok(self.inner.potential(&map(self.automaton.read(&s))?, q))
     }
 
     /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an

@@ -199,7 +199,7 @@ impl PyShield {
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
         barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
-        slack_penalty=1e6, margin=1e-6,
+        slack_penalty=ShieldConfig::DEFAULT_SLACK_PENALTY, margin=ShieldConfig::DEFAULT_MARGIN,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -232,29 +232,33 @@ impl PyShield {
                 lo.len().unwrap_or(1)
             }
         };
-        let config = ShieldConfig {
+        let pos = match pos {
+            Some(p) => crate::convert::indices(p, "pos")?,
+            None => ShieldConfig::DEFAULT_POS.to_vec(),
+        };
+        let config = ShieldConfig::new(
             alpha,
             c3,
-            k: K,
-            cbf_bounds: bounds(cbf_bounds, "cbf_bounds", m)?,
-            clf_bounds: bounds(clf_bounds, "clf_bounds", m)?,
-            action_bounds: action_bounds
+            K,
+            bounds(cbf_bounds, "cbf_bounds", m)?,
+            bounds(clf_bounds, "clf_bounds", m)?,
+        )
+        .with_action_bounds(
+            action_bounds
                 .map(|b| bounds(b, "action_bounds", m))
                 .transpose()?,
-            barriers: barriers
+        )
+        .with_barriers(
+            barriers
                 .map(self::barriers)
                 .transpose()?
                 .unwrap_or_default(),
-            pos: match pos {
-                Some(p) => crate::convert::indices(p, "pos")?,
-                None => vec![0, 1],
-            },
-            use_cbf,
-            use_clf,
-            solver: map(SolverChoice::parse(solver))?,
-            slack_penalty,
-            margin,
-        };
+        )
+        .with_pos(pos)
+        .with_parts(use_cbf, use_clf)
+        .with_solver(map(SolverChoice::parse(solver))?)
+        .with_slack_penalty(slack_penalty)
+        .with_margin(margin);
         let barrier_names = config
             .barriers
             .iter()

@@ -39,6 +39,9 @@ use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::validate::check_finite;
 
+mod program;
+use program::Program;
+
 /// Batches smaller than this are shielded on the calling thread.
 pub const PARALLEL_MIN_ROWS: usize = 32;
 
@@ -227,8 +230,82 @@ pub struct ShieldConfig {
     pub slack_penalty: f64,
     /// Barrier rows enforce `h - margin` (>= 0): the CBF alone keeps `h >= 0`, but an atom
     /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
-    /// to `h = 0` exactly and count as a violation. Small (default 1e-6 from Python).
+    /// to `h = 0` exactly and count as a violation. Small ([`ShieldConfig::DEFAULT_MARGIN`]).
     pub margin: f64,
+}
+
+impl ShieldConfig {
+    /// Default cost per unit of barrier slack in the relaxed problem.
+    pub const DEFAULT_SLACK_PENALTY: f64 = 1e6;
+    /// Default barrier margin: `h` is kept above this, so atoms (`rho > 0`) stay true.
+    pub const DEFAULT_MARGIN: f64 = 1e-6;
+    /// Default CLF dimensions: the position is `s[0], s[1]`.
+    pub const DEFAULT_POS: [usize; 2] = [0, 1];
+
+    /// The gains and boxes every shield needs; everything else at its default: no actuator
+    /// limits, no user barriers, the CLF on [`ShieldConfig::DEFAULT_POS`], both CBF and CLF on,
+    /// [`SolverChoice::Auto`], [`ShieldConfig::DEFAULT_SLACK_PENALTY`] and
+    /// [`ShieldConfig::DEFAULT_MARGIN`]. Validated by [`Shield::new`].
+    pub fn new(alpha: f64, c3: f64, k: f64, cbf_bounds: Bounds, clf_bounds: Bounds) -> Self {
+        ShieldConfig {
+            alpha,
+            c3,
+            k,
+            cbf_bounds,
+            clf_bounds,
+            action_bounds: None,
+            barriers: Vec::new(),
+            pos: Self::DEFAULT_POS.to_vec(),
+            use_cbf: true,
+            use_clf: true,
+            solver: SolverChoice::Auto,
+            slack_penalty: Self::DEFAULT_SLACK_PENALTY,
+            margin: Self::DEFAULT_MARGIN,
+        }
+    }
+
+    /// Limits on the applied action `a_rl + a_cbf + a_clf`.
+    pub fn with_action_bounds(mut self, bounds: Option<Bounds>) -> Self {
+        self.action_bounds = bounds;
+        self
+    }
+
+    /// The user's barriers.
+    pub fn with_barriers(mut self, barriers: Vec<Barrier>) -> Self {
+        self.barriers = barriers;
+        self
+    }
+
+    /// The state dimensions the CLF drives to the goal.
+    pub fn with_pos(mut self, pos: Vec<usize>) -> Self {
+        self.pos = pos;
+        self
+    }
+
+    /// Which parts are on (the paper's configurations).
+    pub fn with_parts(mut self, use_cbf: bool, use_clf: bool) -> Self {
+        self.use_cbf = use_cbf;
+        self.use_clf = use_clf;
+        self
+    }
+
+    /// The QP solver.
+    pub fn with_solver(mut self, solver: SolverChoice) -> Self {
+        self.solver = solver;
+        self
+    }
+
+    /// Cost per unit of barrier slack in the relaxed problem.
+    pub fn with_slack_penalty(mut self, slack_penalty: f64) -> Self {
+        self.slack_penalty = slack_penalty;
+        self
+    }
+
+    /// The barrier margin.
+    pub fn with_margin(mut self, margin: f64) -> Self {
+        self.margin = margin;
+        self
+    }
 }
 
 /// Where an enforced barrier comes from.
@@ -281,17 +358,7 @@ impl Filtered {
 
 /// Reusable buffers and solvers for one thread of shield steps.
 struct Workspace {
-    f: Vec<f64>,
-    g: Vec<f64>,
-    grad: Vec<f64>,
-    safe: Vec<(Literal, f64)>,
-    /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
-    lg: Vec<f64>,
-    rhs: Vec<f64>,
-    weights: Vec<f64>,
-    /// The CLF goal and `Lg V` (m values).
-    goal: Vec<f64>,
-    clf_lg: Vec<f64>,
+    program: Program,
     qp: DenseQp,
     solvers: Solvers,
     out: Filtered,
@@ -332,15 +399,7 @@ impl Solvers {
 impl Workspace {
     fn new(n: usize, m: usize) -> Self {
         Workspace {
-            f: vec![0.0; n],
-            g: vec![0.0; n * m],
-            grad: vec![0.0; n],
-            safe: Vec::new(),
-            lg: Vec::new(),
-            rhs: Vec::new(),
-            weights: Vec::new(),
-            goal: Vec::new(),
-            clf_lg: Vec::new(),
+            program: Program::with_state_len(n),
             qp: DenseQp {
                 p_diag: Vec::new(),
                 c: Vec::new(),
@@ -423,14 +482,6 @@ fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
     }
 }
 
-/// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
-fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
-    let start = qp.g.len();
-    qp.g.resize(start + nv, 0.0);
-    qp.h.push(rhs);
-    &mut qp.g[start..]
-}
-
 /// Checks a drift of `rows` rows of length `n`.
 fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
     if d.len() != rows * n {
@@ -443,10 +494,6 @@ fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
     }
     check_finite("drift", d, n)?;
     Ok(())
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 impl Shield {
@@ -818,103 +865,23 @@ impl Shield {
         record: bool,
         solve: bool,
     ) {
-        let (n, m) = (s.len(), self.m);
         let cfg = &self.config;
-        ws.f.resize(n, 0.0);
-        ws.g.resize(n * m, 0.0);
-        ws.grad.resize(n, 0.0);
-        match (fg, &self.dynamics) {
-            (Some(ControlAffine { f, g }), _) => {
-                ws.f.copy_from_slice(f);
-                ws.g.copy_from_slice(g);
-            }
-            (None, Some(d)) => d.eval(s, &mut ws.f, &mut ws.g),
-            (None, None) => unreachable!("checked by check_dynamics"),
-        }
-        if let Some(d) = drift {
-            for (f, d) in ws.f.iter_mut().zip(d) {
-                *f += d;
-            }
-        }
-
-        // Barriers: value h, Lg h and the row's right-hand side Lf h + Lg h . a_rl + alpha h.
         ws.out.barriers.clear();
-        ws.lg.clear();
-        ws.rhs.clear();
-        ws.weights.clear();
-        // The atoms' robustness at s, once for both the safe set and the goal.
-        let rho = self.automaton.atom_robustness(s);
-        if cfg.use_cbf {
-            let spec = self.automaton.spec();
-            self.automaton.safe_set_from(q, &rho, &mut ws.safe);
-            let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
-                let sign = if b.positive { 1.0 } else { -1.0 };
-                let h = sign * b.predicate.value(s);
-                (
-                    BarrierSource::User(i),
-                    &b.predicate,
-                    sign,
-                    h,
-                    b.slack_weight,
-                )
-            });
-            let kept = ws.safe.iter().map(|&(lit, h)| {
-                let sign = if lit.positive { 1.0 } else { -1.0 };
-                let predicate = &spec.predicates()[lit.atom];
-                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0)
-            });
-            for (source, predicate, sign, h, weight) in user.chain(kept) {
-                ws.weights.push(weight);
-                predicate.gradient_into(s, &mut ws.grad);
-                let lf = sign * dot(&ws.grad, &ws.f);
-                let mut lg_a = 0.0;
-                for (j, a) in a_rl.iter().enumerate() {
-                    let lg = sign * (0..n).map(|k| ws.grad[k] * ws.g[k * m + j]).sum::<f64>();
-                    lg_a += lg * a;
-                    ws.lg.push(lg);
-                }
-                ws.rhs.push(lf + lg_a + cfg.alpha * (h - cfg.margin));
-                if record {
-                    ws.out.barriers.push((source, h));
-                }
-            }
-        }
-        let barriers = ws.rhs.len();
-
-        // CLF row: V = |s[pos] - goal|^2, row Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
-        // The QP's variable is d = delta - delta_0 (see below).
-        let has_goal = cfg.use_clf && self.automaton.goal_from(q, s, &rho, &mut ws.goal);
-        let (mut clf_rhs, mut delta_0) = (0.0, 0.0);
-        ws.clf_lg.clear();
-        ws.clf_lg.resize(m, 0.0);
-        if has_goal {
-            let (mut v, mut lf) = (0.0, 0.0);
-            for (&k, &c) in cfg.pos.iter().zip(&ws.goal) {
-                let e = s[k] - c;
-                v += e * e;
-                lf += 2.0 * e * ws.f[k];
-                for (j, l) in ws.clf_lg.iter_mut().enumerate() {
-                    *l += 2.0 * e * ws.g[k * m + j];
-                }
-            }
-            clf_rhs = -(lf + dot(&ws.clf_lg, a_rl) + cfg.c3 * v);
-            // The CLF bounds give delta a lower bound in closed form; solving for the excess
-            // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
-            // of the order of |a|^2 instead of K * delta. The solution is the same.
-            let best = cfg
-                .clf_bounds
-                .lo
-                .iter()
-                .zip(&cfg.clf_bounds.hi)
-                .zip(&ws.clf_lg)
-                .map(|((lo, hi), l)| (l * lo).min(l * hi))
-                .sum::<f64>();
-            delta_0 = (best - clf_rhs).max(0.0);
-        }
-
-        let cbf_vars = if cfg.use_cbf { m } else { 0 };
-        let clf_vars = if has_goal { m } else { 0 };
-        let vars = cbf_vars + clf_vars + usize::from(has_goal);
+        ws.program.rows(
+            cfg,
+            &self.automaton,
+            self.dynamics.as_ref(),
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+            record.then_some(&mut ws.out.barriers),
+        );
+        let program = &ws.program;
+        let (m, barriers, vars, has_goal) =
+            (self.m, program.barriers(), program.vars(), program.has_goal);
+        let (cbf_vars, clf_vars) = (program.cbf_vars, program.clf_vars);
 
         let out = &mut ws.out;
         out.action.copy_from_slice(a_rl);
@@ -924,7 +891,7 @@ impl Shield {
         out.slack = 0.0;
         out.status = Status::Solved;
         out.solver = SolvedBy::Nothing;
-        out.goal = (record && has_goal).then(|| ws.goal.clone());
+        out.goal = (record && has_goal).then(|| program.goal.clone());
         if vars == 0 {
             ws.qp = DenseQp {
                 p_diag: Vec::new(),
@@ -935,82 +902,14 @@ impl Shield {
             return;
         }
 
-        // Assemble G x <= h with x = [a_cbf | a_clf | delta | sigma (relaxed only)].
-        let (lg, rhs, clf_lg, weights) = (&ws.lg, &ws.rhs, &ws.clf_lg, &ws.weights);
-        let build = |qp: &mut DenseQp, relaxed: bool| {
-            let slacks = if relaxed { barriers } else { 0 };
-            let nv = vars + slacks;
-            let delta = cbf_vars + clf_vars;
-            qp.p_diag.clear();
-            qp.p_diag.resize(nv, 0.0);
-            qp.p_diag[..delta].fill(2.0);
-            qp.c.clear();
-            qp.c.resize(nv, 0.0);
-            if has_goal {
-                qp.c[delta] = cfg.k;
-            }
-            for (c, w) in qp.c[vars..].iter_mut().zip(weights) {
-                *c = cfg.slack_penalty * w;
-            }
-            qp.g.clear();
-            qp.h.clear();
-            for b in 0..barriers {
-                let r = push_row(qp, nv, rhs[b]);
-                for j in 0..m {
-                    let l = lg[b * m + j];
-                    if cfg.use_cbf {
-                        r[j] = -l;
-                    }
-                    if has_goal {
-                        r[cbf_vars + j] = -l;
-                    }
-                }
-                if relaxed {
-                    r[vars + b] = -1.0;
-                }
-            }
-            if has_goal {
-                let r = push_row(qp, nv, clf_rhs + delta_0);
-                r[cbf_vars..delta].copy_from_slice(clf_lg);
-                r[delta] = -1.0;
-                push_row(qp, nv, 0.0)[delta] = -1.0;
-            }
-            let groups = [
-                (cfg.use_cbf, 0, &cfg.cbf_bounds),
-                (has_goal, cbf_vars, &cfg.clf_bounds),
-            ];
-            for (on, offset, bounds) in groups {
-                for j in (0..m).filter(|_| on) {
-                    push_row(qp, nv, bounds.hi[j])[offset + j] = 1.0;
-                    push_row(qp, nv, -bounds.lo[j])[offset + j] = -1.0;
-                }
-            }
-            if let Some(bounds) = &cfg.action_bounds {
-                for (sign, limit) in [(1.0, &bounds.hi), (-1.0, &bounds.lo)] {
-                    for j in 0..m {
-                        let r = push_row(qp, nv, sign * (limit[j] - a_rl[j]));
-                        if cfg.use_cbf {
-                            r[j] = sign;
-                        }
-                        if has_goal {
-                            r[cbf_vars + j] = sign;
-                        }
-                    }
-                }
-            }
-            for b in 0..slacks {
-                push_row(qp, nv, 0.0)[vars + b] = -1.0;
-            }
-        };
-
-        build(&mut ws.qp, false);
+        program.assemble(cfg, a_rl, &mut ws.qp, false);
         if !solve {
             return;
         }
         let mut status = Status::Solved;
         let mut by = ws.solvers.solve(cfg.solver, &ws.qp);
         if ws.solvers.solution.status != QpStatus::Solved && barriers > 0 {
-            build(&mut ws.qp, true);
+            program.assemble(cfg, a_rl, &mut ws.qp, true);
             status = Status::Relaxed;
             by = ws.solvers.solve(cfg.solver, &ws.qp);
         }
@@ -1025,7 +924,7 @@ impl Shield {
         }
         if has_goal {
             out.a_clf.copy_from_slice(&x[cbf_vars..cbf_vars + m]);
-            out.delta = delta_0 + x[cbf_vars + clf_vars].max(0.0);
+            out.delta = program.delta_0 + x[cbf_vars + clf_vars].max(0.0);
         }
         if status == Status::Relaxed {
             out.slack = x[vars..].iter().fold(0.0, |a: f64, &b| a.max(b));
@@ -1068,21 +967,10 @@ mod tests {
     }
 
     fn config(solver: SolverChoice) -> ShieldConfig {
-        ShieldConfig {
-            alpha: 2.0,
-            c3: 1.0,
-            k: 1e4,
-            cbf_bounds: bounds(-6.0, 6.0),
-            clf_bounds: bounds(-0.5, 0.5),
-            action_bounds: None,
-            barriers: Vec::new(),
-            pos: vec![0, 1],
-            use_cbf: true,
-            use_clf: true,
-            solver,
-            slack_penalty: 1e6,
-            margin: 0.0,
-        }
+        ShieldConfig::new(2.0, 1.0, 1e4, bounds(-6.0, 6.0), bounds(-0.5, 0.5))
+            .with_solver(solver)
+            .with_slack_penalty(1e6)
+            .with_margin(0.0)
     }
 
     fn shield(config: ShieldConfig) -> Shield {
@@ -1120,7 +1008,7 @@ mod tests {
         let sh = shield(config(SolverChoice::Auto));
         // Near c1's border (x - y = -1.4), heading straight out (+y), full speed.
         let s = state(1.0, -1.4, std::f64::consts::FRAC_PI_2);
-        let q = sh.automaton().step_unchecked(0, &s);
+        let q = sh.automaton().read(&s).unwrap().step(0);
         let a_rl = [3.0, 0.0];
         let out = sh.filter(&s, q, &a_rl, None, None).unwrap();
         assert_eq!(out.status, Status::Solved);
@@ -1214,7 +1102,7 @@ mod tests {
             cfg.use_clf = false;
             cfg.barriers = vec![Barrier::inside("away", away.clone()).with_slack_weight(weight)];
             let sh = shield(cfg);
-            let q = sh.automaton().step_unchecked(0, &s);
+            let q = sh.automaton().read(&s).unwrap().step(0);
             sh.filter(&s, q, &[0.0, 0.0], None, None).unwrap()
         };
         let light = run(1e-3);
@@ -1396,7 +1284,7 @@ mod tests {
                 rng.uniform(-1.6, 1.6),
                 rng.uniform(-3.2, 3.2),
             );
-            qs.push(sh.automaton().step_unchecked(0, &s));
+            qs.push(sh.automaton().read(&s).unwrap().step(0));
             states.extend(s);
             a_rl.extend([rng.uniform(-2.0, 2.0), rng.uniform(-3.0, 3.0)]);
         }
@@ -1463,7 +1351,7 @@ mod tests {
                 rng.uniform(-1.499, 1.499),
                 rng.uniform(-3.2, 3.2),
             );
-            let mut q = sh.automaton().step_unchecked(0, &s);
+            let mut q = sh.automaton().read(&s).unwrap().step(0);
             for _ in 0..200 {
                 // Adversarial half the time: full speed towards the nearer wall; otherwise
                 // random over the whole RL range (inside the CBF box).
@@ -1484,7 +1372,7 @@ mod tests {
                 s[0] += dt * (cos * v - eps * sin * w);
                 s[1] += dt * (sin * v + eps * cos * w);
                 s[2] += dt * w;
-                q = sh.automaton().step_unchecked(q, &s);
+                q = sh.automaton().read(&s).unwrap().step(q);
                 let h = (s[0] - s[1] + HALF_WIDTH).min(s[1] - s[0] + HALF_WIDTH);
                 min_h = min_h.min(h);
                 steps += 1;
@@ -1524,7 +1412,7 @@ mod tests {
             let auto = shield(cfg.clone());
             let clarabel = shield(ShieldConfig { solver: SolverChoice::Clarabel, ..cfg });
             let s = state(x, offset, theta);
-            let q = auto.automaton().step_unchecked(0, &s);
+            let q = auto.automaton().read(&s).unwrap().step(0);
             let a_rl = [v, w];
             let a = auto.filter(&s, q, &a_rl, None, None).unwrap();
             let b = clarabel.filter(&s, q, &a_rl, None, None).unwrap();

@@ -1,0 +1,277 @@
+//! Eq. 5D2 for one state, top to bottom: the dynamics at `s`, the barrier rows (Lie
+//! derivatives of every barrier), the CLF row of Eq. 5B1 with its `delta_0` shift, and the QP
+//! `min x'Px/2 + c'x  s.t.  G x <= h` over `x = [a_cbf | a_clf | d | sigma (relaxed only)]`.
+//!
+//! The buffers live in [`Program`] and are reused from step to step: nothing here allocates
+//! once they have grown to the problem's size.
+
+use super::{BarrierSource, ControlAffine, ShieldConfig};
+use crate::automaton::Automaton;
+use crate::cnf::Literal;
+use crate::dynamics::Dynamics;
+use crate::qp::DenseQp;
+
+/// The rows of Eq. 5D2 at one state, and the buffers they are computed in.
+#[derive(Debug, Default)]
+pub(super) struct Program {
+    /// `f(s)` (plus the drift) and `g(s)` (n x m).
+    f: Vec<f64>,
+    g: Vec<f64>,
+    grad: Vec<f64>,
+    safe: Vec<(Literal, f64)>,
+    /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
+    lg: Vec<f64>,
+    rhs: Vec<f64>,
+    weights: Vec<f64>,
+    /// The CLF goal and `Lg V` (m values).
+    pub(super) goal: Vec<f64>,
+    clf_lg: Vec<f64>,
+    /// Whether this step has a CLF goal (CLF on and a goal in this FSA state).
+    pub(super) has_goal: bool,
+    clf_rhs: f64,
+    /// The closed-form lower bound of `delta` over the CLF box; the QP solves for
+    /// `d = delta - delta_0 >= 0`.
+    pub(super) delta_0: f64,
+    /// Variables of the unrelaxed problem: `a_cbf` (m if the CBF is on), `a_clf` and `d` (if
+    /// there is a goal).
+    pub(super) cbf_vars: usize,
+    pub(super) clf_vars: usize,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
+fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
+    let start = qp.g.len();
+    qp.g.resize(start + nv, 0.0);
+    qp.h.push(rhs);
+    &mut qp.g[start..]
+}
+
+impl Program {
+    /// Buffers for states of length `n`.
+    pub(super) fn with_state_len(n: usize) -> Self {
+        Program {
+            f: vec![0.0; n],
+            grad: vec![0.0; n],
+            ..Program::default()
+        }
+    }
+
+    /// Barrier rows of the last [`Program::rows`].
+    pub(super) fn barriers(&self) -> usize {
+        self.rhs.len()
+    }
+
+    /// Variables of the unrelaxed problem.
+    pub(super) fn vars(&self) -> usize {
+        self.cbf_vars + self.clf_vars + usize::from(self.has_goal)
+    }
+
+    /// `f(s)` and `g(s)` from the per-call override or the model, plus the drift of the
+    /// dimensions the agent does not control (e.g. moving obstacles).
+    fn load_dynamics(
+        &mut self,
+        s: &[f64],
+        m: usize,
+        fg: Option<ControlAffine<'_>>,
+        model: Option<&Dynamics>,
+        drift: Option<&[f64]>,
+    ) {
+        let n = s.len();
+        self.f.resize(n, 0.0);
+        self.g.resize(n * m, 0.0);
+        self.grad.resize(n, 0.0);
+        match (fg, model) {
+            (Some(ControlAffine { f, g }), _) => {
+                self.f.copy_from_slice(f);
+                self.g.copy_from_slice(g);
+            }
+            (None, Some(d)) => d.eval(s, &mut self.f, &mut self.g),
+            (None, None) => unreachable!("the shield checks that dynamics are given"),
+        }
+        if let Some(d) = drift {
+            for (f, d) in self.f.iter_mut().zip(d) {
+                *f += d;
+            }
+        }
+    }
+
+    /// Builds every row of Eq. 5D2 at `(s, q)` for `a_rl`. `barriers_out` receives each
+    /// enforced barrier and its value (the single-step path records them).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn rows(
+        &mut self,
+        cfg: &ShieldConfig,
+        automaton: &Automaton,
+        model: Option<&Dynamics>,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
+        mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
+    ) {
+        let m = a_rl.len();
+        self.load_dynamics(s, m, fg, model, drift);
+        self.lg.clear();
+        self.rhs.clear();
+        self.weights.clear();
+        // The atoms' robustness at s, once for both the safe set and the goal.
+        let reading = automaton.read_validated(s);
+
+        // Barriers (the user's, then the safe set of Eq. 5C1): value h, Lg h and the row's
+        // right-hand side Lf h + Lg h . a_rl + alpha (h - margin).
+        if cfg.use_cbf {
+            let spec = automaton.spec();
+            reading.safe_set(q, &mut self.safe);
+            let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
+                let sign = if b.positive { 1.0 } else { -1.0 };
+                let h = sign * b.predicate.value(s);
+                (
+                    BarrierSource::User(i),
+                    &b.predicate,
+                    sign,
+                    h,
+                    b.slack_weight,
+                )
+            });
+            let kept = self.safe.iter().map(|&(lit, h)| {
+                let sign = if lit.positive { 1.0 } else { -1.0 };
+                let predicate = &spec.predicates()[lit.atom];
+                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0)
+            });
+            for (source, predicate, sign, h, weight) in user.chain(kept) {
+                self.weights.push(weight);
+                predicate.gradient_into(s, &mut self.grad);
+                let lf = sign * dot(&self.grad, &self.f);
+                let mut lg_a = 0.0;
+                for (j, a) in a_rl.iter().enumerate() {
+                    let lg = sign
+                        * (0..s.len())
+                            .map(|k| self.grad[k] * self.g[k * m + j])
+                            .sum::<f64>();
+                    lg_a += lg * a;
+                    self.lg.push(lg);
+                }
+                self.rhs.push(lf + lg_a + cfg.alpha * (h - cfg.margin));
+                if let Some(out) = barriers_out.as_deref_mut() {
+                    out.push((source, h));
+                }
+            }
+        }
+
+        // CLF row (Eq. 5B1's goal): V = |s[pos] - goal|^2,
+        // Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
+        self.has_goal = cfg.use_clf && reading.goal(q, &mut self.goal);
+        self.clf_rhs = 0.0;
+        self.delta_0 = 0.0;
+        self.clf_lg.clear();
+        self.clf_lg.resize(m, 0.0);
+        if self.has_goal {
+            let (mut v, mut lf) = (0.0, 0.0);
+            for (&k, &c) in cfg.pos.iter().zip(&self.goal) {
+                let e = s[k] - c;
+                v += e * e;
+                lf += 2.0 * e * self.f[k];
+                for (j, l) in self.clf_lg.iter_mut().enumerate() {
+                    *l += 2.0 * e * self.g[k * m + j];
+                }
+            }
+            self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + cfg.c3 * v);
+            // The CLF bounds give delta a lower bound in closed form; solving for the excess
+            // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
+            // of the order of |a|^2 instead of K * delta. The solution is the same.
+            let best = cfg
+                .clf_bounds
+                .lo
+                .iter()
+                .zip(&cfg.clf_bounds.hi)
+                .zip(&self.clf_lg)
+                .map(|((lo, hi), l)| (l * lo).min(l * hi))
+                .sum::<f64>();
+            self.delta_0 = (best - self.clf_rhs).max(0.0);
+        }
+        self.cbf_vars = if cfg.use_cbf { m } else { 0 };
+        self.clf_vars = if self.has_goal { m } else { 0 };
+    }
+
+    /// Writes the QP of the last [`Program::rows`] into `qp`; `relaxed` adds a slack
+    /// `sigma_i >= 0` (cost `slack_penalty * weight_i`) to every barrier row.
+    pub(super) fn assemble(
+        &self,
+        cfg: &ShieldConfig,
+        a_rl: &[f64],
+        qp: &mut DenseQp,
+        relaxed: bool,
+    ) {
+        let m = a_rl.len();
+        let (barriers, vars, has_goal) = (self.barriers(), self.vars(), self.has_goal);
+        let cbf_vars = self.cbf_vars;
+        let slacks = if relaxed { barriers } else { 0 };
+        let nv = vars + slacks;
+        let delta = cbf_vars + self.clf_vars;
+        qp.p_diag.clear();
+        qp.p_diag.resize(nv, 0.0);
+        qp.p_diag[..delta].fill(2.0);
+        qp.c.clear();
+        qp.c.resize(nv, 0.0);
+        if has_goal {
+            qp.c[delta] = cfg.k;
+        }
+        for (c, w) in qp.c[vars..].iter_mut().zip(&self.weights) {
+            *c = cfg.slack_penalty * w;
+        }
+        qp.g.clear();
+        qp.h.clear();
+        for b in 0..barriers {
+            let r = push_row(qp, nv, self.rhs[b]);
+            for j in 0..m {
+                let l = self.lg[b * m + j];
+                if cfg.use_cbf {
+                    r[j] = -l;
+                }
+                if has_goal {
+                    r[cbf_vars + j] = -l;
+                }
+            }
+            if relaxed {
+                r[vars + b] = -1.0;
+            }
+        }
+        if has_goal {
+            let r = push_row(qp, nv, self.clf_rhs + self.delta_0);
+            r[cbf_vars..delta].copy_from_slice(&self.clf_lg);
+            r[delta] = -1.0;
+            push_row(qp, nv, 0.0)[delta] = -1.0;
+        }
+        let groups = [
+            (cfg.use_cbf, 0, &cfg.cbf_bounds),
+            (has_goal, cbf_vars, &cfg.clf_bounds),
+        ];
+        for (on, offset, bounds) in groups {
+            for j in (0..m).filter(|_| on) {
+                push_row(qp, nv, bounds.hi[j])[offset + j] = 1.0;
+                push_row(qp, nv, -bounds.lo[j])[offset + j] = -1.0;
+            }
+        }
+        if let Some(bounds) = &cfg.action_bounds {
+            for (sign, limit) in [(1.0, &bounds.hi), (-1.0, &bounds.lo)] {
+                for j in 0..m {
+                    let r = push_row(qp, nv, sign * (limit[j] - a_rl[j]));
+                    if cfg.use_cbf {
+                        r[j] = sign;
+                    }
+                    if has_goal {
+                        r[cbf_vars + j] = sign;
+                    }
+                }
+            }
+        }
+        for b in 0..slacks {
+            push_row(qp, nv, 0.0)[vars + b] = -1.0;
+        }
+    }
+}
