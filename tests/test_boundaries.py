@@ -12,7 +12,6 @@ import pytest
 import tlshield
 from tlshield.envs.channel import STATE_DIM, THETA, X, Y, channel_task_spec
 
-
 SETTINGS = {"alpha": 2.0, "c3": 1.0, "K": 1e4, "cbf_bounds": (-3.0, 3.0), "clf_bounds": (-0.5, 0.5)}
 
 

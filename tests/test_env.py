@@ -196,6 +196,32 @@ def test_overrides_and_bad_input() -> None:
         env.step(np.array([np.nan, 0.0]))
 
 
+def test_a_channel_too_narrow_for_the_goals_is_rejected_at_make() -> None:
+    # w / sqrt(2) = 0.42 < goal_radius 0.5: no goal disc fits inside the channel. Before the
+    # check, make() accepted it and reset() failed inside numpy (high - low < 0).
+    with pytest.raises(ValueError, match="goal disc must fit inside the channel"):
+        gym.make(ENV_ID, half_width=0.6)
+    # Wider channel, same outside-goal band: an "outside" goal would overlap the channel.
+    with pytest.raises(ValueError, match="outside_goal_v"):
+        gym.make(ENV_ID, half_width=2.0)
+    env = gym.make(ENV_ID, half_width=2.0, outside_goal_v=(2.0, 2.5))
+    env.reset(seed=0)
+
+
+def test_reset_reports_a_start_in_the_trap() -> None:
+    # A start spread wider than the channel puts some s_0 outside it: the automaton is in the
+    # trap from the first state, and reset's info must say so.
+    env = ChannelEnv(start_spread=3.0)
+    trap = env.tracker.automaton.trap
+    seen = set()
+    for seed in range(40):
+        _, info = env.reset(seed=seed)
+        assert info["trap"] == (info["fsa_state"] == trap)
+        assert info["trap"] == (info["constraints"]["c1"] < 0 or info["constraints"]["c2"] < 0)
+        seen.add(info["trap"])
+    assert seen == {True, False}
+
+
 def test_rgb_render() -> None:
     env = gym.make(ENV_ID, render_mode="rgb_array")
     env.reset(seed=0)

@@ -15,8 +15,11 @@ pytest.importorskip("matplotlib")
 pytest.importorskip("stable_baselines3")
 
 from tlshield import plots
-from tlshield.plots import FIGURES, TABLE_COLUMNS, load_results, plot_all, results_table
-from tlshield.training import METRIC_COLUMNS, evaluate, train
+from tlshield.evaluation import evaluate
+from tlshield.plots import FIGURES, plot_all
+from tlshield.report import TABLE_COLUMNS, results_table
+from tlshield.runs import METRIC_COLUMNS, load_results
+from tlshield.training import train
 
 CONFIGS = ("rl", "rl_cbf_clf")
 SEEDS = (0, 1)
@@ -89,8 +92,8 @@ def test_plot_all_writes_decodable_figures(results: Path, tmp_path: Path) -> Non
 
 
 def test_automaton_without_graphviz(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(plots.shutil, "which", lambda name: None)
-    path = plots._plot_automaton(tmp_path / "task_automaton.png")
+    monkeypatch.setattr(plots.automaton.shutil, "which", lambda name: None)
+    path = plots.automaton._plot_automaton(tmp_path / "task_automaton.png")
     from matplotlib.image import imread
 
     gray = imread(path)[..., :3].mean(axis=2)

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from tlshield import cli
-from tlshield.training import METRIC_COLUMNS, clf_scale, evaluate, train
+from tlshield.evaluation import evaluate
+from tlshield.runs import METRIC_COLUMNS
+from tlshield.training import clf_scale, train
 
 
 def read_metrics(run: Path) -> list[dict[str, str]]:
@@ -142,3 +144,31 @@ def test_cli_train_and_evaluate(tmp_path: Path, capsys: pytest.CaptureFixture[st
     printed = capsys.readouterr().out
     assert "wrote" in printed and "success" in printed
     assert (out / "evaluation.json").is_file()
+
+
+def test_cli_without_the_training_extra_names_it(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # None in sys.modules makes `import torch` raise ModuleNotFoundError, as when the extra
+    # is not installed.
+    import sys
+
+    for name in ("torch", "stable_baselines3"):
+        monkeypatch.setitem(sys.modules, name, None)
+    code = cli.main(["train", "--updates", "1", "--out", str(tmp_path / "r"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "pip install 'tlshield[train]'" in err and "Traceback" not in err
+
+
+def test_reproduce_progress_bar_counts_runs(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tlshield import training
+
+    done = []
+    monkeypatch.setattr(training, "_run_one", done.append)
+    training._run_jobs(["a", "b"], workers=1, progress=True)
+    err = capsys.readouterr().err
+    assert done == ["a", "b"]
+    assert "runs" in err and "run" in err and "update" not in err

@@ -15,6 +15,11 @@ import numpy as np
 from tlshield._core import Halfspace, Spec, SpecError, formula_atoms
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 
+#: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
+TRAINING_MODULES = frozenset(
+    {"stable_baselines3", "torch", "matplotlib", "tensorboard", "tqdm", "rich"}
+)
+
 
 def _straight_path(waypoints: Sequence[tuple[float, float]], steps_per_leg: int) -> np.ndarray:
     points = [np.asarray(waypoints[0], dtype=float)]
@@ -134,7 +139,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate_run(run: Path | str, trials: int) -> dict[str, object]:
-    from tlshield.training import evaluate
+    from tlshield.evaluation import evaluate
 
     return evaluate(run, trials=trials)
 
@@ -189,7 +194,8 @@ def _ablation(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from tlshield.plots import plot_all, results_table
+    from tlshield.plots import plot_all
+    from tlshield.report import results_table
 
     for path in plot_all(args.results, args.out):
         print(f"wrote {path}")
@@ -312,6 +318,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.handler(args))
+    except ModuleNotFoundError as err:
+        if (err.name or "").split(".")[0] not in TRAINING_MODULES:
+            raise
+        print(
+            f"tlshield {args.command}: needs the training extra (no module named "
+            f"{err.name!r}); install it with: pip install 'tlshield[train]'",
+            file=sys.stderr,
+        )
+        return 2
     except (FileNotFoundError, ValueError) as err:
         print(f"tlshield {args.command}: error: {err}", file=sys.stderr)
         return 2

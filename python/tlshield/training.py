@@ -1,11 +1,12 @@
-"""PPO on tlshield/Channel-v0 (Stable-Baselines3), per-update metrics, evaluation.
+"""PPO on tlshield/Channel-v0 (Stable-Baselines3) with per-update metrics; the reproduction
+and the ablation of the README (training, then :func:`tlshield.evaluation.evaluate`).
 
-A run folder holds ``config.json`` (what it ran with, and which checkpoint was kept),
-``metrics.csv`` (one row per update, written as it goes, so an interrupted run stays readable),
-``tb/`` (TensorBoard), ``model.zip`` with ``vecnormalize.pkl`` (the kept policy: the best on the
-validation episodes for the default preset, the last one otherwise), ``last_model.zip`` with
-``last_vecnormalize.pkl`` and, after :func:`evaluate`, ``evaluation.json`` and
-``trajectories.npz``.
+A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``config.json`` (what it ran
+with, and which checkpoint was kept), ``metrics.csv`` (one row per update, written as it goes,
+so an interrupted run stays readable), ``tb/`` (TensorBoard), ``model.zip`` with
+``vecnormalize.pkl`` (the kept policy: the best on the validation episodes for the default
+preset, the last one otherwise), ``last_model.zip`` with ``last_vecnormalize.pkl`` and, after
+evaluation, ``evaluation.json`` and ``trajectories.npz``.
 
 PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
 and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
@@ -14,10 +15,11 @@ what the ablation in the README chose (8 environments x 128 steps, minibatches o
 0.999, clip 0.1, a linearly decaying learning rate, 64-64 networks, the best validated
 checkpoint kept). Both: GAE lambda 0.95, CPU, one torch thread (deterministic for a seed).
 Observations and rewards are normalised by running statistics (SB3 ``VecNormalize``, saved as
-``vecnormalize.pkl`` and used by :func:`evaluate`); the metrics are in raw units.
+``vecnormalize.pkl`` and used by the evaluation); the metrics are in raw units.
 
-Evaluation reset seeds start at :data:`EVAL_SEED` (10,000 + trial); training environments
-are seeded from the run seed (``seed * 1000 + env index``), so the two never meet.
+Evaluation reset seeds start at :data:`tlshield.evaluation.EVAL_SEED` (10,000 + trial);
+training environments are seeded from the run seed (``seed * 1000 + env index``), validation
+episodes from :data:`VALIDATION_SEED`, so the three never meet.
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ import csv
 import json
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -34,26 +35,8 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs.channel import CONFIGS, ChannelConfig, ChannelEnv, channel_shield
-
-#: Columns of metrics.csv, in order.
-METRIC_COLUMNS = (
-    "update",
-    "timesteps",
-    "episodes",
-    "return_mean",
-    "return_std",
-    "min_h_c1",
-    "min_h_c2",
-    "min_obstacle_distance",
-    "violations",
-    "trap_entries",
-    "successes",
-    "relaxed",
-    "failed",
-    "clf_scale",
-    "validation_success",
-    "wall_time",
-)
+from tlshield.evaluation import evaluate, rollouts
+from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
 
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -96,8 +79,6 @@ PRESETS: dict[str, dict[str, Any]] = {
         "net_arch": {"pi": [64, 64], "vf": [64, 64]},
     },
 }
-#: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
-EVAL_SEED = 10_000
 #: Reset seeds of the validation episodes that pick the kept checkpoint (disjoint from both).
 VALIDATION_SEED = 20_000
 SCHEDULES = ("fixed", "linear", "exponential")
@@ -300,7 +281,7 @@ def train(
             def policy(obs: np.ndarray) -> np.ndarray:
                 return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
-            outcomes = _rollouts(config, overrides, policy, seeds)[0]
+            outcomes = rollouts(config, overrides, policy, seeds)[0]
             success = sum(o["success"] for o in outcomes) / trials
             if success >= self.best:
                 self.best = success
@@ -368,134 +349,6 @@ def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") ->
     return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, leave=False)
 
 
-def load_run(run: str | Path) -> dict[str, Any]:
-    """The run's config.json (raises FileNotFoundError with a clear message)."""
-    path = Path(run) / "config.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{run}: not a tlshield run folder (no config.json)")
-    return json.loads(path.read_text())
-
-
-def _rollouts(
-    config: str,
-    overrides: dict[str, Any],
-    policy: Callable[[np.ndarray], np.ndarray],
-    seeds: list[int],
-) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
-    """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
-    by side with one batched policy call per step: per-trial outcomes, start states, agent
-    paths and obstacle paths."""
-    envs = [ChannelEnv(config=config, evaluation=True, **overrides) for _ in seeds]
-    obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
-    starts = np.stack([env.state.copy() for env in envs])
-    paths = [[env.state[:2].copy()] for env in envs]
-    obstacle_paths = [[env.state[9:13].copy()] for env in envs]
-    outcomes = [
-        {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
-        for s in seeds
-    ]
-    active = list(range(len(seeds)))
-    for t in range(envs[0].cfg.horizon):
-        if not active:
-            break
-        actions = np.asarray(policy(obs[active]), dtype=np.float64).reshape(len(active), -1)
-        still = []
-        for i, action in zip(active, actions, strict=True):
-            o, _, terminated, truncated, info = envs[i].step(action)
-            obs[i] = o
-            paths[i].append(envs[i].state[:2].copy())
-            obstacle_paths[i].append(envs[i].state[9:13].copy())
-            out = outcomes[i]
-            out["violations"] += int(info["violation"])
-            out["steps"] = t + 1
-            if terminated or truncated:
-                out["success"] = bool(info["success"])
-                out["collision"] = bool(info["collision"])
-            else:
-                still.append(i)
-        active = still
-    return (
-        outcomes,
-        starts,
-        [np.array(p) for p in paths],
-        [np.array(p) for p in obstacle_paths],
-    )
-
-
-def evaluate(
-    run: str | Path,
-    trials: int = 100,
-    seed: int = EVAL_SEED,
-    policy: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> dict[str, Any]:
-    """The paper's evaluation of a trained run: CBF always on; an episode ends at the horizon,
-    on success or on collision. All trials run side by side (one batched policy call per
-    step); ``policy`` maps a batch of observations ``(N, d)`` to actions ``(N, 2)``. Trial
-    ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
-    trial: reset seed, success, collision, steps, violating steps) and ``trajectories.npz``
-    (each trial's start state, agent path and obstacle paths)."""
-    if not (isinstance(trials, int) and trials > 0):
-        raise ValueError(f"trials = {trials!r}: expected a positive integer")
-    record = load_run(run)
-    if policy is None:
-        policy = _saved_policy(Path(run))
-    outcomes, starts, paths, obstacle_paths = _rollouts(
-        record["config"],
-        record.get("overrides", {}),
-        policy,
-        [seed + i for i in range(trials)],
-    )
-    successes = sum(o["success"] for o in outcomes)
-    steps_to_success = [o["steps"] for o in outcomes if o["success"]]
-    result = {
-        "config": record["config"],
-        "seed": record["seed"],
-        "trials": trials,
-        "eval_seed": seed,
-        "success_rate": successes / trials,
-        "successes": successes,
-        "collisions": sum(o["collision"] for o in outcomes),
-        "violation_steps": sum(o["violations"] for o in outcomes),
-        "violating_trials": sum(o["violations"] > 0 for o in outcomes),
-        "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
-        "outcomes": outcomes,
-    }
-    Path(run, "evaluation.json").write_text(json.dumps(result, indent=2))
-    np.savez_compressed(
-        Path(run, "trajectories.npz"),
-        starts=starts,
-        lengths=np.array([len(p) for p in paths]),
-        paths=np.concatenate(paths),
-        obstacle_paths=np.concatenate(obstacle_paths),
-    )
-    return result
-
-
-def _saved_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
-    """The trained policy of a run folder (deterministic), with its observation statistics."""
-    model_path = run / "model.zip"
-    if not model_path.is_file():
-        raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
-    import pickle
-
-    import torch
-    from stable_baselines3 import PPO
-
-    torch.set_num_threads(1)
-    model = PPO.load(model_path, device="cpu")
-    stats_path = run / "vecnormalize.pkl"
-    normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
-    if stats_path.is_file():
-        with stats_path.open("rb") as f:
-            stats = pickle.load(f)
-        normalize = stats.normalize_obs
-
-    def policy(obs: np.ndarray) -> np.ndarray:
-        return model.predict(normalize(obs), deterministic=True)[0]
-
-    return policy
-
-
 def _run_one(job: tuple[str, int, int, str, int, dict[str, Any]]) -> str:
     """One (config, seed) of a reproduction: train, then evaluate (a worker process)."""
     config, seed, updates, folder, trials, options = job
@@ -537,11 +390,12 @@ def reproduce(
     for config in configs:
         for seed in seeds:
             folder = root / f"{config}_s{seed}"
-            done = (folder / "evaluation.json").is_file() and _finished(folder, updates)
+            done = (folder / "evaluation.json").is_file() and is_finished(folder, updates)
             if not done:
                 jobs.append((config, seed, updates, str(folder), trials, options))
     _run_jobs(jobs, workers, progress)
-    from tlshield.plots import plot_all, results_table
+    from tlshield.plots import plot_all
+    from tlshield.report import results_table
 
     plot_all(root)
     (root / "results.md").write_text(results_table(root) + "\n")
@@ -609,7 +463,7 @@ def ablation(
     for k, (_, options) in enumerate(rows):
         for seed in seeds:
             folder = root / f"row{k}_s{seed}"
-            if not ((folder / "evaluation.json").is_file() and _finished(folder, updates)):
+            if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
                 jobs.append((config, seed, updates, str(folder), trials, options))
     _run_jobs(jobs, workers, progress)
     lines = [
@@ -618,28 +472,19 @@ def ablation(
         "|---|---|---:|---:|---:|---:|---:|",
     ]
     for k, (label, _) in enumerate(rows):
-        evals = [json.loads((root / f"row{k}_s{s}" / "evaluation.json").read_text()) for s in seeds]
-        metrics = [_read_metric_rows(root / f"row{k}_s{s}" / "metrics.csv") for s in seeds]
+        runs = [r for s in seeds if (r := load_run(root / f"row{k}_s{s}")) and r.evaluation]
+        if len(runs) != len(seeds):
+            raise RuntimeError(f"{root}: row {k} has a run without evaluation.json")
+        evals = [r.evaluation or {} for r in runs]
         rates = [e["success_rate"] for e in evals]
+        collisions = sum(e["collisions"] for e in evals)
+        metrics = [r.metrics for r in runs]
         lines.append(
             f"| {label} | {' / '.join(f'{r:.2f}' for r in rates)} | {np.mean(rates):.2f} "
-            f"| {sum(e['collisions'] for e in evals)} "
-            f"| {sum(int(sum(r['violations'] for r in m)) for m in metrics)} "
-            f"| {min(min(r['min_obstacle_distance'] for r in m) for m in metrics):.2f} "
-            f"| {sum(int(sum(r['relaxed'] for r in m)) for m in metrics)} |"
+            f"| {collisions} "
+            f"| {int(sum(m['violations'].sum() for m in metrics))} "
+            f"| {min(float(np.nanmin(m['min_obstacle_distance'])) for m in metrics):.2f} "
+            f"| {int(sum(m['relaxed'].sum() for m in metrics))} |"
         )
     (root / "ablation.md").write_text("\n".join(lines) + "\n")
     return root
-
-
-def _read_metric_rows(path: Path) -> list[dict[str, float]]:
-    with path.open() as f:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
-
-
-def _finished(folder: Path, updates: int) -> bool:
-    try:
-        record = load_run(folder)
-    except FileNotFoundError:
-        return False
-    return bool(record.get("finished")) and record.get("updates") == updates

@@ -27,18 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
+from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
 from tlshield.wrappers import FsaTracker, shield_info
 
 #: The task: visit g1 or g2, then g3, staying inside the channel until g3 (paper Eq. 6C1).
 TASK = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
 
-#: Length of the state vector.
-STATE_DIM = 13
-
-#: Index of each named state value.
-X, Y, THETA = 0, 1, 2
-GOAL_DIMS = ((3, 4), (5, 6), (7, 8))
-OBSTACLE_DIMS = ((9, 10), (11, 12))
 
 #: Observation layouts (see the module docs).
 OBSERVATIONS = ("relative", "paper")
@@ -244,6 +238,19 @@ class ChannelConfig:
                 continue
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} = {value!r}: expected a finite number >= 0")
+        inside = self.half_width / SQRT2
+        if self.goal_radius >= inside:
+            raise ValueError(
+                f"half_width = {self.half_width!r}, goal_radius = {self.goal_radius!r}: a goal "
+                f"disc must fit inside the channel, i.e. half_width / sqrt(2) = {inside:.3g} > "
+                "goal_radius"
+            )
+        if self.outside_goal_v[0] < inside + self.goal_radius:
+            raise ValueError(
+                f"outside_goal_v = {self.outside_goal_v!r}: a goal drawn outside the channel must "
+                "lie wholly outside it, i.e. outside_goal_v[0] >= half_width / sqrt(2) + "
+                f"goal_radius = {inside + self.goal_radius:.3g}"
+            )
         lo, hi = np.asarray(self.rl_bounds, dtype=float)
         if lo.shape != (2,) or hi.shape != (2,) or np.any(lo >= hi):
             raise ValueError(
@@ -323,16 +330,69 @@ def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) ->
 
 
 class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
-    """``tlshield/Channel-v0``: the paper's case study as one Gymnasium environment.
+    """``tlshield/Channel-v0``: the paper's case study (Li & Belta, Sec. VI) as one Gymnasium
+    environment.
 
-    ``config`` picks the shield ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf"). ``evaluation=True``
-    applies the paper's evaluation rules: the CBF is always on, and the episode also ends on a
-    collision. Training: the episode ends on success or at the horizon; violations and
-    collisions are allowed (and cost reward). ``shield_in_env=False`` leaves the shield to a
-    vectorised wrapper (:class:`tlshield.wrappers.ShieldedVecEnv` or ``ShieldedVectorEnv``,
-    with ``action_fn=env.rl_action``), which scales and shields the actions of all
-    sub-environments in one call; ``step`` then takes the applied action in physical units.
-    Any :class:`ChannelConfig` field is a keyword override.
+    ## Description
+
+    A unicycle (its reference point ``eps`` ahead of the centre, Eq. 6A2) must visit g1 or g2,
+    then g3, staying inside the diagonal channel ``|x - y| < w`` until it reaches g3
+    (:data:`TASK`). Two obstacles oscillate across the channel. One of g1/g2 may lie outside
+    the channel (a goal the task cannot take without violating it); g3 and the other are always
+    inside, so every episode is solvable. The CBF/CLF shield of the configuration corrects the
+    agent's action before the plant applies it.
+
+    ## Action Space
+
+    ``Box(-1, 1, (2,), float64)``: the forward speed ``a_v`` and turn rate ``a_theta`` of the
+    reference point, scaled to ``ChannelConfig.rl_bounds`` (by default +-1 m/s and +-2 rad/s).
+    With ``shield_in_env=False`` ``step`` takes the applied action in physical units instead.
+
+    ## Observation Space
+
+    ``ChannelConfig.observation = "relative"`` (default): 20 values then the one-hot automaton
+    state -- ``cos theta, sin theta``, the channel constraints ``c1, c2``, the three goals and
+    the two obstacles relative to the agent, the obstacles' velocities and the automaton's next
+    goal (Eq. 5B1, zero in acceptance), in the agent's frame (x ahead, y to the left).
+    ``"paper"``: the 13 state values ``[x, y, theta, g1, g2, g3, o1, o2]`` then the one-hot
+    automaton state.
+
+    ## Rewards
+
+    ``r = r_tl + w * min(d - safe_distance, 0) - collision_penalty * [d < obstacle_radius]``,
+    ``d`` the distance to the nearer obstacle. ``r_tl`` is the progress-aware task reward
+    (``reward="progress"``, default: finishing always out-earns dawdling, the trap is the worst)
+    or the paper's Eq. 5A1 (``reward="paper"``). ``info["tl_reward"]`` is ``r_tl``.
+
+    ## Starting State
+
+    The reference point within ``start_spread`` of the origin, heading ``pi/4 +-
+    start_heading``; goals and obstacles drawn from the reset seed (``reset(seed=...)``).
+
+    ## Episode End
+
+    Terminated on success (the automaton accepts). Truncated at ``horizon`` steps (200). With
+    ``evaluation=True`` (the paper's evaluation rules) the episode also terminates on a
+    collision and the CBF is on in every configuration. Training does not end on collisions or
+    violations: they cost reward.
+
+    ## Arguments
+
+    ``config``: the shield, one of "rl", "rl_cbf", "rl_clf", "rl_cbf_clf" (default).
+    ``evaluation``: the paper's evaluation rules (above). ``render_mode``: "rgb_array" or
+    "human". ``shield_in_env``: False leaves the shield to a vectorised wrapper
+    (:class:`tlshield.wrappers.ShieldedVecEnv` or ``ShieldedVectorEnv`` with
+    ``action_fn=env.rl_action``), which shields all sub-environments in one call. Any
+    :class:`ChannelConfig` field is a keyword override, checked here (a ValueError names it)::
+
+        gymnasium.make("tlshield/Channel-v0", config="rl_cbf", observation="paper")
+
+    ## Info
+
+    ``fsa_state``, ``success``, ``trap``, ``constraints`` (``c1``, ``c2``),
+    ``min_obstacle_distance``, ``collision``, ``violation``; after a step also ``action`` (the
+    applied action), ``tl_reward`` and ``shield`` (``a_rl``, ``a_cbf``, ``a_clf``, ``delta``,
+    ``status``); after a reset ``goal_outside_channel`` and ``clf_goal_outside``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
@@ -517,7 +577,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         info = {
             "fsa_state": q,
             "success": self.tracker.success,
-            "trap": False,
+            "trap": self.tracker.trapped,
             "goal_outside_channel": outside,
             # Whether the goal the CLF heads for first lies outside the channel.
             "clf_goal_outside": bool(goal is not None and abs(goal[1] - goal[0]) > cfg.half_width),

@@ -25,13 +25,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ChannelRenderer", "Scene"]
+from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
 
-#: Index of each named value of the 13-value state.
-_X, _Y, _THETA = 0, 1, 2
-_GOALS = ((3, 4), (5, 6), (7, 8))
-_OBSTACLES = ((9, 10), (11, 12))
-_STATE_DIM = 13
+__all__ = ["ChannelRenderer", "Scene", "draw_channel"]
+
 
 #: Length of the heading arrow (data units, metres).
 _ARROW_LENGTH = 0.6
@@ -56,6 +53,39 @@ _AGENT_COLOR = "black"
 _NON_INTERACTIVE = frozenset(
     {"agg", "cairo", "pdf", "pgf", "ps", "svg", "template", "module://matplotlib_inline"}
 )
+
+
+def draw_channel(
+    ax: Any,
+    half_width: float,
+    lo: float,
+    hi: float,
+    *,
+    alpha: float,
+    zorder: float = 1,
+    label: str | None = None,
+) -> None:
+    """The channel ``|x - y| < half_width`` on ``ax`` from ``x = lo`` to ``x = hi``: the band
+    between ``c2: y = x - w`` and ``c1: y = x + w`` and its two border lines (also used by the
+    trajectory figure)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Polygon
+
+    w = float(half_width)
+    band = [(lo, lo - w), (hi, hi - w), (hi, hi + w), (lo, lo + w)]
+    ax.add_patch(
+        Polygon(
+            band,
+            closed=True,
+            facecolor=_CHANNEL_COLOR,
+            alpha=alpha,
+            edgecolor="none",
+            zorder=zorder,
+            label=label,
+        )
+    )
+    for offset in (w, -w):
+        ax.add_line(Line2D([lo, hi], [lo + offset, hi + offset], color=_CHANNEL_COLOR, lw=0.9))
 
 
 @dataclass(frozen=True)
@@ -119,7 +149,7 @@ class ChannelRenderer:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
         from matplotlib.lines import Line2D
-        from matplotlib.patches import Circle, FancyArrowPatch, Polygon
+        from matplotlib.patches import Circle, FancyArrowPatch
         from matplotlib.transforms import ScaledTranslation
 
         sc = self.scene
@@ -139,22 +169,11 @@ class ChannelRenderer:
         ax.grid(True, color="0.9", linewidth=0.4, zorder=0)
         ax.set_axisbelow(True)
 
-        # The channel: the band between y = x - w (c2) and y = x + w (c1), long enough to
-        # cover the arena; the axes clip it.
+        # The channel, long enough to cover the arena; the axes clip it.
         lo = min(xmin, ymin) - w - 1.0
         hi = max(xmax, ymax) + w + 1.0
-        band = Polygon(
-            [(lo, lo - w), (hi, hi - w), (hi, hi + w), (lo, lo + w)],
-            closed=True,
-            facecolor=_CHANNEL_COLOR,
-            alpha=0.12,
-            edgecolor="none",
-            zorder=1,
-        )
-        ax.add_patch(band)
-        for name, offset in (("c1", w), ("c2", -w)):  # c1: y = x + w, c2: y = x - w
-            line = Line2D([lo, hi], [lo + offset, hi + offset], color=_CHANNEL_COLOR, lw=0.9)
-            ax.add_line(line)
+        draw_channel(ax, w, lo, hi, alpha=0.12, zorder=1)
+        for name, offset in (("c1", w), ("c2", -w)):
             self._label_line(ax, name, offset)
 
         # Moving artists. Labels are mathtext markers: drawn as cached paths, several times
@@ -186,7 +205,7 @@ class ChannelRenderer:
             )
             goal_labels.append(self._marker_label(ax, f"g{k + 1}", color, 9.0))
         obstacles, obstacle_labels = [], []
-        for k in range(len(_OBSTACLES)):
+        for k in range(len(OBSTACLE_DIMS)):
             obstacles.append(
                 Circle(
                     (0.0, 0.0),
@@ -362,8 +381,8 @@ class ChannelRenderer:
             An RGB ``uint8`` array of shape ``(size, size, 3)``.
         """
         s = np.asarray(state, dtype=np.float64).ravel()
-        if s.size < _STATE_DIM:
-            raise ValueError(f"state has {s.size} values, expected {_STATE_DIM}")
+        if s.size < STATE_DIM:
+            raise ValueError(f"state has {s.size} values, expected {STATE_DIM}")
         traj = np.asarray(trajectory, dtype=np.float64)
         if traj.size == 0:
             traj = np.empty((0, 2))
@@ -375,11 +394,11 @@ class ChannelRenderer:
         elif title != self._title:
             self._set_title(title)
 
-        x, y, theta = s[_X], s[_Y], s[_THETA]
-        for circle, label, (i, j) in zip(self._goals, self._goal_labels, _GOALS, strict=True):
+        x, y, theta = s[X], s[Y], s[THETA]
+        for circle, label, (i, j) in zip(self._goals, self._goal_labels, GOAL_DIMS, strict=True):
             self._place(circle, label, s[i], s[j], self.scene.goal_radius)
         for circle, label, (i, j) in zip(
-            self._obstacles, self._obstacle_labels, _OBSTACLES, strict=True
+            self._obstacles, self._obstacle_labels, OBSTACLE_DIMS, strict=True
         ):
             self._place(circle, label, s[i], s[j], self.scene.obstacle_radius)
         self._traj.set_data(traj[:, 0], traj[:, 1])

@@ -1,0 +1,151 @@
+"""The paper's evaluation of a trained run (Li & Belta, Sec. VI): the CBF always on; an
+episode ends at the horizon, on success or on collision. All trials run side by side with one
+batched policy call per step.
+
+Evaluation reset seeds start at :data:`EVAL_SEED` (10,000 + trial); training environments are
+seeded from the run seed (``seed * 1000 + env index``) and validation episodes from
+``VALIDATION_SEED`` (20,000), so the three never meet.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tlshield.envs.channel import ChannelEnv
+from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
+from tlshield.runs import read_config
+
+__all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
+
+#: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
+EVAL_SEED = 10_000
+
+
+def rollouts(
+    config: str,
+    overrides: dict[str, Any],
+    policy: Callable[[np.ndarray], np.ndarray],
+    seeds: list[int],
+) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
+    by side with one batched policy call per step: per-trial outcomes, start states, agent
+    paths and obstacle paths."""
+    envs = [ChannelEnv(config=config, evaluation=True, **overrides) for _ in seeds]
+    obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
+    starts = np.stack([env.state.copy() for env in envs])
+    paths = [[env.state[[X, Y]]] for env in envs]
+    obstacle_paths = [[_obstacles(env)] for env in envs]
+    outcomes = [
+        {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
+        for s in seeds
+    ]
+    active = list(range(len(seeds)))
+    for t in range(envs[0].cfg.horizon):
+        if not active:
+            break
+        actions = np.asarray(policy(obs[active]), dtype=np.float64).reshape(len(active), -1)
+        still = []
+        for i, action in zip(active, actions, strict=True):
+            o, _, terminated, truncated, info = envs[i].step(action)
+            obs[i] = o
+            paths[i].append(envs[i].state[[X, Y]])
+            obstacle_paths[i].append(_obstacles(envs[i]))
+            out = outcomes[i]
+            out["violations"] += int(info["violation"])
+            out["steps"] = t + 1
+            if terminated or truncated:
+                out["success"] = bool(info["success"])
+                out["collision"] = bool(info["collision"])
+            else:
+                still.append(i)
+        active = still
+    return (
+        outcomes,
+        starts,
+        [np.array(p) for p in paths],
+        [np.array(p) for p in obstacle_paths],
+    )
+
+
+def evaluate(
+    run: str | Path,
+    trials: int = 100,
+    seed: int = EVAL_SEED,
+    policy: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> dict[str, Any]:
+    """The paper's evaluation of a trained run: CBF always on; an episode ends at the horizon,
+    on success or on collision. All trials run side by side (one batched policy call per
+    step); ``policy`` maps a batch of observations ``(N, d)`` to actions ``(N, 2)``. Trial
+    ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
+    trial: reset seed, success, collision, steps, violating steps) and ``trajectories.npz``
+    (each trial's start state, agent path and obstacle paths)."""
+    if not (isinstance(trials, int) and trials > 0):
+        raise ValueError(f"trials = {trials!r}: expected a positive integer")
+    record = read_config(run)
+    if policy is None:
+        policy = saved_policy(Path(run))
+    outcomes, starts, paths, obstacle_paths = rollouts(
+        record["config"],
+        record.get("overrides", {}),
+        policy,
+        [seed + i for i in range(trials)],
+    )
+    successes = sum(o["success"] for o in outcomes)
+    steps_to_success = [o["steps"] for o in outcomes if o["success"]]
+    result = {
+        "config": record["config"],
+        "seed": record["seed"],
+        "trials": trials,
+        "eval_seed": seed,
+        "success_rate": successes / trials,
+        "successes": successes,
+        "collisions": sum(o["collision"] for o in outcomes),
+        "violation_steps": sum(o["violations"] for o in outcomes),
+        "violating_trials": sum(o["violations"] > 0 for o in outcomes),
+        "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
+        "outcomes": outcomes,
+    }
+    Path(run, "evaluation.json").write_text(json.dumps(result, indent=2))
+    np.savez_compressed(
+        Path(run, "trajectories.npz"),
+        starts=starts,
+        lengths=np.array([len(p) for p in paths]),
+        paths=np.concatenate(paths),
+        obstacle_paths=np.concatenate(obstacle_paths),
+    )
+    return result
+
+
+def saved_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
+    """The trained policy of a run folder (deterministic), with its observation statistics."""
+    model_path = run / "model.zip"
+    if not model_path.is_file():
+        raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
+    import pickle
+
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.set_num_threads(1)
+    model = PPO.load(model_path, device="cpu")
+    stats_path = run / "vecnormalize.pkl"
+    normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
+    if stats_path.is_file():
+        with stats_path.open("rb") as f:
+            stats = pickle.load(f)
+        normalize = stats.normalize_obs
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        return model.predict(normalize(obs), deterministic=True)[0]
+
+    return policy
+
+
+def _obstacles(env: ChannelEnv) -> np.ndarray:
+    """The obstacles' centres ``[o1x, o1y, o2x, o2y]`` (a copy)."""
+    return env.state[[i for dims in OBSTACLE_DIMS for i in dims]]

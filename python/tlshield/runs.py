@@ -1,0 +1,238 @@
+"""The run-folder schema and its loaders, shared by training, evaluation, the report and the
+figures.
+
+A results folder holds one run folder per configuration and seed (``<config>_s<seed>/``):
+
+* ``config.json``: what the run trained with (configuration, seed, preset, environment
+  overrides, PPO settings), whether it finished and which checkpoint was kept;
+* ``metrics.csv``: one row per PPO update (:data:`METRIC_COLUMNS`), written as it goes;
+* after evaluation, ``evaluation.json`` (totals and one record per trial: reset seed, success,
+  collision, steps, violating steps) and ``trajectories.npz`` (each trial's start state, agent
+  path and obstacle paths).
+
+Any of the last three may be missing, empty or partial (an interrupted run): the loaders leave
+out what is not there, never an error.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tlshield.envs.channel import CONFIGS, ChannelConfig
+from tlshield.envs.layout import STATE_DIM
+
+__all__ = ["METRIC_COLUMNS", "Run", "is_finished", "load_results", "load_run", "read_config"]
+
+#: Columns of metrics.csv, in order.
+METRIC_COLUMNS = (
+    "update",
+    "timesteps",
+    "episodes",
+    "return_mean",
+    "return_std",
+    "min_h_c1",
+    "min_h_c2",
+    "min_obstacle_distance",
+    "violations",
+    "trap_entries",
+    "successes",
+    "relaxed",
+    "failed",
+    "clf_scale",
+    "validation_success",
+    "wall_time",
+)
+
+
+@dataclass
+class Run:
+    """One run folder of a results folder."""
+
+    #: The run folder.
+    path: Path
+    #: Configuration name ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf").
+    config: str
+    #: Training seed.
+    seed: int
+    #: metrics.csv by column (:data:`tlshield.training.METRIC_COLUMNS`), one value per update;
+    #: every array is empty when the run has no complete row yet.
+    metrics: dict[str, NDArray[np.float64]]
+    #: evaluation.json, or None when the run was not evaluated.
+    evaluation: dict[str, Any] | None
+    #: ``(starts, paths)`` of trajectories.npz: the ``(trials, 13)`` initial states and one
+    #: ``(length, 2)`` xy path per trial; None when missing.
+    trajectories: tuple[NDArray[np.float64], list[NDArray[np.float64]]] | None
+    #: The whole config.json.
+    record: dict[str, Any] = field(default_factory=dict)
+    #: One ``(length, 4)`` path of the two obstacle centres per trial (None when missing).
+    obstacle_paths: list[NDArray[np.float64]] | None = None
+
+    @property
+    def updates(self) -> int:
+        """Number of complete metric rows (PPO updates)."""
+        return len(self.metrics["update"])
+
+    @property
+    def env(self) -> ChannelConfig:
+        """The environment constants the run trained with (defaults for missing fields)."""
+        return _env_config(self.record)
+
+
+def _tuples(value: Any) -> Any:
+    """JSON lists back to the (nested) tuples of :class:`ChannelConfig`."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
+def _env_config(record: dict[str, Any]) -> ChannelConfig:
+    known = ChannelConfig.__dataclass_fields__
+    env = record.get("env")
+    values = {k: _tuples(v) for k, v in env.items() if k in known} if isinstance(env, dict) else {}
+    try:
+        return ChannelConfig(**values)
+    except TypeError:  # pragma: no cover - a config.json from an incompatible version
+        return ChannelConfig()
+
+
+def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:
+    """metrics.csv by column; tolerates a missing or empty file and a last row cut short."""
+    rows: list[list[float]] = []
+    if path.is_file():
+        with path.open(newline="") as f:
+            for row in csv.DictReader(f):
+                try:
+                    rows.append([float(row[c]) for c in METRIC_COLUMNS])
+                except (KeyError, TypeError, ValueError):
+                    continue  # an incomplete row (the run was stopped while writing it)
+    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(METRIC_COLUMNS))
+    return {c: table[:, i].copy() for i, c in enumerate(METRIC_COLUMNS)}
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        warnings.warn(f"{path}: unreadable ({err}); ignoring it", RuntimeWarning, stacklevel=3)
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _read_trajectories(
+    path: Path,
+) -> tuple[NDArray[np.float64], list[NDArray[np.float64]]] | None:
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as data:
+            starts = np.asarray(data["starts"], dtype=np.float64)
+            lengths = np.asarray(data["lengths"], dtype=np.int64)
+            flat = np.asarray(data["paths"], dtype=np.float64)
+    except (OSError, ValueError, KeyError) as err:
+        warnings.warn(f"{path}: unreadable ({err}); ignoring it", RuntimeWarning, stacklevel=3)
+        return None
+    if (
+        starts.ndim != 2
+        or starts.shape[1] < STATE_DIM
+        or lengths.shape != (len(starts),)
+        or flat.ndim != 2
+        or flat.shape[1] != 2
+        or int(lengths.sum()) != len(flat)
+    ):
+        warnings.warn(f"{path}: inconsistent arrays; ignoring it", RuntimeWarning, stacklevel=3)
+        return None
+    paths = np.split(flat, np.cumsum(lengths)[:-1]) if len(lengths) else []
+    return starts, list(paths)
+
+
+def _read_obstacle_paths(path: Path, lengths: list[int]) -> list[NDArray[np.float64]] | None:
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as data:
+            if "obstacle_paths" not in data:
+                return None
+            flat = np.asarray(data["obstacle_paths"], dtype=np.float64)
+    except (OSError, ValueError) as err:
+        warnings.warn(f"{path}: unreadable ({err}); ignoring it", RuntimeWarning, stacklevel=3)
+        return None
+    if flat.ndim != 2 or flat.shape[1] != 4 or len(flat) != sum(lengths):
+        return None
+    return list(np.split(flat, np.cumsum(lengths)[:-1])) if lengths else []
+
+
+def load_run(folder: str | Path) -> Run | None:
+    """The run in ``folder``; None when it has no readable ``config.json``."""
+    folder = Path(folder)
+    record = _read_json(folder / "config.json")
+    if record is None or "config" not in record:
+        return None
+    try:
+        seed = int(record.get("seed", 0))
+    except (TypeError, ValueError):
+        seed = 0
+    trajectories = _read_trajectories(folder / "trajectories.npz")
+    lengths = [len(p) for p in trajectories[1]] if trajectories else []
+    return Run(
+        path=folder,
+        config=str(record["config"]),
+        seed=seed,
+        metrics=_read_metrics(folder / "metrics.csv"),
+        evaluation=_read_json(folder / "evaluation.json"),
+        trajectories=trajectories,
+        record=record,
+        obstacle_paths=_read_obstacle_paths(folder / "trajectories.npz", lengths),
+    )
+
+
+def _config_order(config: str) -> tuple[int, str]:
+    known = list(CONFIGS)
+    return (known.index(config), "") if config in known else (len(known), config)
+
+
+def load_results(results: str | Path) -> dict[str, list[Run]]:
+    """The runs of a results folder: configuration -> runs sorted by seed, configurations in
+    the paper's order ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf", then any other).
+
+    A run is a sub-folder with a ``config.json`` (``results`` itself counts when it is a run
+    folder). Raises FileNotFoundError when the folder does not exist or holds no run.
+    """
+    root = Path(results)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such results folder")
+    folders = [root] if (root / "config.json").is_file() else sorted(root.iterdir())
+    runs = [run for folder in folders if folder.is_dir() and (run := load_run(folder))]
+    if not runs:
+        raise FileNotFoundError(
+            f"{root}: no runs found (expected sub-folders <config>_s<seed>/ with a config.json, "
+            "as written by `tlshield reproduce --out`)"
+        )
+    grouped: dict[str, list[Run]] = {}
+    for run in sorted(runs, key=lambda r: (_config_order(r.config), r.seed, r.path.name)):
+        grouped.setdefault(run.config, []).append(run)
+    return grouped
+
+
+def read_config(run: str | Path) -> dict[str, Any]:
+    """The run's config.json (raises FileNotFoundError with a clear message)."""
+    path = Path(run) / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run}: not a tlshield run folder (no config.json)")
+    return json.loads(path.read_text())
+
+
+def is_finished(folder: str | Path, updates: int) -> bool:
+    """Whether the run in ``folder`` finished training ``updates`` updates."""
+    try:
+        record = read_config(folder)
+    except FileNotFoundError:
+        return False
+    return bool(record.get("finished")) and record.get("updates") == updates
