@@ -51,9 +51,10 @@ from typing import Any
 
 import numpy as np
 
-FORMULA = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
+from tlshield.envs.channel import STATE_DIM
+from tlshield.envs.channel import TASK as FORMULA
+
 HORIZON = 200  # T: a trajectory has T + 1 states
-STATE_DIM = 13
 RADIUS = 0.5
 HALF_WIDTH = 1.5
 GOAL_DIMS = {"g1": (3, 4), "g2": (5, 6), "g3": (7, 8)}

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from tlshield.codes import Status
 from tlshield.envs.channel import OBSTACLE_DIMS, THETA, ChannelEnv, X, Y
 
 
@@ -61,11 +62,11 @@ def attack(steps: int, seed: int, config: str, **overrides: object) -> dict[str,
         counts["collisions"] += info["collision"]
         counts["violations"] += info["violation"]
         status = info["shield"]["status"]
-        counts["relaxed"] += status == "relaxed"
-        counts["failed"] += status == "failed"
+        counts["relaxed"] += status == Status.RELAXED
+        counts["failed"] += status == Status.FAILED
         min_d = min(min_d, info["min_obstacle_distance"])
         min_h = min(min_h, *info["constraints"].values())
-        if status == "relaxed":
+        if status == Status.RELAXED:
             max_slack = max(max_slack, env.last_slack)
         if terminated or truncated:
             episode += 1

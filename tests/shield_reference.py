@@ -41,6 +41,11 @@ def parse_guard(text: str, atoms: Sequence[str]) -> list[Cube]:
     return cubes
 
 
+def literal(text: str) -> tuple[str, bool]:
+    """A literal's text as tlshield encodes it: ``"!g3"`` -> ``("g3", False)``."""
+    return (text[1:], False) if text.startswith("!") else (text, True)
+
+
 @dataclass(frozen=True)
 class Task:
     """The case study's predicates: three goal balls (centres in the state), two channel
@@ -87,7 +92,10 @@ class Structure:
     def __init__(self, automaton: Any) -> None:
         atoms = automaton.atoms
         self.cnf = {
-            q: [[(atoms.index(a), pos) for a, pos in clause] for clause in automaton.trap_cnf(q)]
+            q: [
+                [(atoms.index(a), pos) for a, pos in map(literal, clause)]
+                for clause in automaton.trap_cnf(q)
+            ]
             for q in range(automaton.num_states)
         }
         self.progress: dict[int, list[list[Cube]]] = {q: [] for q in range(automaton.num_states)}
@@ -236,8 +244,10 @@ class CvxpyShield:
             "tol_ktratio": 1e-8,
         }
 
-    def solve(self, rows: Rows) -> tuple[np.ndarray, np.ndarray, float, str] | None:
-        """(a_cbf, a_clf, delta, cvxpy status), or None when not solved."""
+    def solve(
+        self, rows: Rows, fresh: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, float, str] | None:
+        """(a_cbf, a_clf, delta, cvxpy status), or None when not solved (by a fresh problem)."""
         nb = rows.lg.shape[0]
         lg = np.zeros((MAX_BARRIERS, 2))
         rhs = np.full(MAX_BARRIERS, 1.0)
@@ -248,7 +258,12 @@ class CvxpyShield:
         self.clf_lo.value, self.clf_hi.value = np.full(2, clo), np.full(2, chi)
         self.problem.solve(solver="CLARABEL", **self.settings)
         if self.problem.status not in ("optimal", "optimal_inaccurate"):
-            return None
+            if fresh:
+                return None
+            # After many solves of the same parametrised problem, Clarabel via cvxpy has
+            # (rarely) reported a borderline instance infeasible that a freshly built problem
+            # solves to optimality: infeasibility is only concluded by a fresh problem.
+            return CvxpyShield(self.params, relaxed=self.sigma is not None).solve(rows, fresh=True)
         d = float(self.d.value) if rows.has_goal else 0.0
         return (
             np.asarray(self.a_cbf.value),

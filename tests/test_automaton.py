@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import tlshield
+from tests.shield_reference import literal
 from tlshield.cli import main
 from tlshield.envs.channel import STATE_DIM, channel_task_spec
 
@@ -51,14 +52,14 @@ def test_running_example_structure(running: tlshield.Automaton) -> None:
         (2, 3, "a | b"),
         (3, 3, "true"),
     ]
-    assert running.trap_cnf(0) == [[("a", False), ("c", True)], [("b", False), ("c", True)]]
+    assert running.trap_cnf(0) == [["!a", "c"], ["!b", "c"]]
     assert running.trap_cnf(2) == []
 
 
 def test_running_example_safe_set_and_reward(running: tlshield.Automaton) -> None:
     s = np.array([2.0, 0.0])  # between a and b, far from c
     # The paper's C(s, q0) = {!a, !b}.
-    assert running.safe_set(0, s) == [("a", False, 1.0), ("b", False, 1.0)]
+    assert running.safe_set(0, s) == [("!a", 1.0), ("!b", 1.0)]
     assert running.safe_set(2, s) == []
     # rho(D_q0) = -5 (c is 5 beyond reach); rho(!psi_trap) = 1; min(-5, 2 * 1).
     assert running.reward(0, s, 2.0) == -5.0
@@ -83,11 +84,7 @@ def test_task_automaton(task: tlshield.Automaton) -> None:
     assert task.atoms == ["g1", "g2", "g3", "c1", "c2"]
     assert (0, 3, "g1 & !g3 & c1 & c2 | g2 & !g3 & c1 & c2") in task.edges()
     assert (3, 2, "g3") in task.edges()
-    assert task.trap_cnf(0) == [
-        [("g3", True), ("c1", True)],
-        [("g3", True), ("c2", True)],
-        [("g1", True), ("g2", True), ("g3", False)],
-    ]
+    assert task.trap_cnf(0) == [["g3", "c1"], ["g3", "c2"], ["g1", "g2", "!g3"]]
 
 
 def test_task_safe_set_near_the_channel_border(task: tlshield.Automaton) -> None:
@@ -95,8 +92,8 @@ def test_task_safe_set_near_the_channel_border(task: tlshield.Automaton) -> None
     s[1] = 1.4  # x = 0, y = 1.4: c1 = 0.1 (close to the border), c2 = 2.9
     s[3:9] = [3.0, 3.0, 5.0, 4.0, 8.0, 8.0]
     kept = task.safe_set(0, s)
-    assert [(a, p) for a, p, _ in kept] == [("c1", True), ("c2", True), ("g3", False)]
-    np.testing.assert_allclose([v for *_, v in kept], [0.1, 2.9, math.hypot(8.0, 6.6) - 0.5])
+    assert [lit for lit, _ in kept] == ["c1", "c2", "!g3"]
+    np.testing.assert_allclose([v for _, v in kept], [0.1, 2.9, math.hypot(8.0, 6.6) - 0.5])
     # Reward at the same point: D_q0 is led by reaching g1 (rho(g1) = 0.5 - |(0,1.4)-(3,3)|).
     d_q0 = max(
         min(0.5 - math.hypot(3, 1.6), 0.5 - math.hypot(8, 6.6)),  # g1 & g3
@@ -130,6 +127,12 @@ def test_acceptance_matches_reference(formula: tuple, traj: np.ndarray) -> None:
     assert aut.accepts(traj) == satisfied(formula, traj, REFERENCE_PREDICATES)
 
 
+def signed(rho: dict[str, float], text: str) -> float:
+    """The robustness of a literal's text (``"!a"``) given the atoms' robustness."""
+    atom, positive = literal(text)
+    return rho[atom] if positive else -rho[atom]
+
+
 @settings(max_examples=300, deadline=None)
 @given(co_safe, arrays(np.float64, (3,), elements=values), st.floats(0.1, 10.0))
 def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
@@ -143,8 +146,7 @@ def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
         if guard == "true":
             return math.inf
         return max(
-            min(-rho[lit[1:]] if lit.startswith("!") else rho[lit] for lit in cube.split(" & "))
-            for cube in guard.split(" | ")
+            min(signed(rho, lit) for lit in cube.split(" & ")) for cube in guard.split(" | ")
         )
 
     for q in range(aut.num_states):
@@ -157,11 +159,13 @@ def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
         expected = max(dnf(g) for g in progress)
         clauses = aut.trap_cnf(q)
         if clauses:
-            cnf = min(max(rho[a] if p else -rho[a] for a, p in c) for c in clauses)
+            cnf = min(max(signed(rho, lit) for lit in c) for c in clauses)
             expected = min(expected, c_r * cnf)
             kept = aut.safe_set(q, s)
-            assert [v for *_, v in kept] == [
-                max(rho[a] if p else -rho[a] for a, p in c) for c in clauses
+            assert [v for _, v in kept] == [max(signed(rho, lit) for lit in c) for c in clauses]
+            # The kept literal is the clause's first most robust one (Eq. 5C1 with argmax).
+            assert [lit for lit, _ in kept] == [
+                max(c, key=lambda lit: signed(rho, lit)) for c in clauses
             ]
         assert aut.reward(q, s, c_r) == pytest.approx(expected, rel=1e-12, abs=1e-12)
 
@@ -260,3 +264,25 @@ def test_advance_bad_input(task: tlshield.Automaton) -> None:
         task.advance(0, np.zeros(STATE_DIM), -1.0)
     with pytest.raises(ValueError, match="trap state"):
         task.advance(task.trap, np.zeros(STATE_DIM), 1.0)
+
+
+def test_an_automaton_from_a_formula_alone() -> None:
+    task = channel_task_spec().automaton()
+    alone = tlshield.Automaton.from_formula(str(task.spec))
+    assert alone.edges() == task.edges() and alone.trap_cnf(0) == task.trap_cnf(0)
+    assert (alone.initial, alone.trap, alone.accepting) == (task.initial, task.trap, task.accepting)
+    assert alone.to_dot() == task.to_dot()
+    with pytest.raises(ValueError, match="a formula alone"):
+        alone.step(0, np.zeros(STATE_DIM))
+    with pytest.raises(tlshield.ShieldError, match="formula alone"):
+        tlshield.Shield(
+            alone,
+            tlshield.Unicycle(0.1),
+            alpha=1.0,
+            c3=1.0,
+            K=1.0,
+            cbf_bounds=(-1.0, 1.0),
+            clf_bounds=(-1.0, 1.0),
+        )
+    with pytest.raises(tlshield.SpecError):
+        tlshield.Automaton.from_formula("G a")

@@ -10,13 +10,12 @@ import numpy as np
 import pytest
 
 import tlshield
+from tests.fixtures import task_shield
 from tlshield.envs.channel import STATE_DIM, THETA, X, Y, channel_task_spec
-
-SETTINGS = {"alpha": 2.0, "c3": 1.0, "K": 1e4, "cbf_bounds": (-3.0, 3.0), "clf_bounds": (-0.5, 0.5)}
 
 
 def shield(model: object, **overrides: object) -> tlshield.Shield:
-    return tlshield.Shield(channel_task_spec(), model, **{**SETTINGS, **overrides})  # type: ignore[arg-type]
+    return task_shield(model, **overrides)
 
 
 def test_errors_are_typed_value_errors() -> None:

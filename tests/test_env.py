@@ -283,7 +283,7 @@ def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
     for _ in range(100):
         obs, _, term, _, info = shielded.step(np.array([0.0, 1.0]))  # straight at the wall
         assert obs[1] < 1.0 + 1e-9
-        assert info["shield"]["status"] == "solved"
+        assert info["shield"]["status"] == tlshield.Status.SOLVED
         if term:
             break
     with pytest.raises(TypeError, match="FsaAugmented"):

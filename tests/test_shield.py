@@ -11,30 +11,22 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tlshield
+from tests.fixtures import PARAMS, task_shield
 from tests.shield_reference import (
     ClarabelShield,
     CvxpyShield,
-    Params,
     Structure,
     Task,
     build_rows,
 )
+from tlshield import Solver, Status
 from tlshield.envs.channel import STATE_DIM, channel_task_spec
 
-PARAMS = Params()
 TASK = Task()
 
 
 def make_shield(**overrides: object) -> tlshield.Shield:
-    kwargs: dict[str, object] = {
-        "alpha": PARAMS.alpha,
-        "c3": PARAMS.c3,
-        "K": PARAMS.K,
-        "cbf_bounds": PARAMS.cbf,
-        "clf_bounds": PARAMS.clf,
-    }
-    kwargs.update(overrides)
-    return tlshield.Shield(channel_task_spec(), tlshield.Unicycle(0.1), **kwargs)  # type: ignore[arg-type]
+    return task_shield(**overrides)
 
 
 def state(x: float, offset: float, theta: float, goals: np.ndarray | None = None) -> np.ndarray:
@@ -88,16 +80,16 @@ def test_equals_an_independent_cvxpy_solve(
     rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
     want = cvx.solve(rows)
     if want is None:
-        assert got.status == "relaxed", got
+        assert got.status == Status.RELAXED, got
         want = cvx_relaxed.solve(rows)
         assert want is not None
     else:
-        assert got.status == "solved", (got, want)
+        assert got.status == Status.SOLVED, (got, want)
     a_cbf, a_clf, delta, _ = want
     np.testing.assert_allclose(got.action, a_rl + a_cbf + a_clf, atol=1e-5, rtol=0)
     assert abs(got.delta - delta) <= 1e-5 * max(1.0, delta)
     assert all(np.isfinite(got.action))
-    if rows.delta_0 == 0.0 and got.status == "solved":
+    if rows.delta_0 == 0.0 and got.status == Status.SOLVED:
         assert got.delta <= 1e-9, got
 
 
@@ -125,7 +117,7 @@ def test_border_step_is_corrected_and_reported(shield: tlshield.Shield) -> None:
     s = state(1.0, -1.4, math.pi / 2)  # near c1's wall, heading out
     q = shield.automaton.step(0, s)
     out = shield.filter(s, q, [3.0, 0.0])
-    assert out.status == "solved" and out.solver == "active_set"
+    assert out.status == Status.SOLVED and out.solver == Solver.ACTIVE_SET
     names = [name for name, _ in out.barriers]
     assert "c1" in names and "c2" in names
     h_c1 = dict(out.barriers)["c1"]
@@ -141,7 +133,7 @@ def test_solver_choice_is_honoured(solver: str) -> None:
     sh = make_shield(solver=solver)
     s = state(1.0, -1.4, math.pi / 2)
     out = sh.filter(s, sh.automaton.step(0, s), [3.0, 0.0])
-    assert out.solver == {"auto": "active_set"}.get(solver, solver)
+    assert str(out.solver) == {"auto": "active_set"}.get(solver, solver)
     reference = make_shield(solver="clarabel").filter(s, 0, [3.0, 0.0])
     np.testing.assert_allclose(out.action, reference.action, atol=1e-6)
 
@@ -150,7 +142,7 @@ def test_configurations() -> None:
     s = state(2.0, 0.3, 0.4)
     a = np.array([0.5, 0.1])
     off = make_shield(use_cbf=False, use_clf=False).filter(s, 0, a)
-    assert off.solver == "none" and np.array_equal(off.action, a) and off.barriers == []
+    assert off.solver == Solver.NONE and np.array_equal(off.action, a) and off.barriers == []
     clf_only = make_shield(use_cbf=False).filter(s, 0, a)
     assert np.all(clf_only.a_cbf == 0) and clf_only.goal is not None
     cbf_only = make_shield(use_clf=False).filter(s, 0, a)
@@ -161,7 +153,7 @@ def test_infeasible_is_relaxed_with_slack_never_nan() -> None:
     sh = make_shield(cbf_bounds=(-0.01, 0.01), clf_bounds=(-0.01, 0.01))
     s = state(1.0, -2.0, math.pi / 2)  # outside the channel, heading further out
     out = sh.filter(s, 0, [5.0, 0.0])
-    assert out.status == "relaxed" and out.slack > 0
+    assert out.status == Status.RELAXED and out.slack > 0
     assert np.all(np.isfinite(out.action))
 
 
@@ -220,15 +212,19 @@ def test_batch_equals_single_calls(shield: tlshield.Shield) -> None:
     qs = np.array([shield.automaton.step(0, s) for s in states])
     a_rl = rng.uniform([-4, -6], [4, 6], size=(64, 2))
     batch = shield.filter_batch(states, qs, a_rl)
-    assert batch["action"].shape == (64, 2) and batch["status"].dtype == np.uint8
+    assert isinstance(batch, tlshield.FilterBatch) and len(batch) == 64
+    assert batch.action.shape == (64, 2) and batch.status.dtype == np.uint8
     for i in range(64):
         single = shield.filter(states[i], int(qs[i]), a_rl[i])
-        np.testing.assert_array_equal(batch["action"][i], single.action)
-        assert tlshield.STATUS[batch["status"][i]] == single.status
-        assert tlshield.SOLVERS[batch["solver"][i]] == single.solver
+        np.testing.assert_array_equal(batch.action[i], single.action)
+        np.testing.assert_array_equal(batch.a_cbf[i], single.a_cbf)
+        assert batch.delta[i] == single.delta and batch.slack[i] == single.slack
+        # One encoding: the batch's codes are the single call's enum members.
+        assert batch.status[i] == single.status and Status(batch.status[i]) is single.status
+        assert Solver(batch.solver[i]) is single.solver
     # Non-contiguous and integer input is accepted.
     again = shield.filter_batch(states[::2], qs[::2].astype(np.int32), a_rl[::2])
-    np.testing.assert_array_equal(again["action"], batch["action"][::2])
+    np.testing.assert_array_equal(again.action, batch.action[::2])
 
 
 def test_same_input_same_output(shield: tlshield.Shield) -> None:
@@ -380,7 +376,7 @@ def test_outside_barrier_and_drift_match_an_explicit_f() -> None:
     batch = sh.filter_batch(
         np.stack([s, s]), [0, 0], np.stack([a_rl, a_rl]), np.stack([drift, drift])
     )
-    np.testing.assert_array_equal(batch["action"][1], out.action)
+    np.testing.assert_array_equal(batch.action[1], out.action)
 
 
 def test_bad_drift_is_a_clear_error() -> None:

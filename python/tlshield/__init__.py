@@ -15,6 +15,7 @@ from tlshield._core import (
     Automaton,
     AutomatonError,
     Ball,
+    FilterBatch,
     FilterResult,
     Halfspace,
     ProgressReward,
@@ -27,26 +28,23 @@ from tlshield._core import (
     __version__,
     formula_atoms,
 )
-
-#: ``Shield.filter_batch`` status codes, by value.
-STATUS = ("solved", "relaxed", "failed")
-#: ``Shield.filter_batch`` solver codes, by value.
-SOLVERS = ("none", "active_set", "clarabel")
+from tlshield.codes import Solver, Status
 
 __all__ = [
-    "SOLVERS",
-    "STATUS",
     "Automaton",
     "AutomatonError",
     "Ball",
+    "FilterBatch",
     "FilterResult",
     "Halfspace",
     "ProgressReward",
     "Shield",
     "ShieldError",
     "SingleIntegrator",
+    "Solver",
     "Spec",
     "SpecError",
+    "Status",
     "Unicycle",
     "__version__",
     "envs",

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tlshield._core import Halfspace, Spec, SpecError, formula_atoms
+from tlshield._core import Automaton, SpecError
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
@@ -64,13 +64,10 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _fsa(args: argparse.Namespace) -> int:
     try:
-        atoms = formula_atoms(args.formula)
+        aut = Automaton.from_formula(args.formula)
     except SpecError as err:
         print(f"tlshield fsa: {err}", file=sys.stderr)
         return 2
-    # The automaton depends only on the formula; the predicates are placeholders.
-    placeholder = Halfspace([1.0], 0.0)
-    aut = Spec(args.formula, dict.fromkeys(atoms, placeholder)).automaton()
     roles = {aut.initial: "initial"}
     for q in aut.accepting:
         roles[q] = "accepting"
@@ -89,10 +86,7 @@ def _fsa(args: argparse.Namespace) -> int:
                 print(f"    -> q{dst}: {guard}")
         clauses = aut.trap_cnf(q)
         if clauses:
-            text = " & ".join(
-                "(" + " | ".join(("" if pos else "!") + a for a, pos in clause) + ")"
-                for clause in clauses
-            )
+            text = " & ".join("(" + " | ".join(clause) + ")" for clause in clauses)
             print(f"    safe set (CNF of the negated trap guard): {text}")
     if args.dot or args.png:
         dot = aut.to_dot()

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from tlshield.codes import Status
 from tlshield.envs.channel import CONFIGS, ChannelConfig, ChannelEnv, channel_shield
 from tlshield.evaluation import evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
@@ -160,8 +161,8 @@ class _Metrics:
             self.was_trapped[i] = info["trap"]
             self.successes += info["success"]
             status = info["shield"]["status"]
-            self.relaxed += status == "relaxed"
-            self.failed += status == "failed"
+            self.relaxed += status == Status.RELAXED
+            self.failed += status == Status.FAILED
             if dones[i]:
                 self.returns.append(float(self.discounted[i]))
                 self.discounted[i], self.discount[i] = 0.0, 1.0

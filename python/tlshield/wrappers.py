@@ -20,7 +20,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, ProgressReward, Shield, Spec
+from tlshield._core import Automaton, FilterBatch, FilterResult, ProgressReward, Shield, Spec
+from tlshield.codes import Status
 
 StateFn = Callable[[Any], NDArray[np.float64]]
 DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
@@ -99,10 +100,11 @@ class FsaTracker:
 
 
 def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
-    """The ``info["shield"]`` entry of a step (zeros and status ``"off"`` without a shield)."""
+    """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta`` and
+    the :class:`tlshield.Status` (zeros and status None when no shield ran)."""
     if result is None:
         zeros = np.zeros_like(a_rl)
-        return {"a_rl": a_rl, "a_cbf": zeros, "a_clf": zeros, "delta": 0.0, "status": "off"}
+        return {"a_rl": a_rl, "a_cbf": zeros, "a_clf": zeros, "delta": 0.0, "status": None}
     return {
         "a_rl": a_rl,
         "a_cbf": result.a_cbf,
@@ -253,20 +255,18 @@ class Shielded(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def _batch_infos(out: dict[str, Any], a_rl: NDArray[np.float64]) -> list[dict[str, Any]]:
+def _batch_infos(out: FilterBatch, a_rl: NDArray[np.float64]) -> list[dict[str, Any]]:
     """Per-env ``info["shield"]`` of a batch (lists of floats: cheaper than array rows)."""
-    from tlshield import STATUS
-
     columns = zip(
         a_rl.tolist(),
-        out["a_cbf"].tolist(),
-        out["a_clf"].tolist(),
-        out["delta"].tolist(),
-        out["status"].tolist(),
+        out.a_cbf.tolist(),
+        out.a_clf.tolist(),
+        out.delta.tolist(),
+        out.status.tolist(),
         strict=True,
     )
     return [
-        {"a_rl": a, "a_cbf": cbf, "a_clf": clf, "delta": delta, "status": STATUS[status]}
+        {"a_rl": a, "a_cbf": cbf, "a_clf": clf, "delta": delta, "status": Status(status)}
         for a, cbf, clf, delta, status in columns
     ]
 
@@ -314,7 +314,7 @@ class ShieldedVectorEnv(gym.vector.VectorWrapper):
         a_rl = _rl_actions(actions, self.action_fn)
         states, qs = _split(self._obs, self._k)
         out = self.shield.filter_batch(states, qs, a_rl)
-        obs, rewards, terminated, truncated, infos = self.env.step(out["action"])
+        obs, rewards, terminated, truncated, infos = self.env.step(out.action)
         self._obs = np.asarray(obs, dtype=np.float64)
         infos = {**infos, "shield": _batch_infos(out, a_rl)}
         return obs, rewards, terminated, truncated, infos
@@ -356,7 +356,7 @@ class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc,valid-type]
         states, qs = _split(self._obs, self._k)
         out = self.shield.filter_batch(states, qs, a_rl)
         self._shield_infos = _batch_infos(out, a_rl)
-        self.venv.step_async(out["action"])
+        self.venv.step_async(out.action)
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.venv.step_wait()

@@ -81,6 +81,28 @@ impl Spec {
         })
     }
 
+    /// The formula alone, its atoms without predicates: its automaton has the formula's
+    /// structure (states, guards, safe-set CNFs, valuations via
+    /// [`crate::Automaton::step_valuation`]) but evaluates no state: every state query is an
+    /// error that says so (see [`Spec::is_bound`]).
+    pub fn from_formula(formula: &str) -> Result<Self, SpecError> {
+        let (parsed, atoms) = Formula::parse(formula)?;
+        let program = Program::compile(&parsed);
+        Ok(Spec {
+            formula: parsed,
+            atoms,
+            predicates: Vec::new(),
+            program,
+            exact_dim: None,
+            min_dim: 0,
+        })
+    }
+
+    /// Whether every atom has a predicate (false for [`Spec::from_formula`] with atoms).
+    pub fn is_bound(&self) -> bool {
+        self.predicates.len() == self.atoms.len()
+    }
+
     /// The parsed formula.
     pub fn formula(&self) -> &Formula {
         &self.formula
@@ -98,6 +120,14 @@ impl Spec {
 
     /// Checks that states of length `n` can be evaluated.
     pub fn check_state_len(&self, n: usize) -> Result<(), InputError> {
+        if !self.is_bound() {
+            return Err(InputError::Value {
+                what: "spec".into(),
+                expected: "predicates for its atoms to evaluate states (build it with Spec::new)"
+                    .into(),
+                got: "a formula alone (Spec::from_formula)".into(),
+            });
+        }
         let ok = match self.exact_dim {
             Some(d) => n == d,
             None => n >= self.min_dim.max(1),
@@ -202,6 +232,19 @@ impl fmt::Display for Spec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_formula_alone_evaluates_no_state() {
+        let spec = Spec::from_formula("F a & X b").unwrap();
+        assert_eq!(spec.atoms(), ["a", "b"]);
+        assert!(!spec.is_bound());
+        let err = spec.check_state_len(2).unwrap_err().to_string();
+        assert!(err.contains("a formula alone"), "{err}");
+        let traj = Trajectory::new(&[0.0, 1.0], 1).unwrap();
+        assert!(spec.robustness(traj).is_err() && spec.satisfied(traj).is_err());
+        assert!(Spec::from_formula("true").unwrap().is_bound());
+        assert!(Spec::from_formula("G a").is_err());
+    }
 
     #[test]
     fn spec_checks_predicates() {

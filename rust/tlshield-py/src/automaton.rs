@@ -7,10 +7,11 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
-use tlshield_core::{Automaton, ProgressParams, Trajectory};
+use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
 
 use crate::convert::{vector, FloatArray};
 use crate::errors::map;
+use crate::literals::LiteralNames;
 use crate::progress::PyProgressReward;
 use crate::spec::PySpec;
 
@@ -28,43 +29,48 @@ impl PySpec {
 #[pyclass(name = "Automaton", module = "tlshield._core", frozen)]
 pub struct PyAutomaton {
     pub(crate) inner: Arc<Automaton>,
-    /// The atom names as Python strings, made once (results reuse them).
-    names: Vec<Py<PyString>>,
+    /// The literals' text, made once (results reuse it).
+    literals: LiteralNames,
 }
 
 impl PyAutomaton {
     /// Wraps a built automaton.
     pub fn new(py: Python<'_>, inner: Arc<Automaton>) -> Self {
-        let names = inner
-            .spec()
-            .atoms()
-            .iter()
-            .map(|a| PyString::new(py, a).unbind())
-            .collect();
-        PyAutomaton { inner, names }
+        let literals = LiteralNames::new(py, inner.spec().atoms());
+        PyAutomaton { inner, literals }
     }
 
+    /// A safe set as ``(literal, robustness)`` pairs.
     fn kept<'py>(
         &self,
         py: Python<'py>,
         kept: &[(Literal, f64)],
-    ) -> Vec<(Bound<'py, PyString>, bool, f64)> {
+    ) -> Vec<(Bound<'py, PyString>, f64)> {
         kept.iter()
-            .map(|(l, rho)| (self.names[l.atom].bind(py).clone(), l.positive, *rho))
+            .map(|(l, rho)| (self.literals.get(py, l), *rho))
             .collect()
     }
 
     fn state(&self, q: i64) -> PyResult<usize> {
         map(self.inner.check_state("q", q))
     }
-
-    fn literal(&self, l: &Literal) -> (String, bool) {
-        (self.inner.spec().atoms()[l.atom].clone(), l.positive)
-    }
 }
 
 #[pymethods]
 impl PyAutomaton {
+    /// The automaton of a formula alone, its atoms without predicates: states, edges,
+    /// ``trap_cnf`` and ``to_dot`` as for any spec of the formula; every method that reads a
+    /// state raises ``ValueError`` (build it with ``Spec(formula, predicates).automaton()`` for
+    /// those). Raises ``SpecError`` for a bad formula.
+    #[staticmethod]
+    fn from_formula(py: Python<'_>, formula: &str) -> PyResult<Self> {
+        let spec = map(Spec::from_formula(formula))?;
+        Ok(PyAutomaton::new(
+            py,
+            Arc::new(map(Automaton::build(&spec))?),
+        ))
+    }
+
     /// Number of states.
     #[getter]
     fn num_states(&self) -> usize {
@@ -185,24 +191,25 @@ impl PyAutomaton {
             .reward(q, &vector(s_next, "s_next")?, c_r, trap_penalty))
     }
 
-    /// The CNF of the negated trap guard of ``q``: clauses of ``(atom, positive)`` literals
-    /// (empty when ``q`` has no trap edge).
-    fn trap_cnf(&self, q: i64) -> PyResult<Vec<Vec<(String, bool)>>> {
+    /// The CNF of the negated trap guard of ``q``: clauses of literals (``"c1"``, ``"!g3"``),
+    /// empty when ``q`` has no trap edge.
+    fn trap_cnf<'py>(&self, py: Python<'py>, q: i64) -> PyResult<Vec<Vec<Bound<'py, PyString>>>> {
         let q = self.state(q)?;
         Ok(map(self.inner.trap_cnf(q))?
             .iter()
-            .map(|clause| clause.iter().map(|l| self.literal(l)).collect())
+            .map(|clause| clause.iter().map(|l| self.literals.get(py, l)).collect())
             .collect())
     }
 
     /// Eq. 5C1: per clause of ``trap_cnf(q)`` the literal with the largest robustness at ``s``,
-    /// as ``(atom, positive, robustness)`` (empty when ``q`` has no trap edge).
+    /// as ``(literal, robustness)`` pairs (``("!g3", 2.4)``; empty when ``q`` has no trap
+    /// edge).
     fn safe_set<'py>(
         &self,
         py: Python<'py>,
         q: i64,
         s: &Bound<'py, PyAny>,
-    ) -> PyResult<Vec<(Bound<'py, PyString>, bool, f64)>> {
+    ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
         let q = self.state(q)?;
         let kept = map(self.inner.safe_set(q, &vector(s, "s")?))?;
         Ok(self.kept(py, &kept))
@@ -221,7 +228,7 @@ impl PyAutomaton {
         s_next: &Bound<'py, PyAny>,
         c_r: f64,
         trap_penalty: Option<f64>,
-    ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, bool, f64)>)> {
+    ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, f64)>)> {
         let q = self.state(q)?;
         let mut kept = Vec::new();
         let (next, reward) =

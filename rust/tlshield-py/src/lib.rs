@@ -4,9 +4,11 @@
 //! Python exceptions; all logic lives in `tlshield-core`.
 
 mod automaton;
+mod codes;
 mod convert;
 mod dynamics;
 mod errors;
+mod literals;
 mod predicate;
 mod progress;
 mod shield;
@@ -41,6 +43,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<dynamics::PySingleIntegrator>()?;
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;
+    m.add_class::<shield::PyFilterBatch>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

@@ -1,21 +1,24 @@
-//! `Unicycle`, `SingleIntegrator`, `Shield` and its `FilterResult`.
+//! `Shield` and its results, `FilterResult` and `FilterBatch`.
 
 use std::sync::Arc;
 
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyUntypedArrayMethods};
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyString};
-use tlshield_core::cnf::Literal;
+use pyo3::types::PyString;
 use tlshield_core::{
     Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Dynamics, Filtered,
-    Shield, ShieldConfig, SolverChoice,
+    Shield, ShieldConfig, SolvedBy, SolverChoice, Status,
 };
 
 use crate::automaton::PyAutomaton;
+use crate::codes;
 use crate::convert::{vector, FloatArray};
 use crate::dynamics::{PySingleIntegrator, PyUnicycle};
 use crate::errors::map;
+use crate::literals::LiteralNames;
 use crate::spec::{predicate_of, PySpec};
 
 /// Bounds from `(lo, hi)`, each a scalar (broadcast to m) or a length-m sequence.
@@ -78,40 +81,87 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
 }
 
 /// The outcome of one ``Shield.filter`` call.
-#[pyclass(name = "FilterResult", module = "tlshield._core", frozen, get_all)]
+#[pyclass(name = "FilterResult", module = "tlshield._core", frozen)]
 pub struct PyFilterResult {
     /// The action to apply, ``a_rl + a_cbf + a_clf`` (m,).
+    #[pyo3(get)]
     action: Py<PyArray1<f64>>,
     /// The safety correction (m,); zeros when the CBF is off.
+    #[pyo3(get)]
     a_cbf: Py<PyArray1<f64>>,
     /// The task correction (m,); zeros when the CLF is off or there is no goal.
+    #[pyo3(get)]
     a_clf: Py<PyArray1<f64>>,
     /// The CLF relaxation (0 when the CLF condition holds).
+    #[pyo3(get)]
     delta: f64,
-    /// ``"solved"``, ``"relaxed"`` (barrier rows needed slack) or ``"failed"`` (zero
-    /// corrections).
-    status: &'static str,
+    status: Status,
     /// The largest barrier slack (0 unless relaxed).
+    #[pyo3(get)]
     slack: f64,
     /// The CLF goal point (len(pos),) or None.
+    #[pyo3(get)]
     goal: Option<Py<PyArray1<f64>>>,
-    /// Which solver answered: ``"active_set"``, ``"clarabel"`` or ``"none"``.
-    solver: &'static str,
-    /// The barriers enforced this step: ``(name, h(s))``; safe-set literals are named by
-    /// their atom (``"!g3"`` when negated), user barriers by their given name.
+    solver: SolvedBy,
+    /// The barriers enforced this step: ``(name, h(s))``; safe-set literals are named as in
+    /// the formula (``"g3"``, ``"!g3"`` when negated), user barriers by their given name.
+    #[pyo3(get)]
     barriers: Vec<(Py<PyString>, f64)>,
 }
 
 #[pymethods]
 impl PyFilterResult {
+    /// ``Status.SOLVED``, ``Status.RELAXED`` (barrier rows needed slack) or ``Status.FAILED``
+    /// (zero corrections).
+    #[getter]
+    fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        codes::status(py, self.status as u8)
+    }
+
+    /// Which solver answered: ``Solver.ACTIVE_SET``, ``Solver.CLARABEL`` or ``Solver.NONE``.
+    #[getter]
+    fn solver<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        codes::solver(py, self.solver as u8)
+    }
+
     fn __repr__(&self, py: Python<'_>) -> String {
         format!(
             "FilterResult(action={}, status={:?}, delta={}, solver={:?})",
             self.action.bind(py),
-            self.status,
+            self.status.name(),
             self.delta,
-            self.solver
+            self.solver.name()
         )
+    }
+}
+
+/// The outcome of one ``Shield.filter_batch`` call: one row per state.
+#[pyclass(name = "FilterBatch", module = "tlshield._core", frozen, get_all)]
+pub struct PyFilterBatch {
+    /// The actions to apply (B, m).
+    action: Py<PyArray2<f64>>,
+    /// The safety corrections (B, m).
+    a_cbf: Py<PyArray2<f64>>,
+    /// The task corrections (B, m).
+    a_clf: Py<PyArray2<f64>>,
+    /// The CLF relaxations (B,).
+    delta: Py<PyArray1<f64>>,
+    /// The largest barrier slack per row (B,).
+    slack: Py<PyArray1<f64>>,
+    /// ``tlshield.Status`` values (B,) uint8: ``batch.status == Status.RELAXED``.
+    status: Py<PyArray1<u8>>,
+    /// ``tlshield.Solver`` values (B,) uint8.
+    solver: Py<PyArray1<u8>>,
+}
+
+#[pymethods]
+impl PyFilterBatch {
+    fn __len__(&self, py: Python<'_>) -> usize {
+        self.delta.bind(py).len()
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!("FilterBatch(rows={})", self.delta.bind(py).len())
     }
 }
 
@@ -122,7 +172,7 @@ pub struct PyShield {
     inner: Shield,
     /// Names of the user barriers, then of every atom (positive, negated), made once.
     barrier_names: Vec<Py<PyString>>,
-    atom_names: Vec<(Py<PyString>, Py<PyString>)>,
+    literals: LiteralNames,
 }
 
 impl PyShield {
@@ -132,17 +182,10 @@ impl PyShield {
             .iter()
             .map(|(source, h)| {
                 let name = match source {
-                    BarrierSource::User(i) => &self.barrier_names[*i],
-                    BarrierSource::SafeSet(Literal { atom, positive }) => {
-                        let (pos, neg) = &self.atom_names[*atom];
-                        if *positive {
-                            pos
-                        } else {
-                            neg
-                        }
-                    }
+                    BarrierSource::User(i) => self.barrier_names[*i].clone_ref(py),
+                    BarrierSource::SafeSet(literal) => self.literals.get(py, literal).unbind(),
                 };
-                (name.clone_ref(py), *h)
+                (name, *h)
             })
             .collect();
         PyFilterResult {
@@ -150,10 +193,10 @@ impl PyShield {
             a_cbf: out.a_cbf.into_pyarray(py).unbind(),
             a_clf: out.a_clf.into_pyarray(py).unbind(),
             delta: out.delta,
-            status: out.status.name(),
+            status: out.status,
             slack: out.slack,
             goal: out.goal.map(|g| g.into_pyarray(py).unbind()),
-            solver: out.solver.name(),
+            solver: out.solver,
             barriers,
         }
     }
@@ -199,7 +242,7 @@ impl PyShield {
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
         barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
-        slack_penalty=ShieldConfig::DEFAULT_SLACK_PENALTY, margin=ShieldConfig::DEFAULT_MARGIN,
+        slack_penalty=None, margin=None,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -217,8 +260,8 @@ impl PyShield {
         use_cbf: bool,
         use_clf: bool,
         solver: &str,
-        slack_penalty: f64,
-        margin: f64,
+        slack_penalty: Option<f64>,
+        margin: Option<f64>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let dynamics = dynamics_of(dynamics)?;
@@ -257,28 +300,19 @@ impl PyShield {
         .with_pos(pos)
         .with_parts(use_cbf, use_clf)
         .with_solver(map(SolverChoice::parse(solver))?)
-        .with_slack_penalty(slack_penalty)
-        .with_margin(margin);
+        // None keeps the core's defaults (ShieldConfig::DEFAULT_SLACK_PENALTY, DEFAULT_MARGIN).
+        .with_slack_penalty(slack_penalty.unwrap_or(ShieldConfig::DEFAULT_SLACK_PENALTY))
+        .with_margin(margin.unwrap_or(ShieldConfig::DEFAULT_MARGIN));
         let barrier_names = config
             .barriers
             .iter()
             .map(|b| PyString::new(py, &b.name).unbind())
             .collect();
-        let atom_names = automaton
-            .spec()
-            .atoms()
-            .iter()
-            .map(|a| {
-                (
-                    PyString::new(py, a).unbind(),
-                    PyString::new(py, &format!("!{a}")).unbind(),
-                )
-            })
-            .collect();
+        let literals = LiteralNames::new(py, automaton.spec().atoms());
         Ok(PyShield {
             inner: map(Shield::new(automaton, dynamics, config))?,
             barrier_names,
-            atom_names,
+            literals,
         })
     }
 
@@ -334,10 +368,10 @@ impl PyShield {
     }
 
     /// Shields a batch: ``states`` (B, n), ``qs`` (B,), ``a_rl`` (B, m), using the dynamics
-    /// model. Parallel over rows with the GIL released. Returns a dict of arrays: ``action``,
-    /// ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,) uint8 codes
-    /// (0 solved, 1 relaxed, 2 failed) and ``solver`` (B,) uint8 codes (0 none, 1 active set,
-    /// 2 Clarabel). ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
+    /// model. Parallel over rows with the GIL released. Returns a ``FilterBatch`` of arrays:
+    /// ``action``, ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,)
+    /// ``tlshield.Status`` values and ``solver`` (B,) ``tlshield.Solver`` values (uint8).
+    /// ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
     #[pyo3(signature = (states, qs, a_rl, drift=None))]
     fn filter_batch<'py>(
         &self,
@@ -346,7 +380,7 @@ impl PyShield {
         qs: PyArrayLike1<'py, i64, AllowTypeChange>,
         a_rl: &Bound<'py, PyAny>,
         drift: Option<&Bound<'py, PyAny>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<PyFilterBatch> {
         let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
         let drift = drift
             .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
@@ -385,18 +419,18 @@ impl PyShield {
         map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, drift, &mut out)))?;
         let matrix = |v: Vec<f64>| {
             numpy::ndarray::Array2::from_shape_vec((rows, m), v)
-                .map(|a| a.into_pyarray(py))
+                .map(|a| a.into_pyarray(py).unbind())
                 .map_err(|e| PyValueError::new_err(e.to_string()))
         };
-        let dict = PyDict::new(py);
-        dict.set_item("action", matrix(out.action)?)?;
-        dict.set_item("a_cbf", matrix(out.a_cbf)?)?;
-        dict.set_item("a_clf", matrix(out.a_clf)?)?;
-        dict.set_item("delta", out.delta.into_pyarray(py))?;
-        dict.set_item("slack", out.slack.into_pyarray(py))?;
-        dict.set_item("status", out.status.into_pyarray(py))?;
-        dict.set_item("solver", out.solver.into_pyarray(py))?;
-        Ok(dict)
+        Ok(PyFilterBatch {
+            action: matrix(out.action)?,
+            a_cbf: matrix(out.a_cbf)?,
+            a_clf: matrix(out.a_clf)?,
+            delta: out.delta.into_pyarray(py).unbind(),
+            slack: out.slack.into_pyarray(py).unbind(),
+            status: out.status.into_pyarray(py).unbind(),
+            solver: out.solver.into_pyarray(py).unbind(),
+        })
     }
 
     /// Number of inputs m.

@@ -439,6 +439,21 @@ mod tests {
     }
 
     #[test]
+    fn a_formula_alone_gives_the_same_automaton_and_reads_no_state() {
+        let task = task();
+        let alone = Automaton::build(&Spec::from_formula(crate::fixtures::TASK).unwrap()).unwrap();
+        assert_eq!(alone.edges(), task.edges());
+        assert_eq!(
+            (alone.initial(), alone.trap()),
+            (task.initial(), task.trap())
+        );
+        assert_eq!(alone.trap_cnf(0).unwrap(), task.trap_cnf(0).unwrap());
+        let s = [0.0; 13];
+        assert!(alone.read(&s).is_err() && alone.step(0, &s).is_err());
+        assert!(alone.safe_set(0, &s).is_err() && alone.goal(0, &s).is_err());
+    }
+
+    #[test]
     fn task_automaton() {
         let aut = task();
         assert_eq!(

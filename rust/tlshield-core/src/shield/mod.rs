@@ -543,6 +543,13 @@ impl Shield {
             )));
         }
         let spec = automaton.spec();
+        if !spec.is_bound() {
+            return Err(ShieldError::Config(
+                "the automaton was built from a formula alone (no predicates): build it from a \
+                 Spec with predicates to shield states"
+                    .into(),
+            ));
+        }
         if config.use_clf {
             for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
                 if let Predicate::Ball(ball) = p {

@@ -1,0 +1,37 @@
+"""The shield's outcome codes, one encoding for ``Shield.filter`` and ``Shield.filter_batch``:
+``FilterResult.status`` is a :class:`Status`, ``FilterBatch.status`` an array of its values
+(compare with ``batch.status == Status.RELAXED``). Both are :class:`enum.IntEnum`, so they
+serialise as plain integers."""
+
+from enum import IntEnum
+
+__all__ = ["Solver", "Status"]
+
+
+class Status(IntEnum):
+    """How the QP of one shield step ended."""
+
+    #: Solved as posed.
+    SOLVED = 0
+    #: The barriers could not all hold: solved with slack on the barrier rows (the largest is
+    #: ``FilterResult.slack``).
+    RELAXED = 1
+    #: No solution: zero corrections, the RL action unchanged.
+    FAILED = 2
+
+    def __str__(self) -> str:
+        return self.name.lower()
+
+
+class Solver(IntEnum):
+    """Which solver answered one shield step."""
+
+    #: No QP (nothing to correct, or failed).
+    NONE = 0
+    #: The dense active-set solver.
+    ACTIVE_SET = 1
+    #: Clarabel (interior point).
+    CLARABEL = 2
+
+    def __str__(self) -> str:
+        return self.name.lower()

@@ -1,0 +1,25 @@
+"""What several test modules share, once: the paper's task shield with the reference
+parameters (the task formula itself lives once, in :mod:`tlshield.envs.channel`)."""
+
+from __future__ import annotations
+
+import tlshield
+from tests.shield_reference import Params
+from tlshield.envs.channel import channel_task_spec
+
+PARAMS = Params()
+
+
+def task_shield(model: object | None = None, **overrides: object) -> tlshield.Shield:
+    """A shield of the paper's task (unicycle eps = 0.1 unless ``model`` is given) with the
+    reference parameters of :class:`tests.shield_reference.Params`; keywords override."""
+    kwargs: dict[str, object] = {
+        "alpha": PARAMS.alpha,
+        "c3": PARAMS.c3,
+        "K": PARAMS.K,
+        "cbf_bounds": PARAMS.cbf,
+        "clf_bounds": PARAMS.clf,
+        **overrides,
+    }
+    model = tlshield.Unicycle(0.1) if model is None else model
+    return tlshield.Shield(channel_task_spec(), model, **kwargs)  # type: ignore[arg-type]
