@@ -44,10 +44,7 @@ impl PyUnicycle {
         a: &Bound<'py, PyAny>,
         dt: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let next = self
-            .inner
-            .checked_euler_step(&vector(s, "s")?, &vector(a, "a")?, dt);
-        Ok(map(next)?.into_pyarray(py))
+        step(py, &self.inner, s, a, dt)
     }
 
     fn __repr__(&self) -> String {
@@ -90,10 +87,7 @@ impl PySingleIntegrator {
         a: &Bound<'py, PyAny>,
         dt: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let next = self
-            .inner
-            .checked_euler_step(&vector(s, "s")?, &vector(a, "a")?, dt);
-        Ok(map(next)?.into_pyarray(py))
+        step(py, &self.inner, s, a, dt)
     }
 
     fn __repr__(&self) -> String {
@@ -113,4 +107,15 @@ fn eval<'py>(py: Python<'py>, dynamics: &Dynamics, s: &Bound<'py, PyAny>) -> PyR
     let g = numpy::ndarray::Array2::from_shape_vec((n, m), g)
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok((f.into_pyarray(py), g.into_pyarray(py)))
+}
+
+fn step<'py>(
+    py: Python<'py>,
+    dynamics: &Dynamics,
+    s: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    dt: f64,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let next = dynamics.checked_euler_step(&vector(s, "s")?, &vector(a, "a")?, dt);
+    Ok(map(next)?.into_pyarray(py))
 }

@@ -731,7 +731,7 @@ impl Shield {
     ) -> Result<Filtered, ShieldError> {
         self.check_call(s, q, a_rl, fg, drift)?;
         Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, drift, true, true);
+            self.step(ws, s, q, a_rl, fg, drift, Want::Recorded);
             ws.out.clone()
         }))
     }
@@ -749,7 +749,7 @@ impl Shield {
     ) -> Result<DenseQp, ShieldError> {
         self.check_call(s, q, a_rl, fg, drift)?;
         Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, drift, false, false);
+            self.step(ws, s, q, a_rl, fg, drift, Want::Problem);
             ws.qp.clone()
         }))
     }
@@ -841,8 +841,7 @@ impl Shield {
                                 &a[rows_m.clone()],
                                 None,
                                 d,
-                                false,
-                                true,
+                                Want::Solution,
                             );
                             action[rows_m.clone()].copy_from_slice(&ws.out.action);
                             a_cbf[rows_m.clone()].copy_from_slice(&ws.out.a_cbf);
@@ -858,8 +857,8 @@ impl Shield {
         Ok(())
     }
 
-    /// The shield step on validated input, result in `ws.out`. `record` keeps the goal and
-    /// the barrier list (the batch path skips them); without `solve` only `ws.qp` is built.
+    /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
+    /// only the problem is wanted.
     #[allow(clippy::too_many_arguments)]
     fn step(
         &self,
@@ -869,9 +868,9 @@ impl Shield {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
-        record: bool,
-        solve: bool,
+        want: Want,
     ) {
+        let record = want == Want::Recorded;
         let cfg = &self.config;
         ws.out.barriers.clear();
         ws.program.rows(
@@ -910,7 +909,7 @@ impl Shield {
         }
 
         program.assemble(cfg, a_rl, &mut ws.qp, false);
-        if !solve {
+        if want == Want::Problem {
             return;
         }
         let mut status = Status::Solved;
@@ -942,6 +941,17 @@ impl Shield {
         out.status = status;
         out.solver = by;
     }
+}
+
+/// What a shield step is asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Want {
+    /// The QP only ([`Shield::problem`]).
+    Problem,
+    /// The corrected action (the batch path: no goal, no barrier list).
+    Solution,
+    /// The corrected action, the goal and the enforced barriers ([`Shield::filter`]).
+    Recorded,
 }
 
 impl From<AutomatonError> for ShieldError {
@@ -1426,7 +1436,7 @@ mod tests {
             prop_assert_eq!(a.status, b.status);
             let gap = a.action.iter().zip(&b.action).fold(0.0f64, |m, (p, r)| m.max((p - r).abs()));
             auto.with_workspace(N, |ws| {
-                auto.step(ws, &s, q, &a_rl, None, None, false, true);
+                auto.step(ws, &s, q, &a_rl, None, None, Want::Solution);
                 let (qp, ours) = (&ws.qp, &ws.solvers.solution);
                 let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
                 assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);
