@@ -13,8 +13,10 @@ setup:
 run: setup
 	$(BIN)/python -m tlshield reproduce --out results
 
-## Every test: Rust (cargo test) and Python (pytest).
-test: setup
+## Every test: Rust (cargo test) and Python (pytest; the benchmark scripts run on tiny budgets,
+## so their comparison tools are installed too).
+test:
+	@EXTRAS=train,test,bench bash scripts/setup.sh
 	cargo test --workspace
 	$(BIN)/python -m pytest
 

@@ -93,7 +93,7 @@ TARGET_STEP = 20.0
 
 Cube = tuple[tuple[int, bool, float], ...]  # literals (predicate index, positive, sign)
 Dnf = tuple[Cube, ...]
-SafeSet = list[tuple[str, bool, float]]
+SafeSet = list[tuple[str, float]]  # (literal text "g3" / "!g3", robustness)
 
 
 # --------------------------------------------------------------------------------------------
@@ -198,8 +198,10 @@ class PythonFsa:
         for q in range(self.num_states):
             self.cnf[q] = [
                 tuple(
-                    (atom, positive, PREDICATES.index(atom), 1.0 if positive else -1.0)
-                    for atom, positive in clause
+                    (text, positive, PREDICATES.index(atom), 1.0 if positive else -1.0)
+                    for text, atom, positive in (
+                        (text, text.lstrip("!"), not text.startswith("!")) for text in clause
+                    )
                 )
                 for clause in aut.trap_cnf(q)
             ]
@@ -224,11 +226,11 @@ class PythonFsa:
                 reward = min(reward, c_r * -dnf_rho(trap_guard, rho))
         safe: SafeSet = []
         for clause in self.cnf[nxt]:
-            best: tuple[str, bool, float] | None = None
-            for atom, positive, i, sign in clause:
+            best: tuple[str, float] | None = None
+            for text, _, i, sign in clause:
                 value = sign * rho[i]
-                if best is None or value > best[2]:
-                    best = (atom, positive, value)
+                if best is None or value > best[1]:
+                    best = (text, value)
             if best is not None:
                 safe.append(best)
         return nxt, reward, safe
@@ -254,9 +256,9 @@ class PythonFsa:
 
 def safe_set_diff(got: SafeSet, want: SafeSet) -> float | None:
     """Max robustness difference of two safe sets, or None when their literals differ."""
-    if [(a, p) for a, p, _ in got] != [(a, p) for a, p, _ in want]:
+    if [lit for lit, _ in got] != [lit for lit, _ in want]:
         return None
-    return max((abs(v - w) for (*_, v), (*_, w) in zip(got, want, strict=True)), default=0.0)
+    return max((abs(v - w) for (_, v), (_, w) in zip(got, want, strict=True)), default=0.0)
 
 
 def check_step(

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
 
 import numpy as np
 
@@ -85,12 +86,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return steps_per_second(step, seconds) * n
 
-        plain = rate(DummyVecEnv([lambda: ChannelEnv(config="rl") for _ in range(n)]))
-        each = rate(DummyVecEnv([lambda: ChannelEnv(config="rl_cbf_clf") for _ in range(n)]))
-        template = ChannelEnv(shield_in_env=False)
+        # The vector shield reads the state from the observation [s, one-hot(q)]: the paper's
+        # observation layout, used by all three vector rows so they compare like with like.
+        plain = rate(DummyVecEnv([partial(ChannelEnv, config="rl", observation="paper")] * n))
+        each = rate(
+            DummyVecEnv([partial(ChannelEnv, config="rl_cbf_clf", observation="paper")] * n)
+        )
+        template = ChannelEnv(shield_in_env=False, observation="paper")
         batched = rate(
             ShieldedVecEnv(
-                DummyVecEnv([lambda: ChannelEnv(shield_in_env=False) for _ in range(n)]),
+                DummyVecEnv([partial(ChannelEnv, shield_in_env=False, observation="paper")] * n),
                 channel_shield(ChannelConfig(), "rl_cbf_clf"),
                 action_fn=template.rl_action,
             )

@@ -1,0 +1,35 @@
+"""Every benchmark script runs end to end on a tiny budget (its own correctness checks
+included), so a change that breaks a benchmark fails here, not when the README is regenerated.
+No timing is asserted: the numbers belong in the README."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHES = Path(__file__).resolve().parent.parent / "benches"
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "expected"),
+    [
+        ("compare_robustness.py", ["--quick"], "tlshield speedup"),
+        ("compare_automaton.py", ["--quick"], "tlshield speedup"),
+        ("compare_shield.py", ["--quick", "--memory-calls", "2000"], "tlshield speedup"),
+        ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
+        ("moving_obstacles.py", ["--steps", "2000"], "moving-obstacle barrier"),
+    ],
+)
+def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:
+    done = subprocess.run(
+        [sys.executable, str(BENCHES / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    assert expected in done.stdout
