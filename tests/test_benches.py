@@ -1,6 +1,8 @@
 """Every benchmark script runs end to end on a tiny budget (its own correctness checks
 included), so a change that breaks a benchmark fails here, not when the README is regenerated.
-No timing is asserted: the numbers belong in the README."""
+No timing is asserted: the scripts exit 1 when a correctness check fails and 2 when a speed
+target is missed, and only the first fails a test (speed belongs in the README, measured on a
+quiet machine)."""
 
 from __future__ import annotations
 
@@ -31,5 +33,5 @@ def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:
         timeout=900,
         check=False,
     )
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    assert done.returncode in (0, 2), done.stdout[-2000:] + done.stderr[-4000:]
     assert expected in done.stdout

@@ -12,9 +12,11 @@ corrects an RL agent's actions, in a Rust core.
 
 from tlshield import envs
 from tlshield._core import (
+    AccelerationUnicycle,
     Automaton,
     AutomatonError,
     Ball,
+    DoubleIntegrator,
     FilterBatch,
     FilterResult,
     Halfspace,
@@ -31,9 +33,11 @@ from tlshield._core import (
 from tlshield.codes import Solver, Status
 
 __all__ = [
+    "AccelerationUnicycle",
     "Automaton",
     "AutomatonError",
     "Ball",
+    "DoubleIntegrator",
     "FilterBatch",
     "FilterResult",
     "Halfspace",

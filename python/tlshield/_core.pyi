@@ -157,8 +157,26 @@ class SingleIntegrator:
     def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
         """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
+@final
+class DoubleIntegrator:
+    """``ds[pos[i]]/dt = s[vel[i]]``, ``ds[vel[i]]/dt = a[i]``: one acceleration per position."""
+
+    def __new__(cls, pos: Sequence[int], vel: Sequence[int]) -> Self: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
+
+@final
+class AccelerationUnicycle:
+    """A unicycle driven by forward acceleration and turn rate: state ``x, y, theta, v``."""
+
+    def __new__(cls, x: int = 0, y: int = 1, theta: int = 2, v: int = 3) -> Self: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
+
 Bound: TypeAlias = float | Sequence[float]
-Dynamics: TypeAlias = Unicycle | SingleIntegrator
+Dynamics: TypeAlias = Unicycle | SingleIntegrator | DoubleIntegrator | AccelerationUnicycle
 
 @final
 class FilterResult:
@@ -229,9 +247,14 @@ class Shield:
         solver: Literal["auto", "active_set", "clarabel"] = "auto",
         slack_penalty: float | None = None,
         margin: float | None = None,
+        alpha2: float | None = None,
+        clf_gain: float | None = None,
     ) -> Self:
         """``slack_penalty`` prices barrier slack when the QP must be relaxed (None: 1e6);
-        ``margin`` is what every barrier is kept above (None: 1e-6)."""
+        ``margin`` is what every barrier is kept above (None: 1e-6); ``alpha2`` is the second
+        gain of the HOCBF rows that barriers of relative degree 2 need (an error when such a
+        barrier exists and it is None); ``clf_gain`` is ``k`` of the second-order CLF
+        ``|dp/dt + k (p - goal)|^2`` (None: 1)."""
     def filter(
         self,
         s: ArrayLike,

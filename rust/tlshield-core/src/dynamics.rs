@@ -1,5 +1,8 @@
 //! Control-affine dynamics `ds/dt = f(s) + g(s) a` for the shield: a single integrator, the
-//! unicycle reference point of the paper (Eq. 6A2), or `f`, `g` supplied by the caller.
+//! unicycle reference point of the paper (Eq. 6A2), two acceleration-level models (a double
+//! integrator and a unicycle driven by acceleration and turn rate), or `f`, `g` supplied by the
+//! caller. Each built-in model also gives exact products with the Jacobian of `f`, which the
+//! second-order (HOCBF) rows and the second-order CLF need.
 
 use crate::error::InputError;
 use crate::validate::check_finite;
@@ -24,6 +27,38 @@ pub enum Dynamics {
         /// State index of the heading.
         theta: usize,
     },
+    /// `ds[pos[i]]/dt = s[vel[i]]`, `ds[vel[i]]/dt = a[i]`: m = pos.len() accelerations. A
+    /// barrier on positions has relative degree 2 under it.
+    DoubleIntegrator {
+        /// The position dimensions.
+        pos: Vec<usize>,
+        /// The velocity dimension of each position (same length).
+        vel: Vec<usize>,
+    },
+    /// A unicycle driven at acceleration level: `dx = v cos theta`, `dy = v sin theta`,
+    /// `dtheta = a[1]` (turn rate), `dv = a[0]` (forward acceleration); m = 2. A barrier on
+    /// `x, y` has relative degree 2 under it.
+    AccelerationUnicycle {
+        /// State index of x.
+        x: usize,
+        /// State index of y.
+        y: usize,
+        /// State index of the heading.
+        theta: usize,
+        /// State index of the forward speed.
+        v: usize,
+    },
+}
+
+fn distinct(what: &str, dims: &[usize]) -> Result<(), InputError> {
+    if (1..dims.len()).any(|i| dims[..i].contains(&dims[i])) {
+        return Err(InputError::Shape {
+            what: what.into(),
+            expected: "distinct state dimensions".into(),
+            got: format!("{dims:?}"),
+        });
+    }
+    Ok(())
 }
 
 impl Dynamics {
@@ -58,19 +93,100 @@ impl Dynamics {
         Ok(Dynamics::Unicycle { eps, x, y, theta })
     }
 
+    /// A double integrator: `pos` and `vel` non-empty, of equal length, all distinct.
+    pub fn double_integrator(pos: Vec<usize>, vel: Vec<usize>) -> Result<Self, InputError> {
+        if pos.is_empty() || pos.len() != vel.len() {
+            return Err(InputError::Shape {
+                what: "DoubleIntegrator pos, vel".into(),
+                expected: "one velocity dimension per position dimension (at least one)".into(),
+                got: format!("pos {pos:?}, vel {vel:?}"),
+            });
+        }
+        distinct(
+            "DoubleIntegrator pos + vel",
+            &[pos.as_slice(), &vel].concat(),
+        )?;
+        Ok(Dynamics::DoubleIntegrator { pos, vel })
+    }
+
+    /// The acceleration-level unicycle; `x`, `y`, `theta`, `v` distinct.
+    pub fn acceleration_unicycle(
+        x: usize,
+        y: usize,
+        theta: usize,
+        v: usize,
+    ) -> Result<Self, InputError> {
+        distinct("AccelerationUnicycle x, y, theta, v", &[x, y, theta, v])?;
+        Ok(Dynamics::AccelerationUnicycle { x, y, theta, v })
+    }
+
     /// Number of inputs m.
     pub fn inputs(&self) -> usize {
         match self {
-            Dynamics::SingleIntegrator { pos } => pos.len(),
-            Dynamics::Unicycle { .. } => 2,
+            Dynamics::SingleIntegrator { pos } | Dynamics::DoubleIntegrator { pos, .. } => {
+                pos.len()
+            }
+            Dynamics::Unicycle { .. } | Dynamics::AccelerationUnicycle { .. } => 2,
         }
     }
 
     /// The smallest state length the model can read.
     pub fn min_dim(&self) -> usize {
+        let top = match self {
+            Dynamics::SingleIntegrator { pos } => pos.iter().copied().max().unwrap_or(0),
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                pos.iter().chain(vel).copied().max().unwrap_or(0)
+            }
+            Dynamics::Unicycle { x, y, theta, .. } => *x.max(y).max(theta),
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => *x.max(y).max(theta).max(v),
+        };
+        top + 1
+    }
+
+    /// Whether an input can move state dimension `d` directly (row `d` of `g` may be
+    /// non-zero). A barrier that reads no such dimension has relative degree 2 or more.
+    pub fn actuates(&self, d: usize) -> bool {
         match self {
-            Dynamics::SingleIntegrator { pos } => pos.iter().max().map_or(0, |m| m + 1),
-            Dynamics::Unicycle { x, y, theta, .. } => *x.max(y).max(theta) + 1,
+            Dynamics::SingleIntegrator { pos } => pos.contains(&d),
+            Dynamics::DoubleIntegrator { vel, .. } => vel.contains(&d),
+            Dynamics::Unicycle { x, y, theta, .. } => d == *x || d == *y || d == *theta,
+            Dynamics::AccelerationUnicycle { theta, v, .. } => d == *theta || d == *v,
+        }
+    }
+
+    /// `out = J_f(s) u`, the Jacobian of the drift `f` times `u` (lengths n).
+    pub fn jacobian_f_times(&self, s: &[f64], u: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        match self {
+            Dynamics::SingleIntegrator { .. } | Dynamics::Unicycle { .. } => {}
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                for (&p, &w) in pos.iter().zip(vel) {
+                    out[p] = u[w];
+                }
+            }
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*x] = -s[*v] * sin * u[*theta] + cos * u[*v];
+                out[*y] = s[*v] * cos * u[*theta] + sin * u[*v];
+            }
+        }
+    }
+
+    /// `out = J_f(s)^T w` (lengths n).
+    pub fn jacobian_f_transpose_times(&self, s: &[f64], w: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        match self {
+            Dynamics::SingleIntegrator { .. } | Dynamics::Unicycle { .. } => {}
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                for (&p, &q) in pos.iter().zip(vel) {
+                    out[q] = w[p];
+                }
+            }
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*theta] = s[*v] * (-sin * w[*x] + cos * w[*y]);
+                out[*v] = cos * w[*x] + sin * w[*y];
+            }
         }
     }
 
@@ -131,6 +247,19 @@ impl Dynamics {
                 out[*y] = sin * a[0] + eps * cos * a[1];
                 out[*theta] = a[1];
             }
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                for ((&p, &v), &ai) in pos.iter().zip(vel).zip(a) {
+                    out[p] = s[v];
+                    out[v] = ai;
+                }
+            }
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*x] = s[*v] * cos;
+                out[*y] = s[*v] * sin;
+                out[*theta] = a[1];
+                out[*v] = a[0];
+            }
         }
     }
 
@@ -162,6 +291,40 @@ impl Dynamics {
                 g[y * m + 1] = eps * cos;
                 g[theta * m + 1] = 1.0;
             }
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                for (i, (&p, &v)) in pos.iter().zip(vel).enumerate() {
+                    f[p] = s[v];
+                    g[v * m + i] = 1.0;
+                }
+            }
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                f[*x] = s[*v] * cos;
+                f[*y] = s[*v] * sin;
+                g[v * m] = 1.0;
+                g[theta * m + 1] = 1.0;
+            }
+        }
+    }
+}
+
+/// The model as its Python constructor writes it, e.g. `DoubleIntegrator(pos=[0, 1], vel=[2, 3])`.
+impl std::fmt::Display for Dynamics {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Dynamics::SingleIntegrator { pos } => write!(f, "SingleIntegrator(pos={pos:?})"),
+            Dynamics::Unicycle { eps, x, y, theta } => {
+                write!(f, "Unicycle(eps={eps}, x={x}, y={y}, theta={theta})")
+            }
+            Dynamics::DoubleIntegrator { pos, vel } => {
+                write!(f, "DoubleIntegrator(pos={pos:?}, vel={vel:?})")
+            }
+            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+                write!(
+                    f,
+                    "AccelerationUnicycle(x={x}, y={y}, theta={theta}, v={v})"
+                )
+            }
         }
     }
 }
@@ -190,6 +353,58 @@ mod tests {
         assert!(Dynamics::unicycle(0.1, 0, 0, 2).is_err());
         assert!(Dynamics::single_integrator(vec![]).is_err());
         assert!(Dynamics::single_integrator(vec![1, 1]).is_err());
+        assert!(Dynamics::double_integrator(vec![0, 1], vec![2]).is_err());
+        assert!(Dynamics::double_integrator(vec![0, 1], vec![1, 2]).is_err());
+        assert!(Dynamics::acceleration_unicycle(0, 1, 2, 2).is_err());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(300))]
+
+        /// The Jacobian products equal central finite differences of `f`, and the two are
+        /// transposes of each other: `w . (J u) == (J^T w) . u`.
+        #[test]
+        fn jacobian_products_match_finite_differences(
+            s in proptest::collection::vec(-3.0..3.0f64, 5),
+            u in proptest::collection::vec(-2.0..2.0f64, 5),
+            w in proptest::collection::vec(-2.0..2.0f64, 5),
+        ) {
+            for model in [
+                Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
+                Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
+                Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
+            ] {
+                let m = model.inputs();
+                let f_at = |x: &[f64]| {
+                    let (mut f, mut g) = (vec![0.0; 5], vec![0.0; 5 * m]);
+                    model.eval(x, &mut f, &mut g);
+                    f
+                };
+                let h = 1e-6;
+                let plus: Vec<f64> = s.iter().zip(&u).map(|(a, b)| a + h * b).collect();
+                let minus: Vec<f64> = s.iter().zip(&u).map(|(a, b)| a - h * b).collect();
+                let (fp, fm) = (f_at(&plus), f_at(&minus));
+                let mut ju = vec![0.0; 5];
+                model.jacobian_f_times(&s, &u, &mut ju);
+                for i in 0..5 {
+                    let fd = (fp[i] - fm[i]) / (2.0 * h);
+                    proptest::prop_assert!((ju[i] - fd).abs() < 1e-6, "{model:?} row {i}");
+                }
+                let mut jtw = vec![0.0; 5];
+                model.jacobian_f_transpose_times(&s, &w, &mut jtw);
+                let lhs: f64 = w.iter().zip(&ju).map(|(a, b)| a * b).sum();
+                let rhs: f64 = jtw.iter().zip(&u).map(|(a, b)| a * b).sum();
+                proptest::prop_assert!((lhs - rhs).abs() < 1e-12);
+                // Structure: g's non-zero rows are exactly the actuated dimensions.
+                let (mut f, mut g) = (vec![0.0; 5], vec![0.0; 5 * m]);
+                model.eval(&s, &mut f, &mut g);
+                for d in 0..5 {
+                    if !model.actuates(d) {
+                        proptest::prop_assert!(g[d * m..(d + 1) * m].iter().all(|&x| x == 0.0));
+                    }
+                }
+            }
+        }
     }
 
     proptest::proptest! {
@@ -205,6 +420,8 @@ mod tests {
                 Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
                 Dynamics::unicycle(0.3, 3, 4, 0).unwrap(),
                 Dynamics::single_integrator(vec![1, 4]).unwrap(),
+                Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
+                Dynamics::acceleration_unicycle(0, 1, 2, 3).unwrap(),
             ] {
                 let m = model.inputs();
                 let (mut f, mut g, mut out) = (vec![0.0; 5], vec![0.0; 5 * m], vec![0.0; 5]);

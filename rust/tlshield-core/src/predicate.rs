@@ -233,6 +233,45 @@ impl Predicate {
         }
     }
 
+    /// Whether the value depends on state dimension `d` (its gradient may be non-zero there).
+    pub fn reads(&self, d: usize) -> bool {
+        match self {
+            Predicate::Halfspace(h) => h.terms.iter().any(|&(i, _)| i == d),
+            Predicate::Ball(b) => {
+                b.pos.contains(&d) || matches!(&b.center, Center::Dims(c) if c.contains(&d))
+            }
+        }
+    }
+
+    /// `out = H(s) v`: the Hessian of [`Predicate::value`] at `s` times `v` (lengths n), for
+    /// second-order barrier rows. Zero for a half-space. For a ball, `value = r - |d|` with
+    /// `d = s[pos] - c(s)` linear in `s`, so `H = -J^T (I - u u^T) J / |d|` (`u = d / |d|`,
+    /// `J` the map `s -> d`); zero at the centre, where it is undefined (never NaN).
+    pub fn hessian_times(&self, s: &[f64], v: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        let Predicate::Ball(b) = self else {
+            return;
+        };
+        let dist = b.distance(s);
+        if dist == 0.0 {
+            return;
+        }
+        // J v and u . J v.
+        let jv = |k: usize| match &b.center {
+            Center::Fixed(_) => v[b.pos[k]],
+            Center::Dims(c) => v[b.pos[k]] - v[c[k]],
+        };
+        let unit = |k: usize| (s[b.pos[k]] - b.center_at(s, k)) / dist;
+        let along: f64 = (0..b.pos.len()).map(|k| unit(k) * jv(k)).sum();
+        for k in 0..b.pos.len() {
+            let z = (jv(k) - unit(k) * along) / dist;
+            out[b.pos[k]] -= z;
+            if let Center::Dims(c) = &b.center {
+                out[c[k]] += z;
+            }
+        }
+    }
+
     /// Gradient of [`Predicate::value`] at `s`, written into `out` (length `s.len()`).
     /// At the centre of a ball the gradient is zero (never NaN).
     pub fn gradient_into(&self, s: &[f64], out: &mut [f64]) {
@@ -306,6 +345,47 @@ impl Halfspace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(300))]
+
+        /// `H v` equals central finite differences of the gradient along `v`.
+        #[test]
+        fn hessian_times_matches_finite_differences(
+            s in proptest::collection::vec(-3.0..3.0f64, 6),
+            v in proptest::collection::vec(-2.0..2.0f64, 6),
+        ) {
+            let predicates = [
+                Predicate::ball(vec![0, 1], 0.5, Center::Fixed(vec![0.3, -0.2])).unwrap(),
+                Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![4, 5])).unwrap(),
+                Predicate::ball(vec![2], 0.5, Center::Fixed(vec![1.0])).unwrap(),
+                Predicate::halfspace(vec![1.0, -1.0, 0.0, 0.0, 0.0, 0.0], 1.5).unwrap(),
+            ];
+            for p in &predicates {
+                if let Predicate::Ball(b) = p {
+                    proptest::prop_assume!(b.distance(&s) > 1e-2);
+                }
+                let h = 1e-6;
+                let plus: Vec<f64> = s.iter().zip(&v).map(|(a, b)| a + h * b).collect();
+                let minus: Vec<f64> = s.iter().zip(&v).map(|(a, b)| a - h * b).collect();
+                let (mut gp, mut gm, mut hv) = (vec![0.0; 6], vec![0.0; 6], vec![0.0; 6]);
+                p.gradient_into(&plus, &mut gp);
+                p.gradient_into(&minus, &mut gm);
+                p.hessian_times(&s, &v, &mut hv);
+                for i in 0..6 {
+                    let fd = (gp[i] - gm[i]) / (2.0 * h);
+                    proptest::prop_assert!((hv[i] - fd).abs() < 1e-5 * (1.0 + fd.abs()), "{p:?} {i}");
+                }
+                for i in 0..6 {
+                    let mut g = vec![0.0; 6];
+                    p.gradient_into(&s, &mut g);
+                    if !p.reads(i) {
+                        proptest::prop_assert_eq!(g[i], 0.0);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn halfspace_value_and_gradient() {

@@ -1,16 +1,50 @@
-//! `Unicycle` and `SingleIntegrator`: the control-affine models of the shield and of the
-//! environments' plants.
+//! The control-affine models of the shield and of the environments' plants: `Unicycle`,
+//! `SingleIntegrator`, `DoubleIntegrator`, `AccelerationUnicycle`. Each wraps a core
+//! `Dynamics` and shares `eval`, `step` and `repr` (one `#[pymethods]` block per model from
+//! `model_methods!`).
 
 use numpy::{IntoPyArray, PyArray1, PyArray2};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use tlshield_core::Dynamics;
 
-use crate::convert::vector;
+use crate::convert::{indices, vector};
 use crate::errors::map;
 
 /// `(f, g)` as numpy arrays.
 type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
+
+/// `eval`, `step` and `__repr__` of a model class (its `inner` is the core model).
+macro_rules! model_methods {
+    ($ty:ty) => {
+        #[pymethods]
+        impl $ty {
+            /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
+            fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
+                eval(py, &self.inner, s)
+            }
+
+            /// One Euler step ``s + dt (f(s) + g(s) a)``: the plant of an environment built on
+            /// this model (Channel-v0 steps through it), the same code the shield's rows use.
+            fn step<'py>(
+                &self,
+                py: Python<'py>,
+                s: &Bound<'py, PyAny>,
+                a: &Bound<'py, PyAny>,
+                dt: f64,
+            ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                let next = self
+                    .inner
+                    .checked_euler_step(&vector(s, "s")?, &vector(a, "a")?, dt);
+                Ok(map(next)?.into_pyarray(py))
+            }
+
+            fn __repr__(&self) -> String {
+                self.inner.to_string()
+            }
+        }
+    };
+}
 
 /// The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2): inputs
 /// ``(a_v, a_theta)``; ``x``, ``y``, ``theta`` are the state dimensions of the reference
@@ -29,33 +63,8 @@ impl PyUnicycle {
             inner: map(Dynamics::unicycle(eps, x, y, theta))?,
         })
     }
-
-    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
-        eval(py, &self.inner, s)
-    }
-
-    /// One Euler step ``s + dt (f(s) + g(s) a)``: the plant of an environment built on this
-    /// model (Channel-v0 steps through it), the same code the shield's constraints use.
-    fn step<'py>(
-        &self,
-        py: Python<'py>,
-        s: &Bound<'py, PyAny>,
-        a: &Bound<'py, PyAny>,
-        dt: f64,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        step(py, &self.inner, s, a, dt)
-    }
-
-    fn __repr__(&self) -> String {
-        match &self.inner {
-            Dynamics::Unicycle { eps, x, y, theta } => {
-                format!("Unicycle(eps={eps}, x={x}, y={y}, theta={theta})")
-            }
-            Dynamics::SingleIntegrator { .. } => unreachable!("PyUnicycle wraps a unicycle"),
-        }
-    }
 }
+model_methods!(PyUnicycle);
 
 /// ``ds[pos[i]]/dt = a[i]``: one input per listed state dimension.
 #[pyclass(name = "SingleIntegrator", module = "tlshield._core", frozen)]
@@ -67,35 +76,78 @@ pub struct PySingleIntegrator {
 impl PySingleIntegrator {
     #[new]
     fn new(pos: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let pos = crate::convert::indices(pos, "pos")?;
         Ok(PySingleIntegrator {
-            inner: map(Dynamics::single_integrator(pos))?,
+            inner: map(Dynamics::single_integrator(indices(pos, "pos")?))?,
         })
     }
+}
+model_methods!(PySingleIntegrator);
 
-    /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
-        eval(py, &self.inner, s)
-    }
+/// ``ds[pos[i]]/dt = s[vel[i]]``, ``ds[vel[i]]/dt = a[i]``: one acceleration per position
+/// dimension. Barriers on positions have relative degree 2 (the shield then needs ``alpha2``).
+#[pyclass(name = "DoubleIntegrator", module = "tlshield._core", frozen)]
+pub struct PyDoubleIntegrator {
+    pub(crate) inner: Dynamics,
+}
 
-    /// One Euler step ``s + dt (f(s) + g(s) a)``: the plant of an environment built on this
-    /// model (Channel-v0 steps through it), the same code the shield's constraints use.
-    fn step<'py>(
-        &self,
-        py: Python<'py>,
-        s: &Bound<'py, PyAny>,
-        a: &Bound<'py, PyAny>,
-        dt: f64,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        step(py, &self.inner, s, a, dt)
+#[pymethods]
+impl PyDoubleIntegrator {
+    #[new]
+    fn new(pos: &Bound<'_, PyAny>, vel: &Bound<'_, PyAny>) -> PyResult<Self> {
+        Ok(PyDoubleIntegrator {
+            inner: map(Dynamics::double_integrator(
+                indices(pos, "pos")?,
+                indices(vel, "vel")?,
+            ))?,
+        })
     }
+}
+model_methods!(PyDoubleIntegrator);
 
-    fn __repr__(&self) -> String {
-        match &self.inner {
-            Dynamics::SingleIntegrator { pos } => format!("SingleIntegrator(pos={pos:?})"),
-            Dynamics::Unicycle { .. } => unreachable!("PySingleIntegrator wraps an integrator"),
-        }
+/// A unicycle driven by forward acceleration and turn rate: state ``x, y, theta, v`` at the
+/// given dimensions, inputs ``(a, omega)``; ``dx = v cos theta``, ``dy = v sin theta``,
+/// ``dtheta = omega``, ``dv = a``. Barriers on ``x, y`` have relative degree 2.
+#[pyclass(name = "AccelerationUnicycle", module = "tlshield._core", frozen)]
+pub struct PyAccelerationUnicycle {
+    pub(crate) inner: Dynamics,
+}
+
+#[pymethods]
+impl PyAccelerationUnicycle {
+    #[new]
+    #[pyo3(signature = (x=0, y=1, theta=2, v=3))]
+    fn new(x: usize, y: usize, theta: usize, v: usize) -> PyResult<Self> {
+        Ok(PyAccelerationUnicycle {
+            inner: map(Dynamics::acceleration_unicycle(x, y, theta, v))?,
+        })
     }
+}
+model_methods!(PyAccelerationUnicycle);
+
+/// The core model of a Python model object; `None` for `None`.
+pub fn model_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    if let Ok(d) = obj.cast::<PyUnicycle>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    if let Ok(d) = obj.cast::<PySingleIntegrator>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    if let Ok(d) = obj.cast::<PyDoubleIntegrator>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    if let Ok(d) = obj.cast::<PyAccelerationUnicycle>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
+    Err(PyTypeError::new_err(format!(
+        "dynamics: expected tlshield.Unicycle, SingleIntegrator, DoubleIntegrator, \
+         AccelerationUnicycle or None (then pass f and g to every filter call), got {}",
+        obj.get_type()
+            .name()
+            .map_or_else(|_| "?".into(), |n| n.to_string())
+    )))
 }
 
 fn eval<'py>(py: Python<'py>, dynamics: &Dynamics, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
@@ -107,15 +159,4 @@ fn eval<'py>(py: Python<'py>, dynamics: &Dynamics, s: &Bound<'py, PyAny>) -> PyR
     let g = numpy::ndarray::Array2::from_shape_vec((n, m), g)
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok((f.into_pyarray(py), g.into_pyarray(py)))
-}
-
-fn step<'py>(
-    py: Python<'py>,
-    dynamics: &Dynamics,
-    s: &Bound<'py, PyAny>,
-    a: &Bound<'py, PyAny>,
-    dt: f64,
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let next = dynamics.checked_euler_step(&vector(s, "s")?, &vector(a, "a")?, dt);
-    Ok(map(next)?.into_pyarray(py))
 }

@@ -41,6 +41,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<progress::PyProgressReward>()?;
     m.add_class::<dynamics::PyUnicycle>()?;
     m.add_class::<dynamics::PySingleIntegrator>()?;
+    m.add_class::<dynamics::PyDoubleIntegrator>()?;
+    m.add_class::<dynamics::PyAccelerationUnicycle>()?;
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;
     m.add_class::<shield::PyFilterBatch>()?;

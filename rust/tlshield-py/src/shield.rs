@@ -9,14 +9,14 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::{
-    Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Dynamics, Filtered,
-    Shield, ShieldConfig, SolvedBy, SolverChoice, Status,
+    Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
+    ShieldConfig, SolvedBy, SolverChoice, Status,
 };
 
 use crate::automaton::PyAutomaton;
 use crate::codes;
 use crate::convert::{vector, FloatArray};
-use crate::dynamics::{PySingleIntegrator, PyUnicycle};
+use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
 use crate::spec::{predicate_of, PySpec};
@@ -217,32 +217,13 @@ fn automaton_of(obj: &Bound<'_, PyAny>) -> PyResult<Arc<Automaton>> {
     )))
 }
 
-fn dynamics_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
-    if obj.is_none() {
-        return Ok(None);
-    }
-    if let Ok(d) = obj.cast::<PyUnicycle>() {
-        return Ok(Some(d.get().inner.clone()));
-    }
-    if let Ok(d) = obj.cast::<PySingleIntegrator>() {
-        return Ok(Some(d.get().inner.clone()));
-    }
-    Err(PyTypeError::new_err(format!(
-        "dynamics: expected tlshield.Unicycle, tlshield.SingleIntegrator or None (then pass f \
-         and g to every filter call), got {}",
-        obj.get_type()
-            .name()
-            .map_or_else(|_| "?".into(), |n| n.to_string())
-    )))
-}
-
 #[pymethods]
 impl PyShield {
     #[new]
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
         barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
-        slack_penalty=None, margin=None,
+        slack_penalty=None, margin=None, alpha2=None, clf_gain=None,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -262,9 +243,11 @@ impl PyShield {
         solver: &str,
         slack_penalty: Option<f64>,
         margin: Option<f64>,
+        alpha2: Option<f64>,
+        clf_gain: Option<f64>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
-        let dynamics = dynamics_of(dynamics)?;
+        let dynamics = model_of(dynamics)?;
         // m from the model, else from the CBF bounds (a scalar pair then means m = 1).
         let m = match &dynamics {
             Some(d) => d.inputs(),
@@ -302,7 +285,9 @@ impl PyShield {
         .with_solver(map(SolverChoice::parse(solver))?)
         // None keeps the core's defaults (ShieldConfig::DEFAULT_SLACK_PENALTY, DEFAULT_MARGIN).
         .with_slack_penalty(slack_penalty.unwrap_or(ShieldConfig::DEFAULT_SLACK_PENALTY))
-        .with_margin(margin.unwrap_or(ShieldConfig::DEFAULT_MARGIN));
+        .with_margin(margin.unwrap_or(ShieldConfig::DEFAULT_MARGIN))
+        .with_alpha2(alpha2)
+        .with_clf_gain(clf_gain.unwrap_or(ShieldConfig::DEFAULT_CLF_GAIN));
         let barrier_names = config
             .barriers
             .iter()

@@ -39,7 +39,9 @@ use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::validate::check_finite;
 
+mod order;
 mod program;
+use order::Orders;
 use program::Program;
 
 /// Batches smaller than this are shielded on the calling thread.
@@ -203,8 +205,12 @@ impl Bounds {
 /// The shield's parameters (names as in the paper).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShieldConfig {
-    /// CBF class-K gain: `dh/dt + alpha h >= 0` (> 0).
+    /// CBF class-K gain: `dh/dt + alpha h >= 0` (> 0). For a second-order (HOCBF) row it is
+    /// the first gain: `psi_1 = dh/dt + alpha h`.
     pub alpha: f64,
+    /// The HOCBF's second gain: `dpsi_1/dt + alpha2 psi_1 >= 0` (> 0), required when a barrier
+    /// has relative degree 2 under the model (see `shield/order.rs`).
+    pub alpha2: Option<f64>,
     /// CLF decay rate: `dV/dt + c3 V <= delta` (> 0).
     pub c3: f64,
     /// Linear cost on the CLF relaxation `delta` (> 0; an exact penalty once it exceeds the
@@ -220,6 +226,9 @@ pub struct ShieldConfig {
     pub barriers: Vec<Barrier>,
     /// State dimensions the CLF drives to the goal.
     pub pos: Vec<usize>,
+    /// Gain `k` of the second-order CLF `V = |dp/dt + k (p - goal)|^2`, used when no input
+    /// moves `pos` directly (acceleration-level models) (> 0).
+    pub clf_gain: f64,
     /// Whether the CBF part (barriers, safe set, `a_cbf`) is on.
     pub use_cbf: bool,
     /// Whether the CLF part (`a_clf`, `delta`) is on.
@@ -241,6 +250,8 @@ impl ShieldConfig {
     pub const DEFAULT_MARGIN: f64 = 1e-6;
     /// Default CLF dimensions: the position is `s[0], s[1]`.
     pub const DEFAULT_POS: [usize; 2] = [0, 1];
+    /// Default gain of the second-order CLF.
+    pub const DEFAULT_CLF_GAIN: f64 = 1.0;
 
     /// The gains and boxes every shield needs; everything else at its default: no actuator
     /// limits, no user barriers, the CLF on [`ShieldConfig::DEFAULT_POS`], both CBF and CLF on,
@@ -249,6 +260,7 @@ impl ShieldConfig {
     pub fn new(alpha: f64, c3: f64, k: f64, cbf_bounds: Bounds, clf_bounds: Bounds) -> Self {
         ShieldConfig {
             alpha,
+            alpha2: None,
             c3,
             k,
             cbf_bounds,
@@ -256,6 +268,7 @@ impl ShieldConfig {
             action_bounds: None,
             barriers: Vec::new(),
             pos: Self::DEFAULT_POS.to_vec(),
+            clf_gain: Self::DEFAULT_CLF_GAIN,
             use_cbf: true,
             use_clf: true,
             solver: SolverChoice::Auto,
@@ -304,6 +317,18 @@ impl ShieldConfig {
     /// The barrier margin.
     pub fn with_margin(mut self, margin: f64) -> Self {
         self.margin = margin;
+        self
+    }
+
+    /// The HOCBF's second gain (needed for barriers of relative degree 2).
+    pub fn with_alpha2(mut self, alpha2: Option<f64>) -> Self {
+        self.alpha2 = alpha2;
+        self
+    }
+
+    /// The gain of the second-order CLF.
+    pub fn with_clf_gain(mut self, clf_gain: f64) -> Self {
+        self.clf_gain = clf_gain;
         self
     }
 }
@@ -455,6 +480,8 @@ pub struct Shield {
     automaton: Arc<Automaton>,
     dynamics: Option<Dynamics>,
     config: ShieldConfig,
+    /// Which rows are second order (HOCBF) under the model.
+    orders: Orders,
     m: usize,
     /// Smallest state length every part can read.
     min_dim: usize,
@@ -505,6 +532,10 @@ impl Shield {
         config: ShieldConfig,
     ) -> Result<Self, ShieldError> {
         positive("alpha", config.alpha)?;
+        if let Some(a2) = config.alpha2 {
+            positive("alpha2", a2)?;
+        }
+        positive("clf_gain", config.clf_gain)?;
         positive("c3", config.c3)?;
         positive("K", config.k)?;
         positive("slack_penalty", config.slack_penalty)?;
@@ -595,10 +626,12 @@ impl Shield {
                 )));
             }
         }
+        let orders = Orders::new(spec, &config, dynamics.as_ref(), min_dim)?;
         Ok(Shield {
             automaton,
             dynamics,
             config,
+            orders,
             m,
             min_dim,
             pool: Mutex::new(Vec::new()),
@@ -875,6 +908,7 @@ impl Shield {
         ws.out.barriers.clear();
         ws.program.rows(
             cfg,
+            &self.orders,
             &self.automaton,
             self.dynamics.as_ref(),
             s,

@@ -1,10 +1,19 @@
 //! Eq. 5D2 for one state, top to bottom: the dynamics at `s`, the barrier rows (Lie
-//! derivatives of every barrier), the CLF row of Eq. 5B1 with its `delta_0` shift, and the QP
-//! `min x'Px/2 + c'x  s.t.  G x <= h` over `x = [a_cbf | a_clf | d | sigma (relaxed only)]`.
+//! derivatives of every barrier; second-order HOCBF rows where the barrier has relative degree
+//! 2, see `order.rs`), the CLF row of Eq. 5B1 (second-order form under acceleration-level
+//! models) with its `delta_0` shift, and the QP `min x'Px/2 + c'x  s.t.  G x <= h` over
+//! `x = [a_cbf | a_clf | d | sigma (relaxed only)]`.
+//!
+//! Every row has the form `L . (a_rl + a_cbf + a_clf) + r >= 0` for the barriers. First order:
+//! `L = Lg h`, `r = Lf h + alpha (h - margin)`. Second order (Xiao & Belta): with
+//! `psi_1 = Lf h + alpha (h - margin)`, `L = Lg psi_1 = (H f + J_f^T grad h)^T g` and
+//! `r = Lf psi_1 + alpha2 psi_1`, `Lf psi_1 = f^T H f + grad h . J_f f + alpha Lf h`
+//! (`H` the barrier's Hessian, `J_f` the Jacobian of the drift; both exact).
 //!
 //! The buffers live in [`Program`] and are reused from step to step: nothing here allocates
 //! once they have grown to the problem's size.
 
+use super::order::Orders;
 use super::{BarrierSource, ControlAffine, ShieldConfig};
 use crate::automaton::Automaton;
 use crate::cnf::Literal;
@@ -18,6 +27,10 @@ pub(super) struct Program {
     f: Vec<f64>,
     g: Vec<f64>,
     grad: Vec<f64>,
+    /// Second-order terms: `H f`, `J_f f` and `J_f^T w` (n each).
+    hf: Vec<f64>,
+    jf: Vec<f64>,
+    jt: Vec<f64>,
     safe: Vec<(Literal, f64)>,
     /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
     lg: Vec<f64>,
@@ -56,6 +69,9 @@ impl Program {
         Program {
             f: vec![0.0; n],
             grad: vec![0.0; n],
+            hf: vec![0.0; n],
+            jf: vec![0.0; n],
+            jt: vec![0.0; n],
             ..Program::default()
         }
     }
@@ -84,6 +100,9 @@ impl Program {
         self.f.resize(n, 0.0);
         self.g.resize(n * m, 0.0);
         self.grad.resize(n, 0.0);
+        self.hf.resize(n, 0.0);
+        self.jf.resize(n, 0.0);
+        self.jt.resize(n, 0.0);
         match (fg, model) {
             (Some(ControlAffine { f, g }), _) => {
                 self.f.copy_from_slice(f);
@@ -105,6 +124,7 @@ impl Program {
     pub(super) fn rows(
         &mut self,
         cfg: &ShieldConfig,
+        orders: &Orders,
         automaton: &Automaton,
         model: Option<&Dynamics>,
         s: &[f64],
@@ -122,48 +142,71 @@ impl Program {
         // The atoms' robustness at s, once for both the safe set and the goal.
         let reading = automaton.read_validated(s);
 
-        // Barriers (the user's, then the safe set of Eq. 5C1): value h, Lg h and the row's
-        // right-hand side Lf h + Lg h . a_rl + alpha (h - margin).
+        // Barriers (the user's, then the safe set of Eq. 5C1): value h, the row's L (m values)
+        // and right-hand side r + L . a_rl (see the module docs).
         if cfg.use_cbf {
             let spec = automaton.spec();
             reading.safe_set(q, &mut self.safe);
             let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
                 let sign = if b.positive { 1.0 } else { -1.0 };
                 let h = sign * b.predicate.value(s);
+                let second = orders.barriers[i];
                 (
                     BarrierSource::User(i),
                     &b.predicate,
                     sign,
                     h,
                     b.slack_weight,
+                    second,
                 )
             });
             let kept = self.safe.iter().map(|&(lit, h)| {
                 let sign = if lit.positive { 1.0 } else { -1.0 };
                 let predicate = &spec.predicates()[lit.atom];
-                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0)
+                let second = orders.atoms[lit.atom];
+                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, second)
             });
-            for (source, predicate, sign, h, weight) in user.chain(kept) {
+            for (source, predicate, sign, h, weight, second) in user.chain(kept) {
                 self.weights.push(weight);
                 predicate.gradient_into(s, &mut self.grad);
-                let lf = sign * dot(&self.grad, &self.f);
+                self.grad.iter_mut().for_each(|v| *v *= sign);
+                let lf = dot(&self.grad, &self.f);
+                let psi = lf + cfg.alpha * (h - cfg.margin);
+                let (coefficients, r) = match (second, model) {
+                    (true, Some(model)) => {
+                        predicate.hessian_times(s, &self.f, &mut self.hf);
+                        self.hf.iter_mut().for_each(|v| *v *= sign);
+                        model.jacobian_f_times(s, &self.f, &mut self.jf);
+                        model.jacobian_f_transpose_times(s, &self.grad, &mut self.jt);
+                        let lf_psi =
+                            dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + cfg.alpha * lf;
+                        // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
+                        for (a, b) in self.hf.iter_mut().zip(&self.jt) {
+                            *a += b;
+                        }
+                        let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
+                        (&self.hf, lf_psi + alpha2 * psi)
+                    }
+                    _ => (&self.grad, psi),
+                };
                 let mut lg_a = 0.0;
                 for (j, a) in a_rl.iter().enumerate() {
-                    let lg = sign
-                        * (0..s.len())
-                            .map(|k| self.grad[k] * self.g[k * m + j])
-                            .sum::<f64>();
+                    let lg = (0..s.len())
+                        .map(|k| coefficients[k] * self.g[k * m + j])
+                        .sum::<f64>();
                     lg_a += lg * a;
                     self.lg.push(lg);
                 }
-                self.rhs.push(lf + lg_a + cfg.alpha * (h - cfg.margin));
+                self.rhs.push(r + lg_a);
                 if let Some(out) = barriers_out.as_deref_mut() {
                     out.push((source, h));
                 }
             }
         }
 
-        // CLF row (Eq. 5B1's goal): V = |s[pos] - goal|^2,
+        // CLF row (Eq. 5B1's goal): V = |e|^2 with e = s[pos] - goal, or, when no input moves
+        // pos directly (second order), e = f[pos] + k (s[pos] - goal) (drive the velocity
+        // towards k times the remaining distance);
         // Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
         self.has_goal = cfg.use_clf && reading.goal(q, &mut self.goal);
         self.clf_rhs = 0.0;
@@ -172,12 +215,35 @@ impl Program {
         self.clf_lg.resize(m, 0.0);
         if self.has_goal {
             let (mut v, mut lf) = (0.0, 0.0);
-            for (&k, &c) in cfg.pos.iter().zip(&self.goal) {
-                let e = s[k] - c;
-                v += e * e;
-                lf += 2.0 * e * self.f[k];
-                for (j, l) in self.clf_lg.iter_mut().enumerate() {
-                    *l += 2.0 * e * self.g[k * m + j];
+            match (orders.clf, model) {
+                (true, Some(model)) => {
+                    // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
+                    let k = cfg.clf_gain;
+                    model.jacobian_f_times(s, &self.f, &mut self.jf);
+                    self.hf.fill(0.0); // e placed at the pos dimensions
+                    for (&p, &c) in cfg.pos.iter().zip(&self.goal) {
+                        let e = self.f[p] + k * (s[p] - c);
+                        self.hf[p] = e;
+                        v += e * e;
+                        lf += 2.0 * e * (self.jf[p] + k * self.f[p]);
+                    }
+                    model.jacobian_f_transpose_times(s, &self.hf, &mut self.jt);
+                    for (j, l) in self.clf_lg.iter_mut().enumerate() {
+                        *l = 2.0
+                            * (0..s.len())
+                                .map(|i| self.jt[i] * self.g[i * m + j])
+                                .sum::<f64>();
+                    }
+                }
+                _ => {
+                    for (&k, &c) in cfg.pos.iter().zip(&self.goal) {
+                        let e = s[k] - c;
+                        v += e * e;
+                        lf += 2.0 * e * self.f[k];
+                        for (j, l) in self.clf_lg.iter_mut().enumerate() {
+                            *l += 2.0 * e * self.g[k * m + j];
+                        }
+                    }
                 }
             }
             self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + cfg.c3 * v);

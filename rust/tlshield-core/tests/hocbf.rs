@@ -1,0 +1,168 @@
+//! Second-order barriers (HOCBF) under acceleration-level models, through the public API:
+//! forward invariance of an obstacle's outside under adversarial accelerations, for the double
+//! integrator and the acceleration-driven unicycle.
+
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+use tlshield_core::{
+    Automaton, Barrier, Bounds, Center, Dynamics, Predicate, Shield, ShieldConfig, Spec, Status,
+};
+
+/// Adversarial steps per model (the README quotes this run).
+const STEPS: usize = 100_000;
+
+/// A small deterministic generator (xorshift), so the test needs no extra crate.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+fn bounds(v: f64, m: usize) -> Bounds {
+    Bounds {
+        lo: vec![-v; m],
+        hi: vec![v; m],
+    }
+}
+
+/// A shield keeping `s[0..2]` out of a ball of radius 1 at the origin, CLF off (the task is
+/// only the barrier's), HOCBF gains 2 and 2; the spec reads the same state.
+fn shield(model: Dynamics, accel: f64) -> Shield {
+    let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
+    let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![50.0, 50.0])).unwrap();
+    let spec = Spec::new("F g", [("g", goal)]).unwrap();
+    let m = model.inputs();
+    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
+        .with_alpha2(Some(2.0))
+        // Kept 1 cm clear in continuous time, so the Euler plant's O(dt^2) error per step
+        // cannot carry the state inside.
+        .with_margin(1e-2)
+        .with_parts(true, false)
+        .with_action_bounds(Some(bounds(accel, m)))
+        .with_barriers(vec![Barrier::outside("o", obstacle)]);
+    Shield::new(
+        Arc::new(Automaton::build(&spec).unwrap()),
+        Some(model),
+        config,
+    )
+    .unwrap()
+}
+
+/// Steps `steps` adversarial actions (toward the obstacle at full acceleration, or random)
+/// from random starts with h >= 0 and psi_1 >= 0, shielded or not; returns (min h, relaxed,
+/// failed).
+fn attack(
+    model: Dynamics,
+    start: impl Fn(&mut Rng) -> Vec<f64>,
+    steps: usize,
+    shielded: bool,
+) -> (f64, usize, usize) {
+    let accel = 2.0;
+    let sh = shield(model.clone(), accel);
+    let dt = 0.01;
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let (mut min_h, mut relaxed, mut failed) = (f64::INFINITY, 0, 0);
+    let mut s = start(&mut rng);
+    let mut next = vec![0.0; s.len()];
+    for t in 0..steps {
+        if t % 400 == 0 {
+            s = start(&mut rng);
+        }
+        let m = model.inputs();
+        let a_rl: Vec<f64> = if rng.uniform(0.0, 1.0) < 0.7 {
+            // Accelerate straight at the obstacle (for the unicycle: full forward, no turn).
+            let (px, py) = (s[0], s[1]);
+            let norm = (px * px + py * py).sqrt().max(1e-9);
+            match model {
+                Dynamics::DoubleIntegrator { .. } => vec![-accel * px / norm, -accel * py / norm],
+                _ => vec![accel, 0.0],
+            }
+        } else {
+            (0..m).map(|_| rng.uniform(-accel, accel)).collect()
+        };
+        let action = if shielded {
+            let out = sh.filter(&s, 0, &a_rl, None, None).unwrap();
+            match out.status {
+                Status::Relaxed => relaxed += 1,
+                Status::Failed => failed += 1,
+                Status::Solved => {}
+            }
+            assert!(out.action.iter().all(|a| a.is_finite()));
+            out.action
+        } else {
+            a_rl
+        };
+        model.euler_step(&s, &action, dt, &mut next);
+        std::mem::swap(&mut s, &mut next);
+        min_h = min_h.min((s[0] * s[0] + s[1] * s[1]).sqrt() - 1.0);
+    }
+    (min_h, relaxed, failed)
+}
+
+#[test]
+fn double_integrator_never_enters_the_obstacle() {
+    let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
+    // Starts outside, moving at up to 1 m/s, with psi_1 = dh/dt + 2 h >= 0.
+    let start = |rng: &mut Rng| loop {
+        let angle = rng.uniform(-PI, PI);
+        let r = rng.uniform(1.05, 3.0);
+        let (px, py) = (r * angle.cos(), r * angle.sin());
+        let (vx, vy) = (rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
+        let psi = (px * vx + py * vy) / r + 2.0 * (r - 1.0);
+        if psi >= 0.0 {
+            return vec![px, py, vx, vy];
+        }
+    };
+    // The attack is real: unshielded, it enters the obstacle.
+    assert!(attack(model.clone(), start, 4_000, false).0 < 0.0);
+    let (min_h, relaxed, failed) = attack(model, start, STEPS, true);
+    assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
+    assert_eq!(failed, 0);
+    println!(
+        "double integrator, {STEPS} steps: min h {min_h:.2e}, relaxed {relaxed}, failed {failed}"
+    );
+}
+
+#[test]
+fn acceleration_unicycle_never_enters_the_obstacle() {
+    let model = Dynamics::acceleration_unicycle(0, 1, 2, 3).unwrap();
+    let start = |rng: &mut Rng| loop {
+        let angle = rng.uniform(-PI, PI);
+        let r = rng.uniform(1.05, 3.0);
+        let (px, py) = (r * angle.cos(), r * angle.sin());
+        let theta = rng.uniform(-PI, PI);
+        let v = rng.uniform(0.0, 1.0);
+        let psi = v * (px * theta.cos() + py * theta.sin()) / r + 2.0 * (r - 1.0);
+        if psi >= 0.0 {
+            return vec![px, py, theta, v];
+        }
+    };
+    assert!(attack(model.clone(), start, 4_000, false).0 < 0.0);
+    let (min_h, relaxed, failed) = attack(model, start, STEPS, true);
+    assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
+    assert_eq!(failed, 0);
+    println!("acceleration unicycle, {STEPS} steps: min h {min_h:.2e}, relaxed {relaxed}, failed {failed}");
+}
+
+#[test]
+fn a_second_order_barrier_needs_alpha2() {
+    let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
+    let spec = Spec::new("F o", [("o", obstacle.clone())]).unwrap();
+    let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
+    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
+        .with_barriers(vec![Barrier::outside("o", obstacle)]);
+    let aut = Arc::new(Automaton::build(&spec).unwrap());
+    let err = Shield::new(aut.clone(), Some(model.clone()), config.clone()).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("relative degree 2") && text.contains("alpha2"),
+        "{text}"
+    );
+    assert!(Shield::new(aut, Some(model), config.with_alpha2(Some(1.0))).is_ok());
+}
