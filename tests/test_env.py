@@ -290,6 +290,21 @@ def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
         Shielded(PointEnv(), shield)
 
 
+def test_fsa_augmented_reset_reports_a_start_in_the_trap() -> None:
+    # The wrapped env starts above the y < 1 line: the automaton is in the trap from s_0.
+    class AboveEnv(PointEnv):
+        def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[Any, dict]:
+            super().reset(seed=seed)
+            self.p = np.array([0.0, 2.0])
+            return self.p.copy(), {}
+
+    spec = point_spec()
+    _, info = FsaAugmented(AboveEnv(), spec).reset(seed=0)
+    assert info["trap"] and info["fsa_state"] == spec.automaton().trap
+    _, info = FsaAugmented(PointEnv(), spec).reset(seed=0)
+    assert not info["trap"]
+
+
 def test_fsa_augmented_pays_the_progress_reward_by_default() -> None:
     spec = point_spec()
     env = FsaAugmented(PointEnv(), spec, gamma=0.9, scale=2.0)

@@ -182,7 +182,8 @@ class FsaAugmented(gym.Wrapper):
     def reset(self, **kwargs: Any) -> tuple[NDArray[np.float64], dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         q = self.tracker.reset(self.state_fn(obs))
-        info = {**info, "fsa_state": q, "success": self.tracker.success, "trap": False}
+        info = {**info, "fsa_state": q, "success": self.tracker.success}
+        info["trap"] = self.tracker.trapped
         return self._observe(obs), info
 
     def step(
