@@ -1,5 +1,6 @@
-"""Environments and tasks of tlshield: the paper's channel case study, registered with
-Gymnasium as ``tlshield/Channel-v0`` when ``tlshield`` is imported."""
+"""Environments and tasks of tlshield, registered with Gymnasium when ``tlshield`` is
+imported: the paper's channel case study ``tlshield/Channel-v0`` and a double-integrator robot
+with a sequencing task, ``tlshield/PointMass-v0``."""
 
 import gymnasium as gym
 
@@ -14,13 +15,17 @@ from tlshield.envs.channel import (
 )
 
 ENV_ID = "tlshield/Channel-v0"
+POINT_MASS_ID = "tlshield/PointMass-v0"
 
 if ENV_ID not in gym.registry:
     gym.register(id=ENV_ID, entry_point="tlshield.envs.channel:ChannelEnv")
+if POINT_MASS_ID not in gym.registry:
+    gym.register(id=POINT_MASS_ID, entry_point="tlshield.envs.point_mass:make_point_mass")
 
 __all__ = [
     "CONFIGS",
     "ENV_ID",
+    "POINT_MASS_ID",
     "STATE_DIM",
     "TASK",
     "ChannelConfig",

@@ -1,0 +1,95 @@
+"""tlshield/PointMass-v0: Gymnasium API, the task wiring, and the higher-order shield keeping
+a double integrator out of the obstacles against a policy that drives straight through them."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tlshield
+from tlshield.envs import POINT_MASS_ID
+from tlshield.envs.point_mass import CONFIGS, PointMassConfig, make_point_mass
+
+CFG = PointMassConfig()
+
+
+# The whole stack is checked on purpose (a user's env is the wrapped one), so the checker's
+# "different from the unwrapped version" notice is expected.
+@pytest.mark.filterwarnings("ignore:.*different from the unwrapped")
+@pytest.mark.parametrize("config", sorted(CONFIGS))
+def test_check_env_passes(config: str) -> None:
+    check_env(make_point_mass(config), skip_render_check=True)
+    env = gym.make(POINT_MASS_ID, config=config)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == env.observation_space.shape and info["fsa_state"] == 0
+
+
+def before_a(env: gym.Env) -> bool:
+    """Whether the task is still at its start (a not yet visited)."""
+    tracker = env.get_wrapper_attr("tracker")
+    return bool(tracker.q == tracker.automaton.initial)
+
+
+def straight(env: gym.Env, obs: np.ndarray) -> np.ndarray:
+    """Full acceleration straight at the current goal (a, then b), braking near it: the
+    straight lines cross o1 and o2."""
+    p, v = obs[:2], obs[2:4]
+    goal = np.array(CFG.goal_a if before_a(env) else CFG.goal_b)
+    return np.clip(2.0 * (goal - p) - 2.0 * v, -1.0, 1.0)
+
+
+def run(config: str, policy: object, seed: int) -> tuple[int, bool, float]:
+    env = make_point_mass(config)
+    obs, _ = env.reset(seed=seed)
+    entries, min_h = 0, math.inf
+    for _ in range(CFG.horizon):
+        obs, _, terminated, truncated, info = env.step(policy(env, obs))  # type: ignore[operator]
+        entries += info["collision"]
+        min_h = min(min_h, info["min_obstacle_distance"])
+        if terminated or truncated:
+            return entries, bool(info["success"]), min_h
+    return entries, False, min_h
+
+
+def test_the_hocbf_keeps_a_straight_driver_out_of_the_obstacles() -> None:
+    for seed in range(3):
+        unshielded, _, _ = run("rl", straight, seed)
+        assert unshielded > 0  # the attack is real
+        entries, _, min_h = run("rl_cbf", straight, seed)
+        assert entries == 0 and min_h > 0.0, (seed, min_h)
+
+
+def waypoints(env: gym.Env, obs: np.ndarray) -> np.ndarray:
+    """Past o1 on its right, to a; then over o2, to b."""
+    p, v = obs[:2], obs[2:4]
+    if before_a(env):
+        target = (3.2, 6.0) if p[1] < 5.5 else CFG.goal_a
+    else:
+        target = (5.0, 9.8) if p[0] < 4.9 else CFG.goal_b
+    return np.clip(1.5 * (np.array(target) - p) - 2.0 * v, -1.0, 1.0)
+
+
+def test_the_task_is_doable_and_finishing_ends_the_episode() -> None:
+    for seed in range(3):
+        entries, success, _ = run("rl", waypoints, seed)
+        assert success and entries == 0, seed
+
+
+def test_bad_settings_are_rejected_at_make() -> None:
+    with pytest.raises(ValueError, match="overlap"):
+        gym.make(POINT_MASS_ID, obstacle_radius=4.0)
+    with pytest.raises(ValueError, match="config"):
+        gym.make(POINT_MASS_ID, config="cbf")
+    with pytest.raises(TypeError, match="unknown PointMass-v0 parameter"):
+        gym.make(POINT_MASS_ID, alhpa=1.0)
+    with pytest.raises(ValueError, match="alpha2"):
+        gym.make(POINT_MASS_ID, alpha2=0.0)
+    env = make_point_mass()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([math.nan, 0.0]))
+    assert isinstance(tlshield.DoubleIntegrator([0, 1], [2, 3]), tlshield.DoubleIntegrator)
