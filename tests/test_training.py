@@ -172,3 +172,19 @@ def test_reproduce_progress_bar_counts_runs(
     err = capsys.readouterr().err
     assert done == ["a", "b"]
     assert "runs" in err and "run" in err and "update" not in err
+
+
+def test_train_and_evaluate_point_mass_from_the_cli(tmp_path: Path) -> None:
+    # Tiny budget: the plumbing (env choice, metrics, validation, evaluation), not learning.
+    out = tmp_path / "pm"
+    args = ["train", "--env", "tlshield/PointMass-v0", "--config", "rl_cbf_clf"]
+    assert cli.main([*args, "--updates", "1", "--out", str(out), "--quiet"]) == 0
+    record = json.loads((out / "config.json").read_text())
+    assert record["env_id"] == "tlshield/PointMass-v0" and record["finished"]
+    rows = read_metrics(out)
+    assert len(rows) == 1 and int(rows[0]["violations"]) == 0  # the HOCBF holds in training
+    result = evaluate(out, trials=3)
+    assert result["trials"] == 3 and len(result["outcomes"]) == 3
+    assert result["collisions"] == 0
+    with pytest.raises(ValueError, match="only 'fixed'"):
+        train("rl_clf", 0, 1, tmp_path / "x", env="tlshield/PointMass-v0", clf_schedule="linear")

@@ -121,6 +121,7 @@ def _train(args: argparse.Namespace) -> int:
         args.seed,
         args.updates,
         args.out,
+        env=args.env,
         clf_schedule=args.clf_schedule,
         clf_final_scale=args.clf_final_scale,
         progress=not args.quiet,
@@ -202,7 +203,10 @@ def _preset_options(args: argparse.Namespace) -> dict[str, object]:
     reward, 13-value observation, no moving-obstacle barrier)."""
     from tlshield.envs.channel import PAPER_ENV
 
-    if args.preset == "paper":
+    if (
+        args.preset == "paper"
+        and getattr(args, "env", "tlshield/Channel-v0") == "tlshield/Channel-v0"
+    ):
         return {"preset": "paper", **PAPER_ENV}
     return {"preset": args.preset}
 
@@ -257,6 +261,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     train = sub.add_parser("train", help="train PPO on one configuration of the case study")
     train.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
+    train.add_argument(
+        "--env",
+        choices=["tlshield/Channel-v0", "tlshield/PointMass-v0"],
+        default="tlshield/Channel-v0",
+        help="the environment (default: the paper's case study)",
+    )
     train.add_argument(
         "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"
     )

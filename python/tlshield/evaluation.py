@@ -14,8 +14,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
+from tlshield.envs import ENV_ID
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_config
@@ -26,26 +28,36 @@ __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
 EVAL_SEED = 10_000
 
 
+def _make(env_id: str, config: str, overrides: dict[str, Any]) -> Any:
+    """One evaluation environment (the paper's rules: CBF on in every configuration)."""
+    if env_id == ENV_ID:
+        return ChannelEnv(config=config, evaluation=True, **overrides)
+    return gym.make(env_id, config=config, evaluation=True, **overrides)
+
+
 def rollouts(
     config: str,
     overrides: dict[str, Any],
     policy: Callable[[np.ndarray], np.ndarray],
     seeds: list[int],
+    env_id: str = ENV_ID,
 ) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
     by side with one batched policy call per step: per-trial outcomes, start states, agent
-    paths and obstacle paths."""
-    envs = [ChannelEnv(config=config, evaluation=True, **overrides) for _ in seeds]
+    paths and obstacle paths (the last three for Channel-v0 only; empty for other envs)."""
+    envs = [_make(env_id, config, overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
-    starts = np.stack([env.state.copy() for env in envs])
-    paths = [[env.state[[X, Y]]] for env in envs]
-    obstacle_paths = [[_obstacles(env)] for env in envs]
+    channel = env_id == ENV_ID
+    starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))
+    paths = [[env.state[[X, Y]]] for env in envs] if channel else []
+    obstacle_paths = [[_obstacles(env)] for env in envs] if channel else []
     outcomes = [
         {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
         for s in seeds
     ]
+    horizon = envs[0].get_wrapper_attr("cfg").horizon
     active = list(range(len(seeds)))
-    for t in range(envs[0].cfg.horizon):
+    for t in range(horizon):
         if not active:
             break
         actions = np.asarray(policy(obs[active]), dtype=np.float64).reshape(len(active), -1)
@@ -53,12 +65,13 @@ def rollouts(
         for i, action in zip(active, actions, strict=True):
             o, _, terminated, truncated, info = envs[i].step(action)
             obs[i] = o
-            paths[i].append(envs[i].state[[X, Y]])
-            obstacle_paths[i].append(_obstacles(envs[i]))
+            if channel:
+                paths[i].append(envs[i].state[[X, Y]])
+                obstacle_paths[i].append(_obstacles(envs[i]))
             out = outcomes[i]
             out["violations"] += int(info["violation"])
             out["steps"] = t + 1
-            if terminated or truncated:
+            if terminated or truncated or info["collision"]:
                 out["success"] = bool(info["success"])
                 out["collision"] = bool(info["collision"])
             else:
@@ -82,8 +95,9 @@ def evaluate(
     on success or on collision. All trials run side by side (one batched policy call per
     step); ``policy`` maps a batch of observations ``(N, d)`` to actions ``(N, 2)``. Trial
     ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
-    trial: reset seed, success, collision, steps, violating steps) and ``trajectories.npz``
-    (each trial's start state, agent path and obstacle paths)."""
+    trial: reset seed, success, collision, steps, violating steps) and, for Channel-v0,
+    ``trajectories.npz`` (each trial's start state, agent path and obstacle paths). The run's
+    environment is the one its config.json names (``env_id``; Channel-v0 when absent)."""
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
     record = read_config(run)
@@ -94,6 +108,7 @@ def evaluate(
         record.get("overrides", {}),
         policy,
         [seed + i for i in range(trials)],
+        record.get("env_id", ENV_ID),
     )
     successes = sum(o["success"] for o in outcomes)
     steps_to_success = [o["steps"] for o in outcomes if o["success"]]
@@ -111,6 +126,8 @@ def evaluate(
         "outcomes": outcomes,
     }
     Path(run, "evaluation.json").write_text(json.dumps(result, indent=2))
+    if not paths:  # not Channel-v0: no trajectory figure to feed
+        return result
     np.savez_compressed(
         Path(run, "trajectories.npz"),
         starts=starts,

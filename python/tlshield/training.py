@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.codes import Status
+from tlshield.envs import ENV_ID, POINT_MASS_ID
 from tlshield.envs.channel import CONFIGS, ChannelConfig, ChannelEnv, channel_shield
 from tlshield.evaluation import evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
@@ -83,6 +84,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: Reset seeds of the validation episodes that pick the kept checkpoint (disjoint from both).
 VALIDATION_SEED = 20_000
 SCHEDULES = ("fixed", "linear", "exponential")
+#: Environments :func:`train` and :func:`tlshield.evaluation.evaluate` know.
+ENV_IDS = (ENV_ID, POINT_MASS_ID)
 
 
 def clf_scale(schedule: str, progress: float, final: float) -> float:
@@ -120,13 +123,21 @@ def _check_run_args(
         raise ValueError(f"final CLF scale {final_scale!r}: expected a number in (0, 1]")
 
 
-def make_vec_env(config: str, seed: int, overrides: dict[str, Any], n_envs: int) -> Any:
-    """The training VecEnv: ``n_envs`` Channel-v0 copies, each shielding its own steps (the
-    shield needs each env's measured obstacle motion; at 3 us a call, batching 8 rows would
-    save nothing), seeded ``seed * 1000 + i``."""
+def make_vec_env(
+    config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
+) -> Any:
+    """The training VecEnv: ``n_envs`` copies of ``env_id`` (Channel-v0 by default), each
+    shielding its own steps (Channel-v0's shield needs each env's measured obstacle motion; at
+    3 us a call, batching 8 rows would save nothing), seeded ``seed * 1000 + i``."""
+    import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    venv = DummyVecEnv([(lambda: ChannelEnv(config=config, **overrides)) for _ in range(n_envs)])
+    def make() -> Any:
+        if env_id == ENV_ID:
+            return ChannelEnv(config=config, **overrides)
+        return gym.make(env_id, config=config, **overrides)
+
+    venv = DummyVecEnv([make] * n_envs)
     venv.seed(seed * 1000)
     return venv
 
@@ -152,15 +163,15 @@ class _Metrics:
         self.discounted += self.discount * rewards
         self.discount *= self.gamma
         for i, info in enumerate(infos):
-            h = info["constraints"]
-            self.min_h[0] = min(self.min_h[0], h["c1"])
-            self.min_h[1] = min(self.min_h[1], h["c2"])
+            h = info["constraints"]  # Channel-v0's c1, c2 (other envs: not recorded)
+            self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
+            self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
             self.min_d = min(self.min_d, info["min_obstacle_distance"])
             self.violations += info["violation"]
             self.trap_entries += info["trap"] and not self.was_trapped[i]
             self.was_trapped[i] = info["trap"]
             self.successes += info["success"]
-            status = info["shield"]["status"]
+            status = info.get("shield", {}).get("status")
             self.relaxed += status == Status.RELAXED
             self.failed += status == Status.FAILED
             if dones[i]:
@@ -180,12 +191,19 @@ def train(
     progress: bool = True,
     preset: str = "default",
     ppo: dict[str, Any] | None = None,
+    env: str = ENV_ID,
     **overrides: Any,
 ) -> Path:
-    """Trains PPO on one configuration; returns the run folder. ``overrides`` are
-    :class:`ChannelConfig` fields. Ctrl-C stops cleanly: the metrics so far and the model are
+    """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
+    ``"tlshield/PointMass-v0"``); returns the run folder. ``overrides`` are the environment's
+    config fields (``ChannelConfig``, ``PointMassConfig``). Ctrl-C stops cleanly: the metrics
+    so far and the model are
     kept (``config.json`` then says ``"interrupted": true``)."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
+    if env not in ENV_IDS:
+        raise ValueError(f"env {env!r}: expected one of {', '.join(ENV_IDS)}")
+    if env != ENV_ID and clf_schedule != "fixed":
+        raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
     spec = PRESETS[preset]
     ppo_kwargs, n_envs, net_arch = {**spec["ppo"], **(ppo or {})}, spec["n_envs"], spec["net_arch"]
     log_std_init = float(ppo_kwargs.pop("log_std_init", spec.get("log_std_init", 0.0)))
@@ -202,10 +220,11 @@ def train(
     run.mkdir(parents=True, exist_ok=True)
     from stable_baselines3.common.vec_env import VecNormalize
 
-    inner = make_vec_env(config, seed, overrides, n_envs)
-    cfg: ChannelConfig = inner.get_attr("cfg", [0])[0]
+    inner = make_vec_env(config, seed, overrides, n_envs, env)
+    cfg: Any = inner.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
     venv = VecNormalize(inner, norm_obs=True, norm_reward=True, gamma=ppo_kwargs["gamma"])
     record = {
+        "env_id": env,
         "config": config,
         "seed": seed,
         "updates": updates,
@@ -282,7 +301,7 @@ def train(
             def policy(obs: np.ndarray) -> np.ndarray:
                 return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
-            outcomes = rollouts(config, overrides, policy, seeds)[0]
+            outcomes = rollouts(config, overrides, policy, seeds, env)[0]
             success = sum(o["success"] for o in outcomes) / trials
             if success >= self.best:
                 self.best = success
