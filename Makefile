@@ -28,6 +28,7 @@ bench:
 	$(BIN)/python benches/compare_robustness.py
 	$(BIN)/python benches/compare_automaton.py --install-mona
 	$(BIN)/python benches/compare_shield.py
+	$(BIN)/python benches/compare_cbfpy.py
 
 ## Formatting and lints (rustfmt, clippy, ruff, stubtest).
 lint:

@@ -23,6 +23,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("compare_shield.py", ["--quick", "--memory-calls", "2000"], "tlshield speedup"),
         ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
         ("moving_obstacles.py", ["--steps", "2000"], "moving-obstacle barrier"),
+        ("compare_cbfpy.py", ["--quick"], "tlshield speedup"),
     ],
 )
 def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:
