@@ -13,10 +13,10 @@ setup:
 run: setup
 	$(BIN)/python -m tlshield reproduce --out results
 
-## Every test: Rust (cargo test) and Python (pytest; the benchmark scripts run on tiny budgets,
-## so their comparison tools are installed too).
+## Every test: Rust (cargo test) and Python (pytest; the benchmark scripts and the examples run on
+## tiny budgets, so their comparison tools and third-party environments are installed too).
 test:
-	@EXTRAS=train,test,bench bash scripts/setup.sh
+	@EXTRAS=train,test,bench,examples bash scripts/setup.sh
 	cargo test --workspace
 	$(BIN)/python -m pytest
 
@@ -35,6 +35,6 @@ lint:
 	@EXTRAS=train,test,lint bash scripts/setup.sh
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
-	$(BIN)/ruff check python tests benches
-	$(BIN)/ruff format --check python tests benches
+	$(BIN)/ruff check python tests benches examples
+	$(BIN)/ruff format --check python tests benches examples
 	$(BIN)/python -m mypy.stubtest tlshield._core --allowlist stubtest_allow.txt

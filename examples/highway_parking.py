@@ -1,0 +1,168 @@
+"""Shielding a third-party environment: highway-env's ``parking-v0`` (not ours; installs from
+the package registry, no downloaded assets) with a temporal-logic task and the shield.
+
+The task: ``(w1 & w2 & w3 & w4) U g``: stay inside the lot's walls until the ego car is within
+1 m of its goal spot. The parked cars are user barriers: each car is two discs (at +-1.5 m
+along its heading, radius ``CAR_RADIUS``) that the ego's centre must stay out of. The shield's
+model is an approximation of the simulator: ``tlshield.AccelerationUnicycle`` (position moves
+along the heading at speed ``v``; inputs forward acceleration and turn rate) where highway-env
+integrates a kinematic bicycle (the velocity points along heading + slip angle, the turn rate
+is ``v sin(beta) / (L / 2)`` with ``beta = atan(tan(delta) / 2)``) at 15 Hz under a 5 Hz
+policy. The shield's turn rate is turned into a steering angle by inverting that relation
+(saturated at the steering limit), its acceleration passed as is; positions are constraints of
+relative degree 2 under this model, so the shield uses higher-order barriers (``alpha2``).
+
+``python examples/highway_parking.py [--steps N] [--seed S]`` drives a naive policy (steer and
+accelerate towards the goal, 30% random actions) for N environment steps with and without the
+shield and prints crashes (highway-env's own collision check, rectangles), successes and the
+shield's relaxed/failed counts. Needs ``pip install highway-env``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from typing import Any
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers parking-v0)
+import numpy as np
+
+import tlshield
+
+#: The lot's walls (highway-env parking: 70 m x 42 m, walls 1 m thick) and the margin kept.
+HALF_X, HALF_Y, WALL_MARGIN = 35.0, 21.0, 3.0
+#: Radius of each of a parked car's two discs (its 5 m x 2 m body plus the ego's half-width).
+CAR_RADIUS = 3.0
+#: Within this distance of the goal spot's centre the task is done (m).
+GOAL_RADIUS = 1.0
+#: highway-env's limits: acceleration (m/s^2), steering (rad); the car's length (m).
+MAX_ACCEL, MAX_STEER, LENGTH = 5.0, math.pi / 4, 5.0
+
+
+def state_of(env: gym.Env) -> np.ndarray:
+    """``[x, y, theta, v]`` of the ego car (the shield's state)."""
+    car = env.unwrapped.vehicle
+    return np.array([car.position[0], car.position[1], car.heading, car.speed])
+
+
+def make_spec(env: gym.Env) -> tlshield.Spec:
+    """The task of the episode just reset (the goal spot moves per episode)."""
+    goal = env.unwrapped.vehicle.goal.position
+    walls = {
+        "w1": tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], HALF_X - WALL_MARGIN),
+        "w2": tlshield.Halfspace([1.0, 0.0, 0.0, 0.0], HALF_X - WALL_MARGIN),
+        "w3": tlshield.Halfspace([0.0, -1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
+        "w4": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
+    }
+    g = tlshield.Ball(pos=[0, 1], radius=GOAL_RADIUS, center=list(goal))
+    return tlshield.Spec("(w1 & w2 & w3 & w4) U g", {**walls, "g": g})
+
+
+def make_shield(env: gym.Env, spec: tlshield.Spec) -> tlshield.Shield:
+    """The shield of the episode just reset: the task's walls, the parked cars as barriers."""
+    u = env.unwrapped
+    cars: dict[str, tlshield.Ball] = {}
+    for k, car in enumerate(u.road.vehicles[1:]):
+        along = 1.5 * np.array([math.cos(car.heading), math.sin(car.heading)])
+        for end, sign in (("f", 1.0), ("r", -1.0)):
+            centre = list(car.position + sign * along)
+            cars[f"!car{k}{end}"] = tlshield.Ball(pos=[0, 1], radius=CAR_RADIUS, center=centre)
+    return tlshield.Shield(
+        spec,
+        tlshield.AccelerationUnicycle(x=0, y=1, theta=2, v=3),
+        alpha=1.0,
+        alpha2=1.0,
+        c3=1.0,
+        K=1e4,
+        cbf_bounds=(-20.0, 20.0),
+        clf_bounds=(-0.5, 0.5),
+        action_bounds=((-MAX_ACCEL, -2.0), (MAX_ACCEL, 2.0)),
+        use_clf=False,
+        margin=0.05,
+        barriers=cars,
+    )
+
+
+def to_env_action(accel: float, turn_rate: float, speed: float) -> np.ndarray:
+    """The shield's ``(a, omega)`` as highway-env's normalised ``(acceleration, steering)``:
+    invert ``omega = v sin(beta) / (L / 2)``, ``beta = atan(tan(delta) / 2)``."""
+    if abs(speed) < 1e-3:
+        steer = 0.0
+    else:
+        sin_beta = max(-1.0, min(1.0, turn_rate * (LENGTH / 2) / speed))
+        steer = math.atan(2.0 * math.tan(math.asin(sin_beta)))
+    steer = max(-MAX_STEER, min(MAX_STEER, steer))
+    return np.array([accel / MAX_ACCEL, steer / MAX_STEER], dtype=np.float32)
+
+
+def naive(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
+    """A user's unsafe controller: turn towards the goal, hold 3 m/s; 30% random actions.
+    Returns ``(a, omega)`` in physical units."""
+    if rng.random() < 0.3:
+        return rng.uniform(-MAX_ACCEL, MAX_ACCEL), rng.uniform(-2.0, 2.0)
+    x, y, theta, v = state_of(env)
+    gx, gy = env.unwrapped.vehicle.goal.position
+    error = (math.atan2(gy - y, gx - x) - theta + math.pi) % (2 * math.pi) - math.pi
+    return 2.0 * (3.0 - v), max(-2.0, min(2.0, 2.0 * error))
+
+
+def run(steps: int, shielded: bool, seed: int) -> dict[str, Any]:
+    """``steps`` environment steps of the naive policy, shielded or not."""
+    env = gym.make("parking-v0", config={"vehicles_count": 10, "duration": 60})
+    rng = np.random.default_rng(seed)
+    counts = {"steps": 0, "episodes": 0, "crashes": 0, "successes": 0, "relaxed": 0, "failed": 0}
+    episode = 0
+    while counts["steps"] < steps:
+        env.reset(seed=seed * 10_000 + episode)
+        episode += 1
+        spec = make_spec(env)
+        shield = make_shield(env, spec) if shielded else None
+        aut = spec.automaton()
+        q = aut.step(aut.initial, state_of(env))
+        while counts["steps"] < steps:
+            accel, turn = naive(env, rng)
+            s = state_of(env)
+            if shield is not None:
+                out = shield.filter(s, q, [accel, turn])
+                accel, turn = float(out.action[0]), float(out.action[1])
+                counts["relaxed"] += out.status == tlshield.Status.RELAXED
+                counts["failed"] += out.status == tlshield.Status.FAILED
+            _, _, terminated, truncated, info = env.step(to_env_action(accel, turn, s[3]))
+            counts["steps"] += 1
+            q = aut.step(q, state_of(env))
+            if info["crashed"]:
+                counts["crashes"] += 1
+                break
+            if q in aut.accepting:
+                counts["successes"] += 1
+                break
+            if terminated or truncated:
+                break
+        counts["episodes"] += 1
+    env.close()
+    return counts
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    print(f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each:")
+    print("| shield | episodes | crashes | successes | relaxed | failed | wall time |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for shielded in (False, True):
+        start = time.perf_counter()
+        c = run(args.steps, shielded, args.seed)
+        print(
+            f"| {'on' if shielded else 'off'} | {c['episodes']} | {c['crashes']} | "
+            f"{c['successes']} | {c['relaxed']} | {c['failed']} | "
+            f"{time.perf_counter() - start:.0f} s |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,24 @@
+"""The shipped examples run end to end on a tiny budget (their numbers belong in the README)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def test_highway_parking_example_runs() -> None:
+    done = subprocess.run(
+        [sys.executable, str(EXAMPLES / "highway_parking.py"), "--steps", "150"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    rows = [line for line in done.stdout.splitlines() if line.startswith(("| off", "| on"))]
+    assert len(rows) == 2, done.stdout
+    # With the shield on, the shield never failed to return an action.
+    assert rows[1].split("|")[6].strip() == "0"
