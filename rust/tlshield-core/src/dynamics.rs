@@ -154,6 +154,16 @@ impl Dynamics {
         }
     }
 
+    /// Whether an input moves state dimension `d` through one integration (the dimension has
+    /// relative degree 2: `d` is a position of an acceleration-level model).
+    pub fn actuates_twice_removed(&self, d: usize) -> bool {
+        match self {
+            Dynamics::SingleIntegrator { .. } | Dynamics::Unicycle { .. } => false,
+            Dynamics::DoubleIntegrator { pos, .. } => pos.contains(&d),
+            Dynamics::AccelerationUnicycle { x, y, .. } => d == *x || d == *y,
+        }
+    }
+
     /// `out = J_f(s) u`, the Jacobian of the drift `f` times `u` (lengths n).
     pub fn jacobian_f_times(&self, s: &[f64], u: &[f64], out: &mut [f64]) {
         out.fill(0.0);

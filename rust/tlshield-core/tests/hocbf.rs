@@ -31,12 +31,12 @@ fn bounds(v: f64, m: usize) -> Bounds {
     }
 }
 
-/// A shield keeping `s[0..2]` out of a ball of radius 1 at the origin, CLF off (the task is
-/// only the barrier's), HOCBF gains 2 and 2; the spec reads the same state.
-fn shield(model: Dynamics, accel: f64) -> Shield {
+/// A shield keeping `s[0..2]` out of a ball of radius 1 at the origin, CLF off, HOCBF gains 2
+/// and 2. The obstacle is a user barrier, or (`in_formula`) an atom of the task `!o U g` whose
+/// safe-set literal `!o` the shield enforces.
+fn shield(model: Dynamics, accel: f64, in_formula: bool) -> Shield {
     let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
     let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![50.0, 50.0])).unwrap();
-    let spec = Spec::new("F g", [("g", goal)]).unwrap();
     let m = model.inputs();
     let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
         .with_alpha2(Some(2.0))
@@ -44,8 +44,19 @@ fn shield(model: Dynamics, accel: f64) -> Shield {
         // cannot carry the state inside.
         .with_margin(1e-2)
         .with_parts(true, false)
-        .with_action_bounds(Some(bounds(accel, m)))
-        .with_barriers(vec![Barrier::outside("o", obstacle)]);
+        .with_action_bounds(Some(bounds(accel, m)));
+    let (spec, config) = if in_formula {
+        (
+            Spec::new("!o U g", [("o", obstacle), ("g", goal)]).unwrap(),
+            config,
+        )
+    } else {
+        let barrier = Barrier::outside("o", obstacle);
+        (
+            Spec::new("F g", [("g", goal)]).unwrap(),
+            config.with_barriers(vec![barrier]),
+        )
+    };
     Shield::new(
         Arc::new(Automaton::build(&spec).unwrap()),
         Some(model),
@@ -62,9 +73,10 @@ fn attack(
     start: impl Fn(&mut Rng) -> Vec<f64>,
     steps: usize,
     shielded: bool,
+    in_formula: bool,
 ) -> (f64, usize, usize) {
     let accel = 2.0;
-    let sh = shield(model.clone(), accel);
+    let sh = shield(model.clone(), accel, in_formula);
     let dt = 0.01;
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let (mut min_h, mut relaxed, mut failed) = (f64::INFINITY, 0, 0);
@@ -87,7 +99,8 @@ fn attack(
             (0..m).map(|_| rng.uniform(-accel, accel)).collect()
         };
         let action = if shielded {
-            let out = sh.filter(&s, 0, &a_rl, None, None).unwrap();
+            let q = sh.automaton().initial();
+            let out = sh.filter(&s, q, &a_rl, None, None).unwrap();
             match out.status {
                 Status::Relaxed => relaxed += 1,
                 Status::Failed => failed += 1,
@@ -120,13 +133,21 @@ fn double_integrator_never_enters_the_obstacle() {
         }
     };
     // The attack is real: unshielded, it enters the obstacle.
-    assert!(attack(model.clone(), start, 4_000, false).0 < 0.0);
-    let (min_h, relaxed, failed) = attack(model, start, STEPS, true);
-    assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
-    assert_eq!(failed, 0);
-    println!(
-        "double integrator, {STEPS} steps: min h {min_h:.2e}, relaxed {relaxed}, failed {failed}"
-    );
+    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
+    for in_formula in [false, true] {
+        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
+        assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
+        assert_eq!(failed, 0);
+        println!(
+            "double integrator, obstacle {}, {STEPS} steps: min h {min_h:.2e}, relaxed \
+             {relaxed}, failed {failed}",
+            if in_formula {
+                "in the formula"
+            } else {
+                "a user barrier"
+            }
+        );
+    }
 }
 
 #[test]
@@ -143,11 +164,21 @@ fn acceleration_unicycle_never_enters_the_obstacle() {
             return vec![px, py, theta, v];
         }
     };
-    assert!(attack(model.clone(), start, 4_000, false).0 < 0.0);
-    let (min_h, relaxed, failed) = attack(model, start, STEPS, true);
-    assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
-    assert_eq!(failed, 0);
-    println!("acceleration unicycle, {STEPS} steps: min h {min_h:.2e}, relaxed {relaxed}, failed {failed}");
+    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
+    for in_formula in [false, true] {
+        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
+        assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
+        assert_eq!(failed, 0);
+        println!(
+            "acceleration unicycle, obstacle {}, {STEPS} steps: min h {min_h:.2e}, relaxed \
+             {relaxed}, failed {failed}",
+            if in_formula {
+                "in the formula"
+            } else {
+                "a user barrier"
+            }
+        );
+    }
 }
 
 #[test]
@@ -165,4 +196,25 @@ fn a_second_order_barrier_needs_alpha2() {
         "{text}"
     );
     assert!(Shield::new(aut, Some(model), config.with_alpha2(Some(1.0))).is_ok());
+}
+
+#[test]
+fn a_barrier_no_input_can_reach_is_an_error() {
+    // A disc over dimensions 4, 5 (say, another robot's position): the double integrator on
+    // 0-3 never moves them, so no CBF of any order can enforce it.
+    let other = Predicate::ball(vec![4, 5], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
+    let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![5.0, 5.0])).unwrap();
+    let spec = Spec::new("F g", [("g", goal)]).unwrap();
+    let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
+    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
+        .with_alpha2(Some(1.0))
+        .with_barriers(vec![Barrier::outside("far", other)]);
+    let aut = Arc::new(Automaton::build(&spec).unwrap());
+    let text = Shield::new(aut, Some(model), config)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        text.contains("\"far\"") && text.contains("relative degree > 2"),
+        "{text}"
+    );
 }

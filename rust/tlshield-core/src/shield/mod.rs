@@ -626,7 +626,7 @@ impl Shield {
                 )));
             }
         }
-        let orders = Orders::new(spec, &config, dynamics.as_ref(), min_dim)?;
+        let orders = Orders::new(&automaton, &config, dynamics.as_ref(), min_dim)?;
         Ok(Shield {
             automaton,
             dynamics,

@@ -5,14 +5,15 @@
 //! model and the predicates, when the shield is built.
 
 use super::{ShieldConfig, ShieldError};
+use crate::automaton::Automaton;
 use crate::dynamics::Dynamics;
 use crate::predicate::Predicate;
-use crate::spec::Spec;
 
 /// The order of every barrier row and of the CLF row.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub(super) struct Orders {
-    /// Per atom of the spec: its safe-set literal needs the second-order row.
+    /// Per atom of the spec: its safe-set literal needs the second-order row (false for atoms
+    /// no safe set can keep).
     pub(super) atoms: Vec<bool>,
     /// Per user barrier, the same.
     pub(super) barriers: Vec<bool>,
@@ -20,8 +21,18 @@ pub(super) struct Orders {
     pub(super) clf: bool,
 }
 
-fn second_order(predicate: &Predicate, model: &Dynamics, n: usize) -> bool {
-    !(0..n).any(|d| predicate.reads(d) && model.actuates(d))
+/// The relative degree of a barrier on `predicate` under `model`: 1 when it reads a dimension
+/// an input moves, 2 when it reads one an input moves through one integration, else none the
+/// shield can enforce (`None`).
+fn degree(predicate: &Predicate, model: &Dynamics, n: usize) -> Option<u8> {
+    let reads = |test: &dyn Fn(usize) -> bool| (0..n).any(|d| predicate.reads(d) && test(d));
+    if reads(&|d| model.actuates(d)) {
+        Some(1)
+    } else if reads(&|d| model.actuates_twice_removed(d)) {
+        Some(2)
+    } else {
+        None
+    }
 }
 
 impl Orders {
@@ -29,11 +40,12 @@ impl Orders {
     /// come with every call and every row is first order). Errors when a second-order row is
     /// needed and `alpha2` is missing.
     pub(super) fn new(
-        spec: &Spec,
+        automaton: &Automaton,
         config: &ShieldConfig,
         model: Option<&Dynamics>,
         n: usize,
     ) -> Result<Self, ShieldError> {
+        let spec = automaton.spec();
         let Some(model) = model else {
             return Ok(Orders {
                 atoms: vec![false; spec.atoms().len()],
@@ -41,16 +53,40 @@ impl Orders {
                 clf: false,
             });
         };
+        let order = |what: String, p: &Predicate| -> Result<bool, ShieldError> {
+            match degree(p, model, n) {
+                Some(d) => Ok(config.use_cbf && d == 2),
+                None if !config.use_cbf => Ok(false),
+                None => Err(ShieldError::Config(format!(
+                    "{what} reads no state dimension that {model} can move within two \
+                     integrations (relative degree > 2, or not controlled): the shield cannot \
+                     enforce it"
+                ))),
+            }
+        };
+        // Only atoms that some state's safe set can keep are ever enforced.
+        let enforced = |atom: usize| {
+            (0..automaton.num_states()).any(|q| {
+                automaton
+                    .trap_cnf(q)
+                    .is_ok_and(|cnf| cnf.iter().flatten().any(|l| l.atom == atom))
+            })
+        };
         let atoms: Vec<bool> = spec
-            .predicates()
+            .atoms()
             .iter()
-            .map(|p| config.use_cbf && second_order(p, model, n))
-            .collect();
+            .zip(spec.predicates())
+            .enumerate()
+            .map(|(i, (a, p))| match enforced(i) {
+                true => order(format!("atom {a:?}"), p),
+                false => Ok(false),
+            })
+            .collect::<Result<_, _>>()?;
         let barriers: Vec<bool> = config
             .barriers
             .iter()
-            .map(|b| config.use_cbf && second_order(&b.predicate, model, n))
-            .collect();
+            .map(|b| order(format!("barrier {:?}", b.name), &b.predicate))
+            .collect::<Result<_, _>>()?;
         let clf = config.use_clf && !config.pos.iter().any(|&d| model.actuates(d));
         if config.alpha2.is_none() {
             let first = atoms
