@@ -31,8 +31,10 @@ import numpy as np
 
 import tlshield
 
-#: The lot's walls (highway-env parking: 70 m x 42 m, walls 1 m thick) and the margin kept.
-HALF_X, HALF_Y, WALL_MARGIN = 35.0, 21.0, 3.0
+#: The lot's walls (highway-env parking: 70 m x 42 m, walls 1 m thick) and the margin the ego
+#: car's centre keeps from their centre lines: half a wall, half the car's length (2.5 m) and
+#: 1 m for the model's error.
+HALF_X, HALF_Y, WALL_MARGIN = 35.0, 21.0, 4.0
 #: Radius of each of a parked car's two discs (its 5 m x 2 m body plus the ego's half-width).
 CAR_RADIUS = 3.0
 #: Within this distance of the goal spot's centre the task is done (m).
@@ -60,7 +62,9 @@ def make_spec(env: gym.Env) -> tlshield.Spec:
     return tlshield.Spec("(w1 & w2 & w3 & w4) U g", {**walls, "g": g})
 
 
-def make_shield(env: gym.Env, spec: tlshield.Spec) -> tlshield.Shield:
+def make_shield(
+    env: gym.Env, spec: tlshield.Spec, car_radius: float = CAR_RADIUS
+) -> tlshield.Shield:
     """The shield of the episode just reset: the task's walls, the parked cars as barriers."""
     u = env.unwrapped
     cars: dict[str, tlshield.Ball] = {}
@@ -68,7 +72,7 @@ def make_shield(env: gym.Env, spec: tlshield.Spec) -> tlshield.Shield:
         along = 1.5 * np.array([math.cos(car.heading), math.sin(car.heading)])
         for end, sign in (("f", 1.0), ("r", -1.0)):
             centre = list(car.position + sign * along)
-            cars[f"!car{k}{end}"] = tlshield.Ball(pos=[0, 1], radius=CAR_RADIUS, center=centre)
+            cars[f"!car{k}{end}"] = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre)
     return tlshield.Shield(
         spec,
         tlshield.AccelerationUnicycle(x=0, y=1, theta=2, v=3),
@@ -108,17 +112,18 @@ def naive(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
     return 2.0 * (3.0 - v), max(-2.0, min(2.0, 2.0 * error))
 
 
-def run(steps: int, shielded: bool, seed: int) -> dict[str, Any]:
+def run(steps: int, shielded: bool, seed: int, car_radius: float = CAR_RADIUS) -> dict[str, Any]:
     """``steps`` environment steps of the naive policy, shielded or not."""
     env = gym.make("parking-v0", config={"vehicles_count": 10, "duration": 60})
     rng = np.random.default_rng(seed)
-    counts = {"steps": 0, "episodes": 0, "crashes": 0, "successes": 0, "relaxed": 0, "failed": 0}
+    counts = {"steps": 0, "episodes": 0, "crashes": 0, "wall_crashes": 0, "successes": 0}
+    counts.update({"relaxed": 0, "failed": 0})
     episode = 0
     while counts["steps"] < steps:
         env.reset(seed=seed * 10_000 + episode)
         episode += 1
         spec = make_spec(env)
-        shield = make_shield(env, spec) if shielded else None
+        shield = make_shield(env, spec, car_radius) if shielded else None
         aut = spec.automaton()
         q = aut.step(aut.initial, state_of(env))
         while counts["steps"] < steps:
@@ -134,6 +139,9 @@ def run(steps: int, shielded: bool, seed: int) -> dict[str, Any]:
             q = aut.step(q, state_of(env))
             if info["crashed"]:
                 counts["crashes"] += 1
+                x, y = state_of(env)[:2]
+                near_wall = abs(x) > HALF_X - WALL_MARGIN or abs(y) > HALF_Y - WALL_MARGIN
+                counts["wall_crashes"] += bool(near_wall)
                 break
             if q in aut.accepting:
                 counts["successes"] += 1
@@ -149,15 +157,27 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--car-radius",
+        type=float,
+        nargs="+",
+        default=[CAR_RADIUS],
+        help="radius of each parked car's two discs (m); several values: one shielded row each",
+    )
     args = parser.parse_args()
     print(f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each:")
-    print("| shield | episodes | crashes | successes | relaxed | failed | wall time |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for shielded in (False, True):
+    print(
+        "| shield | car disc radius | episodes | crashes (at a wall) | successes | relaxed | "
+        "failed | time |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    settings = [(False, math.nan)] + [(True, r) for r in args.car_radius]
+    for shielded, radius in settings:
         start = time.perf_counter()
-        c = run(args.steps, shielded, args.seed)
+        c = run(args.steps, shielded, args.seed, radius)
         print(
-            f"| {'on' if shielded else 'off'} | {c['episodes']} | {c['crashes']} | "
+            f"| {'on' if shielded else 'off'} | {radius:g} | {c['episodes']} | "
+            f"{c['crashes']} ({c['wall_crashes']}) | "
             f"{c['successes']} | {c['relaxed']} | {c['failed']} | "
             f"{time.perf_counter() - start:.0f} s |"
         )

@@ -21,4 +21,4 @@ def test_highway_parking_example_runs() -> None:
     rows = [line for line in done.stdout.splitlines() if line.startswith(("| off", "| on"))]
     assert len(rows) == 2, done.stdout
     # With the shield on, the shield never failed to return an action.
-    assert rows[1].split("|")[6].strip() == "0"
+    assert rows[1].split("|")[7].strip() == "0"

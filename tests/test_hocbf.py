@@ -134,3 +134,18 @@ def test_models_step_as_documented() -> None:
     s = au.step([0.0, 0.0, np.pi / 2, 2.0], [1.0, 0.5], 0.1)
     np.testing.assert_allclose(s, [0.0, 0.2, np.pi / 2 + 0.05, 2.1], atol=1e-15)
     assert repr(di) == "DoubleIntegrator(pos=[0, 1], vel=[2, 3])"
+
+
+def test_models_that_do_not_fit_are_clear_errors() -> None:
+    # The spec's half-space fixes the state length at 3; the double integrator reads 4 values.
+    spec = tlshield.Spec("F h", {"h": tlshield.Halfspace([1.0, 0.0, 0.0], 1.0)})
+    model = tlshield.DoubleIntegrator(pos=[0, 1], vel=[2, 3])
+    gains = {"alpha": 1.0, "alpha2": 1.0, "c3": 1.0, "K": 1e4}
+    bounds = {"cbf_bounds": (-5.0, 5.0), "clf_bounds": (-1.0, 1.0)}
+    with pytest.raises(tlshield.ShieldError, match="state length at 3"):
+        tlshield.Shield(spec, model, **gains, **bounds)  # type: ignore[arg-type]
+    # A barrier on dimensions no input reaches within two integrations.
+    goal = tlshield.Spec("F g", {"g": tlshield.Ball(pos=[0, 1], radius=0.3, center=GOAL)})
+    far = {"!far": tlshield.Ball(pos=[4, 5], radius=1.0, center=[0.0, 0.0])}
+    with pytest.raises(tlshield.ShieldError, match=r"relative degree > 2"):
+        tlshield.Shield(goal, model, **gains, **bounds, barriers=far)  # type: ignore[arg-type]
