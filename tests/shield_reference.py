@@ -337,3 +337,29 @@ class ClarabelShield:
         x = np.asarray(sol.x)
         d = float(x[4]) if rows.has_goal else 0.0
         return x[0:2], x[2:4], rows.delta_0 + max(d, 0.0), str(sol.status)
+
+
+def assert_matches(
+    got: Any,
+    rows: Rows,
+    a_rl: np.ndarray,
+    solvers: tuple[CvxpyShield, CvxpyShield],
+    tol: float,
+) -> None:
+    """The shield's result ``got`` equals cvxpy's solve of ``rows`` within ``tol``: status
+    solved when cvxpy solves the QP as posed, relaxed (and equal to the relaxed solve) when
+    only the relaxed problem is feasible."""
+    from tlshield import Status
+
+    cvx, cvx_relaxed = solvers
+    want = cvx.solve(rows)
+    if want is None:
+        assert got.status == Status.RELAXED, got
+        want = cvx_relaxed.solve(rows)
+        assert want is not None
+    else:
+        assert got.status == Status.SOLVED, (got, want)
+    a_cbf, a_clf, delta, _ = want
+    np.testing.assert_allclose(got.action, a_rl + a_cbf + a_clf, atol=tol, rtol=0)
+    assert abs(got.delta - delta) <= tol * max(1.0, delta)
+    assert all(np.isfinite(got.action))

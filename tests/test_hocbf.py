@@ -10,8 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tlshield
-from tests.shield_reference import CvxpyShield, Params, Rows
-from tlshield import Status
+from tests.shield_reference import CvxpyShield, Params, Rows, assert_matches
 
 OBSTACLE, RADIUS = np.array([2.0, 0.1]), 0.5
 GOAL = np.array([4.0, 0.0])
@@ -92,17 +91,7 @@ def test_hocbf_equals_an_independent_solve(
     shield, cvx, cvx_relaxed = solvers
     s = np.concatenate([p, v])
     got = shield.filter(s, 0, a_rl)
-    rows = hand_rows(s, a_rl)
-    want = cvx.solve(rows)
-    if want is None:
-        assert got.status == Status.RELAXED, got
-        want = cvx_relaxed.solve(rows)
-        assert want is not None
-    else:
-        assert got.status == Status.SOLVED, (got, want)
-    a_cbf, a_clf, delta, _ = want
-    np.testing.assert_allclose(got.action, a_rl + a_cbf + a_clf, atol=1e-6, rtol=0)
-    assert abs(got.delta - delta) <= 1e-6 * max(1.0, delta)
+    assert_matches(got, hand_rows(s, a_rl), a_rl, (cvx, cvx_relaxed), 1e-6)
     np.testing.assert_allclose(got.goal, GOAL)
 
 

@@ -17,6 +17,7 @@ from tests.shield_reference import (
     CvxpyShield,
     Structure,
     Task,
+    assert_matches,
     build_rows,
 )
 from tlshield import Solver, Status
@@ -78,17 +79,7 @@ def test_equals_an_independent_cvxpy_solve(
     a_rl = np.array([v, w])
     got = shield.filter(s, q, a_rl)
     rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
-    want = cvx.solve(rows)
-    if want is None:
-        assert got.status == Status.RELAXED, got
-        want = cvx_relaxed.solve(rows)
-        assert want is not None
-    else:
-        assert got.status == Status.SOLVED, (got, want)
-    a_cbf, a_clf, delta, _ = want
-    np.testing.assert_allclose(got.action, a_rl + a_cbf + a_clf, atol=1e-5, rtol=0)
-    assert abs(got.delta - delta) <= 1e-5 * max(1.0, delta)
-    assert all(np.isfinite(got.action))
+    assert_matches(got, rows, a_rl, (cvx, cvx_relaxed), 1e-5)
     if rows.delta_0 == 0.0 and got.status == Status.SOLVED:
         assert got.delta <= 1e-9, got
 

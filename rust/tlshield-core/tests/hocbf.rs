@@ -118,6 +118,26 @@ fn attack(
     (min_h, relaxed, failed)
 }
 
+/// The attack is real (unshielded, it enters the obstacle), and shielded it never enters,
+/// with the obstacle as a user barrier and as an atom of the formula.
+fn never_enters(name: &str, model: Dynamics, start: impl Fn(&mut Rng) -> Vec<f64> + Copy) {
+    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
+    for in_formula in [false, true] {
+        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
+        assert!(min_h >= 0.0, "{name} entered the obstacle: min h = {min_h}");
+        assert_eq!(failed, 0);
+        let form = if in_formula {
+            "in the formula"
+        } else {
+            "a user barrier"
+        };
+        println!(
+            "{name}, obstacle {form}, {STEPS} steps: min h {min_h:.2e}, relaxed {relaxed}, \
+             failed {failed}"
+        );
+    }
+}
+
 #[test]
 fn double_integrator_never_enters_the_obstacle() {
     let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
@@ -132,22 +152,7 @@ fn double_integrator_never_enters_the_obstacle() {
             return vec![px, py, vx, vy];
         }
     };
-    // The attack is real: unshielded, it enters the obstacle.
-    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
-    for in_formula in [false, true] {
-        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
-        assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
-        assert_eq!(failed, 0);
-        println!(
-            "double integrator, obstacle {}, {STEPS} steps: min h {min_h:.2e}, relaxed \
-             {relaxed}, failed {failed}",
-            if in_formula {
-                "in the formula"
-            } else {
-                "a user barrier"
-            }
-        );
-    }
+    never_enters("double integrator", model, start);
 }
 
 #[test]
@@ -164,21 +169,7 @@ fn acceleration_unicycle_never_enters_the_obstacle() {
             return vec![px, py, theta, v];
         }
     };
-    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
-    for in_formula in [false, true] {
-        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
-        assert!(min_h >= 0.0, "entered the obstacle: min h = {min_h}");
-        assert_eq!(failed, 0);
-        println!(
-            "acceleration unicycle, obstacle {}, {STEPS} steps: min h {min_h:.2e}, relaxed \
-             {relaxed}, failed {failed}",
-            if in_formula {
-                "in the formula"
-            } else {
-                "a user barrier"
-            }
-        );
-    }
+    never_enters("acceleration unicycle", model, start);
 }
 
 #[test]
