@@ -63,7 +63,7 @@ def make_spec(env: gym.Env) -> tlshield.Spec:
 
 
 def make_shield(
-    env: gym.Env, spec: tlshield.Spec, car_radius: float = CAR_RADIUS
+    env: gym.Env, spec: tlshield.Spec, car_radius: float = CAR_RADIUS, alpha: float = 1.0
 ) -> tlshield.Shield:
     """The shield of the episode just reset: the task's walls, the parked cars as barriers."""
     u = env.unwrapped
@@ -76,8 +76,8 @@ def make_shield(
     return tlshield.Shield(
         spec,
         tlshield.AccelerationUnicycle(x=0, y=1, theta=2, v=3),
-        alpha=1.0,
-        alpha2=1.0,
+        alpha=alpha,
+        alpha2=alpha,
         c3=1.0,
         K=1e4,
         cbf_bounds=(-20.0, 20.0),
@@ -112,7 +112,9 @@ def naive(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
     return 2.0 * (3.0 - v), max(-2.0, min(2.0, 2.0 * error))
 
 
-def run(steps: int, shielded: bool, seed: int, car_radius: float = CAR_RADIUS) -> dict[str, Any]:
+def run(
+    steps: int, shielded: bool, seed: int, car_radius: float = CAR_RADIUS, alpha: float = 1.0
+) -> dict[str, Any]:
     """``steps`` environment steps of the naive policy, shielded or not."""
     env = gym.make("parking-v0", config={"vehicles_count": 10, "duration": 60})
     rng = np.random.default_rng(seed)
@@ -123,7 +125,7 @@ def run(steps: int, shielded: bool, seed: int, car_radius: float = CAR_RADIUS) -
         env.reset(seed=seed * 10_000 + episode)
         episode += 1
         spec = make_spec(env)
-        shield = make_shield(env, spec, car_radius) if shielded else None
+        shield = make_shield(env, spec, car_radius, alpha) if shielded else None
         aut = spec.automaton()
         q = aut.step(aut.initial, state_of(env))
         while counts["steps"] < steps:
@@ -164,8 +166,12 @@ def main() -> int:
         default=[CAR_RADIUS],
         help="radius of each parked car's two discs (m); several values: one shielded row each",
     )
+    parser.add_argument("--alpha", type=float, default=1.0, help="alpha = alpha2 of the HOCBF")
     args = parser.parse_args()
-    print(f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each:")
+    print(
+        f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each, "
+        f"alpha = alpha2 = {args.alpha:g}:"
+    )
     print(
         "| shield | car disc radius | episodes | crashes (at a wall) | successes | relaxed | "
         "failed | time |"
@@ -174,7 +180,7 @@ def main() -> int:
     settings = [(False, math.nan)] + [(True, r) for r in args.car_radius]
     for shielded, radius in settings:
         start = time.perf_counter()
-        c = run(args.steps, shielded, args.seed, radius)
+        c = run(args.steps, shielded, args.seed, radius, args.alpha)
         print(
             f"| {'on' if shielded else 'off'} | {radius:g} | {c['episodes']} | "
             f"{c['crashes']} ({c['wall_crashes']}) | "
