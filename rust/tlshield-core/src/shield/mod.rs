@@ -762,11 +762,14 @@ impl Shield {
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
     ) -> Result<Filtered, ShieldError> {
-        self.check_call(s, q, a_rl, fg, drift)?;
-        Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, drift, Want::Recorded);
-            ws.out.clone()
-        }))
+        let call = Call {
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+        };
+        self.checked_step(call, Want::Recorded, |ws| ws.out.clone())
     }
 
     /// The QP [`Shield::filter`] would solve at this step (before any relaxation), for
@@ -780,10 +783,27 @@ impl Shield {
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
     ) -> Result<DenseQp, ShieldError> {
-        self.check_call(s, q, a_rl, fg, drift)?;
-        Ok(self.with_workspace(s.len(), |ws| {
-            self.step(ws, s, q, a_rl, fg, drift, Want::Problem);
-            ws.qp.clone()
+        let call = Call {
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+        };
+        self.checked_step(call, Want::Problem, |ws| ws.qp.clone())
+    }
+
+    /// Checks one call's input, runs the step it wants and takes its result from the workspace.
+    fn checked_step<R>(
+        &self,
+        c: Call<'_>,
+        want: Want,
+        take: impl FnOnce(&Workspace) -> R,
+    ) -> Result<R, ShieldError> {
+        self.check_call(c.s, c.q, c.a_rl, c.fg, c.drift)?;
+        Ok(self.with_workspace(c.s.len(), |ws| {
+            self.step(ws, c.s, c.q, c.a_rl, c.fg, c.drift, want);
+            take(ws)
         }))
     }
 
@@ -975,6 +995,16 @@ impl Shield {
         out.status = status;
         out.solver = by;
     }
+}
+
+/// The inputs of one single-state call.
+#[derive(Clone, Copy)]
+struct Call<'a> {
+    s: &'a [f64],
+    q: usize,
+    a_rl: &'a [f64],
+    fg: Option<ControlAffine<'a>>,
+    drift: Option<&'a [f64]>,
 }
 
 /// What a shield step is asked for.
