@@ -171,8 +171,9 @@ impl Program {
                 predicate.gradient_into(s, &mut self.grad);
                 self.grad.iter_mut().for_each(|v| *v *= sign);
                 let lf = dot(&self.grad, &self.f);
-                let psi = lf + cfg.alpha * (h - cfg.margin);
-                let (coefficients, r) = match (second, model) {
+                let psi = cfg.alpha * (h - cfg.margin);
+                // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
+                let (coefficients, second_r) = match (second, model) {
                     (true, Some(model)) => {
                         predicate.hessian_times(s, &self.f, &mut self.hf);
                         self.hf.iter_mut().for_each(|v| *v *= sign);
@@ -185,9 +186,9 @@ impl Program {
                             *a += b;
                         }
                         let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
-                        (&self.hf, lf_psi + alpha2 * psi)
+                        (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
                     }
-                    _ => (&self.grad, psi),
+                    _ => (&self.grad, None),
                 };
                 let mut lg_a = 0.0;
                 for (j, a) in a_rl.iter().enumerate() {
@@ -197,7 +198,11 @@ impl Program {
                     lg_a += lg * a;
                     self.lg.push(lg);
                 }
-                self.rhs.push(r + lg_a);
+                self.rhs.push(match second_r {
+                    Some(r) => r + lg_a,
+                    // In this order (Lf h + Lg h . a_rl first), bit for bit as before HOCBF rows.
+                    None => lf + lg_a + psi,
+                });
                 if let Some(out) = barriers_out.as_deref_mut() {
                     out.push((source, h));
                 }
