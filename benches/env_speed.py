@@ -21,17 +21,21 @@ import numpy as np
 TARGET_OVERHEAD = 0.30
 
 
-def steps_per_second(step: Callable[[], object], seconds: float) -> float:
-    """Median rate over 5 blocks of about ``seconds / 5`` each."""
-    step()
-    rates = []
+def steps_per_second(steps: Sequence[Callable[[], object]], seconds: float) -> list[float]:
+    """Median rate of each stepper over 5 rounds; within a round the steppers take turns
+    (blocks of about ``seconds / 5``), so a slow phase of a shared machine hits all of them
+    alike and the ratios stay meaningful."""
+    for step in steps:
+        step()
+    rates: list[list[float]] = [[] for _ in steps]
     for _ in range(5):
-        count, start = 0, time.perf_counter()
-        while (elapsed := time.perf_counter() - start) < seconds / 5:
-            step()
-            count += 1
-        rates.append(count / elapsed)
-    return float(np.median(rates))
+        for i, step in enumerate(steps):
+            count, start = 0, time.perf_counter()
+            while (elapsed := time.perf_counter() - start) < seconds / 5:
+                step()
+                count += 1
+            rates[i].append(count / elapsed)
+    return [float(np.median(r)) for r in rates]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -49,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("| environment | env steps/s | us per env step | shield overhead |")
     print("|---|---:|---:|---:|")
 
-    def single(config: str) -> float:
+    def single(config: str) -> Callable[[], object]:
         env = ChannelEnv(config=config)
         env.reset(seed=0)
         actions = rng.uniform(-1, 1, size=(4096, 2))
@@ -61,10 +65,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if term or trunc:
                 env.reset()
 
-        return steps_per_second(step, seconds)
+        return step
 
-    base = single("rl")
-    shielded = single("rl_cbf_clf")
+    base, shielded = steps_per_second([single("rl"), single("rl_cbf_clf")], seconds)
     print(f"| single, no shield | {base:,.0f} | {1e6 / base:.1f} | |")
     print(
         f"| single, shield in the env | {shielded:,.0f} | {1e6 / shielded:.1f} | "
@@ -75,7 +78,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for n in (8, 64):
         actions = rng.uniform(-1, 1, size=(256, n, 2))
 
-        def rate(venv: object, actions: np.ndarray = actions, n: int = n) -> float:
+        def stepper(venv: object, actions: np.ndarray = actions) -> Callable[[], object]:
             venv.seed(0)  # type: ignore[attr-defined]
             venv.reset()  # type: ignore[attr-defined]
             k = [0]
@@ -84,21 +87,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                 k[0] += 1
                 venv.step(actions[k[0] % 256])  # type: ignore[attr-defined]
 
-            return steps_per_second(step, seconds) * n
+            return step
 
         # The vector shield reads the state from the observation [s, one-hot(q)]: the paper's
         # observation layout, used by all three vector rows so they compare like with like.
-        plain = rate(DummyVecEnv([partial(ChannelEnv, config="rl", observation="paper")] * n))
-        each = rate(
-            DummyVecEnv([partial(ChannelEnv, config="rl_cbf_clf", observation="paper")] * n)
-        )
         template = ChannelEnv(shield_in_env=False, observation="paper")
-        batched = rate(
+        venvs = [
+            DummyVecEnv([partial(ChannelEnv, config="rl", observation="paper")] * n),
+            DummyVecEnv([partial(ChannelEnv, config="rl_cbf_clf", observation="paper")] * n),
             ShieldedVecEnv(
                 DummyVecEnv([partial(ChannelEnv, shield_in_env=False, observation="paper")] * n),
                 channel_shield(ChannelConfig(), "rl_cbf_clf"),
                 action_fn=template.rl_action,
-            )
+            ),
+        ]
+        plain, each, batched = (
+            r * n for r in steps_per_second([stepper(v) for v in venvs], seconds)
         )
         overhead = plain / batched - 1
         verdicts.append(overhead <= TARGET_OVERHEAD)
