@@ -93,3 +93,35 @@ def test_bad_settings_are_rejected_at_make() -> None:
     with pytest.raises(ValueError, match="NaN"):
         env.step(np.array([math.nan, 0.0]))
     assert isinstance(tlshield.DoubleIntegrator([0, 1], [2, 3]), tlshield.DoubleIntegrator)
+
+
+def discounted_return(policy: object, seed: int, gamma: float = CFG.gamma) -> float:
+    """The training reward of PointMass-v0 (config rl: no shield), discounted."""
+    env = make_point_mass("rl")
+    obs, _ = env.reset(seed=seed)
+    total, discount = 0.0, 1.0
+    for _ in range(CFG.horizon):
+        obs, reward, terminated, truncated, _ = env.step(policy(env, obs))  # type: ignore[operator]
+        total += discount * float(reward)
+        discount *= gamma
+        if terminated or truncated:
+            break
+    return total
+
+
+def park_before_b(env: gym.Env, obs: np.ndarray) -> np.ndarray:
+    """Visits a like the waypoint driver, then parks 1.2 m short of b and stays."""
+    if before_a(env):
+        return waypoints(env, obs)
+    p, v = obs[:2], obs[2:4]
+    target = (5.0, 9.8) if p[0] < 4.9 else (CFG.goal_b[0] - 1.2, CFG.goal_b[1])
+    return np.clip(1.5 * (np.array(target) - p) - 2.0 * v, -1.0, 1.0)
+
+
+def test_the_reward_pays_finishing_and_never_pays_barging() -> None:
+    # Finishing out-earns dawdling just short of the last goal, and going around the obstacles
+    # out-earns driving straight through them, on every seed (no shield: the reward alone).
+    for seed in range(5):
+        finish = discounted_return(waypoints, seed)
+        assert finish > discounted_return(park_before_b, seed), seed
+        assert finish > discounted_return(straight, seed), seed
