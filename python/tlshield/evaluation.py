@@ -14,10 +14,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from tlshield.envs import ENV_ID
+from tlshield.envs import ENV_ID, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_config
@@ -26,13 +25,6 @@ __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
 
 #: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
 EVAL_SEED = 10_000
-
-
-def _make(env_id: str, config: str, overrides: dict[str, Any]) -> Any:
-    """One evaluation environment (the paper's rules: CBF on in every configuration)."""
-    if env_id == ENV_ID:
-        return ChannelEnv(config=config, evaluation=True, **overrides)
-    return gym.make(env_id, config=config, evaluation=True, **overrides)
 
 
 def rollouts(
@@ -45,7 +37,8 @@ def rollouts(
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
     by side with one batched policy call per step: per-trial outcomes, start states, agent
     paths and obstacle paths (the last three for Channel-v0 only; empty for other envs)."""
-    envs = [_make(env_id, config, overrides) for _ in seeds]
+    # The paper's evaluation rules: the CBF on in every configuration.
+    envs = [make(env_id, config, evaluation=True, **overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
     channel = env_id == ENV_ID
     starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))

@@ -29,14 +29,15 @@ import json
 import math
 import time
 from dataclasses import asdict, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tlshield.codes import Status
-from tlshield.envs import ENV_ID, POINT_MASS_ID
-from tlshield.envs.channel import CONFIGS, ChannelConfig, ChannelEnv, channel_shield
+from tlshield.envs import ENV_ID, POINT_MASS_ID, make
+from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
 from tlshield.evaluation import evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
 
@@ -129,15 +130,9 @@ def make_vec_env(
     """The training VecEnv: ``n_envs`` copies of ``env_id`` (Channel-v0 by default), each
     shielding its own steps (Channel-v0's shield needs each env's measured obstacle motion; at
     3 us a call, batching 8 rows would save nothing), seeded ``seed * 1000 + i``."""
-    import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    def make() -> Any:
-        if env_id == ENV_ID:
-            return ChannelEnv(config=config, **overrides)
-        return gym.make(env_id, config=config, **overrides)
-
-    venv = DummyVecEnv([make] * n_envs)
+    venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
     venv.seed(seed * 1000)
     return venv
 

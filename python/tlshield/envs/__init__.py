@@ -2,6 +2,8 @@
 imported: the paper's channel case study ``tlshield/Channel-v0`` and a double-integrator robot
 with a sequencing task, ``tlshield/PointMass-v0``."""
 
+from typing import Any
+
 import gymnasium as gym
 
 from tlshield.envs.channel import (
@@ -22,6 +24,15 @@ if ENV_ID not in gym.registry:
 if POINT_MASS_ID not in gym.registry:
     gym.register(id=POINT_MASS_ID, entry_point="tlshield.envs.point_mass:make_point_mass")
 
+
+def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
+    """One environment of ``env_id`` in shield configuration ``config``: Channel-v0 unwrapped
+    (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
+    if env_id == ENV_ID:
+        return ChannelEnv(config=config, **kwargs)
+    return gym.make(env_id, config=config, **kwargs)
+
+
 __all__ = [
     "CONFIGS",
     "ENV_ID",
@@ -32,4 +43,5 @@ __all__ = [
     "ChannelEnv",
     "channel_shield",
     "channel_task_spec",
+    "make",
 ]
