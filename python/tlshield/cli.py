@@ -17,7 +17,7 @@ from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
 TRAINING_MODULES = frozenset(
-    {"stable_baselines3", "torch", "matplotlib", "tensorboard", "tqdm", "rich"}
+    {"stable_baselines3", "torch", "matplotlib", "tensorboard", "tqdm", "rich", "ray", "optuna"}
 )
 
 
@@ -113,19 +113,43 @@ def _positive(text: str) -> int:
     return value
 
 
+def _settings(args: argparse.Namespace, env_id: str = "tlshield/Channel-v0") -> dict[str, object]:
+    """``--settings FILE`` then ``--set NAME=VALUE`` (later wins) as :func:`train` keywords,
+    over the preset's and the schedule options'; fills ``args.config`` from the file when the
+    command line names none."""
+    from tlshield import settings
+
+    chosen: dict[str, object] = {}
+    named = None
+    if args.settings:
+        chosen, named = settings.load(args.settings)
+    chosen.update(settings.parse_assignments(args.set or [], env_id))
+    if getattr(args, "config", "") is None:
+        args.config = named or "rl_cbf_clf"
+    options: dict[str, object] = {
+        "clf_schedule": args.clf_schedule,
+        "clf_final_scale": args.clf_final_scale,
+        **_preset_options(args),
+    }
+    for key, value in settings.split(chosen, env_id).items():
+        if key == "ppo" and isinstance(value, dict):
+            value = {**options.get("ppo", {}), **value}  # type: ignore[dict-item]
+        options[key] = value
+    return options
+
+
 def _train(args: argparse.Namespace) -> int:
     from tlshield.training import train
 
+    options = _settings(args, args.env)
     run = train(
         args.config,
         args.seed,
         args.updates,
         args.out,
         env=args.env,
-        clf_schedule=args.clf_schedule,
-        clf_final_scale=args.clf_final_scale,
         progress=not args.quiet,
-        **_preset_options(args),
+        **options,  # type: ignore[arg-type]
     )
     print(f"wrote {run} (metrics.csv, model.zip, tb/, config.json)")
     if args.evaluate:
@@ -163,10 +187,9 @@ def _reproduce(args: argparse.Namespace) -> int:
         updates=args.updates,
         trials=args.trials,
         workers=args.workers,
+        address=args.address,
         progress=not args.quiet,
-        clf_schedule=args.clf_schedule,
-        clf_final_scale=args.clf_final_scale,
-        **_preset_options(args),
+        **_settings(args),  # type: ignore[arg-type]
     )
     print((root / "results.md").read_text())
     print(f"figures in {root / 'figures'}")
@@ -182,9 +205,31 @@ def _ablation(args: argparse.Namespace) -> int:
         updates=args.updates,
         trials=args.trials,
         workers=args.workers,
+        address=args.address,
         progress=not args.quiet,
     )
     print((root / "ablation.md").read_text())
+    return 0
+
+
+def _tune(args: argparse.Namespace) -> int:
+    from tlshield.tune import tune
+
+    root = tune(
+        args.out,
+        config=args.config,
+        samples=args.samples,
+        updates=args.updates,
+        search=args.search,
+        seed=args.seed,
+        trials=args.trials,
+        workers=args.workers,
+        address=args.address,
+        progress=not args.quiet,
+    )
+    print((root / "trials.md").read_text())
+    print((root / "best.json").read_text())
+    print(f"wrote {root / 'best.json'} (use: tlshield train --settings {root / 'best.json'})")
     return 0
 
 
@@ -236,6 +281,35 @@ def _add_schedule(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_settings(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--settings",
+        metavar="FILE",
+        help="JSON settings, e.g. the best.json of tlshield tune (names: tlshield.settings)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="one setting (JSON value), e.g. --set alpha=3 --set learning_rate=1e-3",
+    )
+
+
+def _add_ray(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--workers",
+        type=_positive,
+        default=None,
+        help="CPUs of the local Ray (default: all cores); ignored with --address",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="an existing Ray cluster (HOST:PORT of `ray start --head`; default: $RAY_ADDRESS, "
+        "else a local Ray started inside the command)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``tlshield`` command."""
     parser = argparse.ArgumentParser(
@@ -260,7 +334,12 @@ def build_parser() -> argparse.ArgumentParser:
     from tlshield.envs.channel import CONFIGS
 
     train = sub.add_parser("train", help="train PPO on one configuration of the case study")
-    train.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
+    train.add_argument(
+        "--config",
+        choices=sorted(CONFIGS),
+        default=None,
+        help="configuration (default: the one --settings names, else rl_cbf_clf)",
+    )
     train.add_argument(
         "--env",
         choices=["tlshield/Channel-v0", "tlshield/PointMass-v0"],
@@ -277,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_schedule(train)
     _add_preset(train)
+    _add_settings(train)
     train.set_defaults(handler=_train)
 
     evaluate = sub.add_parser("evaluate", help="evaluate saved runs (CBF on, paper's rules)")
@@ -292,10 +372,11 @@ def build_parser() -> argparse.ArgumentParser:
     repro.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     repro.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
     repro.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
-    repro.add_argument("--workers", type=_positive, default=2, help="parallel runs")
+    _add_ray(repro)
     repro.add_argument("--quiet", action="store_true")
     _add_schedule(repro)
     _add_preset(repro)
+    _add_settings(repro)
     repro.set_defaults(handler=_reproduce)
 
     abl = sub.add_parser(
@@ -305,9 +386,30 @@ def build_parser() -> argparse.ArgumentParser:
     abl.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     abl.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
     abl.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
-    abl.add_argument("--workers", type=_positive, default=2, help="parallel runs")
+    _add_ray(abl)
     abl.add_argument("--quiet", action="store_true")
     abl.set_defaults(handler=_ablation)
+
+    tune = sub.add_parser(
+        "tune", help="search the task, shield and PPO settings (Ray Tune, Optuna, ASHA)"
+    )
+    tune.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
+    tune.add_argument("--samples", type=_positive, default=32, help="samples (default 32)")
+    tune.add_argument("--updates", type=_positive, default=300, help="PPO updates per sample")
+    tune.add_argument("--out", default="results_tune", help="folder (default: results_tune)")
+    tune.add_argument(
+        "--search",
+        nargs="+",
+        metavar="NAME",
+        help="settings to search (default: every one that applies to the configuration)",
+    )
+    tune.add_argument("--seed", type=int, default=3, help="training seed of every sample")
+    tune.add_argument(
+        "--trials", type=_positive, default=50, help="tuning evaluation trials per sample"
+    )
+    _add_ray(tune)
+    tune.add_argument("--quiet", action="store_true")
+    tune.set_defaults(handler=_tune)
 
     plot = sub.add_parser("plot", help="figures and the results table from a results folder")
     plot.add_argument("results", help="results folder (as written by reproduce)")
@@ -331,9 +433,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    except (FileNotFoundError, ValueError) as err:
+    except (FileNotFoundError, ValueError, ConnectionError) as err:
         print(f"tlshield {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except RuntimeError as err:
+        print(f"tlshield {args.command}: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(
             f"tlshield {args.command}: interrupted; finished runs and metrics so far are kept",

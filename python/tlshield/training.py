@@ -28,6 +28,7 @@ import csv
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from functools import partial
 from pathlib import Path
@@ -38,7 +39,7 @@ import numpy as np
 from tlshield.codes import Status
 from tlshield.envs import ENV_ID, POINT_MASS_ID, make
 from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
-from tlshield.evaluation import evaluate, rollouts
+from tlshield.evaluation import EVAL_SEED, evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
 
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks.
@@ -84,6 +85,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 #: Reset seeds of the validation episodes that pick the kept checkpoint (disjoint from both).
 VALIDATION_SEED = 20_000
+#: Training seeds are 0 .. MAX_SEED - 1 (so the reset seed ranges above never meet).
+MAX_SEED = 10
 SCHEDULES = ("fixed", "linear", "exponential")
 #: Environments :func:`train` and :func:`tlshield.evaluation.evaluate` know.
 ENV_IDS = (ENV_ID, POINT_MASS_ID)
@@ -187,14 +190,17 @@ def train(
     preset: str = "default",
     ppo: dict[str, Any] | None = None,
     env: str = ENV_ID,
+    on_update: Callable[[dict[str, float]], Any] | None = None,
     **overrides: Any,
 ) -> Path:
     """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
     ``"tlshield/PointMass-v0"``); returns the run folder. ``overrides`` are the environment's
     config fields (``ChannelConfig``, ``PointMassConfig``). Ctrl-C stops cleanly: the metrics
-    so far and the model are
-    kept (``config.json`` then says ``"interrupted": true``)."""
+    so far and the model are kept (``config.json`` then says ``"interrupted": true``).
+    ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
+    once it is written."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
+    _check_seeds((seed,))
     if env not in ENV_IDS:
         raise ValueError(f"env {env!r}: expected one of {', '.join(ENV_IDS)}")
     if env != ENV_ID and clf_schedule != "fixed":
@@ -328,6 +334,8 @@ def train(
             }
             writer.writerow(row)
             csv_file.flush()
+            if on_update is not None:
+                on_update(row)
             for key, value in row.items():
                 if key not in ("update", "timesteps"):
                     self.logger.record(f"tlshield/{key}", value)
@@ -364,9 +372,10 @@ def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") ->
     return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, leave=False)
 
 
-def _run_one(job: tuple[str, int, int, str, int, dict[str, Any]]) -> str:
-    """One (config, seed) of a reproduction: train, then evaluate (a worker process)."""
-    config, seed, updates, folder, trials, options = job
+def run_job(
+    config: str, seed: int, updates: int, trials: int, options: dict[str, Any], folder: Path
+) -> Path:
+    """One (config, seed) of a sweep: train into ``folder``, then evaluate (a Ray task)."""
     import torch
 
     torch.set_num_threads(1)
@@ -382,13 +391,16 @@ def reproduce(
     seeds: tuple[int, ...] = (0, 1),
     updates: int = 300,
     trials: int = 100,
-    workers: int = 2,
+    workers: int | None = None,
+    address: str | None = None,
     progress: bool = True,
     **options: Any,
 ) -> Path:
-    """Trains and evaluates every configuration x seed (``workers`` processes), then writes the
-    figures (``out/figures``) and the results table (``out/results.md``). Runs that already
-    finished and were evaluated (same folder) are kept, so an interrupted reproduction resumes."""
+    """Trains and evaluates every configuration x seed as Ray tasks (a local Ray with
+    ``workers`` CPUs, all cores by default, or the cluster at ``address``; see
+    :mod:`tlshield.cluster`), then writes the figures (``out/figures``) and the results table
+    (``out/results.md``). Runs that already finished and were evaluated (same folder) are
+    kept, so an interrupted reproduction resumes."""
     for config in configs:
         _check_run_args(
             config,
@@ -397,18 +409,18 @@ def reproduce(
             options.get("clf_final_scale", 0.2),
             options.get("preset", "default"),
         )
+    _check_seeds(seeds)
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    jobs = []
+    jobs = {}
     for config in configs:
         for seed in seeds:
             folder = root / f"{config}_s{seed}"
-            done = (folder / "evaluation.json").is_file() and is_finished(folder, updates)
-            if not done:
-                jobs.append((config, seed, updates, str(folder), trials, options))
-    _run_jobs(jobs, workers, progress)
+            if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
+                jobs[folder] = partial(run_job, config, seed, updates, trials, options)
+    _run_jobs(jobs, workers, address, progress)
     from tlshield.plots import plot_all
     from tlshield.report import results_table
 
@@ -417,20 +429,29 @@ def reproduce(
     return root
 
 
-def _run_jobs(jobs: list[Any], workers: int, progress: bool) -> None:
-    """Trains and evaluates each job, ``workers`` processes at a time."""
+def _check_seeds(seeds: Any) -> None:
+    """Training seeds 0-9: their reset seeds (``seed * 1000 + i``) stay below the evaluation
+    seeds and their validation seeds below the tuning seeds."""
+    for seed in seeds:
+        if not (isinstance(seed, int) and 0 <= seed < MAX_SEED):
+            raise ValueError(
+                f"seed = {seed!r}: expected an integer in [0, {MAX_SEED}) (training reset seeds "
+                f"seed * 1000 + i must stay below the evaluation seeds, {EVAL_SEED}+)"
+            )
+
+
+def _run_jobs(
+    jobs: dict[Path, Any], workers: int | None, address: str | None, progress: bool
+) -> None:
+    """Runs the jobs as Ray tasks, gathering each run folder as it finishes."""
+    if not jobs:
+        return
+    from tlshield import cluster
+
     bar = _progress_bar(len(jobs), "runs", progress, unit="run")
     try:
-        if workers > 1 and len(jobs) > 1:
-            import multiprocessing as mp
-
-            with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-                for _ in pool.imap_unordered(_run_one, jobs):
-                    bar.update(1)
-        else:
-            for job in jobs:
-                _run_one(job)
-                bar.update(1)
+        with cluster.session(address, workers):
+            cluster.run(jobs, on_done=lambda _: bar.update(1))
     finally:
         bar.close()
 
@@ -464,23 +485,25 @@ def ablation(
     seeds: tuple[int, ...] = (0, 1),
     updates: int = 300,
     trials: int = 100,
-    workers: int = 2,
+    workers: int | None = None,
+    address: str | None = None,
     progress: bool = True,
 ) -> Path:
     """The README's ablation: each row adds one change to the one before (see
     :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
     Finished rows are kept, so an interrupted ablation resumes."""
     _check_run_args(config, updates, "fixed", 0.2)
+    _check_seeds(seeds)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
     rows = _ablation_rows()
-    jobs = []
+    jobs = {}
     for k, (_, options) in enumerate(rows):
         for seed in seeds:
             folder = root / f"row{k}_s{seed}"
             if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
-                jobs.append((config, seed, updates, str(folder), trials, options))
-    _run_jobs(jobs, workers, progress)
+                jobs[folder] = partial(run_job, config, seed, updates, trials, options)
+    _run_jobs(jobs, workers, address, progress)
     lines = [
         f"| change ({config}, {len(seeds)} seeds x {trials} trials) | eval success per seed "
         "| mean | eval collisions | train violations | train min obstacle distance | relaxed |",

@@ -21,6 +21,15 @@ use crate::errors::map;
 use crate::literals::LiteralNames;
 use crate::spec::{predicate_of, PySpec};
 
+/// `(a, b)` or `[a, b]` (bounds read back from JSON are lists).
+fn pair<'py>(obj: &Bound<'py, PyAny>) -> Option<[Bound<'py, PyAny>; 2]> {
+    if obj.is_instance_of::<PyString>() {
+        return None;
+    }
+    let items: Vec<Bound<'py, PyAny>> = obj.extract().ok()?;
+    items.try_into().ok()
+}
+
 /// Bounds from `(lo, hi)`, each a scalar (broadcast to m) or a length-m sequence.
 fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
     let pair_error = || {
@@ -28,7 +37,7 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
             "{name}: expected a pair (lo, hi) of numbers or of length-{m} sequences"
         ))
     };
-    let (lo, hi): (Bound<'_, PyAny>, Bound<'_, PyAny>) = obj.extract().map_err(|_| pair_error())?;
+    let [lo, hi] = pair(obj).ok_or_else(pair_error)?;
     let side = |v: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
         if let Ok(x) = v.extract::<f64>() {
             return Ok(vec![x; m]);
@@ -252,9 +261,8 @@ impl PyShield {
         let m = match &dynamics {
             Some(d) => d.inputs(),
             None => {
-                let (lo, _): (Bound<'_, PyAny>, Bound<'_, PyAny>) = cbf_bounds
-                    .extract()
-                    .map_err(|_| PyTypeError::new_err("cbf_bounds: expected a pair (lo, hi)"))?;
+                let [lo, _] = pair(cbf_bounds)
+                    .ok_or_else(|| PyTypeError::new_err("cbf_bounds: expected a pair (lo, hi)"))?;
                 lo.len().unwrap_or(1)
             }
         };

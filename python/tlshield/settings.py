@@ -1,0 +1,129 @@
+"""Named training settings: what ``tlshield train --settings FILE`` / ``--set NAME=VALUE`` and
+``tlshield tune`` speak.
+
+A setting is one of
+
+* an environment constant (a field of :class:`tlshield.envs.ChannelConfig`, or of
+  ``PointMassConfig`` for PointMass-v0): ``c_r``, ``w``, ``alpha``, ``c3``, ``K``,
+  ``clf_bounds``, ``cbf_bounds``, ...;
+* a PPO setting (:data:`PPO_NAMES`): ``learning_rate``, ``ent_coef``, ``n_epochs``,
+  ``batch_size``, ...;
+* a training schedule (:data:`SCHEDULE_NAMES`): ``clf_schedule``, ``clf_final_scale``.
+
+``gamma`` is PPO's discount; the environment's progress reward is sized for the same value.
+A settings file is JSON: ``{"settings": {name: value, ...}}`` (what ``tune`` writes as
+``best.json``, which also names its ``config``) or a bare ``{name: value}`` object. Names are
+checked where they are given, against the list of known ones.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import Any
+
+from tlshield.envs import ENV_ID, POINT_MASS_ID
+
+#: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments and the
+#: initial log standard deviation of the policy).
+PPO_NAMES = (
+    "learning_rate",
+    "ent_coef",
+    "n_epochs",
+    "batch_size",
+    "n_steps",
+    "n_envs",
+    "gamma",
+    "gae_lambda",
+    "clip_range",
+    "vf_coef",
+    "max_grad_norm",
+    "log_std_init",
+)
+#: Settings of :func:`tlshield.training.train` itself.
+SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
+
+
+def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
+    """The environment constants of ``env_id`` (its config dataclass's fields)."""
+    return tuple(f.name for f in fields(_config_class(env_id)))
+
+
+def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
+    """Every setting name ``env_id``'s runs accept, sorted."""
+    return tuple(sorted({*env_names(env_id), *PPO_NAMES, *SCHEDULE_NAMES}))
+
+
+def check_names(names: Any, env_id: str = ENV_ID, where: str = "settings") -> None:
+    """Raises ValueError naming the unknown settings in ``names`` and listing the known ones."""
+    known = known_names(env_id)
+    unknown = sorted(str(n) for n in names if n not in known)
+    if unknown:
+        raise ValueError(
+            f"{where}: unknown setting(s) {', '.join(unknown)} for {env_id}; known: "
+            f"{', '.join(known)}"
+        )
+
+
+def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
+    """Keyword arguments of :func:`tlshield.training.train` for ``settings``: the schedule
+    settings as themselves, the PPO ones under ``ppo``, the rest as environment overrides.
+    Checks the names, and the environment constants by building the environment's config."""
+    check_names(settings, env_id)
+    out: dict[str, Any] = {k: settings[k] for k in SCHEDULE_NAMES if k in settings}
+    ppo = {k: settings[k] for k in PPO_NAMES if k in settings}
+    if ppo:
+        out["ppo"] = ppo
+    env = {k: _tuples(v) for k, v in settings.items() if k not in PPO_NAMES + SCHEDULE_NAMES}
+    try:
+        replace(_config_class(env_id)(), **env).check()
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"settings: {err}") from None
+    return {**out, **env}
+
+
+def load(path: str | Path) -> tuple[dict[str, Any], str | None]:
+    """The settings of a JSON file and the configuration it names (``None`` if it names none).
+    Raises ValueError on a file that is not a JSON object of settings."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not JSON ({err})") from None
+    settings = data.get("settings", data) if isinstance(data, dict) else None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path}: expected a JSON object of settings, {{name: value}}")
+    config = data.get("config") if "settings" in data else None
+    check_names(settings, data.get("env_id", ENV_ID), where=str(path))
+    return settings, config
+
+
+def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
+    """``["alpha=3", "clf_schedule=linear", "clf_bounds=[[-0.2,-0.4],[0.2,0.4]]"]`` -> a
+    settings dict; values are JSON, or plain strings when they are not."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--set {item!r}: expected NAME=VALUE")
+        try:
+            out[name.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            out[name.strip()] = text
+    check_names(out, env_id, where="--set")
+    return out
+
+
+def _tuples(value: Any) -> Any:
+    """JSON lists back into the tuples the config dataclasses hold."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
+def _config_class(env_id: str) -> Any:
+    from tlshield.envs import ChannelConfig
+    from tlshield.envs.point_mass import PointMassConfig
+
+    classes = {ENV_ID: ChannelConfig, POINT_MASS_ID: PointMassConfig}
+    if env_id not in classes:
+        raise ValueError(f"env {env_id!r}: expected one of {', '.join(classes)}")
+    return classes[env_id]
