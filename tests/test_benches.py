@@ -24,6 +24,8 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
         ("moving_obstacles.py", ["--steps", "2000"], "moving-obstacle barrier"),
         ("compare_cbfpy.py", ["--quick"], "tlshield speedup"),
+        ("ray_overhead.py", ["--quick"], "runs identical: yes"),
+        ("ray_scaling.py", ["--quick"], "runs identical at every size: yes"),
     ],
 )
 def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:

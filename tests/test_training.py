@@ -99,6 +99,9 @@ def test_bad_training_arguments(tmp_path: Path) -> None:
         train("rl", 0, 0, tmp_path / "bad")
     with pytest.raises(ValueError, match="scale"):
         train("rl", 0, 1, tmp_path / "bad", clf_final_scale=2.0)
+    for seed in (-1, 10):  # reset seeds seed * 1000 + i would reach the evaluation seeds
+        with pytest.raises(ValueError, match=r"seed = .*\[0, 10\).*evaluation seeds"):
+            train("rl", seed, 1, tmp_path / "bad")
     with pytest.raises(FileNotFoundError, match="not a tlshield run"):
         evaluate(tmp_path / "missing")
     with pytest.raises(ValueError, match="trials"):
@@ -106,7 +109,7 @@ def test_bad_training_arguments(tmp_path: Path) -> None:
 
 
 def test_cli_help_and_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    for command in ("train", "evaluate", "reproduce", "plot", "fsa"):
+    for command in ("train", "evaluate", "reproduce", "ablation", "tune", "plot", "fsa"):
         with pytest.raises(SystemExit) as exit_info:
             cli.main([command, "--help"])
         assert exit_info.value.code == 0
@@ -159,19 +162,6 @@ def test_cli_without_the_training_extra_names_it(
     err = capsys.readouterr().err
     assert code == 2
     assert "pip install 'tlshield[train]'" in err and "Traceback" not in err
-
-
-def test_reproduce_progress_bar_counts_runs(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from tlshield import training
-
-    done = []
-    monkeypatch.setattr(training, "_run_one", done.append)
-    training._run_jobs(["a", "b"], workers=1, progress=True)
-    err = capsys.readouterr().err
-    assert done == ["a", "b"]
-    assert "runs" in err and "run" in err and "update" not in err
 
 
 def test_train_and_evaluate_point_mass_from_the_cli(tmp_path: Path) -> None:

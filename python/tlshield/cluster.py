@@ -89,24 +89,19 @@ def session(address: str | None = None, workers: int | None = None) -> Iterator[
 def run(
     jobs: dict[Path, Job],
     *,
-    limit: int | None = None,
     on_done: Callable[[Path], None] | None = None,
 ) -> None:
-    """Runs each job as a Ray task (one CPU each) inside a :func:`session` and unpacks its
-    folder at its key, at most ``limit`` at a time (default: as many as the cluster's CPUs
-    take). ``on_done`` is called with each folder as it arrives. Jobs that fail are reported
-    together after the others finished (their folders are not written)."""
+    """Runs each job as a Ray task (one CPU each, so as many at a time as the cluster has
+    CPUs) inside a :func:`session` and unpacks its folder at its key. ``on_done`` is called
+    with each folder as it arrives. Jobs that fail are reported together after the others
+    finished (their folders are not written)."""
     import ray
 
     task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_in_tempdir)
-    queue = list(jobs.items())
-    pending: dict[Any, Path] = {}
+    pending = {task.remote(job, folder.name): folder for folder, job in jobs.items()}
     failures: list[str] = []
     try:
-        while queue or pending:
-            while queue and (limit is None or len(pending) < limit):
-                folder, job = queue.pop(0)
-                pending[task.remote(job, folder.name)] = folder
+        while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             folder = pending.pop(ready[0])
             try:

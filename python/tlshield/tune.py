@@ -231,17 +231,42 @@ def tune(
         ray_tune.with_parameters(_trial, config=config, updates=updates, seed=seed, trials=trials),
         {"cpu": 1},
     )
+    # An interrupted search resumes when run again with the same arguments (Tune's records
+    # under out/ray/search, the sampler's state included).
+    experiment = root / "ray" / "search"
+    arguments = {
+        "config": config,
+        "samples": samples,
+        "updates": updates,
+        "search": names,
+        "seed": seed,
+        "trials": trials,
+        "sampler_seed": sampler_seed,
+    }
+    recorded = root / "ray" / "arguments.json"
     start = time.perf_counter()
     with cluster.session(address, workers):
-        grid = ray_tune.Tuner(
-            trainable,
-            tune_config=ray_tune.TuneConfig(
-                search_alg=searcher, scheduler=scheduler, num_samples=samples
-            ),
-            run_config=ray_tune.RunConfig(
-                name="search", storage_path=str(root / "ray"), verbose=1 if progress else 0
-            ),
-        ).fit()
+        if ray_tune.Tuner.can_restore(str(experiment)):
+            before = json.loads(recorded.read_text()) if recorded.is_file() else None
+            if before != json.loads(json.dumps(arguments)):
+                raise ValueError(
+                    f"{root} holds a search with other arguments ({before}); resume it with "
+                    "those, or use another --out"
+                )
+            tuner = ray_tune.Tuner.restore(str(experiment), trainable, resume_errored=True)
+        else:
+            recorded.parent.mkdir(parents=True, exist_ok=True)
+            recorded.write_text(json.dumps(arguments, indent=2))
+            tuner = ray_tune.Tuner(
+                trainable,
+                tune_config=ray_tune.TuneConfig(
+                    search_alg=searcher, scheduler=scheduler, num_samples=samples
+                ),
+                run_config=ray_tune.RunConfig(
+                    name="search", storage_path=str(root / "ray"), verbose=1 if progress else 0
+                ),
+            )
+        grid = tuner.fit()
     wall = time.perf_counter() - start
     rows = []
     for k, result in enumerate(grid):
