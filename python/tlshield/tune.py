@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import tempfile
 import time
 from collections.abc import Sequence
@@ -244,7 +245,7 @@ def tune(
         "sampler_seed": sampler_seed,
     }
     recorded = root / "ray" / "arguments.json"
-    start = time.perf_counter()
+    start, before_wall = time.perf_counter(), 0.0
     with cluster.session(address, workers):
         if ray_tune.Tuner.can_restore(str(experiment)):
             before = json.loads(recorded.read_text()) if recorded.is_file() else None
@@ -254,6 +255,8 @@ def tune(
                     "those, or use another --out"
                 )
             tuner = ray_tune.Tuner.restore(str(experiment), trainable, resume_errored=True)
+            if (root / "best.json").is_file():  # the time of the invocations before
+                before_wall = json.loads((root / "best.json").read_text()).get("wall_time", 0.0)
         else:
             recorded.parent.mkdir(parents=True, exist_ok=True)
             recorded.write_text(json.dumps(arguments, indent=2))
@@ -267,14 +270,16 @@ def tune(
                 ),
             )
         grid = tuner.fit()
-    wall = time.perf_counter() - start
+    wall = before_wall + time.perf_counter() - start
     rows = []
-    for k, result in enumerate(grid):
+    # Samples in the order they were drawn (Tune numbers its trial folders so; the grid's own
+    # order changes when a search is restored), so sample 0 is the defaults.
+    for result in sorted(grid, key=_sample_number):
         metrics = result.metrics or {}
         params = {n: result.config.get(n) for n in names if n in result.config}
         rows.append(
             {
-                "trial": k,
+                "trial": _sample_number(result),
                 **{n: params.get(n) for n in names},
                 "updates": metrics.get("update", 0),
                 "validation_success": metrics.get("validation_success"),
@@ -287,6 +292,15 @@ def tune(
         )
     _write(root, rows, names, config, updates, seed, trials, samples, wall)
     return root
+
+
+def _sample_number(result: Any) -> int:
+    """The draw order of a Tune result: its folder is ``<trainable>_<id>_<N>_<params>``, N
+    counting from 1."""
+    match = re.search(r"_[0-9a-f]{5,}_(\d+)_", Path(result.path).name)
+    if match is None:
+        raise RuntimeError(f"unexpected Ray Tune trial folder name: {result.path}")
+    return int(match.group(1)) - 1
 
 
 def _write(
