@@ -41,12 +41,18 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+#: The throwaway loopback cluster runs without token authentication (Ray turns it on when the
+#: machine has a token; the nodes joining would then need it too).
+NODE_ENV = {**os.environ, "RAY_AUTH_MODE": "disabled"}
+
+
 def _start(args: list[str]) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
         [RAY, "start", *args, "--block", "--disable-usage-stats"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
+        env=NODE_ENV,
     )
 
 
@@ -54,7 +60,7 @@ def _wait_for_cpus(address: str, cpus: int) -> None:
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:
         status = subprocess.run(
-            [RAY, "status", "--address", address], capture_output=True, text=True
+            [RAY, "status", "--address", address], capture_output=True, text=True, env=NODE_ENV
         ).stdout
         if f"/{float(cpus)} CPU" in status:
             return

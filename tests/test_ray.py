@@ -189,10 +189,18 @@ def test_a_worker_that_dies_is_retried_without_losing_finished_runs(tmp_path: Pa
     assert second["trials"] == 3
 
 
-@pytest.fixture
-def ray_cluster(tmp_path: Path) -> Iterator[str]:
-    """A real Ray cluster of this machine (`ray start --head` on 127.0.0.1), stopped after."""
+@pytest.fixture(params=["token", "disabled"])
+def ray_cluster(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[tuple[str, dict]]:
+    """A real Ray cluster of this machine (`ray start --head` on 127.0.0.1), with and without
+    token authentication, stopped after; yields its address and the environment a client
+    gets (the token's path, not RAY_AUTH_MODE: tlshield must send the token by itself)."""
     port = free_port()
+    client = {k: v for k, v in clean_env().items() if k != "RAY_AUTH_MODE"}
+    if request.param == "token":
+        token = tmp_path / "auth_token"
+        token.write_text(os.urandom(32).hex())
+        client["RAY_AUTH_TOKEN_PATH"] = str(token)
+    head_env = {**client, "RAY_AUTH_MODE": request.param}
     head = subprocess.Popen(
         [
             RAY,
@@ -208,35 +216,41 @@ def ray_cluster(tmp_path: Path) -> Iterator[str]:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
-        env=clean_env(),
+        env=head_env,
     )
     address = f"127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + HANG
         while True:
             status = subprocess.run(
-                [RAY, "status", "--address", address], capture_output=True, text=True
+                [RAY, "status", "--address", address],
+                capture_output=True,
+                text=True,
+                env=head_env,
             )
             if status.returncode == 0 and "CPU" in status.stdout:
                 break
             assert head.poll() is None, "ray start --head exited"
             assert time.monotonic() < deadline, "the cluster never came up"
             time.sleep(1)
-        yield address
+        yield address, client
     finally:
         os.killpg(head.pid, signal.SIGTERM)
         head.wait(timeout=HANG)
 
 
-def test_reproduce_on_a_cluster_through_its_address(ray_cluster: str, tmp_path: Path) -> None:
+def test_reproduce_on_a_cluster_through_its_address(
+    ray_cluster: tuple[str, dict], tmp_path: Path
+) -> None:
+    address, env = ray_cluster
     out = tmp_path / "out"
     args = ["--configs", "rl_cbf_clf", "--seeds", "0", "1", "--updates", "2", "--trials", "3"]
     proc = subprocess.run(
-        command("reproduce", *args, "--address", ray_cluster, "--out", str(out), "--quiet"),
+        command("reproduce", *args, "--address", address, "--out", str(out), "--quiet"),
         capture_output=True,
         text=True,
         timeout=HANG,
-        env=clean_env(),
+        env=env,
     )
     assert proc.returncode == 0, proc.stderr
     for seed in (0, 1):

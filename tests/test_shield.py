@@ -379,3 +379,20 @@ def test_bad_drift_is_a_clear_error() -> None:
         sh.filter(s, 0, np.zeros(2), drift=np.full(STATE_DIM, np.nan))
     with pytest.raises(ValueError, match="drift"):
         sh.filter_batch(np.stack([s, s]), [0, 0], np.zeros((2, 2)), np.zeros((1, STATE_DIM)))
+
+
+def test_bounds_given_as_lists_equal_tuples() -> None:
+    # Bounds read back from JSON (a run's config.json, a tune best.json) are lists.
+    state = np.zeros(STATE_DIM)
+    state[:2] = (0.3, -0.9)  # near the c1 wall, so the corrections are not zero
+    state[3:] = (1.0, 2.0, 3.0, 1.0, 5.0, 5.2, 1.0, 3.0, 4.0, 2.0)  # goals, obstacles
+    boxes = {"cbf_bounds": ((-1.5, -3.0), (1.5, 3.0)), "clf_bounds": ((-0.3, -0.6), (0.3, 0.6))}
+    as_lists = {k: [list(side) for side in v] for k, v in boxes.items()}
+    a = task_shield(**boxes).filter(state, 0, np.array([0.5, -1.0]))
+    b = task_shield(**as_lists).filter(state, 0, np.array([0.5, -1.0]))
+    assert np.any(a.a_cbf != 0)
+    assert np.array_equal(a.a_cbf, b.a_cbf) and np.array_equal(a.a_clf, b.a_clf)
+    with pytest.raises(TypeError, match="cbf_bounds: expected a pair"):
+        task_shield(cbf_bounds=[-1.0, 0.0, 1.0])
+    with pytest.raises(TypeError, match="cbf_bounds: expected a pair"):
+        task_shield(cbf_bounds="ab")

@@ -176,6 +176,8 @@ class AccelerationUnicycle:
         """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
 Bound: TypeAlias = float | Sequence[float]
+#: ``(lo, hi)``; a list ``[lo, hi]`` (as read back from JSON) is accepted too.
+Bounds: TypeAlias = tuple[Bound, Bound] | Sequence[Bound]
 Dynamics: TypeAlias = Unicycle | SingleIntegrator | DoubleIntegrator | AccelerationUnicycle
 
 @final
@@ -235,9 +237,9 @@ class Shield:
         alpha: float,
         c3: float,
         K: float,
-        cbf_bounds: tuple[Bound, Bound],
-        clf_bounds: tuple[Bound, Bound],
-        action_bounds: tuple[Bound, Bound] | None = None,
+        cbf_bounds: Bounds,
+        clf_bounds: Bounds,
+        action_bounds: Bounds | None = None,
         barriers: Sequence[Predicate]
         | Mapping[str, Predicate | tuple[Predicate, float]]
         | None = None,

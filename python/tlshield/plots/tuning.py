@@ -24,7 +24,9 @@ def plot_trials(
     fig = _figure(3.2 * cols, 2.6 * nrows)
     axes = fig.subplots(nrows, cols, squeeze=False).ravel()
     done = [r for r in rows if r.get("objective") is not None]
-    stopped = [r for r in rows if r.get("objective") is None and r.get("validation_success")]
+    stopped = [
+        r for r in rows if r.get("objective") is None and r.get("validation_success") is not None
+    ]
     best = max(done, key=lambda r: r["objective"], default=None)
     for ax, name in zip(axes, names, strict=False):
         kind = kinds[name]
