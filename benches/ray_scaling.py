@@ -31,6 +31,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 RAY = str(Path(sys.executable).parent / "ray")
+#: The ports of a node, each given a free one.
+NODE_PORTS = (
+    "node-manager",
+    "object-manager",
+    "dashboard-agent-listen",
+    "dashboard-agent-grpc",
+    "metrics-export",
+    "runtime-env-agent",
+)
 #: Object store per node (bytes): the runs travel as a few hundred kB each.
 OBJECT_STORE = 100 * 1024 * 1024
 
@@ -78,9 +87,13 @@ def with_cluster(workers: int, run: list[str]) -> float:
     ]
     try:
         time.sleep(3)
-        for _ in range(workers):
-            nodes.append(_start([f"--address={address}", "--num-cpus=1", *common]))
-        _wait_for_cpus(address, workers)
+        for k in range(workers):
+            # Nodes sharing a machine need their own ports (the defaults would collide and
+            # the later raylet dies), and start one at a time (started together, one timed
+            # out registering with the head).
+            ports = [f"--{name}-port={_free_port()}" for name in NODE_PORTS]
+            nodes.append(_start([f"--address={address}", "--num-cpus=1", *ports, *common]))
+            _wait_for_cpus(address, k + 1)
         env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
         start = time.perf_counter()
         subprocess.run([*run, "--address", address], check=True, env=env, stdout=subprocess.DEVNULL)

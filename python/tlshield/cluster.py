@@ -78,15 +78,7 @@ def session(address: str | None = None, workers: int | None = None) -> Iterator[
         ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)
         where = f"a local Ray with {int(ray.cluster_resources().get('CPU', 0))} CPUs"
     else:
-        _use_token_if_available()
-        try:
-            ray.init(address=address, **quiet)
-        except ConnectionError as err:
-            raise ConnectionError(
-                f"{err} (a cluster with token authentication, Ray's default for `ray start "
-                "--head` on a machine with a token, needs the same token here: RAY_AUTH_TOKEN, "
-                "RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token)"
-            ) from None
+        _connect(address, **quiet)
         where = f"the Ray cluster at {address}"
     try:
         yield where
@@ -94,22 +86,32 @@ def session(address: str | None = None, workers: int | None = None) -> Iterator[
         ray.shutdown()
 
 
-def _use_token_if_available() -> None:
-    """Ray >= 2.5x: ``ray start --head`` turns token authentication on when the machine has a
-    token (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``), but a
-    connecting driver sends it only with ``RAY_AUTH_MODE=token``. Unless the mode is set, use
-    the token when there is one (a cluster without authentication ignores it), as Ray's own
-    ``ray start`` does: set the mode and refresh Ray's cached configuration."""
-    path = os.environ.get("RAY_AUTH_TOKEN_PATH") or str(Path.home() / ".ray" / "auth_token")
-    has_token = bool(os.environ.get("RAY_AUTH_TOKEN")) or Path(path).is_file()
-    if "RAY_AUTH_MODE" in os.environ or not has_token:
-        return
-    os.environ["RAY_AUTH_MODE"] = "token"
+def _connect(address: str, **options: Any) -> None:
+    """``ray.init`` at ``address``. Ray >= 2.5x: ``ray start --head`` turns token
+    authentication on when its machine has a token, and a driver then needs
+    ``RAY_AUTH_MODE=token`` (a token-less cluster must not get it: its nodes then fail to hand
+    results over). Unless the mode is set, connect without; if refused and this machine has a
+    token (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH``, ``~/.ray/auth_token``), with it."""
+    import ray
+
     try:
-        from ray._raylet import Config
-    except ImportError:  # a Ray without token authentication: nothing to refresh
+        ray.init(address=address, **options)
         return
+    except ConnectionError as err:
+        path = os.environ.get("RAY_AUTH_TOKEN_PATH") or str(Path.home() / ".ray" / "auth_token")
+        has_token = bool(os.environ.get("RAY_AUTH_TOKEN")) or Path(path).is_file()
+        if "RAY_AUTH_MODE" in os.environ or not has_token:
+            raise ConnectionError(
+                f"{err} (a cluster with token authentication, Ray's default for `ray start "
+                "--head` on a machine with a token, needs the same token here: RAY_AUTH_TOKEN, "
+                "RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token)"
+            ) from None
+    ray.shutdown()
+    os.environ["RAY_AUTH_MODE"] = "token"  # what Ray's own `ray start` does with a token
+    from ray._raylet import Config
+
     Config.initialize("")
+    ray.init(address=address, **options)
 
 
 def run(
