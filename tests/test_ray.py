@@ -141,13 +141,30 @@ def _two_jobs(out: Path) -> list[str]:
     )
 
 
-def test_an_interrupted_reproduce_resumes_keeping_finished_runs(tmp_path: Path) -> None:
-    out = tmp_path / "out"
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _first_of_two_jobs(out: Path) -> tuple[subprocess.Popen[str], Path]:
+    """Starts the two-job reproduce; returns once the first run has arrived in ``out``."""
     proc = subprocess.Popen(
-        _two_jobs(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env()
+        _two_jobs(out),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=clean_env(),
+        # SIGINT as a shell leaves it: in a full pytest run the command once ignored Ctrl-C
+        # (an ignored SIGINT is inherited; which earlier test leaves it so was not found).
+        preexec_fn=_default_sigint,
     )
     first = out / "rl_cbf_s0" / "evaluation.json"
     _wait_for(first, proc)
+    return proc, first
+
+
+def test_an_interrupted_reproduce_resumes_keeping_finished_runs(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc, first = _first_of_two_jobs(out)
     proc.send_signal(signal.SIGINT)  # Ctrl-C while the second run trains
     _, err = proc.communicate(timeout=HANG)
     assert proc.returncode == 130, err
@@ -170,11 +187,7 @@ def _task_workers() -> list[int]:
 
 def test_a_worker_that_dies_is_retried_without_losing_finished_runs(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    proc = subprocess.Popen(
-        _two_jobs(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=clean_env()
-    )
-    first = out / "rl_cbf_s0" / "evaluation.json"
-    _wait_for(first, proc)
+    proc, first = _first_of_two_jobs(out)
     kept = first.stat().st_mtime_ns
     deadline = time.monotonic() + HANG
     while not (pids := _task_workers()):  # the worker that trains the second run
