@@ -126,16 +126,12 @@ def _settings(args: argparse.Namespace, env_id: str = "tlshield/Channel-v0") -> 
     chosen.update(settings.parse_assignments(args.set or [], env_id))
     if getattr(args, "config", "") is None:
         args.config = named or "rl_cbf_clf"
-    options: dict[str, object] = {
+    return {
         "clf_schedule": args.clf_schedule,
         "clf_final_scale": args.clf_final_scale,
-        **_preset_options(args),
+        **_preset_options(args),  # the preset's environment; it sets no PPO keywords
+        **settings.split(chosen, env_id),
     }
-    for key, value in settings.split(chosen, env_id).items():
-        if key == "ppo" and isinstance(value, dict):
-            value = {**options.get("ppo", {}), **value}  # type: ignore[dict-item]
-        options[key] = value
-    return options
 
 
 def _train(args: argparse.Namespace) -> int:

@@ -200,7 +200,7 @@ def train(
     ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
     once it is written."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
-    _check_seeds((seed,))
+    check_seeds((seed,))
     if env not in ENV_IDS:
         raise ValueError(f"env {env!r}: expected one of {', '.join(ENV_IDS)}")
     if env != ENV_ID and clf_schedule != "fixed":
@@ -409,7 +409,7 @@ def reproduce(
             options.get("clf_final_scale", 0.2),
             options.get("preset", "default"),
         )
-    _check_seeds(seeds)
+    check_seeds(seeds)
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
     root = Path(out)
@@ -429,7 +429,7 @@ def reproduce(
     return root
 
 
-def _check_seeds(seeds: Any) -> None:
+def check_seeds(seeds: Any) -> None:
     """Training seeds 0-9: their reset seeds (``seed * 1000 + i``) stay below the evaluation
     seeds and their validation seeds below the tuning seeds."""
     for seed in seeds:
@@ -493,7 +493,7 @@ def ablation(
     :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
     Finished rows are kept, so an interrupted ablation resumes."""
     _check_run_args(config, updates, "fixed", 0.2)
-    _check_seeds(seeds)
+    check_seeds(seeds)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
     rows = _ablation_rows()

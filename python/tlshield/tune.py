@@ -205,11 +205,11 @@ def tune(
     from ray.tune.search.optuna import OptunaSearch
 
     from tlshield import cluster
-    from tlshield.training import _check_seeds
+    from tlshield.training import check_seeds
 
     names = tuple(search) if search else searchable(config)
     _check(config, names, samples, updates, trials)
-    _check_seeds((seed,))
+    check_seeds((seed,))
     root = Path(out).resolve()
     root.mkdir(parents=True, exist_ok=True)
     defaults = {k: DEFAULTS[k] for k in names if k in DEFAULTS}
