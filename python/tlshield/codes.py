@@ -18,6 +18,10 @@ class Status(IntEnum):
     RELAXED = 1
     #: No solution: zero corrections, the RL action unchanged.
     FAILED = 2
+    #: The solver called the problem solved, but its answer broke a constraint by more than
+    #: the shield's residual tolerance (1e-7 of the row's scale); the action is the relaxed
+    #: problem's answer, which passed the same check.
+    INACCURATE = 3
 
     def __str__(self) -> str:
         return self.name.lower()

@@ -256,6 +256,15 @@ class ChannelConfig:
             raise ValueError(
                 f"rl_bounds = {self.rl_bounds!r}: expected ((lo_v, lo_w), (hi_v, hi_w))"
             )
+        if not (math.isfinite(self.cbf_margin) and self.cbf_margin > 0):
+            raise ValueError(
+                f"cbf_margin = {self.cbf_margin!r}: expected a finite number > 0 (an atom holds "
+                "only while rho > 0, so a barrier kept at h >= 0 lets the discrete-time plant "
+                "settle at h = 0 or just below it)"
+            )
+        # The shield's own checks, with these settings (the CBF box must cancel every RL plus
+        # CLF action): refused here, where the setting is given, not at the first episode.
+        channel_shield(self, "rl_cbf_clf")
 
 
 def task_spec(cfg: ChannelConfig) -> Spec:
@@ -322,6 +331,7 @@ def channel_shield(cfg: ChannelConfig, config: str, spec: Spec | None = None) ->
         K=cfg.K,
         cbf_bounds=cfg.cbf_bounds,
         clf_bounds=cfg.clf_bounds,
+        rl_bounds=cfg.rl_bounds,
         use_cbf=use_cbf,
         use_clf=use_clf,
         margin=cfg.cbf_margin,

@@ -90,7 +90,7 @@ class PointMassConfig:
                 if not (isinstance(v, (int, float)) and math.isfinite(v)):
                     raise ValueError(f"{f.name} = {value!r}: expected finite numbers")
         positive = ("goal_radius", "obstacle_radius", "max_accel", "dt", "alpha", "alpha2")
-        positive += ("c3", "K", "clf_gain", "clf_bound", "progress_scale")
+        positive += ("c3", "K", "clf_gain", "clf_bound", "progress_scale", "cbf_margin")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} = {getattr(self, name)!r}: expected a number > 0")
@@ -153,6 +153,7 @@ def point_mass_shield(cfg: PointMassConfig, config: str, spec: Spec) -> Shield |
         cbf_bounds=(-2 * accel, 2 * accel),
         clf_bounds=(-cfg.clf_bound, cfg.clf_bound),
         action_bounds=(-accel, accel),
+        rl_bounds=(-accel, accel),
         clf_gain=cfg.clf_gain,
         margin=cfg.cbf_margin,
         use_cbf=use_cbf,

@@ -214,14 +214,14 @@ impl Predicate {
                     let (cx, cy) = (c[0], c[1]);
                     for (o, s) in out.iter_mut().zip(rows) {
                         let (dx, dy) = (s[*px] - s[cx], s[*py] - s[cy]);
-                        *o = b.radius - (dx * dx + dy * dy).sqrt();
+                        *o = b.radius - norm2(dx, dy);
                     }
                 }
                 ([px, py], Center::Fixed(c)) => {
                     let (cx, cy) = (c[0], c[1]);
                     for (o, s) in out.iter_mut().zip(rows) {
                         let (dx, dy) = (s[*px] - cx, s[*py] - cy);
-                        *o = b.radius - (dx * dx + dy * dy).sqrt();
+                        *o = b.radius - norm2(dx, dy);
                     }
                 }
                 _ => {
@@ -295,6 +295,17 @@ impl Predicate {
     }
 }
 
+/// `|(dx, dy)|`: the plain formula, or `hypot` where the squares overflow.
+#[inline]
+fn norm2(dx: f64, dy: f64) -> f64 {
+    let sq = dx * dx + dy * dy;
+    if sq.is_finite() {
+        sq.sqrt()
+    } else {
+        dx.hypot(dy)
+    }
+}
+
 impl Ball {
     #[inline]
     fn center_at(&self, s: &[f64], k: usize) -> f64 {
@@ -304,14 +315,18 @@ impl Ball {
         }
     }
 
+    /// `|s[pos] - c|`, finite for every finite difference (the squares of differences above
+    /// ~1e154 overflow, so those are summed rescaled by the largest).
     #[inline]
     fn distance(&self, s: &[f64]) -> f64 {
-        let mut sq = 0.0;
-        for (k, &p) in self.pos.iter().enumerate() {
-            let diff = s[p] - self.center_at(s, k);
-            sq += diff * diff;
+        let diff = |k: usize| s[self.pos[k]] - self.center_at(s, k);
+        let sq: f64 = (0..self.pos.len()).map(|k| diff(k) * diff(k)).sum();
+        if sq.is_finite() {
+            return sq.sqrt();
         }
-        sq.sqrt()
+        let scale = (0..self.pos.len()).fold(0.0_f64, |a, k| a.max(diff(k).abs()));
+        let scaled: f64 = (0..self.pos.len()).map(|k| (diff(k) / scale).powi(2)).sum();
+        scale * scaled.sqrt()
     }
 
     /// State dimensions of the point that must be inside the ball.

@@ -302,25 +302,26 @@ impl<'a> TrajectoryBatch<'a> {
         if stride == 0 || out.is_empty() {
             return Ok(out);
         }
-        let first_bad = out
-            .par_iter_mut()
-            .zip(self.data.par_chunks(stride))
-            .enumerate()
-            .map_init(Scratch::default, |scratch, (b, (o, data))| {
-                if let Some(i) = first_non_finite(data) {
-                    return Some(b * stride + i);
-                }
-                *o = f(
-                    Trajectory {
-                        data,
-                        dim: self.dim,
-                    },
-                    scratch,
-                );
-                None
-            })
-            .filter_map(|bad| bad)
-            .min();
+        let first_bad = crate::parallel::install(|| {
+            out.par_iter_mut()
+                .zip(self.data.par_chunks(stride))
+                .enumerate()
+                .map_init(Scratch::default, |scratch, (b, (o, data))| {
+                    if let Some(i) = first_non_finite(data) {
+                        return Some(b * stride + i);
+                    }
+                    *o = f(
+                        Trajectory {
+                            data,
+                            dim: self.dim,
+                        },
+                        scratch,
+                    );
+                    None
+                })
+                .filter_map(|bad| bad)
+                .min()
+        });
         match first_bad {
             Some(i) => Err(self.non_finite(i)),
             None => Ok(out),

@@ -2,14 +2,14 @@
 
 use std::sync::Arc;
 
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
 
-use crate::convert::{vector, FloatArray};
+use crate::convert::{state, vector, FloatArray};
 use crate::errors::map;
 use crate::literals::LiteralNames;
 use crate::progress::PyProgressReward;
@@ -51,8 +51,8 @@ impl PyAutomaton {
             .collect()
     }
 
-    fn state(&self, q: i64) -> PyResult<usize> {
-        map(self.inner.check_state("q", q))
+    fn state(&self, q: &Bound<'_, PyAny>) -> PyResult<usize> {
+        state(q, "q", &self.inner)
     }
 }
 
@@ -123,7 +123,7 @@ impl PyAutomaton {
     }
 
     /// The state after reading state vector ``s`` from state ``q``.
-    fn step(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<usize> {
+    fn step(&self, q: &Bound<'_, PyAny>, s: &Bound<'_, PyAny>) -> PyResult<usize> {
         let q = self.state(q)?;
         map(self.inner.step(q, &vector(s, "s")?))
     }
@@ -133,9 +133,13 @@ impl PyAutomaton {
     fn step_batch<'py>(
         &self,
         py: Python<'py>,
-        qs: PyArrayLike1<'py, i64, AllowTypeChange>,
+        qs: &Bound<'py, PyAny>,
         states: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let qs: Vec<i64> = crate::convert::states(qs, "qs", &self.inner)?
+            .into_iter()
+            .map(|q| q as i64)
+            .collect();
         let arr = FloatArray::extract(states, "states", 2, "(B, n)")?;
         if arr.shape()[0] != qs.len() {
             return Err(PyValueError::new_err(format!(
@@ -146,7 +150,6 @@ impl PyAutomaton {
         }
         let dim = arr.shape()[1];
         let values = arr.values();
-        let qs = qs.as_array().to_vec();
         let aut = &self.inner;
         let out = py.detach(|| aut.step_batch(&qs, &values, dim));
         Ok(map(out)?
@@ -180,7 +183,7 @@ impl PyAutomaton {
     #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
     fn reward(
         &self,
-        q: i64,
+        q: &Bound<'_, PyAny>,
         s_next: &Bound<'_, PyAny>,
         c_r: f64,
         trap_penalty: Option<f64>,
@@ -193,7 +196,11 @@ impl PyAutomaton {
 
     /// The CNF of the negated trap guard of ``q``: clauses of literals (``"c1"``, ``"!g3"``),
     /// empty when ``q`` has no trap edge.
-    fn trap_cnf<'py>(&self, py: Python<'py>, q: i64) -> PyResult<Vec<Vec<Bound<'py, PyString>>>> {
+    fn trap_cnf<'py>(
+        &self,
+        py: Python<'py>,
+        q: &Bound<'_, PyAny>,
+    ) -> PyResult<Vec<Vec<Bound<'py, PyString>>>> {
         let q = self.state(q)?;
         Ok(map(self.inner.trap_cnf(q))?
             .iter()
@@ -207,7 +214,7 @@ impl PyAutomaton {
     fn safe_set<'py>(
         &self,
         py: Python<'py>,
-        q: i64,
+        q: &Bound<'_, PyAny>,
         s: &Bound<'py, PyAny>,
     ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
         let q = self.state(q)?;
@@ -224,7 +231,7 @@ impl PyAutomaton {
     fn advance<'py>(
         &self,
         py: Python<'py>,
-        q: i64,
+        q: &Bound<'_, PyAny>,
         s_next: &Bound<'py, PyAny>,
         c_r: f64,
         trap_penalty: Option<f64>,
@@ -244,7 +251,7 @@ impl PyAutomaton {
     fn goal<'py>(
         &self,
         py: Python<'py>,
-        q: i64,
+        q: &Bound<'_, PyAny>,
         s: &Bound<'py, PyAny>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
         let q = self.state(q)?;

@@ -1,11 +1,50 @@
-//! numpy <-> slices. Inputs are accepted as any array-like of numbers; contiguous float64 arrays
-//! are read in place, anything else is converted once.
+//! numpy <-> slices. Inputs are accepted as any array-like of real numbers in any layout (C or
+//! Fortran order, strided, negative strides, read-only, float32 or integer): C-contiguous float64
+//! arrays are read in place, anything else is converted once into C order. Complex, boolean,
+//! object and text input is refused with a `TypeError` naming the argument (numpy would drop an
+//! imaginary part or read `True` as 1 without a word).
 
 use std::borrow::Cow;
 
-use numpy::{AllowTypeChange, PyArray1, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArrayDescrMethods, PyArrayLike1, PyArrayLikeDyn, PyArrayMethods,
+    PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyFloat};
+use tlshield_core::Automaton;
+
+use crate::errors::{map, AutomatonError};
+
+/// numpy's dtype kind of `obj`: its own for an ndarray, else that of `numpy.asarray(obj)`.
+fn dtype_kind(obj: &Bound<'_, PyAny>) -> PyResult<u8> {
+    if let Ok(array) = obj.cast::<PyUntypedArray>() {
+        return Ok(array.dtype().kind());
+    }
+    let array = obj.py().import("numpy")?.call_method1("asarray", (obj,))?;
+    Ok(array.cast::<PyUntypedArray>()?.dtype().kind())
+}
+
+/// The dtype kinds read as numbers: signed and unsigned integers and floats.
+fn check_real(obj: &Bound<'_, PyAny>, name: &str, layout: &str) -> PyResult<()> {
+    let kind = match dtype_kind(obj) {
+        Ok(kind) => kind,
+        // numpy could not make an array of it (ragged lists...): the extraction says why.
+        Err(_) => return Ok(()),
+    };
+    let what = match kind {
+        b'f' | b'i' | b'u' => return Ok(()),
+        b'c' => "complex numbers (the imaginary part would be lost)",
+        b'b' => "booleans",
+        b'O' => "Python objects",
+        b'U' | b'S' => "text",
+        _ => "values that are not real numbers",
+    };
+    Err(PyTypeError::new_err(format!(
+        "{name}: expected real numbers (float or int) with shape {layout}, got an array of {what}"
+    )))
+}
 
 /// A float64 array of known dimensionality, borrowed from Python.
 pub struct FloatArray<'py> {
@@ -26,6 +65,7 @@ impl<'py> FloatArray<'py> {
                 "{name}: expected an array-like of numbers with shape {layout}, got None"
             )));
         }
+        check_real(obj, name, layout)?;
         let array: PyArrayLikeDyn<'py, f64, AllowTypeChange> = obj.extract().map_err(|e| {
             PyTypeError::new_err(format!(
                 "{name}: expected an array-like of numbers with shape {layout}, got {} ({e})",
@@ -48,12 +88,15 @@ impl<'py> FloatArray<'py> {
         self.array.shape()
     }
 
-    /// The values in C order, borrowed when the array is C-contiguous.
+    /// The values in C order, borrowed when the array is C-contiguous. (`as_slice` alone would
+    /// also hand out a Fortran-contiguous buffer, in Fortran order.)
     pub fn values(&self) -> Cow<'_, [f64]> {
-        match self.array.as_slice() {
-            Ok(slice) => Cow::Borrowed(slice),
-            Err(_) => Cow::Owned(self.array.as_array().iter().copied().collect()),
+        if self.array.is_c_contiguous() {
+            if let Ok(slice) = self.array.as_slice() {
+                return Cow::Borrowed(slice);
+            }
         }
+        Cow::Owned(self.array.as_array().iter().copied().collect())
     }
 }
 
@@ -69,6 +112,85 @@ pub fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
     Ok(FloatArray::extract(obj, name, 1, "(n,)")?
         .values()
         .into_owned())
+}
+
+/// An FSA state argument: a Python or numpy integer in `0..automaton.num_states()`; a bool, a
+/// float or an integer out of range (however large) is refused, naming `name`.
+pub fn state(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyResult<usize> {
+    if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyFloat>() {
+        return Err(PyTypeError::new_err(format!(
+            "{name}: expected an integer FSA state, got {}",
+            type_name(obj)
+        )));
+    }
+    match obj.extract::<i64>() {
+        Ok(q) => map(automaton.check_state(name, q)),
+        Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => {
+            Err(AutomatonError::new_err(format!(
+                "{name}: state {} does not exist (the automaton has states 0..{})",
+                obj.repr().map_or_else(|_| "?".into(), |r| r.to_string()),
+                automaton.num_states()
+            )))
+        }
+        Err(_) => Err(PyTypeError::new_err(format!(
+            "{name}: expected an integer FSA state, got {}",
+            type_name(obj)
+        ))),
+    }
+}
+
+/// A `(B,)` array-like of FSA states (any integer dtype and layout), each checked as
+/// [`state`] checks one; anything but integers is a `TypeError` naming `name`.
+pub fn states(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyResult<Vec<usize>> {
+    let kind = dtype_kind(obj).map_err(|_| states_type_error(obj, name))?;
+    if kind != b'i' && kind != b'u' {
+        return Err(states_type_error(obj, name));
+    }
+    let check = |i: usize, q: i64| map(automaton.check_state(&format!("{name}[{i}]"), q));
+    if kind == b'u' {
+        let qs: PyArrayLike1<'_, u64, AllowTypeChange> = obj
+            .extract()
+            .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})")))?;
+        let n = automaton.num_states() as u64;
+        return qs
+            .as_array()
+            .iter()
+            .enumerate()
+            .map(|(i, &q)| {
+                if q < n {
+                    Ok(q as usize)
+                } else {
+                    Err(AutomatonError::new_err(format!(
+                        "{name}[{i}]: state {q} does not exist (the automaton has states 0..{n})"
+                    )))
+                }
+            })
+            .collect();
+    }
+    let qs: PyArrayLike1<'_, i64, AllowTypeChange> = obj
+        .extract()
+        .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})")))?;
+    qs.as_array()
+        .iter()
+        .enumerate()
+        .map(|(i, &q)| check(i, q))
+        .collect()
+}
+
+fn states_type_error(obj: &Bound<'_, PyAny>, name: &str) -> PyErr {
+    let dtype = obj
+        .getattr("dtype")
+        .and_then(|d| d.str())
+        .map_or_else(|_| type_name(obj), |d| format!("dtype {d}"));
+    PyTypeError::new_err(format!(
+        "{name}: expected integer FSA states with shape (B,), got {dtype}"
+    ))
+}
+
+fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map_or_else(|_| "?".into(), |n| n.to_string())
 }
 
 /// Extracts a list of non-negative dimension indices, naming the bad entry.

@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use tlshield_core::{Automaton, ProgressParams, ProgressReward};
 
-use crate::convert::vector;
+use crate::convert::{state, vector};
 use crate::errors::map;
 
 /// The progress-aware task reward of an automaton (beyond the paper's Eq. 5A1): a potential
@@ -87,16 +87,21 @@ impl PyProgressReward {
     }
 
     /// ``Phi(s, q)``.
-    fn potential(&self, q: i64, s: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let q = map(self.automaton.check_state("q", q))?;
+    fn potential(&self, q: &Bound<'_, PyAny>, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let q = state(q, "q", &self.automaton)?;
         let s = vector(s, "s")?;
         Ok(self.inner.potential(&map(self.automaton.read(&s))?, q))
     }
 
     /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
     /// episode with ``q = automaton.step(automaton.initial, s_0)`` and ``phi = 0``.
-    fn advance(&self, q: i64, phi: f64, s_next: &Bound<'_, PyAny>) -> PyResult<(usize, f64, f64)> {
-        let q = map(self.automaton.check_state("q", q))?;
+    fn advance(
+        &self,
+        q: &Bound<'_, PyAny>,
+        phi: f64,
+        s_next: &Bound<'_, PyAny>,
+    ) -> PyResult<(usize, f64, f64)> {
+        let q = state(q, "q", &self.automaton)?;
         map(self
             .inner
             .advance(&self.automaton, q, phi, &vector(s_next, "s_next")?))

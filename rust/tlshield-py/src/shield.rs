@@ -2,9 +2,7 @@
 
 use std::sync::Arc;
 
-use numpy::{
-    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyString;
@@ -15,7 +13,7 @@ use tlshield_core::{
 
 use crate::automaton::PyAutomaton;
 use crate::codes;
-use crate::convert::{vector, FloatArray};
+use crate::convert::{self, state, vector, FloatArray};
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
@@ -231,7 +229,7 @@ impl PyShield {
     #[new]
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
-        barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
+        rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
@@ -245,6 +243,7 @@ impl PyShield {
         cbf_bounds: &Bound<'_, PyAny>,
         clf_bounds: &Bound<'_, PyAny>,
         action_bounds: Option<&Bound<'_, PyAny>>,
+        rl_bounds: Option<&Bound<'_, PyAny>>,
         barriers: Option<&Bound<'_, PyAny>>,
         pos: Option<&Bound<'_, PyAny>>,
         use_cbf: bool,
@@ -282,6 +281,7 @@ impl PyShield {
                 .map(|b| bounds(b, "action_bounds", m))
                 .transpose()?,
         )
+        .with_rl_bounds(rl_bounds.map(|b| bounds(b, "rl_bounds", m)).transpose()?)
         .with_barriers(
             barriers
                 .map(self::barriers)
@@ -319,7 +319,7 @@ impl PyShield {
         &self,
         py: Python<'_>,
         s: &Bound<'_, PyAny>,
-        q: i64,
+        q: &Bound<'_, PyAny>,
         a_rl: &Bound<'_, PyAny>,
         f: Option<&Bound<'_, PyAny>>,
         g: Option<&Bound<'_, PyAny>>,
@@ -328,7 +328,7 @@ impl PyShield {
         let s = vector(s, "s")?;
         let drift = drift.map(|d| vector(d, "drift")).transpose()?;
         let drift = drift.as_deref();
-        let q = map(self.inner.automaton().check_state("q", q))?;
+        let q = state(q, "q", self.inner.automaton())?;
         let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
             .values()
             .into_owned();
@@ -370,7 +370,7 @@ impl PyShield {
         &self,
         py: Python<'py>,
         states: &Bound<'py, PyAny>,
-        qs: PyArrayLike1<'py, i64, AllowTypeChange>,
+        qs: &Bound<'py, PyAny>,
         a_rl: &Bound<'py, PyAny>,
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<PyFilterBatch> {
@@ -389,21 +389,15 @@ impl PyShield {
         }
         let drift_values = drift.as_ref().map(|d| d.values());
         let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
+        let qs_usize = convert::states(qs, "qs", self.inner.automaton())?;
         let (rows, n, m) = (states.shape()[0], states.shape()[1], self.inner.inputs());
-        if qs.len() != rows || a_rl.shape() != [rows, m] {
+        if qs_usize.len() != rows || a_rl.shape() != [rows, m] {
             return Err(PyValueError::new_err(format!(
                 "filter_batch: expected qs ({rows},) and a_rl ({rows}, {m}) for {rows} states, \
                  got qs ({},) and a_rl {}",
-                qs.len(),
+                qs_usize.len(),
                 crate::convert::shape_text(a_rl.shape())
             )));
-        }
-        let mut qs_usize = Vec::with_capacity(rows);
-        for (i, &q) in qs.as_array().iter().enumerate() {
-            qs_usize.push(map(self
-                .inner
-                .automaton()
-                .check_state(&format!("qs[{i}]"), q))?);
         }
         let (values, actions) = (states.values(), a_rl.values());
         let shield = &self.inner;

@@ -224,11 +224,12 @@ impl Automaton {
             .enumerate()
             .map(|(i, &q)| self.check_state(&format!("qs[{i}]"), q))
             .collect::<Result<_, _>>()?;
-        Ok(qs
-            .par_iter()
-            .zip(states.par_chunks(dim))
-            .map(|(&q, s)| self.read_validated(s).step(q))
-            .collect())
+        Ok(crate::parallel::install(|| {
+            qs.par_iter()
+                .zip(states.par_chunks(dim))
+                .map(|(&q, s)| self.read_validated(s).step(q))
+                .collect()
+        }))
     }
 
     /// The state after reading every state of `traj`, starting from the initial state.

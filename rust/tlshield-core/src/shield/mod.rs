@@ -47,6 +47,27 @@ use program::Program;
 /// Batches smaller than this are shielded on the calling thread.
 pub const PARALLEL_MIN_ROWS: usize = 32;
 
+/// Every QP answer is checked against the constraints it was asked to satisfy: row `i` of
+/// `G x <= h` may exceed its right-hand side by at most `RESIDUAL_TOL * (1 + |h_i| +
+/// sum_j |G_ij x_j|)` (relative to the row's scale, well above the solvers' own 1e-8
+/// tolerances). An answer outside it is not returned as solved (see [`Status::Inaccurate`]).
+pub const RESIDUAL_TOL: f64 = 1e-7;
+
+/// Whether `x` satisfies every row of `qp` within [`RESIDUAL_TOL`] (and is finite).
+fn within_tolerance(qp: &DenseQp, x: &[f64]) -> bool {
+    let n = qp.vars();
+    x.len() == n
+        && x.iter().all(|v| v.is_finite())
+        && qp.h.iter().enumerate().all(|(i, &hi)| {
+            let row = &qp.g[i * n..(i + 1) * n];
+            let (gx, scale) = row
+                .iter()
+                .zip(x)
+                .fold((0.0, 0.0), |(s, a), (g, x)| (s + g * x, a + (g * x).abs()));
+            gx - hi <= RESIDUAL_TOL * (1.0 + hi.abs() + scale)
+        })
+}
+
 /// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`].
 pub const ACTIVE_SET_MAX_VARS: usize = 16;
 
@@ -131,15 +152,20 @@ pub enum Status {
     Relaxed = 1,
     /// Even the relaxed problem failed; the corrections are zero.
     Failed = 2,
+    /// The solver reported the problem as posed solved, but its answer broke a constraint by
+    /// more than [`RESIDUAL_TOL`]; the action is the relaxed problem's answer, which passed the
+    /// same check (the largest slack is reported).
+    Inaccurate = 3,
 }
 
 impl Status {
-    /// `"solved"`, `"relaxed"` or `"failed"`.
+    /// `"solved"`, `"relaxed"`, `"failed"` or `"inaccurate"`.
     pub fn name(self) -> &'static str {
         match self {
             Status::Solved => "solved",
             Status::Relaxed => "relaxed",
             Status::Failed => "failed",
+            Status::Inaccurate => "inaccurate",
         }
     }
 }
@@ -222,6 +248,11 @@ pub struct ShieldConfig {
     pub clf_bounds: Bounds,
     /// Optional limits on the applied action `a_rl + a_cbf + a_clf`.
     pub action_bounds: Option<Bounds>,
+    /// The range of the RL action, if known. With the CBF on, [`Shield::new`] checks that the
+    /// CBF box can cancel every RL action in it plus every CLF correction (so applying no
+    /// action, e.g. stopping, stays feasible and the barrier rows never need slack for want of
+    /// authority), and each call refuses an `a_rl` outside it.
+    pub rl_bounds: Option<Bounds>,
     /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
     pub barriers: Vec<Barrier>,
     /// State dimensions the CLF drives to the goal.
@@ -266,6 +297,7 @@ impl ShieldConfig {
             cbf_bounds,
             clf_bounds,
             action_bounds: None,
+            rl_bounds: None,
             barriers: Vec::new(),
             pos: Self::DEFAULT_POS.to_vec(),
             clf_gain: Self::DEFAULT_CLF_GAIN,
@@ -280,6 +312,12 @@ impl ShieldConfig {
     /// Limits on the applied action `a_rl + a_cbf + a_clf`.
     pub fn with_action_bounds(mut self, bounds: Option<Bounds>) -> Self {
         self.action_bounds = bounds;
+        self
+    }
+
+    /// The range of the RL action (see [`ShieldConfig::rl_bounds`]).
+    pub fn with_rl_bounds(mut self, bounds: Option<Bounds>) -> Self {
+        self.rl_bounds = bounds;
         self
     }
 
@@ -509,6 +547,60 @@ fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
     }
 }
 
+/// Checks that the CBF box can cancel every action the RL box plus (when on) the CLF box can
+/// reach: without that authority the barrier rows can become infeasible, and the relaxed
+/// answer breaks them.
+fn check_cover(config: &ShieldConfig, rl: &Bounds) -> Result<(), ShieldError> {
+    let (cbf, clf) = (&config.cbf_bounds, &config.clf_bounds);
+    for j in 0..rl.lo.len() {
+        let (clf_lo, clf_hi) = if config.use_clf {
+            (clf.lo[j], clf.hi[j])
+        } else {
+            (0.0, 0.0)
+        };
+        let (reach_lo, reach_hi) = (rl.lo[j] + clf_lo, rl.hi[j] + clf_hi);
+        if cbf.lo[j] > -reach_hi || cbf.hi[j] < -reach_lo {
+            let clf_text = if config.use_clf {
+                format!(" plus clf_bounds[{j}] = ({clf_lo}, {clf_hi})")
+            } else {
+                String::new()
+            };
+            return Err(ShieldError::Config(format!(
+                "cbf_bounds[{j}] = ({}, {}) cannot cancel every action: rl_bounds[{j}] = ({}, \
+                 {}){clf_text} reach ({reach_lo}, {reach_hi}), so the CBF box must contain \
+                 ({}, {}) for the barriers to stay feasible",
+                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j], -reach_hi, -reach_lo
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that every row of `a` (rows of `lo.len()` values) lies in `b`, up to rounding
+/// (1e-9 of the bound's size, so a policy action scaled onto the box's edge passes).
+fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), ShieldError> {
+    let m = b.lo.len();
+    for (k, &v) in a.iter().enumerate() {
+        let j = k % m;
+        let (lo, hi) = (b.lo[j], b.hi[j]);
+        let slack = 1e-9 * (1.0 + lo.abs().max(hi.abs()));
+        if v < lo - slack || v > hi + slack {
+            let at = if a.len() > m {
+                format!("{what}[{}, {j}]", k / m)
+            } else {
+                format!("{what}[{j}]")
+            };
+            return Err(InputError::Value {
+                what: at,
+                expected: format!("a value in rl_bounds ({lo}, {hi})"),
+                got: v.to_string(),
+            }
+            .into());
+        }
+    }
+    Ok(())
+}
+
 /// Checks a drift of `rows` rows of length `n`.
 fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
     if d.len() != rows * n {
@@ -539,9 +631,12 @@ impl Shield {
         positive("c3", config.c3)?;
         positive("K", config.k)?;
         positive("slack_penalty", config.slack_penalty)?;
-        if !(config.margin.is_finite() && config.margin >= 0.0) {
+        if !(config.margin.is_finite() && config.margin > 0.0) {
             return Err(ShieldError::Config(format!(
-                "margin = {}: expected a finite number >= 0",
+                "margin = {}: expected a finite number > 0 (an atom holds only while its \
+                 robustness is > 0, so barriers held at h >= 0 would let a state settle at \
+                 h = 0, or just below it after a discrete step, where the task counts it \
+                 violated)",
                 config.margin
             )));
         }
@@ -564,6 +659,12 @@ impl Shield {
         config.clf_bounds.check("clf_bounds", m)?;
         if let Some(b) = &config.action_bounds {
             b.check("action_bounds", m)?;
+        }
+        if let Some(rl) = &config.rl_bounds {
+            rl.check("rl_bounds", m)?;
+            if config.use_cbf {
+                check_cover(&config, rl)?;
+            }
         }
         if config.pos.is_empty()
             || (1..config.pos.len()).any(|i| config.pos[..i].contains(&config.pos[i]))
@@ -696,6 +797,9 @@ impl Shield {
             .into());
         }
         check_finite(what, a, a.len())?;
+        if let Some(rl) = &self.config.rl_bounds {
+            check_within(what, a, rl)?;
+        }
         Ok(())
     }
 
@@ -841,6 +945,9 @@ impl Shield {
         self.check_state("states row", &states[..n.min(states.len())])?;
         check_finite("states", states, n)?;
         check_finite("a_rl", a_rl, m)?;
+        if let Some(rl) = &self.config.rl_bounds {
+            check_within("a_rl", a_rl, rl)?;
+        }
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
@@ -856,11 +963,31 @@ impl Shield {
         out.solver.resize(rows, 0);
         // One contiguous chunk of rows per worker thread, each with its own workspace; small
         // batches stay on the calling thread (waking the pool costs more than they do).
-        let threads = if rows < PARALLEL_MIN_ROWS {
-            1
+        if rows < PARALLEL_MIN_ROWS {
+            self.batch_rows(states, n, qs, a_rl, drift, out, 1);
         } else {
-            rayon::current_num_threads().max(1)
-        };
+            crate::parallel::install(|| {
+                let threads = rayon::current_num_threads().max(1);
+                self.batch_rows(states, n, qs, a_rl, drift, out, threads);
+            });
+        }
+        Ok(())
+    }
+
+    /// The rows of [`Shield::filter_batch`] on validated input, in `threads` contiguous chunks.
+    #[allow(clippy::too_many_arguments)]
+    fn batch_rows(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        drift: Option<&[f64]>,
+        out: &mut BatchOutput,
+        threads: usize,
+    ) {
+        let m = self.m;
+        let rows = qs.len();
         let chunk = rows.div_ceil(threads).max(1);
         let drift_rows = drift.unwrap_or(&[]);
         states
@@ -907,7 +1034,6 @@ impl Shield {
                     })
                 },
             );
-        Ok(())
     }
 
     /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
@@ -968,14 +1094,22 @@ impl Shield {
         }
         let mut status = Status::Solved;
         let mut by = ws.solvers.solve(cfg.solver, &ws.qp);
-        if ws.solvers.solution.status != QpStatus::Solved && barriers > 0 {
+        let mut checked = ws.solvers.solution.status == QpStatus::Solved
+            && within_tolerance(&ws.qp, &ws.solvers.solution.x);
+        if !checked && barriers > 0 {
+            status = if ws.solvers.solution.status == QpStatus::Solved {
+                Status::Inaccurate
+            } else {
+                Status::Relaxed
+            };
             program.assemble(cfg, a_rl, &mut ws.qp, true);
-            status = Status::Relaxed;
             by = ws.solvers.solve(cfg.solver, &ws.qp);
+            checked = ws.solvers.solution.status == QpStatus::Solved
+                && within_tolerance(&ws.qp, &ws.solvers.solution.x);
         }
         let out = &mut ws.out;
         let x = &ws.solvers.solution.x;
-        if ws.solvers.solution.status != QpStatus::Solved || x.iter().any(|v| !v.is_finite()) {
+        if !checked {
             out.status = Status::Failed;
             return;
         }
@@ -986,7 +1120,7 @@ impl Shield {
             out.a_clf.copy_from_slice(&x[cbf_vars..cbf_vars + m]);
             out.delta = program.delta_0 + x[cbf_vars + clf_vars].max(0.0);
         }
-        if status == Status::Relaxed {
+        if status != Status::Solved {
             out.slack = x[vars..].iter().fold(0.0, |a: f64, &b| a.max(b));
         }
         for (j, action) in out.action.iter_mut().enumerate() {
