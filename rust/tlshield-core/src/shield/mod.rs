@@ -1185,7 +1185,7 @@ mod tests {
         ShieldConfig::new(2.0, 1.0, 1e4, bounds(-6.0, 6.0), bounds(-0.5, 0.5))
             .with_solver(solver)
             .with_slack_penalty(1e6)
-            .with_margin(0.0)
+            .with_margin(ShieldConfig::DEFAULT_MARGIN)
     }
 
     fn shield(config: ShieldConfig) -> Shield {
@@ -1419,6 +1419,121 @@ mod tests {
         let a = sh.filter(&s, 0, &[1.0, 1.0], None, None).unwrap();
         let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg), None).unwrap();
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_zero_margin_is_refused_naming_it() {
+        for margin in [0.0, -1e-3, f64::NAN] {
+            let err = Shield::new(task(), None, config(SolverChoice::Auto).with_margin(margin))
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with("margin = ") && err.contains("> 0"), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_cbf_box_that_cannot_cancel_the_rl_and_clf_boxes_is_refused() {
+        let unicycle = || Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap());
+        // CBF [-6, 6] covers RL [-5, 5] plus CLF [-0.5, 0.5] ...
+        let fits = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-5.0, 5.0)));
+        assert!(Shield::new(task(), unicycle(), fits).is_ok());
+        // ... but not RL [-5.6, 5.6] plus CLF [-0.5, 0.5] = [-6.1, 6.1].
+        let wide = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-5.6, 5.6)));
+        let err = Shield::new(task(), unicycle(), wide)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("cbf_bounds[0]") && err.contains("rl_bounds[0]") && err.contains("6.1"),
+            "{err}"
+        );
+        // Without the CLF the same RL box fits.
+        let no_clf = config(SolverChoice::Auto)
+            .with_rl_bounds(Some(bounds(-5.6, 5.6)))
+            .with_parts(true, false);
+        assert!(Shield::new(task(), unicycle(), no_clf).is_ok());
+        // An asymmetric RL box needs the mirrored CBF box.
+        let mut lopsided = config(SolverChoice::Auto).with_rl_bounds(Some(Bounds {
+            lo: vec![0.0, -1.0],
+            hi: vec![5.0, 1.0],
+        }));
+        lopsided.cbf_bounds = Bounds {
+            lo: vec![-6.0, -2.0],
+            hi: vec![0.5, 2.0],
+        };
+        assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_ok());
+        lopsided.cbf_bounds.lo[0] = -5.4;
+        assert!(Shield::new(task(), unicycle(), lopsided).is_err());
+    }
+
+    #[test]
+    fn an_rl_action_outside_rl_bounds_is_refused() {
+        let sh = shield(config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-1.0, 1.0))));
+        let s = state(1.0, 0.0, 0.0);
+        let q = sh.automaton().read(&s).unwrap().step(0);
+        assert!(sh.filter(&s, q, &[1.0, -1.0], None, None).is_ok());
+        let err = sh.filter(&s, q, &[1.5, 0.0], None, None).unwrap_err();
+        assert!(err.to_string().contains("a_rl[0]"), "{err}");
+        let mut out = BatchOutput::default();
+        let err = sh
+            .filter_batch(
+                &[s.clone(), s].concat(),
+                N,
+                &[q, q],
+                &[0.0, 0.0, 0.0, -2.0],
+                None,
+                &mut out,
+            )
+            .unwrap_err();
+        assert!(err.to_string().contains("a_rl[1, 1]"), "{err}");
+    }
+
+    #[test]
+    fn the_residual_check_rejects_what_breaks_a_row() {
+        let qp = DenseQp {
+            p_diag: vec![1.0, 1.0],
+            c: vec![0.0, 0.0],
+            g: vec![1.0, 1.0, -1.0, 0.0],
+            h: vec![1.0, 0.0],
+        };
+        assert!(within_tolerance(&qp, &[0.5, 0.5]));
+        assert!(within_tolerance(&qp, &[0.5, 0.5 + 1e-8]));
+        assert!(!within_tolerance(&qp, &[0.5, 0.5 + 1e-5]));
+        assert!(!within_tolerance(&qp, &[-1e-5, 0.0]));
+        assert!(!within_tolerance(&qp, &[f64::NAN, 0.0]));
+        assert!(!within_tolerance(&qp, &[0.0]));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        /// Whatever the solver and however large K (the paper's 1e10 included), the action the
+        /// shield returns satisfies the barrier rows it was asked to: answers are checked.
+        #[test]
+        fn every_returned_answer_is_checked(
+            offset in -1.45f64..1.45,
+            theta in -3.1f64..3.1,
+            v in -4.0f64..4.0,
+            w in -4.0f64..4.0,
+            k_exp in 0i32..11,
+            clarabel in any::<bool>(),
+        ) {
+            let solver = if clarabel { SolverChoice::Clarabel } else { SolverChoice::Auto };
+            let mut cfg = config(solver);
+            cfg.k = 10f64.powi(k_exp);
+            let sh = shield(cfg);
+            let s = state(1.0, offset, theta);
+            let q = sh.automaton().read(&s).unwrap().step(0);
+            let a = [v, w];
+            let out = sh.filter(&s, q, &a, None, None).unwrap();
+            prop_assert!(out.action.iter().all(|x| x.is_finite()));
+            // The CBF box covers the RL and CLF boxes here, so no answer may be missing ...
+            prop_assert!(out.status != Status::Failed);
+            // ... and whatever the solver reported, the applied action keeps both channel rows.
+            let (alpha, margin) = (sh.config().alpha, sh.config().margin);
+            for m in channel_margins(&s, &out.action, alpha) {
+                prop_assert!(m >= alpha * margin - 1e-6, "row {m} (status {:?})", out.status);
+            }
+        }
     }
 
     #[test]
