@@ -3,7 +3,8 @@ refuses what is not an array of real numbers with an error that names it (issue 
 
 The functions under test are not listed by hand: they are every method of ``_core.pyi`` with an
 ``ArrayLike`` parameter. Each needs a recipe in :data:`CASES` (an object and C-order float64
-arguments); a new array-taking method without one fails :func:`test_every_array_parameter_has_a_case`.
+arguments); a new array-taking method without one fails
+:func:`test_every_array_parameter_has_a_case`.
 
 ``python -m tests.test_layouts`` prints the layout matrix (functions x layouts).
 """
