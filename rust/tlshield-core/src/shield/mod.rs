@@ -547,30 +547,41 @@ fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
     }
 }
 
-/// Checks that the CBF box can cancel every action the RL box plus (when on) the CLF box can
-/// reach: without that authority the barrier rows can become infeasible, and the relaxed
-/// answer breaks them.
+/// Checks that applying no action stays feasible for every RL action in `rl`: the CBF box must
+/// be able to cancel it (`cbf ⊇ -rl`, for steps without a goal, where `a_clf` is absent), and
+/// with the CLF on, `cbf + clf ⊇ -rl` (only binding when the CLF box excludes 0), and actuator
+/// limits must allow 0. Without that authority the barrier rows can become infeasible, and the
+/// relaxed answer breaks them. (For the driftless models, unicycle and single integrator,
+/// applying nothing keeps every barrier where it is; the CBF row then holds for any h >= margin.)
 fn check_cover(config: &ShieldConfig, rl: &Bounds) -> Result<(), ShieldError> {
     let (cbf, clf) = (&config.cbf_bounds, &config.clf_bounds);
     for j in 0..rl.lo.len() {
-        let (clf_lo, clf_hi) = if config.use_clf {
-            (clf.lo[j], clf.hi[j])
-        } else {
-            (0.0, 0.0)
-        };
-        let (reach_lo, reach_hi) = (rl.lo[j] + clf_lo, rl.hi[j] + clf_hi);
-        if cbf.lo[j] > -reach_hi || cbf.hi[j] < -reach_lo {
-            let clf_text = if config.use_clf {
-                format!(" plus clf_bounds[{j}] = ({clf_lo}, {clf_hi})")
-            } else {
-                String::new()
-            };
+        let (need_lo, need_hi) = (-rl.hi[j], -rl.lo[j]);
+        if cbf.lo[j] > need_lo || cbf.hi[j] < need_hi {
             return Err(ShieldError::Config(format!(
-                "cbf_bounds[{j}] = ({}, {}) cannot cancel every action: rl_bounds[{j}] = ({}, \
-                 {}){clf_text} reach ({reach_lo}, {reach_hi}), so the CBF box must contain \
-                 ({}, {}) for the barriers to stay feasible",
-                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j], -reach_hi, -reach_lo
+                "cbf_bounds[{j}] = ({}, {}) cannot cancel every RL action: rl_bounds[{j}] = \
+                 ({}, {}), so the CBF box must contain ({need_lo}, {need_hi}) for the barriers \
+                 to stay feasible",
+                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j]
             )));
+        }
+        let (sum_lo, sum_hi) = (cbf.lo[j] + clf.lo[j], cbf.hi[j] + clf.hi[j]);
+        if config.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
+            return Err(ShieldError::Config(format!(
+                "cbf_bounds[{j}] = ({}, {}) plus clf_bounds[{j}] = ({}, {}) reach ({sum_lo}, \
+                 {sum_hi}), which cannot cancel every RL action in rl_bounds[{j}] = ({}, {}): \
+                 widen cbf_bounds or let the CLF box contain 0",
+                cbf.lo[j], cbf.hi[j], clf.lo[j], clf.hi[j], rl.lo[j], rl.hi[j]
+            )));
+        }
+        if let Some(act) = &config.action_bounds {
+            if act.lo[j] > 0.0 || act.hi[j] < 0.0 {
+                return Err(ShieldError::Config(format!(
+                    "action_bounds[{j}] = ({}, {}) exclude 0: the shield needs to be able to \
+                     apply no action",
+                    act.lo[j], act.hi[j]
+                )));
+            }
         }
     }
     Ok(())
@@ -1432,13 +1443,13 @@ mod tests {
     }
 
     #[test]
-    fn a_cbf_box_that_cannot_cancel_the_rl_and_clf_boxes_is_refused() {
+    fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
         let unicycle = || Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap());
-        // CBF [-6, 6] covers RL [-5, 5] plus CLF [-0.5, 0.5] ...
-        let fits = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-5.0, 5.0)));
+        // CBF [-6, 6] cancels RL [-6, 6] (CLF [-0.5, 0.5] holds 0) ...
+        let fits = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.0, 6.0)));
         assert!(Shield::new(task(), unicycle(), fits).is_ok());
-        // ... but not RL [-5.6, 5.6] plus CLF [-0.5, 0.5] = [-6.1, 6.1].
-        let wide = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-5.6, 5.6)));
+        // ... but not RL [-6.1, 6.1]: steps without a goal have no a_clf to help.
+        let wide = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.1, 6.1)));
         let err = Shield::new(task(), unicycle(), wide)
             .unwrap_err()
             .to_string();
@@ -1446,23 +1457,42 @@ mod tests {
             err.contains("cbf_bounds[0]") && err.contains("rl_bounds[0]") && err.contains("6.1"),
             "{err}"
         );
-        // Without the CLF the same RL box fits.
-        let no_clf = config(SolverChoice::Auto)
-            .with_rl_bounds(Some(bounds(-5.6, 5.6)))
-            .with_parts(true, false);
-        assert!(Shield::new(task(), unicycle(), no_clf).is_ok());
         // An asymmetric RL box needs the mirrored CBF box.
         let mut lopsided = config(SolverChoice::Auto).with_rl_bounds(Some(Bounds {
             lo: vec![0.0, -1.0],
             hi: vec![5.0, 1.0],
         }));
         lopsided.cbf_bounds = Bounds {
-            lo: vec![-6.0, -2.0],
-            hi: vec![0.5, 2.0],
+            lo: vec![-5.0, -1.0],
+            hi: vec![0.0, 1.0],
         };
         assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_ok());
-        lopsided.cbf_bounds.lo[0] = -5.4;
-        assert!(Shield::new(task(), unicycle(), lopsided).is_err());
+        lopsided.cbf_bounds.lo[0] = -4.9;
+        assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_err());
+        // A CLF box without 0 must still leave the sum able to cancel.
+        lopsided.cbf_bounds.lo[0] = -5.0;
+        lopsided.clf_bounds = Bounds {
+            lo: vec![0.1, -0.5],
+            hi: vec![0.5, 0.5],
+        };
+        let err = Shield::new(task(), unicycle(), lopsided.clone())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("clf_bounds[0]"), "{err}");
+        // Actuator limits must allow applying nothing.
+        lopsided.clf_bounds = bounds(-0.5, 0.5);
+        let positive = Bounds {
+            lo: vec![0.5, -1.0],
+            hi: vec![5.0, 1.0],
+        };
+        let err = Shield::new(
+            task(),
+            unicycle(),
+            lopsided.with_action_bounds(Some(positive)),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("action_bounds[0]"), "{err}");
     }
 
     #[test]
