@@ -4,7 +4,8 @@ schema is in :mod:`tlshield.runs`, the results table in :mod:`tlshield.report`).
 :func:`plot_all` writes the figures of the paper's case study (Li & Belta, Figs. 6.2.1-6.2.5)
 as 150 dpi PNGs:
 
-* ``learning_curves.png``: mean discounted episode return per PPO update;
+* ``learning_curves.png``: validation success per PPO update (each seed and the mean) and the
+  training violations per update;
 * ``min_constraints.png``: the smallest channel barrier values ``h_c1``, ``h_c2`` per update;
 * ``min_obstacle_distance.png``: the smallest distance to an obstacle per update;
 * ``success_rates.png``: evaluation success rate per configuration;

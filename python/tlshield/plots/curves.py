@@ -131,13 +131,46 @@ def _curves_figure(
 
 
 def _plot_learning_curves(groups: dict[str, list[Run]], path: Path) -> Path:
-    return _curves_figure(
-        groups,
-        [("return_mean", "")],
-        rf"discounted episode return ($\gamma$ = {_training_of(groups)[1]:g})",
-        "Learning curves: mean ± std over seeds",
-        path,
-    )
+    """Validation success per update (each seed thin, the mean over seeds bold) and the
+    training violations per update: what learned, when, and whether it stayed learned."""
+    configs = list(groups)
+    fig = _figure(12.0, 5.2)
+    success_ax, violation_ax = fig.subplots(1, 2)
+    drawn = False
+    for config, runs in groups.items():
+        color, label = _color(config, configs), _label(config)
+        seeds = []
+        for run in runs:
+            if run.updates == 0:
+                continue
+            x, y = run.metrics["update"], run.metrics["validation_success"]
+            ok = np.isfinite(y)
+            if ok.any():
+                success_ax.plot(x[ok], y[ok], color=color, lw=0.8, alpha=0.45)
+                seeds.append(run)
+        curve = _curve(seeds, "validation_success") if seeds else None
+        if curve is not None:
+            x, mean, _ = curve
+            ok = np.isfinite(mean)
+            success_ax.plot(x[ok], mean[ok], color=color, lw=2.0, label=f"{label} ({len(seeds)})")
+            drawn = True
+        _plot_band(violation_ax, runs, "violations", color, label)
+    if not drawn:
+        _no_data(success_ax, "no validation yet")
+    success_ax.set_ylim(-0.02, 1.02)
+    success_ax.set_ylabel("validation success (deterministic policy, 20 episodes)")
+    success_ax.set_title("Validation success per update: bold = mean, thin = each seed")
+    violation_ax.set_ylim(bottom=0)
+    violation_ax.set_ylabel("channel-violating steps in the update")
+    violation_ax.set_title("Training violations per update (mean ± std over seeds)")
+    steps = _training_of(groups)[0]
+    for ax in (success_ax, violation_ax):
+        _update_axis(ax, steps)
+    if drawn:
+        handles, labels = success_ax.get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4))
+    fig.suptitle("Learning: success per update, and safety during training")
+    return _save(fig, path)
 
 
 def _plot_min_constraints(groups: dict[str, list[Run]], path: Path) -> Path:
