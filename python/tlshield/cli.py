@@ -7,6 +7,7 @@ import itertools
 import shutil
 import subprocess
 import sys
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -153,15 +154,21 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluate_run(run: Path | str, trials: int) -> dict[str, object]:
+def _evaluate_run(
+    run: Path | str, trials: int, which: str = "kept", trust_pickles: bool = False
+) -> dict[str, object]:
     from tlshield.evaluation import evaluate
 
-    return evaluate(run, trials=trials)
+    if not Path(run).is_dir():
+        what = "not a folder" if Path(run).exists() else "no such folder"
+        raise FileNotFoundError(f"{run}: {what} (expected a run folder)")
+    return evaluate(run, trials=trials, which=which, trust_pickles=trust_pickles)
 
 
 def _print_evaluation(result: dict[str, object]) -> None:
     print(
-        f"{result['config']} seed {result['seed']}: success {result['successes']}/"
+        f"{result['config']} seed {result['seed']} ({result.get('policy', 'kept')} policy): "
+        f"success {result['successes']}/"
         f"{result['trials']} ({result['success_rate']:.0%}), collisions {result['collisions']}, "
         f"violation steps {result['violation_steps']}"
     )
@@ -169,7 +176,7 @@ def _print_evaluation(result: dict[str, object]) -> None:
 
 def _evaluate(args: argparse.Namespace) -> int:
     for run in args.runs:
-        _print_evaluation(_evaluate_run(run, args.trials))
+        _print_evaluation(_evaluate_run(run, args.trials, args.policy, args.trust_pickles))
     return 0
 
 
@@ -358,6 +365,18 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser("evaluate", help="evaluate saved runs (CBF on, paper's rules)")
     evaluate.add_argument("runs", nargs="+", help="run folders")
     evaluate.add_argument("--trials", type=_positive, default=100)
+    evaluate.add_argument(
+        "--policy",
+        choices=("kept", "last"),
+        default="kept",
+        help="the kept policy (model.zip, default) or the last one (last_model.zip)",
+    )
+    evaluate.add_argument(
+        "--trust-pickles",
+        action="store_true",
+        help="also load older run folders whose statistics are a pickle (vecnormalize.pkl); "
+        "loading a pickle runs its code: only for folders you made yourself",
+    )
     evaluate.set_defaults(handler=_evaluate)
 
     repro = sub.add_parser(
@@ -414,6 +433,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(err: BaseException) -> str:
+    """An error as one line: an OSError as "what: path", anything else by its message."""
+    if isinstance(err, OSError) and err.strerror and err.filename is not None:
+        text = f"{err.strerror}: {err.filename}"
+        if err.filename2 is not None:
+            text += f" -> {err.filename2}"
+    else:
+        text = str(err) or type(err).__name__
+    return " ".join(text.split())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tlshield`` and ``python -m tlshield``."""
     parser = build_parser()
@@ -429,8 +459,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    except (FileNotFoundError, ValueError, ConnectionError) as err:
-        print(f"tlshield {args.command}: error: {err}", file=sys.stderr)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        # Bad paths and files (missing, the wrong kind, unwritable, corrupt, truncated): one
+        # line, exit 2, as argparse reports a bad argument.
+        print(f"tlshield {args.command}: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except RuntimeError as err:
         print(f"tlshield {args.command}: {err}", file=sys.stderr)

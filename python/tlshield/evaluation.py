@@ -78,11 +78,21 @@ def rollouts(
     )
 
 
+#: The files an evaluation writes, per policy ("kept": the run's model, "last": its last).
+EVALUATION_FILES = {
+    "kept": ("evaluation.json", "trajectories.npz"),
+    "last": ("last_evaluation.json", "last_trajectories.npz"),
+}
+
+
 def evaluate(
     run: str | Path,
     trials: int = 100,
     seed: int = EVAL_SEED,
     policy: Callable[[np.ndarray], np.ndarray] | None = None,
+    *,
+    which: str = "kept",
+    trust_pickles: bool = False,
 ) -> dict[str, Any]:
     """The paper's evaluation of a trained run: CBF always on; an episode ends at the horizon,
     on success or on collision. All trials run side by side (one batched policy call per
@@ -90,12 +100,18 @@ def evaluate(
     ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
     trial: reset seed, success, collision, steps, violating steps) and, for Channel-v0,
     ``trajectories.npz`` (each trial's start state, agent path and obstacle paths). The run's
-    environment is the one its config.json names (``env_id``; Channel-v0 when absent)."""
+    environment is the one its config.json names (``env_id``; Channel-v0 when absent).
+    ``which="last"`` evaluates the last policy instead of the kept one and writes
+    ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
+    folder's pickled statistics load (see :mod:`tlshield.saved`)."""
     if not (isinstance(trials, int) and trials > 0):
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
+    if which not in EVALUATION_FILES:
+        raise ValueError(f"which = {which!r}: expected one of {', '.join(EVALUATION_FILES)}")
     record = read_config(run)
     if policy is None:
-        policy = saved_policy(Path(run))
+        policy = saved_policy(Path(run), which, trust_pickles=trust_pickles)
+    evaluation_file, trajectories_file = EVALUATION_FILES[which]
     outcomes, starts, paths, obstacle_paths = rollouts(
         record["config"],
         record.get("overrides", {}),
@@ -108,6 +124,7 @@ def evaluate(
     result = {
         "config": record["config"],
         "seed": record["seed"],
+        "policy": which,
         "trials": trials,
         "eval_seed": seed,
         "success_rate": successes / trials,
@@ -118,11 +135,11 @@ def evaluate(
         "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
         "outcomes": outcomes,
     }
-    Path(run, "evaluation.json").write_text(json.dumps(result, indent=2))
+    Path(run, evaluation_file).write_text(json.dumps(result, indent=2))
     if not paths:  # not Channel-v0: no trajectory figure to feed
         return result
     np.savez_compressed(
-        Path(run, "trajectories.npz"),
+        Path(run, trajectories_file),
         starts=starts,
         lengths=np.array([len(p) for p in paths]),
         paths=np.concatenate(paths),
@@ -131,29 +148,18 @@ def evaluate(
     return result
 
 
-def saved_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
-    """The trained policy of a run folder (deterministic), with its observation statistics."""
-    model_path = run / "model.zip"
-    if not model_path.is_file():
-        raise FileNotFoundError(f"{run}: no model.zip (training did not finish?)")
-    import pickle
-
+def saved_policy(
+    run: Path, which: str = "kept", *, trust_pickles: bool = False
+) -> Callable[[np.ndarray], np.ndarray]:
+    """The trained policy ``which`` (``"kept"`` or ``"last"``) of a run folder
+    (deterministic), with its observation statistics, read without running code from the
+    folder (:func:`tlshield.saved.load_policy`)."""
     import torch
-    from stable_baselines3 import PPO
+
+    from tlshield.saved import load_policy
 
     torch.set_num_threads(1)
-    model = PPO.load(model_path, device="cpu")
-    stats_path = run / "vecnormalize.pkl"
-    normalize: Callable[[np.ndarray], np.ndarray] = lambda obs: obs  # noqa: E731
-    if stats_path.is_file():
-        with stats_path.open("rb") as f:
-            stats = pickle.load(f)
-        normalize = stats.normalize_obs
-
-    def policy(obs: np.ndarray) -> np.ndarray:
-        return model.predict(normalize(obs), deterministic=True)[0]
-
-    return policy
+    return load_policy(run, which, trust_pickles=trust_pickles)
 
 
 def _obstacles(env: ChannelEnv) -> np.ndarray:

@@ -6,9 +6,13 @@ A results folder holds one run folder per configuration and seed (``<config>_s<s
 * ``config.json``: what the run trained with (configuration, seed, preset, environment
   overrides, PPO settings), whether it finished and which checkpoint was kept;
 * ``metrics.csv``: one row per PPO update (:data:`METRIC_COLUMNS`), written as it goes;
+* ``model.zip`` (SB3) with ``normalization.json`` (observation statistics: ``obs_mean``,
+  ``obs_var``, ``epsilon``, ``clip_obs``), the kept policy, and ``last_model.zip`` with
+  ``last_normalization.json``, the last one; read without unpickling (:mod:`tlshield.saved`);
 * after evaluation, ``evaluation.json`` (totals and one record per trial: reset seed, success,
   collision, steps, violating steps) and ``trajectories.npz`` (each trial's start state, agent
-  path and obstacle paths).
+  path and obstacle paths), and ``last_evaluation.json`` / ``last_trajectories.npz`` for the
+  last policy.
 
 Any of the last three may be missing, empty or partial (an interrupted run): the loaders leave
 out what is not there, never an error.
@@ -29,8 +33,34 @@ from numpy.typing import NDArray
 from tlshield.envs.channel import CONFIGS, ChannelConfig
 from tlshield.envs.layout import STATE_DIM
 
-__all__ = ["METRIC_COLUMNS", "Run", "is_finished", "load_results", "load_run", "read_config"]
+__all__ = [
+    "DIAGNOSTIC_COLUMNS",
+    "METRIC_COLUMNS",
+    "Run",
+    "is_finished",
+    "load_results",
+    "load_run",
+    "read_config",
+]
 
+#: Diagnostics of learning, per update (the last columns of metrics.csv; NaN in older runs):
+#: the policy's std per action dimension (of the Gaussian before any squashing), the fraction
+#: of sampled actions outside the action box, the mean norm of the shield's correction
+#: ``|a_applied - a_rl|`` (physical units), the fraction of relaxed or inaccurate QPs, and
+#: PPO's statistics of the gradient step that preceded the update's rollout (approx_kl,
+#: clip_fraction, explained_variance, value_loss, entropy_loss; NaN before the first step).
+DIAGNOSTIC_COLUMNS = (
+    "policy_std_0",
+    "policy_std_1",
+    "out_of_box",
+    "mean_correction",
+    "relaxed_rate",
+    "approx_kl",
+    "clip_fraction",
+    "explained_variance",
+    "value_loss",
+    "entropy_loss",
+)
 #: Columns of metrics.csv, in order.
 METRIC_COLUMNS = (
     "update",
@@ -49,6 +79,7 @@ METRIC_COLUMNS = (
     "clf_scale",
     "validation_success",
     "wall_time",
+    *DIAGNOSTIC_COLUMNS,
 )
 
 
@@ -74,6 +105,8 @@ class Run:
     record: dict[str, Any] = field(default_factory=dict)
     #: One ``(length, 4)`` path of the two obstacle centres per trial (None when missing).
     obstacle_paths: list[NDArray[np.float64]] | None = None
+    #: last_evaluation.json (the last policy, beside the kept one), or None.
+    last_evaluation: dict[str, Any] | None = None
 
     @property
     def updates(self) -> int:
@@ -108,7 +141,13 @@ def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:
         with path.open(newline="") as f:
             for row in csv.DictReader(f):
                 try:
-                    rows.append([float(row[c]) for c in METRIC_COLUMNS])
+                    # Diagnostic columns came later: older runs read them as NaN.
+                    rows.append(
+                        [
+                            float(row.get(c) or "nan") if c in DIAGNOSTIC_COLUMNS else float(row[c])
+                            for c in METRIC_COLUMNS
+                        ]
+                    )
                 except (KeyError, TypeError, ValueError):
                     continue  # an incomplete row (the run was stopped while writing it)
     table = np.array(rows, dtype=np.float64).reshape(len(rows), len(METRIC_COLUMNS))
@@ -190,6 +229,7 @@ def load_run(folder: str | Path) -> Run | None:
         trajectories=trajectories,
         record=record,
         obstacle_paths=_read_obstacle_paths(folder / "trajectories.npz", lengths),
+        last_evaluation=_read_json(folder / "last_evaluation.json"),
     )
 
 
@@ -222,11 +262,17 @@ def load_results(results: str | Path) -> dict[str, list[Run]]:
 
 
 def read_config(run: str | Path) -> dict[str, Any]:
-    """The run's config.json (raises FileNotFoundError with a clear message)."""
+    """The run's config.json (FileNotFoundError or ValueError with a clear message)."""
     path = Path(run) / "config.json"
     if not path.is_file():
         raise FileNotFoundError(f"{run}: not a tlshield run folder (no config.json)")
-    return json.loads(path.read_text())
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{path}: not JSON ({err})") from None
+    if not isinstance(record, dict) or "config" not in record:
+        raise ValueError(f'{path}: not a run\'s config.json (no "config" entry)')
+    return record
 
 
 def is_finished(folder: str | Path, updates: int) -> bool:

@@ -25,8 +25,9 @@ from typing import Any
 
 from tlshield.envs import ENV_ID, POINT_MASS_ID
 
-#: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments and the
-#: initial log standard deviation of the policy).
+#: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
+#: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
+#: POLICIES`) and whether rewards are normalised).
 PPO_NAMES = (
     "learning_rate",
     "ent_coef",
@@ -40,6 +41,8 @@ PPO_NAMES = (
     "vf_coef",
     "max_grad_norm",
     "log_std_init",
+    "policy",
+    "norm_reward",
 )
 #: Settings of :func:`tlshield.training.train` itself.
 SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")

@@ -3,10 +3,12 @@ and the ablation of the README (training, then :func:`tlshield.evaluation.evalua
 
 A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``config.json`` (what it ran
 with, and which checkpoint was kept), ``metrics.csv`` (one row per update, written as it goes,
-so an interrupted run stays readable), ``tb/`` (TensorBoard), ``model.zip`` with
-``vecnormalize.pkl`` (the kept policy: the best on the validation episodes for the default
-preset, the last one otherwise), ``last_model.zip`` with ``last_vecnormalize.pkl`` and, after
-evaluation, ``evaluation.json`` and ``trajectories.npz``.
+so an interrupted run stays readable; with the learning diagnostics of
+:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`), ``tb/`` (TensorBoard), ``model.zip`` with
+``normalization.json`` (the kept policy: the best on the validation episodes for the default
+preset, the last one otherwise), ``last_model.zip`` with ``last_normalization.json`` and, after
+evaluation, ``evaluation.json`` and ``trajectories.npz`` (``last_evaluation.json`` for the last
+policy). Nothing in a run folder is a pickle that loading would run (:mod:`tlshield.saved`).
 
 PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
 and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
@@ -14,8 +16,10 @@ per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, clip 0.2); `
 what the ablation in the README chose (8 environments x 128 steps, minibatches of 512, gamma
 0.999, clip 0.1, a linearly decaying learning rate, 64-64 networks, the best validated
 checkpoint kept). Both: GAE lambda 0.95, CPU, one torch thread (deterministic for a seed).
-Observations and rewards are normalised by running statistics (SB3 ``VecNormalize``, saved as
-``vecnormalize.pkl`` and used by the evaluation); the metrics are in raw units.
+Observations are normalised by running statistics (SB3 ``VecNormalize``, saved as
+``normalization.json`` and used by the evaluation); rewards are normalised too unless the preset
+says ``norm_reward: False``; the metrics are in raw units. The policy is one of
+:data:`tlshield.policies.POLICIES` (the preset's ``policy``; PPO setting ``policy``).
 
 Evaluation reset seeds start at :data:`tlshield.evaluation.EVAL_SEED` (10,000 + trial);
 training environments are seeded from the run seed (``seed * 1000 + env index``), validation
@@ -155,7 +159,8 @@ class _Metrics:
         self.min_h = [math.inf, math.inf]
         self.min_d = math.inf
         self.violations = self.trap_entries = self.successes = 0
-        self.relaxed = self.failed = 0
+        self.relaxed = self.failed = self.steps = 0
+        self.correction = 0.0
 
     def step(self, rewards: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
         self.discounted += self.discount * rewards
@@ -169,9 +174,13 @@ class _Metrics:
             self.trap_entries += info["trap"] and not self.was_trapped[i]
             self.was_trapped[i] = info["trap"]
             self.successes += info["success"]
-            status = info.get("shield", {}).get("status")
-            self.relaxed += status == Status.RELAXED
+            shield = info.get("shield", {})
+            status = shield.get("status")
+            self.relaxed += status in (Status.RELAXED, Status.INACCURATE)
             self.failed += status == Status.FAILED
+            self.steps += 1
+            if "a_cbf" in shield:  # |a_applied - a_rl|: what the shield and the CLF overruled
+                self.correction += float(np.linalg.norm(shield["a_cbf"] + shield["a_clf"]))
             if dones[i]:
                 self.returns.append(float(self.discounted[i]))
                 self.discounted[i], self.discount[i] = 0.0, 1.0
@@ -209,6 +218,11 @@ def train(
     ppo_kwargs, n_envs, net_arch = {**spec["ppo"], **(ppo or {})}, spec["n_envs"], spec["net_arch"]
     log_std_init = float(ppo_kwargs.pop("log_std_init", spec.get("log_std_init", 0.0)))
     n_envs = int(ppo_kwargs.pop("n_envs", n_envs))
+    policy_name = str(ppo_kwargs.pop("policy", spec.get("policy", "gaussian")))
+    norm_reward = bool(ppo_kwargs.pop("norm_reward", spec.get("norm_reward", True)))
+    from tlshield.policies import policy_class
+
+    policy_class(policy_name)  # an unknown name fails here, before any environment is built
     # The progress reward is shaped for the discount PPO uses.
     overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
     import torch
@@ -223,7 +237,7 @@ def train(
 
     inner = make_vec_env(config, seed, overrides, n_envs, env)
     cfg: Any = inner.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
-    venv = VecNormalize(inner, norm_obs=True, norm_reward=True, gamma=ppo_kwargs["gamma"])
+    venv = VecNormalize(inner, norm_obs=True, norm_reward=norm_reward, gamma=ppo_kwargs["gamma"])
     record = {
         "env_id": env,
         "config": config,
@@ -237,6 +251,8 @@ def train(
             **ppo_kwargs,
             "lr_schedule": spec.get("lr_schedule", "constant"),
             "log_std_init": log_std_init,
+            "policy": policy_name,
+            "norm_reward": norm_reward,
             "net_arch": net_arch,
             "activation": "ReLU",
         },
@@ -251,8 +267,10 @@ def train(
     if spec.get("lr_schedule") == "linear":
         start_lr = float(learning_rate)
         learning_rate = lambda remaining: start_lr * remaining  # noqa: E731
+    from tlshield.saved import save_normalization
+
     model = PPO(
-        "MlpPolicy",
+        policy_class(policy_name),
         venv,
         seed=seed,
         device="cpu",
@@ -307,7 +325,7 @@ def train(
             if success >= self.best:
                 self.best = success
                 model.save(run / "model.zip")
-                venv.save(str(run / "vecnormalize.pkl"))
+                save_normalization(venv, run / "normalization.json")
                 record["kept"] = {"update": self.update, "validation_success": success}
             return success
 
@@ -331,6 +349,7 @@ def train(
                 "clf_scale": self.scale,
                 "validation_success": self._validate(),
                 "wall_time": time.perf_counter() - start,
+                **_diagnostics(self.model, metrics),
             }
             writer.writerow(row)
             csv_file.flush()
@@ -354,16 +373,48 @@ def train(
         # The last policy is kept beside the validated one (model.zip, what evaluate reads);
         # without validation they are the same.
         model.save(run / "last_model.zip")
-        venv.save(str(run / "last_vecnormalize.pkl"))
+        save_normalization(venv, run / "last_normalization.json")
         if "kept" not in record:
             model.save(run / "model.zip")
-            venv.save(str(run / "vecnormalize.pkl"))
+            save_normalization(venv, run / "normalization.json")
         record["wall_time"] = time.perf_counter() - start
         (run / "config.json").write_text(json.dumps(record, indent=2))
         venv.close()
     if record["interrupted"]:
         raise KeyboardInterrupt
     return run
+
+
+def _diagnostics(model: Any, metrics: _Metrics) -> dict[str, float]:
+    """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
+    policy's std per dimension, the sampled actions outside the box, the shield's mean
+    correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
+    before this rollout; NaN before the first)."""
+    import torch
+
+    log_std = getattr(model.policy, "log_std", None)
+    std = torch.exp(log_std).detach().cpu().numpy() if log_std is not None else np.array([])
+    actions = np.asarray(model.rollout_buffer.actions).reshape(-1, model.action_space.shape[0])
+    low, high = model.action_space.low, model.action_space.high
+    logged = model.logger.name_to_value
+    steps = max(metrics.steps, 1)
+    return {
+        "policy_std_0": float(std[0]) if len(std) > 0 else math.nan,
+        "policy_std_1": float(std[1]) if len(std) > 1 else math.nan,
+        "out_of_box": float(np.mean(np.any((actions < low) | (actions > high), axis=1))),
+        "mean_correction": metrics.correction / steps,
+        "relaxed_rate": metrics.relaxed / steps,
+        **{
+            name: float(logged.get(f"train/{name}", math.nan))
+            for name in (
+                "approx_kl",
+                "clip_fraction",
+                "explained_variance",
+                "value_loss",
+                "entropy_loss",
+            )
+        },
+    }
 
 
 def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") -> Any:
@@ -375,12 +426,14 @@ def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") ->
 def run_job(
     config: str, seed: int, updates: int, trials: int, options: dict[str, Any], folder: Path
 ) -> Path:
-    """One (config, seed) of a sweep: train into ``folder``, then evaluate (a Ray task)."""
+    """One (config, seed) of a sweep: train into ``folder``, then evaluate the kept and the
+    last policy (a Ray task)."""
     import torch
 
     torch.set_num_threads(1)
     train(config, seed, updates, folder, progress=False, **options)
     evaluate(folder, trials=trials)
+    evaluate(folder, trials=trials, which="last")
     return folder
 
 
