@@ -161,7 +161,7 @@ def _evaluate_run(
 
     if not Path(run).is_dir():
         what = "not a folder" if Path(run).exists() else "no such folder"
-        raise FileNotFoundError(f"{run}: {what} (expected a run folder)")
+        raise FileNotFoundError(f"{run}: {what}, so not a tlshield run folder")
     return evaluate(run, trials=trials, which=which, trust_pickles=trust_pickles)
 
 

@@ -32,6 +32,7 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelConfig
 from tlshield.settings import split
+from tlshield.training import PRESETS
 
 #: Reset seeds of the tuning evaluation: 30,000 + trial (training < 10,000, evaluation
 #: 10,000+, validation 20,000+).
@@ -66,7 +67,7 @@ DEFAULTS: dict[str, Any] = {
     "K": 1e4,
     "clf_bounds": 1.0,
     "clf_schedule": "fixed",
-    "learning_rate": 3e-4,
+    "learning_rate": PRESETS["default"]["ppo"]["learning_rate"],
     "ent_coef": 1e-6,
     "n_epochs": 10,
     "batch_size": 512,

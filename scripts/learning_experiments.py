@@ -1,0 +1,100 @@
+"""The learning experiments of docs/learning.md: candidate fixes for the PPO collapse, each
+trained on several seeds at the default budget, with the kept and the last policy evaluated.
+
+    .venv/bin/python scripts/learning_experiments.py --out results_learning \\
+        --variants gaussian tanh_mean squashed --configs rl_cbf_clf rl_cbf --seeds 0 1 2
+
+Each variant is a set of training settings (:data:`VARIANTS`, names as ``tlshield train
+--set``). Runs go to ``OUT/<variant>/<config>_s<seed>/`` as Ray tasks (2 at a time on 2 cores)
+and finished runs are kept, so an interrupted sweep resumes. Prints, and writes to
+``OUT/candidates.md``, one row per run: the kept and the last policy's evaluation success
+(100 trials), the best and the last validation success, and the training violations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tlshield.runs import load_run
+from tlshield.training import _run_jobs, is_finished, run_job
+
+#: Candidate settings (PPO settings, as ``--set NAME=VALUE``).
+VARIANTS: dict[str, dict[str, Any]] = {
+    "gaussian": {"policy": "gaussian"},
+    "tanh_mean": {"policy": "tanh_mean"},
+    "squashed": {"policy": "squashed"},
+    "tanh_mean+std0.6": {"policy": "tanh_mean", "log_std_init": -0.5},
+    "tanh_mean+raw": {"policy": "tanh_mean", "norm_reward": False},
+    "tanh_mean+raw+g0.99": {"policy": "tanh_mean", "norm_reward": False, "gamma": 0.99},
+    "tanh_mean+raw+lr1e-3": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 1e-3},
+    "tanh_mean+env16": {"policy": "tanh_mean", "n_envs": 16},
+}
+
+
+def _options(variant: str) -> dict[str, Any]:
+    from tlshield import settings
+
+    return settings.split(VARIANTS[variant])
+
+
+def table(root: Path, variants: list[str], configs: list[str], seeds: list[int]) -> str:
+    lines = [
+        "| variant | config | seed | kept | last | best validation | last validation "
+        "| kept update | train violations |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for variant in variants:
+        for config in configs:
+            for seed in seeds:
+                run = load_run(root / variant / f"{config}_s{seed}")
+                if run is None or run.evaluation is None:
+                    continue
+                val = run.metrics["validation_success"]
+                val = val[np.isfinite(val)]
+                last = (run.last_evaluation or {}).get("success_rate", math.nan)
+                kept = run.record.get("kept", {}).get("update", "last")
+                lines.append(
+                    f"| {variant} | {config} | {seed} | {run.evaluation['success_rate']:.2f} "
+                    f"| {last:.2f} | {val.max() if len(val) else math.nan:.2f} "
+                    f"| {val[-1] if len(val) else math.nan:.2f} | {kept} "
+                    f"| {int(run.metrics['violations'].sum())} |"
+                )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="results_learning")
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=["tanh_mean"])
+    parser.add_argument("--configs", nargs="+", default=["rl_cbf_clf", "rl_cbf"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--updates", type=int, default=300)
+    parser.add_argument("--trials", type=int, default=100)
+    parser.add_argument("--workers", type=int, default=None)
+    args = parser.parse_args()
+    root = Path(args.out)
+    jobs = {}
+    for variant in args.variants:
+        options = _options(variant)
+        for config in args.configs:
+            for seed in args.seeds:
+                folder = root / variant / f"{config}_s{seed}"
+                done = (folder / "last_evaluation.json").is_file()
+                if not (done and is_finished(folder, args.updates)):
+                    jobs[folder] = partial(
+                        run_job, config, seed, args.updates, args.trials, options
+                    )
+    _run_jobs(jobs, args.workers, None, True)
+    text = table(root, args.variants, args.configs, args.seeds)
+    (root / "candidates.md").write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
