@@ -7,21 +7,19 @@ trained on several seeds at the default budget, with the kept and the last polic
 Each variant is a set of training settings (:data:`VARIANTS`, names as ``tlshield train
 --set``). Runs go to ``OUT/<variant>/<config>_s<seed>/`` as Ray tasks (2 at a time on 2 cores)
 and finished runs are kept, so an interrupted sweep resumes. Prints, and writes to
-``OUT/candidates.md``, one row per run: the kept and the last policy's evaluation success
-(100 trials), the best and the last validation success, and the training violations.
+``OUT/candidates.md``, per variant, one row per run (:func:`tlshield.report.seeds_table`): the
+kept and the last policy's evaluation success (100 trials), the best and the last validation
+success, and the training violations.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 from functools import partial
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from tlshield.runs import load_run
+from tlshield.report import seeds_table
 from tlshield.training import _run_jobs, is_finished, run_job
 
 #: Candidate settings (PPO settings, as ``--set NAME=VALUE``).
@@ -43,29 +41,10 @@ def _options(variant: str) -> dict[str, Any]:
     return settings.split(VARIANTS[variant])
 
 
-def table(root: Path, variants: list[str], configs: list[str], seeds: list[int]) -> str:
-    lines = [
-        "| variant | config | seed | kept | last | best validation | last validation "
-        "| kept update | train violations |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for variant in variants:
-        for config in configs:
-            for seed in seeds:
-                run = load_run(root / variant / f"{config}_s{seed}")
-                if run is None or run.evaluation is None:
-                    continue
-                val = run.metrics["validation_success"]
-                val = val[np.isfinite(val)]
-                last = (run.last_evaluation or {}).get("success_rate", math.nan)
-                kept = run.record.get("kept", {}).get("update", "last")
-                lines.append(
-                    f"| {variant} | {config} | {seed} | {run.evaluation['success_rate']:.2f} "
-                    f"| {last:.2f} | {val.max() if len(val) else math.nan:.2f} "
-                    f"| {val[-1] if len(val) else math.nan:.2f} | {kept} "
-                    f"| {int(run.metrics['violations'].sum())} |"
-                )
-    return "\n".join(lines)
+def table(root: Path, variants: list[str]) -> str:
+    """One :func:`tlshield.report.seeds_table` per variant, under its name."""
+    parts = [f"### {v}\n\n{seeds_table(root / v)}" for v in variants if (root / v).is_dir()]
+    return "\n\n".join(parts)
 
 
 def main() -> None:
@@ -91,7 +70,7 @@ def main() -> None:
                         run_job, config, seed, args.updates, args.trials, options
                     )
     _run_jobs(jobs, args.workers, None, True)
-    text = table(root, args.variants, args.configs, args.seeds)
+    text = table(root, args.variants)
     (root / "candidates.md").write_text(text + "\n")
     print(text)
 

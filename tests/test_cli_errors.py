@@ -60,8 +60,8 @@ CASES: dict[str, list[Case]] = {
         ("--out is an existing file", lambda b, r: ["train", "--out", str(_file(b))]),
         ("--out under a file", lambda b, r: ["train", "--out", _under_a_file(b)]),
         ("--out in /proc", lambda b, r: ["train", "--out", "/proc/tlshield-run"]),
-        ("--settings missing", lambda b, r: ["train", "--out", str(b / "o"), "--settings", "nope"]),
-        ("--settings a folder", lambda b, r: ["train", "--out", str(b / "o"), "--settings", str(b)]),
+        ("--settings missing", lambda b, r: ["train", "--out", f"{b}/o", "--settings", "nope"]),
+        ("--settings a folder", lambda b, r: ["train", "--out", f"{b}/o", "--settings", str(b)]),
         (
             "--settings corrupt JSON",
             lambda b, r: ["train", "--out", str(b / "o"), "--settings", str(_file(b, "s.json"))],

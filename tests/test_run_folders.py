@@ -85,7 +85,7 @@ def test_a_crafted_pickle_is_refused_and_runs_nothing(
 ) -> None:
     marker = tmp_path / "pwned"
     folder = _crafted(run, tmp_path, marker)
-    with pytest.raises(UntrustedPickleError, match="pickle.*--trust-pickles"):
+    with pytest.raises(UntrustedPickleError, match=r"pickle.*--trust-pickles"):
         load_policy(folder)
     assert cli.main(["evaluate", str(folder), "--trials", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -123,7 +123,7 @@ def test_a_crafted_model_zip_runs_nothing(run: Path, tmp_path: Path) -> None:
     buffer = io.BytesIO()
     torch.save({"w": Payload(marker)}, buffer)
     _rezip(model, {"policy.pth": buffer.getvalue()})
-    with pytest.raises(ValueError, match="policy.pth is not a plain tensor state dict"):
+    with pytest.raises(ValueError, match=r"policy\.pth is not a plain tensor state dict"):
         load_policy(folder)
     assert not marker.exists()
 

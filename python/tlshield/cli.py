@@ -238,11 +238,13 @@ def _tune(args: argparse.Namespace) -> int:
 
 def _plot(args: argparse.Namespace) -> int:
     from tlshield.plots import plot_all
-    from tlshield.report import results_table
+    from tlshield.report import results_table, seeds_table
 
     for path in plot_all(args.results, args.out):
         print(f"wrote {path}")
     print(results_table(args.results))
+    print()
+    print(seeds_table(args.results))
     return 0
 
 

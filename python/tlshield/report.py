@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from tlshield.runs import Run, load_results
 
-__all__ = ["TABLE_COLUMNS", "results_table"]
+__all__ = ["SEED_COLUMNS", "TABLE_COLUMNS", "results_table", "seeds_table"]
 
 #: Header of :func:`results_table`.
 TABLE_COLUMNS = (
@@ -30,6 +30,18 @@ TABLE_COLUMNS = (
     "eval violation steps",
 )
 _MISSING = "—"
+
+#: Header of :func:`seeds_table`.
+SEED_COLUMNS = (
+    "config",
+    "seed",
+    "kept policy: eval success",
+    "last policy: eval success",
+    "best validation",
+    "last validation",
+    "kept update",
+    "train violations",
+)
 
 
 def seed_stat(values: Sequence[float]) -> tuple[float, float] | None:
@@ -116,4 +128,36 @@ def results_table(results: str | Path) -> str:
             violation_steps,
         )
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _rate(evaluation: dict[str, Any] | None) -> str:
+    return _MISSING if evaluation is None else f"{float(evaluation['success_rate']):.2f}"
+
+
+def seeds_table(results: str | Path) -> str:
+    """A Markdown table of a results folder, one row per run (columns :data:`SEED_COLUMNS`):
+    the evaluation success of the kept policy (the best validated) and of the last one side by
+    side, so that a checkpoint choice can never hide a collapse; the best and the last
+    validation success; the update of the kept policy; the training violations."""
+    lines = [
+        "| " + " | ".join(SEED_COLUMNS) + " |",
+        "|" + "|".join(["---", "---:"] + ["---:"] * (len(SEED_COLUMNS) - 2)) + "|",
+    ]
+    for config, runs in load_results(results).items():
+        for run in runs:
+            val = run.metrics["validation_success"]
+            val = val[np.isfinite(val)]
+            kept = run.record.get("kept", {}).get("update", "last") if run.updates else _MISSING
+            cells = (
+                config,
+                str(run.seed),
+                _rate(run.evaluation),
+                _rate(run.last_evaluation),
+                f"{val.max():.2f}" if len(val) else _MISSING,
+                f"{val[-1]:.2f}" if len(val) else _MISSING,
+                str(kept),
+                str(int(np.nansum(run.metrics["violations"]))) if run.updates else _MISSING,
+            )
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

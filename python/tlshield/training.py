@@ -487,10 +487,10 @@ def reproduce(
                 jobs[folder] = partial(run_job, config, seed, updates, trials, options)
     _run_jobs(jobs, workers, address, progress)
     from tlshield.plots import plot_all
-    from tlshield.report import results_table
+    from tlshield.report import results_table, seeds_table
 
     plot_all(root)
-    (root / "results.md").write_text(results_table(root) + "\n")
+    (root / "results.md").write_text(f"{results_table(root)}\n\n{seeds_table(root)}\n")
     return root
 
 
