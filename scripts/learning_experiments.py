@@ -22,16 +22,26 @@ from typing import Any
 from tlshield.report import seeds_table
 from tlshield.training import _run_jobs, is_finished, run_job
 
-#: Candidate settings (PPO settings, as ``--set NAME=VALUE``).
+#: Candidate settings (as ``--set NAME=VALUE``), each complete over the default preset: the
+#: old default was SB3's Gaussian with normalised rewards and a learning rate of 3e-4; the new
+#: one is ``tanh_mean+raw+lr1e-3``. ``tanh_mean+env16`` keeps the budget with ``--updates 150``.
+OLD = {"norm_reward": True, "learning_rate": 3e-4}
 VARIANTS: dict[str, dict[str, Any]] = {
-    "gaussian": {"policy": "gaussian"},
-    "tanh_mean": {"policy": "tanh_mean"},
-    "squashed": {"policy": "squashed"},
-    "tanh_mean+std0.6": {"policy": "tanh_mean", "log_std_init": -0.5},
-    "tanh_mean+raw": {"policy": "tanh_mean", "norm_reward": False},
-    "tanh_mean+raw+g0.99": {"policy": "tanh_mean", "norm_reward": False, "gamma": 0.99},
+    "gaussian": {**OLD, "policy": "gaussian"},
+    "tanh_mean": {**OLD, "policy": "tanh_mean"},
+    "squashed": {**OLD, "policy": "squashed"},
+    "tanh_mean+std0.6": {**OLD, "policy": "tanh_mean", "log_std_init": -0.5},
+    "tanh_mean+env16": {**OLD, "policy": "tanh_mean", "n_envs": 16},
+    "tanh_mean+w0.01": {**OLD, "policy": "tanh_mean", "w": 0.01},
+    "tanh_mean+raw": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 3e-4},
+    "tanh_mean+raw+g0.99": {
+        "policy": "tanh_mean",
+        "norm_reward": False,
+        "learning_rate": 3e-4,
+        "gamma": 0.99,
+    },
     "tanh_mean+raw+lr1e-3": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 1e-3},
-    "tanh_mean+env16": {"policy": "tanh_mean", "n_envs": 16},
+    "tanh_mean+raw+lr2e-3": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 2e-3},
 }
 
 

@@ -38,8 +38,10 @@ def main(collapsing: str, healthy: str, out: str) -> None:
             assert run is not None
             x, y = run.metrics["update"], run.metrics[column]
             ok = np.isfinite(y) & ((y > 0) if log else True)
-            policy = run.record["ppo"].get("policy", "gaussian")
-            ax.plot(x[ok], y[ok], color=color, label=f"{label}: {policy}, seed {run.seed}")
+            ppo = run.record["ppo"]
+            kind = f"{ppo.get('policy', 'gaussian')}, lr {ppo.get('learning_rate')}"
+            kind += ", raw rewards" if ppo.get("norm_reward") is False else ", normalised rewards"
+            ax.plot(x[ok], y[ok], color=color, label=f"{label}: {kind}, seed {run.seed}")
         ax.set_title(title)
         ax.set_xlabel("PPO update")
         if log:
@@ -50,8 +52,8 @@ def main(collapsing: str, healthy: str, out: str) -> None:
     assert bad is not None
     kept = bad.record.get("kept", {}).get("update", "last")
     for ax, name, title in (
-        (axes.flat[4], "trajectories.npz", f"collapsing run, kept policy (update {kept})"),
-        (axes.flat[5], "last_trajectories.npz", "collapsing run, last policy (update 300)"),
+        (axes.flat[4], "trajectories.npz", f"collapsing, kept (update {kept})"),
+        (axes.flat[5], "last_trajectories.npz", "collapsing, last (update 300)"),
     ):
         for path in _paths(bad.path, name)[:20]:
             ax.plot(path[:, 0], path[:, 1], lw=0.8, alpha=0.7)
