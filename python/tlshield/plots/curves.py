@@ -130,42 +130,62 @@ def _curves_figure(
     return _save(fig, path)
 
 
+def _success_series(run: Run) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+    """(updates, success, validated): the validation success where the run validated, else the
+    fraction of the update's training episodes that succeeded, averaged over 10 updates."""
+    x, val = run.metrics["update"], run.metrics["validation_success"]
+    ok = np.isfinite(val)
+    if ok.any():
+        return x[ok], val[ok], True
+    episodes = np.maximum(run.metrics["episodes"], 1.0)
+    rate = run.metrics["successes"] / episodes
+    window = min(10, len(rate)) or 1
+    smooth = np.convolve(rate, np.ones(window) / window, mode="valid")
+    return x[window - 1 :], smooth, False
+
+
 def _plot_learning_curves(groups: dict[str, list[Run]], path: Path) -> Path:
-    """Validation success per update (each seed thin, the mean over seeds bold) and the
-    training violations per update: what learned, when, and whether it stayed learned."""
+    """Success per update (each seed thin, the mean over seeds bold): the validation success
+    where the runs validated, else the training episodes' success rate; and the training
+    violations per update: what learned, when, and whether it stayed learned."""
     configs = list(groups)
     fig = _figure(12.0, 5.2)
     success_ax, violation_ax = fig.subplots(1, 2)
-    drawn = False
+    drawn, validated = False, True
     for config, runs in groups.items():
         color, label = _color(config, configs), _label(config)
-        seeds = []
-        for run in runs:
-            if run.updates == 0:
-                continue
-            x, y = run.metrics["update"], run.metrics["validation_success"]
-            ok = np.isfinite(y)
-            if ok.any():
-                success_ax.plot(x[ok], y[ok], color=color, lw=0.8, alpha=0.45)
-                seeds.append(run)
-        curve = _curve(seeds, "validation_success") if seeds else None
-        if curve is not None:
-            x, mean, _ = curve
+        series = [_success_series(r) for r in runs if r.updates > 0]
+        for x, y, was_validated in series:
+            success_ax.plot(x, y, color=color, lw=0.8, alpha=0.45)
+            validated &= was_validated
+        if series:
+            last = int(max(x.max() for x, _, _ in series))
+            table = np.full((len(series), last), np.nan)
+            for i, (x, y, _) in enumerate(series):
+                table[i, x.astype(np.int64) - 1] = y
+            mean, _ = _nan_mean_std(table)
             ok = np.isfinite(mean)
-            success_ax.plot(x[ok], mean[ok], color=color, lw=2.0, label=f"{label} ({len(seeds)})")
+            steps = np.arange(1, last + 1)
+            success_ax.plot(
+                steps[ok], mean[ok], color=color, lw=2.0, label=f"{label} ({len(series)})"
+            )
             drawn = True
         _plot_band(violation_ax, runs, "violations", color, label)
     if not drawn:
-        _no_data(success_ax, "no validation yet")
+        _no_data(success_ax, "no training metrics yet")
     success_ax.set_ylim(-0.02, 1.02)
-    success_ax.set_ylabel("validation success (deterministic policy, 20 episodes)")
-    success_ax.set_title("Validation success per update: bold = mean, thin = each seed")
+    success_ax.set_ylabel(
+        "validation success (deterministic policy, 20 episodes)"
+        if validated
+        else "success of the training episodes (10-update mean)"
+    )
+    success_ax.set_title("Success per update: bold = mean, thin = each seed")
     violation_ax.set_ylim(bottom=0)
     violation_ax.set_ylabel("channel-violating steps in the update")
     violation_ax.set_title("Training violations per update (mean ± std over seeds)")
-    steps = _training_of(groups)[0]
+    steps_per_update = _training_of(groups)[0]
     for ax in (success_ax, violation_ax):
-        _update_axis(ax, steps)
+        _update_axis(ax, steps_per_update)
     if drawn:
         handles, labels = success_ax.get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4))
