@@ -104,7 +104,6 @@ PROBE: dict[str, dict[str, Any]] = {
     "cbf_bounds = the RL box exactly": {"cbf_bounds": tuple(map(tuple, DEFAULT_RL))},
     "cbf_bounds 0.9x the RL box": {"cbf_bounds": tuple(map(tuple, 0.9 * DEFAULT_RL))},
     "cbf_margin=1e-6": {"cbf_margin": 1e-6},
-    "start_spread=1.2 (starts outside the channel)": {"start_spread": 1.2},
 }
 
 #: Settings a probe entry expects refused (the rest must be accepted with 0 violations).
@@ -113,7 +112,6 @@ REFUSED = {
     "cbf_bounds=((-0.2,-0.4),(0.2,0.4))": "cbf_bounds",
     "rl_bounds 5x": "cbf_bounds",
     "cbf_bounds 0.9x the RL box": "cbf_bounds",
-    "start_spread=1.2 (starts outside the channel)": "start_spread",
 }
 
 

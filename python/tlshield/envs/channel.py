@@ -262,16 +262,6 @@ class ChannelConfig:
                 "only while rho > 0, so a barrier kept at h >= 0 lets the discrete-time plant "
                 "settle at h = 0 or just below it)"
             )
-        # Starts (|v| <= start_spread across the channel, x - y = -sqrt(2) v) must be inside
-        # the channel by the margin, or the first state is a violation no shield can undo.
-        if not (
-            0 <= self.start_spread and SQRT2 * self.start_spread < self.half_width - self.cbf_margin
-        ):
-            raise ValueError(
-                f"start_spread = {self.start_spread!r}: starts must lie inside the channel, i.e. "
-                f"0 <= start_spread < (half_width - cbf_margin) / sqrt(2) = "
-                f"{(self.half_width - self.cbf_margin) / SQRT2:.3g}"
-            )
         # The shield's own checks, with these settings (the CBF box must cancel every RL plus
         # CLF action): refused here, where the setting is given, not at the first episode.
         channel_shield(self, "rl_cbf_clf")
