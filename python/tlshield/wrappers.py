@@ -100,17 +100,33 @@ class FsaTracker:
 
 
 def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
-    """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta`` and
-    the :class:`tlshield.Status` (zeros and status None when no shield ran)."""
+    """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta``, the
+    :class:`tlshield.Status`, the largest barrier ``slack``, the :class:`tlshield.Solver`, the
+    CLF ``goal`` (or None) and the enforced ``barriers`` as ``{name: h(s)}`` (zeros, None and
+    empty when no shield ran)."""
     if result is None:
         zeros = np.zeros_like(a_rl)
-        return {"a_rl": a_rl, "a_cbf": zeros, "a_clf": zeros, "delta": 0.0, "status": None}
+        return {
+            "a_rl": a_rl,
+            "a_cbf": zeros,
+            "a_clf": zeros,
+            "delta": 0.0,
+            "status": None,
+            "slack": 0.0,
+            "solver": None,
+            "goal": None,
+            "barriers": {},
+        }
     return {
         "a_rl": a_rl,
         "a_cbf": result.a_cbf,
         "a_clf": result.a_clf,
         "delta": result.delta,
         "status": result.status,
+        "slack": result.slack,
+        "solver": result.solver,
+        "goal": result.goal,
+        "barriers": dict(result.barriers),
     }
 
 
@@ -121,7 +137,11 @@ class FsaAugmented(gym.Wrapper):
     read (default: the observation itself). The reward becomes ``r_tl + w * r_env``: ``w = 0``
     replaces the env's reward, ``w > 0`` augments it. ``info`` gains ``fsa_state``, ``success``
     (the accepting state is reached), ``trap`` and ``tl_reward``. With
-    ``terminate_on_success`` the episode ends when the task is done.
+    ``terminate_on_success`` the episode ends when the task is done, with ``terminate_on_trap``
+    when it can no longer be done (the trap pays its penalty once, which the progress reward
+    sizes so that entering the trap even at the last step loses). With
+    ``failure_on_termination`` an episode the wrapped env ends before success (leaving the map)
+    pays the trap penalty too, so ending early is never a way out.
 
     ``reward="progress"`` (default) pays the progress-aware reward
     (:class:`tlshield.ProgressReward`, built with ``gamma``, ``horizon``, ``scale``,
@@ -139,6 +159,8 @@ class FsaAugmented(gym.Wrapper):
         w: float = 0.0,
         trap_penalty: float = -100.0,
         terminate_on_success: bool = True,
+        terminate_on_trap: bool = False,
+        failure_on_termination: bool = False,
         reward: str = "progress",
         gamma: float = 0.99,
         horizon: int = 200,
@@ -166,6 +188,8 @@ class FsaAugmented(gym.Wrapper):
         self.state_fn = state_fn
         self.w = float(w)
         self.terminate_on_success = terminate_on_success
+        self.terminate_on_trap = terminate_on_trap
+        self.failure_on_termination = failure_on_termination
         box = env.observation_space
         k = self.tracker.automaton.num_states
         low = np.concatenate([box.low.ravel(), np.zeros(k)])
@@ -198,7 +222,16 @@ class FsaAugmented(gym.Wrapper):
             "trap": self.tracker.trapped,
             "tl_reward": r_tl,
         }
-        terminated = bool(terminated) or (self.terminate_on_success and self.tracker.success)
+        if terminated and self.failure_on_termination and not self.tracker.success:
+            # The env ended the episode as a failure (e.g. leaving the map): pay what entering
+            # the trap pays, so that ending early never beats going on.
+            r_tl = self.tracker.trap_penalty
+            info["tl_reward"] = r_tl
+        terminated = (
+            bool(terminated)
+            or (self.terminate_on_success and self.tracker.success)
+            or (self.terminate_on_trap and self.tracker.trapped)
+        )
         return self._observe(obs), r_tl + self.w * float(reward), terminated, truncated, info
 
 

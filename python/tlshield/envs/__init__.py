@@ -1,6 +1,7 @@
 """Environments and tasks of tlshield, registered with Gymnasium when ``tlshield`` is
-imported: the paper's channel case study ``tlshield/Channel-v0`` and a double-integrator robot
-with a sequencing task, ``tlshield/PointMass-v0``."""
+imported: the paper's channel case study ``tlshield/Channel-v0``, a double-integrator robot
+with a sequencing task, ``tlshield/PointMass-v0``, and DeepLTL's benchmark with any formula over
+its colours, ``tlshield/FlatWorld-v0``."""
 
 from typing import Any
 
@@ -18,11 +19,14 @@ from tlshield.envs.channel import (
 
 ENV_ID = "tlshield/Channel-v0"
 POINT_MASS_ID = "tlshield/PointMass-v0"
+FLATWORLD_ID = "tlshield/FlatWorld-v0"
 
 if ENV_ID not in gym.registry:
     gym.register(id=ENV_ID, entry_point="tlshield.envs.channel:ChannelEnv")
 if POINT_MASS_ID not in gym.registry:
     gym.register(id=POINT_MASS_ID, entry_point="tlshield.envs.point_mass:make_point_mass")
+if FLATWORLD_ID not in gym.registry:
+    gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
 
 
 def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
@@ -36,6 +40,7 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
 __all__ = [
     "CONFIGS",
     "ENV_ID",
+    "FLATWORLD_ID",
     "POINT_MASS_ID",
     "STATE_DIM",
     "TASK",

@@ -22,8 +22,9 @@ pub fn channel(sign: f64) -> Predicate {
     Predicate::halfspace(w, HALF_WIDTH).expect("finite weights")
 }
 
-/// The task spec: Ball goals (radius 0.5) whose centres are read from the state, and the two
-/// channel walls c1, c2.
+/// The task spec: Ball goals (radius 0.5) whose centres are read from the state, declared
+/// mutually exclusive (the geometry of moving centres cannot tell), and the two channel walls
+/// c1, c2.
 pub fn task_spec() -> Spec {
     let goal = |k: usize| {
         Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![3 + 2 * k, 4 + 2 * k]))
@@ -39,6 +40,7 @@ pub fn task_spec() -> Spec {
             ("c2", channel(-1.0)),
         ],
     )
+    .and_then(|spec| spec.with_exclusive([["g1", "g2", "g3"]]))
     .expect("the task parses")
 }
 

@@ -28,6 +28,7 @@ pub mod parallel;
 pub mod predicate;
 pub mod progress;
 pub mod qp;
+pub mod region;
 pub mod robustness;
 pub mod shield;
 pub mod spec;

@@ -1,5 +1,10 @@
 //! State predicates: real-valued functions of the full state vector whose sign says whether an
 //! atom holds (`> 0` holds). Each has an exact value and gradient.
+//!
+//! Regions compose: a [`Predicate::Union`] holds where any part holds (robustness: the max of
+//! the parts'), an [`Predicate::Intersection`] where every part holds (the min). Their gradient
+//! and Hessian are those of the part that attains the max (min), the first on ties: exact
+//! wherever that part is unique, and a valid one-sided choice on the seams.
 
 use crate::error::{InputError, SpecError};
 
@@ -36,6 +41,10 @@ pub enum Predicate {
     Halfspace(Halfspace),
     /// See [`Ball`].
     Ball(Ball),
+    /// Holds where any part holds (a red region made of two discs).
+    Union(Vec<Predicate>),
+    /// Holds where every part holds.
+    Intersection(Vec<Predicate>),
 }
 
 fn check_finite(what: &str, values: &[f64]) -> Result<(), SpecError> {
@@ -121,11 +130,57 @@ impl Predicate {
         }))
     }
 
+    /// A union of regions: holds where any part holds. `parts` must be non-empty, and parts
+    /// that fix the state length must agree on it.
+    pub fn union(parts: Vec<Predicate>) -> Result<Self, SpecError> {
+        check_parts("Union", &parts)?;
+        Ok(Predicate::Union(parts))
+    }
+
+    /// An intersection of regions: holds where every part holds. `parts` as for
+    /// [`Predicate::union`].
+    pub fn intersection(parts: Vec<Predicate>) -> Result<Self, SpecError> {
+        check_parts("Intersection", &parts)?;
+        Ok(Predicate::Intersection(parts))
+    }
+
+    /// The parts of a union or intersection (empty for a half-space or ball).
+    pub fn parts(&self) -> &[Predicate] {
+        match self {
+            Predicate::Union(p) | Predicate::Intersection(p) => p,
+            _ => &[],
+        }
+    }
+
     /// The exact state length this predicate needs, if it fixes one (a half-space does).
     pub fn exact_dim(&self) -> Option<usize> {
         match self {
             Predicate::Halfspace(h) => Some(h.w.len()),
             Predicate::Ball(_) => None,
+            Predicate::Union(p) | Predicate::Intersection(p) => {
+                p.iter().find_map(Predicate::exact_dim)
+            }
+        }
+    }
+
+    /// The part that decides the value at `s`: the first largest (union) or smallest
+    /// (intersection) part, recursively down to a half-space or ball.
+    fn active(&self, s: &[f64]) -> &Predicate {
+        match self {
+            Predicate::Union(parts) | Predicate::Intersection(parts) => {
+                let union = matches!(self, Predicate::Union(_));
+                let mut best = &parts[0];
+                let mut best_value = best.value(s);
+                for p in &parts[1..] {
+                    let v = p.value(s);
+                    if (union && v > best_value) || (!union && v < best_value) {
+                        best = p;
+                        best_value = v;
+                    }
+                }
+                best.active(s)
+            }
+            leaf => leaf,
         }
     }
 
@@ -144,6 +199,9 @@ impl Predicate {
                     .max()
                     .map_or(0, |m| m + 1)
                     .max(center_max)
+            }
+            Predicate::Union(p) | Predicate::Intersection(p) => {
+                p.iter().map(Predicate::min_dim).max().unwrap_or(0)
             }
         }
     }
@@ -189,6 +247,13 @@ impl Predicate {
         match self {
             Predicate::Halfspace(h) => h.terms.iter().map(|&(i, w)| w * s[i]).sum::<f64>() + h.b,
             Predicate::Ball(b) => b.radius - b.distance(s),
+            Predicate::Union(p) => p
+                .iter()
+                .map(|x| x.value(s))
+                .fold(f64::NEG_INFINITY, f64::max),
+            Predicate::Intersection(p) => {
+                p.iter().map(|x| x.value(s)).fold(f64::INFINITY, f64::min)
+            }
         }
     }
 
@@ -230,6 +295,11 @@ impl Predicate {
                     }
                 }
             },
+            Predicate::Union(_) | Predicate::Intersection(_) => {
+                for (o, s) in out.iter_mut().zip(rows) {
+                    *o = self.value(s);
+                }
+            }
         }
     }
 
@@ -240,6 +310,7 @@ impl Predicate {
             Predicate::Ball(b) => {
                 b.pos.contains(&d) || matches!(&b.center, Center::Dims(c) if c.contains(&d))
             }
+            Predicate::Union(p) | Predicate::Intersection(p) => p.iter().any(|x| x.reads(d)),
         }
     }
 
@@ -249,7 +320,7 @@ impl Predicate {
     /// `J` the map `s -> d`); zero at the centre, where it is undefined (never NaN).
     pub fn hessian_times(&self, s: &[f64], v: &[f64], out: &mut [f64]) {
         out.fill(0.0);
-        let Predicate::Ball(b) = self else {
+        let Predicate::Ball(b) = self.active(s) else {
             return;
         };
         let dist = b.distance(s);
@@ -276,7 +347,7 @@ impl Predicate {
     /// At the centre of a ball the gradient is zero (never NaN).
     pub fn gradient_into(&self, s: &[f64], out: &mut [f64]) {
         out.fill(0.0);
-        match self {
+        match self.active(s) {
             Predicate::Halfspace(h) => out[..h.w.len()].copy_from_slice(&h.w),
             Predicate::Ball(b) => {
                 let dist = b.distance(s);
@@ -291,8 +362,27 @@ impl Predicate {
                     }
                 }
             }
+            Predicate::Union(_) | Predicate::Intersection(_) => {
+                unreachable!("active() returns a half-space or ball")
+            }
         }
     }
+}
+
+fn check_parts(what: &str, parts: &[Predicate]) -> Result<(), SpecError> {
+    if parts.is_empty() {
+        return Err(SpecError::InvalidPredicate(format!(
+            "{what} needs at least one part"
+        )));
+    }
+    let dims: Vec<usize> = parts.iter().filter_map(Predicate::exact_dim).collect();
+    if let Some(d) = dims.iter().find(|&&d| d != dims[0]) {
+        return Err(SpecError::InvalidPredicate(format!(
+            "{what} parts fix different state lengths ({} and {d})",
+            dims[0]
+        )));
+    }
+    Ok(())
 }
 
 /// `|(dx, dy)|`: the plain formula, or `hypot` where the squares overflow.

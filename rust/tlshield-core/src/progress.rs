@@ -93,40 +93,44 @@ fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
     })
 }
 
-/// Fewest transitions from each state to acceptance, reading only valuations in which no two
-/// atoms of one `exclusive` group hold (`None`: acceptance is unreachable, e.g. the trap).
+/// Fewest transitions from each state to acceptance, reading only valuations the regions'
+/// geometry admits ([`Automaton::admissible`]) in which no two atoms of one `exclusive` group
+/// hold (`None`: acceptance is unreachable, e.g. the trap).
 pub fn ranks(automaton: &Automaton, exclusive: &[u32]) -> Vec<Option<u32>> {
-    let n = automaton.num_states();
-    let letters = 1usize << automaton.spec().atoms().len();
-    let admissible: Vec<usize> = (0..letters)
-        .filter(|&v| exclusive.iter().all(|&g| (v as u32 & g).count_ones() <= 1))
-        .collect();
-    let mut rank: Vec<Option<u32>> = (0..n)
-        .map(|q| automaton.is_accepting(q).then_some(0))
-        .collect();
-    // Bellman-Ford over at most n rounds: the graph is small (states x admissible letters).
-    for _ in 0..n {
-        let mut changed = false;
-        for q in 0..n {
-            let best = admissible
-                .iter()
-                .filter_map(|&v| {
-                    let d = automaton.step_valuation(q, v);
-                    (d != q).then(|| rank[d].map(|r| r + 1)).flatten()
-                })
-                .min();
-            if let Some(b) = best {
-                if rank[q].is_none_or(|r| b < r) {
-                    rank[q] = Some(b);
-                    changed = true;
+    crate::automaton::ranks(
+        automaton.num_states(),
+        1usize << automaton.spec().atoms().len(),
+        &(0..automaton.num_states())
+            .map(|q| automaton.is_accepting(q))
+            .collect::<Vec<_>>(),
+        |q, v| automaton.step_valuation(q, v),
+        |v| automaton.admissible(v) && exclusive.iter().all(|&g| (v as u32 & g).count_ones() <= 1),
+    )
+}
+
+/// Checks each `exclusive` group against the geometry: two atoms of one group whose regions
+/// overlap could hold together, and declaring them exclusive would hide the letters where they
+/// do. Pairs the geometry cannot decide (moving regions) are trusted.
+fn check_exclusive(automaton: &Automaton, exclusive: &[u32]) -> Result<(), InputError> {
+    let atoms = automaton.spec().atoms();
+    for &g in exclusive {
+        let members: Vec<usize> = (0..atoms.len()).filter(|i| g >> i & 1 == 1).collect();
+        for (k, &i) in members.iter().enumerate() {
+            for &j in &members[k + 1..] {
+                if automaton.can_hold_together(i, j) == Some(true) {
+                    return Err(InputError::Value {
+                        what: "exclusive".into(),
+                        expected: "groups of atoms that never hold together".into(),
+                        got: format!(
+                            "{:?} and {:?} in one group, but their regions overlap",
+                            atoms[i], atoms[j]
+                        ),
+                    });
                 }
             }
         }
-        if !changed {
-            break;
-        }
     }
-    rank
+    Ok(())
 }
 
 impl ProgressReward {
@@ -175,7 +179,25 @@ impl ProgressReward {
                 .into());
             }
         }
+        check_exclusive(automaton, &params.exclusive)?;
         let ranks = ranks(automaton, &params.exclusive);
+        if ranks[automaton.initial()].is_none() {
+            return Err(InputError::Value {
+                what: "task".into(),
+                expected: "a formula whose acceptance is reachable from the initial state".into(),
+                got: format!(
+                    "no path to acceptance over the valuations the regions' geometry{} \
+                     admits (the formula needs atoms to hold together whose regions are \
+                     disjoint, or is unsatisfiable)",
+                    if params.exclusive.is_empty() {
+                        ""
+                    } else {
+                        " and the exclusive groups"
+                    }
+                ),
+            }
+            .into());
+        }
         let max_rank = ranks.iter().flatten().copied().max().unwrap_or(0);
         let band = f64::from(max_rank + 1);
         let step_cost = match params.step_cost {
@@ -348,6 +370,34 @@ mod tests {
     }
 
     #[test]
+    fn unreachable_acceptance_and_overlapping_exclusive_groups_are_refused() {
+        let ball = |c: f64, r: f64| Predicate::ball(vec![0], r, Center::Fixed(vec![c])).unwrap();
+        // a and b are disjoint: F(a & b) can never be accepted.
+        let spec = Spec::new("F(a & b)", [("a", ball(0.0, 0.5)), ("b", ball(2.0, 0.5))]).unwrap();
+        let err = ProgressReward::new(
+            &Automaton::build(&spec).unwrap(),
+            &ProgressParams::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("no path to acceptance"), "{err}");
+        // Overlapping discs can hold together: declaring them exclusive is an error naming both.
+        let spec = Spec::new("F a & F b", [("a", ball(0.0, 0.5)), ("b", ball(0.6, 0.5))]).unwrap();
+        let aut = Automaton::build(&spec).unwrap();
+        let params = ProgressParams {
+            exclusive: vec![0b11],
+            ..Default::default()
+        };
+        let err = ProgressReward::new(&aut, &params).unwrap_err().to_string();
+        assert!(
+            err.contains("\"a\" and \"b\"") && err.contains("overlap"),
+            "{err}"
+        );
+        let err = spec.with_exclusive([["a", "b"]]).unwrap_err().to_string();
+        assert!(err.contains("overlap"), "{err}");
+    }
+
+    #[test]
     fn exclusive_goals_rank_the_subgoal_state_between() {
         let aut = channel_like();
         let atoms = aut.spec().atoms().to_vec();
@@ -355,9 +405,20 @@ mod tests {
         let loose = ranks(&aut, &[]);
         let tight = ranks(&aut, &[bit("a") | bit("b") | bit("c")]);
         let q0 = aut.initial();
-        // Without exclusivity a single valuation can satisfy a and c at once.
-        assert_eq!(loose[q0], Some(1));
+        // The discs are disjoint, so the geometry alone rules out a and c at once.
+        assert_eq!(loose[q0], Some(2));
         assert_eq!(tight[q0], Some(2));
+        // The formula alone knows no geometry: a single valuation can satisfy a and c at once,
+        // unless the exclusive group says otherwise.
+        let formula = "(F a | F b) & F c & (!c U (a | b)) & (w U c)";
+        let alone = Automaton::build(&Spec::from_formula(formula).unwrap()).unwrap();
+        let names = alone.spec().atoms().to_vec();
+        let bit = |name: &str| 1u32 << names.iter().position(|a| a == name).unwrap();
+        assert_eq!(ranks(&alone, &[])[alone.initial()], Some(1));
+        assert_eq!(
+            ranks(&alone, &[bit("a") | bit("b") | bit("c")])[alone.initial()],
+            Some(2)
+        );
         assert_eq!(aut.trap().map(|t| tight[t]), Some(None));
     }
 
@@ -475,6 +536,8 @@ mod tests {
         ) {
             let spec = spec_for(&f);
             let aut = Automaton::build(&spec).unwrap();
+            // An unsatisfiable task is refused (tested below).
+            prop_assume!(ranks(&aut, &[])[aut.initial()].is_some());
             let horizon = 11; // every trajectory has 12 states = 11 steps
             let params = ProgressParams { gamma, scale: 2.0, horizon, ..Default::default() };
             let mut r = ProgressReward::new(&aut, &params).unwrap();
@@ -530,6 +593,7 @@ mod tests {
         ) {
             let spec = spec_for(&f);
             let aut = Automaton::build(&spec).unwrap();
+            prop_assume!(ranks(&aut, &[])[aut.initial()].is_some());
             let params = ProgressParams { gamma, scale: 2.0, ..Default::default() };
             let r = ProgressReward::new(&aut, &params).unwrap();
             let states: Vec<&[f64]> = data.chunks(3).collect();

@@ -19,6 +19,8 @@ pub struct Spec {
     program: Program,
     exact_dim: Option<usize>,
     min_dim: usize,
+    /// Groups of atoms (bitmasks) of which at most one holds at a time.
+    exclusive: Vec<u32>,
 }
 
 impl Spec {
@@ -78,7 +80,61 @@ impl Spec {
             program,
             exact_dim,
             min_dim,
+            exclusive: Vec::new(),
         })
+    }
+
+    /// Declares groups of atoms of which at most one holds at any state (goal regions whose
+    /// positions live in the state, so the geometry cannot tell). The automaton's ranks, goals
+    /// and progress-preserving safe set then read only valuations that respect them. Unknown
+    /// names are an error, and so are two atoms of one group whose fixed regions overlap (they
+    /// can hold together). Disjoint fixed regions need no declaration: the geometry says so.
+    pub fn with_exclusive<G, S>(mut self, groups: G) -> Result<Self, SpecError>
+    where
+        G: IntoIterator,
+        G::Item: IntoIterator<Item = S>,
+        S: AsRef<str>,
+    {
+        let mut masks = Vec::new();
+        for group in groups {
+            let mut mask = 0u32;
+            for name in group {
+                let name = name.as_ref();
+                let Some(i) = self.atoms.iter().position(|a| a == name) else {
+                    return Err(SpecError::InvalidPredicate(format!(
+                        "exclusive names {name:?}, which is not an atom of the formula (atoms: \
+                         {})",
+                        self.atoms.join(", ")
+                    )));
+                };
+                mask |= 1 << i;
+            }
+            if self.is_bound() {
+                let members: Vec<usize> = (0..self.atoms.len())
+                    .filter(|i| mask >> i & 1 == 1)
+                    .collect();
+                for (k, &i) in members.iter().enumerate() {
+                    for &j in &members[k + 1..] {
+                        let (a, b) = (&self.predicates[i], &self.predicates[j]);
+                        if crate::region::can_hold_together(a, b) == Some(true) {
+                            return Err(SpecError::InvalidPredicate(format!(
+                                "exclusive groups {:?} and {:?} together, but their regions \
+                                 overlap: both can hold at one state",
+                                self.atoms[i], self.atoms[j]
+                            )));
+                        }
+                    }
+                }
+            }
+            masks.push(mask);
+        }
+        self.exclusive = masks;
+        Ok(self)
+    }
+
+    /// The declared exclusive groups as bitmasks over the atoms (bit `i`: atom `i`).
+    pub fn exclusive(&self) -> &[u32] {
+        &self.exclusive
     }
 
     /// The formula alone, its atoms without predicates: its automaton has the formula's
@@ -95,6 +151,7 @@ impl Spec {
             program,
             exact_dim: None,
             min_dim: 0,
+            exclusive: Vec::new(),
         })
     }
 

@@ -208,17 +208,42 @@ impl PyAutomaton {
             .collect())
     }
 
+    /// The CNF of the progress-preserving safe set of ``q``: the negation of every guard to a
+    /// state farther from acceptance (``ranks``), the trap's included; ``trap_cnf(q)`` where
+    /// the trap is the only setback.
+    fn avoid_cnf<'py>(
+        &self,
+        py: Python<'py>,
+        q: &Bound<'_, PyAny>,
+    ) -> PyResult<Vec<Vec<Bound<'py, PyString>>>> {
+        let q = self.state(q)?;
+        Ok(map(self.inner.avoid_cnf(q))?
+            .iter()
+            .map(|clause| clause.iter().map(|l| self.literals.get(py, l)).collect())
+            .collect())
+    }
+
+    /// Transitions to acceptance per state over the valuations the regions' geometry and the
+    /// spec's exclusive groups admit (``None``: unreachable, e.g. the trap).
+    #[getter]
+    fn ranks(&self) -> Vec<Option<u32>> {
+        self.inner.ranks().to_vec()
+    }
+
     /// Eq. 5C1: per clause of ``trap_cnf(q)`` the literal with the largest robustness at ``s``,
     /// as ``(literal, robustness)`` pairs (``("!g3", 2.4)``; empty when ``q`` has no trap
-    /// edge).
+    /// edge), each literal once. ``preserve_progress=True`` reads ``avoid_cnf(q)`` instead
+    /// (the shield's default).
+    #[pyo3(signature = (q, s, preserve_progress=false))]
     fn safe_set<'py>(
         &self,
         py: Python<'py>,
         q: &Bound<'_, PyAny>,
         s: &Bound<'py, PyAny>,
+        preserve_progress: bool,
     ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
         let q = self.state(q)?;
-        let kept = map(self.inner.safe_set(q, &vector(s, "s")?))?;
+        let kept = map(self.inner.safe_set(q, &vector(s, "s")?, preserve_progress))?;
         Ok(self.kept(py, &kept))
     }
 

@@ -36,6 +36,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ShieldError", m.py().get_type::<errors::ShieldError>())?;
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
+    m.add_class::<predicate::PyUnion>()?;
+    m.add_class::<predicate::PyIntersection>()?;
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
     m.add_class::<progress::PyProgressReward>()?;

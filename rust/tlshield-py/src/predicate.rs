@@ -1,9 +1,10 @@
-//! `Halfspace` and `Ball`: Python classes around `tlshield_core::Predicate`.
+//! `Halfspace`, `Ball`, `Union` and `Intersection`: Python classes around
+//! `tlshield_core::Predicate`.
 
 use numpy::{IntoPyArray, PyArray1};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyTuple;
+use pyo3::types::{PyList, PyTuple};
 use tlshield_core::{Center, Predicate};
 
 use crate::convert::{indices, FloatArray};
@@ -90,7 +91,7 @@ impl PyHalfspace {
     fn halfspace(&self) -> &tlshield_core::Halfspace {
         match &self.inner {
             Predicate::Halfspace(h) => h,
-            Predicate::Ball(_) => unreachable!("PyHalfspace always wraps a half-space"),
+            _ => unreachable!("PyHalfspace always wraps a half-space"),
         }
     }
 }
@@ -214,15 +215,135 @@ impl PyBall {
     fn ball(&self) -> &tlshield_core::Ball {
         match &self.inner {
             Predicate::Ball(b) => b,
-            Predicate::Halfspace(_) => unreachable!("PyBall always wraps a ball"),
+            _ => unreachable!("PyBall always wraps a ball"),
         }
     }
 }
 
 /// Wraps a core predicate in the matching Python class.
 pub fn to_python<'py>(py: Python<'py>, p: &Predicate) -> PyResult<Bound<'py, PyAny>> {
+    let inner = p.clone();
     Ok(match p {
-        Predicate::Halfspace(_) => Bound::new(py, PyHalfspace { inner: p.clone() })?.into_any(),
-        Predicate::Ball(_) => Bound::new(py, PyBall { inner: p.clone() })?.into_any(),
+        Predicate::Halfspace(_) => Bound::new(py, PyHalfspace { inner })?.into_any(),
+        Predicate::Ball(_) => Bound::new(py, PyBall { inner })?.into_any(),
+        Predicate::Union(_) => Bound::new(py, PyUnion { inner })?.into_any(),
+        Predicate::Intersection(_) => Bound::new(py, PyIntersection { inner })?.into_any(),
     })
 }
+
+/// A predicate from a Python `Halfspace`, `Ball`, `Union` or `Intersection`, or a list or
+/// tuple of them (their union: "red" made of two discs); `what` names it in the error.
+pub fn predicate_of(what: &str, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
+    if let Ok(h) = value.cast::<PyHalfspace>() {
+        return Ok(h.get().inner.clone());
+    }
+    if let Ok(b) = value.cast::<PyBall>() {
+        return Ok(b.get().inner.clone());
+    }
+    if let Ok(u) = value.cast::<PyUnion>() {
+        return Ok(u.get().inner.clone());
+    }
+    if let Ok(i) = value.cast::<PyIntersection>() {
+        return Ok(i.get().inner.clone());
+    }
+    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        return map(Predicate::union(parts_of(what, value)?));
+    }
+    Err(PyTypeError::new_err(format!(
+        "{what}: expected a tlshield.Halfspace, Ball, Union or Intersection (or a list of them, \
+         their union), got {}",
+        value
+            .get_type()
+            .name()
+            .map_or_else(|_| "?".into(), |n| n.to_string())
+    )))
+}
+
+fn parts_of(what: &str, parts: &Bound<'_, PyAny>) -> PyResult<Vec<Predicate>> {
+    parts
+        .try_iter()
+        .map_err(|_| PyTypeError::new_err(format!("{what}: expected a sequence of predicates")))?
+        .enumerate()
+        .map(|(i, p)| predicate_of(&format!("{what}[{i}]"), &p?))
+        .collect()
+}
+
+macro_rules! region_class {
+    ($rust:ident, $py:literal, $ctor:ident, $doc:literal) => {
+        #[doc = $doc]
+        #[pyclass(name = $py, module = "tlshield._core", frozen)]
+        pub struct $rust {
+            pub(crate) inner: Predicate,
+        }
+
+        #[pymethods]
+        impl $rust {
+            #[new]
+            fn new(parts: &Bound<'_, PyAny>) -> PyResult<Self> {
+                Ok($rust {
+                    inner: map(Predicate::$ctor(parts_of("parts", parts)?))?,
+                })
+            }
+
+            /// Robustness at state `s`.
+            fn robustness(&self, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+                value(&self.inner, s)
+            }
+
+            /// Gradient of the robustness at `s`: the deciding part's.
+            fn gradient<'py>(&self, s: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                gradient(&self.inner, s)
+            }
+
+            /// The parts.
+            #[getter]
+            fn parts<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyAny>>> {
+                self.inner
+                    .parts()
+                    .iter()
+                    .map(|p| to_python(py, p))
+                    .collect()
+            }
+
+            fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
+                let parts: Vec<String> = slf
+                    .get()
+                    .inner
+                    .parts()
+                    .iter()
+                    .map(|p| Ok(to_python(slf.py(), p)?.repr()?.to_string()))
+                    .collect::<PyResult<_>>()?;
+                Ok(format!("{}([{}])", $py, parts.join(", ")))
+            }
+
+            fn __reduce__<'py>(
+                slf: &Bound<'py, Self>,
+            ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+                let py = slf.py();
+                let parts = PyList::new(
+                    py,
+                    slf.get()
+                        .inner
+                        .parts()
+                        .iter()
+                        .map(|p| to_python(py, p))
+                        .collect::<PyResult<Vec<_>>>()?,
+                )?;
+                Ok((slf.get_type().into_any(), PyTuple::new(py, [parts])?))
+            }
+        }
+    };
+}
+
+region_class!(
+    PyUnion,
+    "Union",
+    union,
+    "A union of regions: holds where any part holds (robustness: the largest part's)."
+);
+region_class!(
+    PyIntersection,
+    "Intersection",
+    intersection,
+    "An intersection of regions: holds where every part holds (robustness: the smallest)."
+);

@@ -17,7 +17,8 @@ use crate::convert::{self, state, vector, FloatArray};
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
-use crate::spec::{predicate_of, PySpec};
+use crate::predicate::predicate_of;
+use crate::spec::PySpec;
 
 /// `(a, b)` or `[a, b]` (bounds read back from JSON are lists).
 fn pair<'py>(obj: &Bound<'py, PyAny>) -> Option<[Bound<'py, PyAny>; 2]> {
@@ -63,7 +64,7 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
                 Ok((p, w)) => (p, w),
                 Err(_) => (value, 1.0),
             };
-            let predicate = predicate_of(&key, &value)?;
+            let predicate = predicate_of(&format!("barriers[{name:?}]"), &value)?;
             let barrier = if name.starts_with('!') {
                 Barrier::outside(name, predicate)
             } else {
@@ -81,8 +82,10 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
     })?;
     for (i, item) in iter.enumerate() {
         let item = item?;
-        let key = i.into_pyobject(obj.py())?.into_any();
-        out.push(Barrier::inside(format!("h{i}"), predicate_of(&key, &item)?));
+        out.push(Barrier::inside(
+            format!("h{i}"),
+            predicate_of(&format!("barriers[{i}]"), &item)?,
+        ));
     }
     Ok(out)
 }
@@ -230,7 +233,7 @@ impl PyShield {
     #[pyo3(signature = (
         spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
-        slack_penalty=None, margin=None, alpha2=None, clf_gain=None,
+        slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -253,6 +256,7 @@ impl PyShield {
         margin: Option<f64>,
         alpha2: Option<f64>,
         clf_gain: Option<f64>,
+        preserve_progress: bool,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let dynamics = model_of(dynamics)?;
@@ -295,7 +299,8 @@ impl PyShield {
         .with_slack_penalty(slack_penalty.unwrap_or(ShieldConfig::DEFAULT_SLACK_PENALTY))
         .with_margin(margin.unwrap_or(ShieldConfig::DEFAULT_MARGIN))
         .with_alpha2(alpha2)
-        .with_clf_gain(clf_gain.unwrap_or(ShieldConfig::DEFAULT_CLF_GAIN));
+        .with_clf_gain(clf_gain.unwrap_or(ShieldConfig::DEFAULT_CLF_GAIN))
+        .with_preserve_progress(preserve_progress);
         let barrier_names = config
             .barriers
             .iter()

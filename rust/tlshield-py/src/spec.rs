@@ -10,7 +10,7 @@ use tlshield_core::{Automaton, Predicate, Spec, Trajectory, TrajectoryBatch};
 
 use crate::convert::FloatArray;
 use crate::errors::map;
-use crate::predicate::{to_python, PyBall, PyHalfspace};
+use crate::predicate::{predicate_of, to_python};
 
 /// An scTLTL formula over named state predicates.
 #[pyclass(name = "Spec", module = "tlshield._core", frozen)]
@@ -40,24 +40,6 @@ impl PySpec {
     }
 }
 
-/// A predicate from a Python `Halfspace` or `Ball`; `key` names it in the error.
-pub fn predicate_of(key: &Bound<'_, PyAny>, value: &Bound<'_, PyAny>) -> PyResult<Predicate> {
-    if let Ok(h) = value.cast::<PyHalfspace>() {
-        return Ok(h.get().inner.clone());
-    }
-    if let Ok(b) = value.cast::<PyBall>() {
-        return Ok(b.get().inner.clone());
-    }
-    Err(PyTypeError::new_err(format!(
-        "predicates[{}]: expected a tlshield.Halfspace or tlshield.Ball, got {}",
-        key.repr().map_or_else(|_| "?".into(), |r| r.to_string()),
-        value
-            .get_type()
-            .name()
-            .map_or_else(|_| "?".into(), |n| n.to_string())
-    )))
-}
-
 fn trajectory<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
     FloatArray::extract(obj, "traj", 2, "(T+1, n)")
 }
@@ -65,7 +47,12 @@ fn trajectory<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
 #[pymethods]
 impl PySpec {
     #[new]
-    fn new(formula: &str, predicates: &Bound<'_, PyAny>) -> PyResult<Self> {
+    #[pyo3(signature = (formula, predicates, exclusive=None))]
+    fn new(
+        formula: &str,
+        predicates: &Bound<'_, PyAny>,
+        exclusive: Option<Vec<Vec<String>>>,
+    ) -> PyResult<Self> {
         let items = predicates.call_method0("items").map_err(|_| {
             PyTypeError::new_err(format!(
                 "predicates: expected a mapping of atom names to predicates, got {}",
@@ -84,16 +71,37 @@ impl PySpec {
                     key.repr().map_or_else(|_| "?".into(), |r| r.to_string())
                 ))
             })?;
-            let predicate = predicate_of(&key, &value)?;
+            let what = format!("predicates[{}]", key.repr()?);
+            let predicate = predicate_of(&what, &value)?;
             bound.push((name, predicate));
         }
-        Ok(PySpec::from_core(map(Spec::new(formula, bound))?))
+        let mut spec = map(Spec::new(formula, bound))?;
+        if let Some(groups) = exclusive {
+            spec = map(spec.with_exclusive(groups))?;
+        }
+        Ok(PySpec::from_core(spec))
     }
 
     /// Atom names in order of first appearance in the formula.
     #[getter]
     fn atoms(&self) -> Vec<String> {
         self.inner.atoms().to_vec()
+    }
+
+    /// The declared exclusive groups, as lists of atom names.
+    #[getter]
+    fn exclusive(&self) -> Vec<Vec<String>> {
+        let atoms = self.inner.atoms();
+        self.inner
+            .exclusive()
+            .iter()
+            .map(|&g| {
+                (0..atoms.len())
+                    .filter(|i| g >> i & 1 == 1)
+                    .map(|i| atoms[i].clone())
+                    .collect()
+            })
+            .collect()
     }
 
     /// The predicates of the atoms, by name.
@@ -173,6 +181,7 @@ impl PySpec {
             [
                 this.inner.to_string().into_pyobject(py)?.into_any(),
                 this.predicates(py)?.into_any(),
+                this.exclusive().into_pyobject(py)?.into_any(),
             ],
         )?;
         Ok((slf.get_type().into_any(), args))

@@ -7,7 +7,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use smallvec::{smallvec, SmallVec};
 
-use super::{Automaton, Edge, MAX_ATOMS, MAX_TRANSITIONS};
+use super::{regions, Automaton, Edge, MAX_ATOMS, MAX_TRANSITIONS};
 use crate::cnf;
 use crate::error::AutomatonError;
 use crate::formula::Formula;
@@ -447,7 +447,30 @@ impl Automaton {
                 progress_cubes[e.src].extend_from_slice(&e.guard);
             }
         }
-        let trap_cnf = trap_guard.iter().map(|g| cnf::complement_cnf(g)).collect();
+        let trap_cnf: Vec<_> = trap_guard
+            .iter()
+            .map(|g| regions::dedup_cnf(cnf::complement_cnf(g)))
+            .collect();
+
+        // 5. The map's part (regions.rs): admissible letters, ranks, goals, the avoid CNF.
+        let (admissible, pairs) = regions::admissible_letters(spec, letters);
+        let ranks = regions::ranks(
+            num_states,
+            letters,
+            &accepting,
+            |q, v| table[q * letters + v] as usize,
+            |v| admissible[v],
+        );
+        let goal_alternatives = edges
+            .iter()
+            .map(|e| {
+                e.guard
+                    .iter()
+                    .map(|c| regions::goal_alternatives(spec, c))
+                    .collect()
+            })
+            .collect();
+        let avoid_cnf = regions::avoid_cnf(num_states, &edges, &ranks, &trap_cnf);
         Ok(Automaton {
             spec: spec.clone(),
             letters,
@@ -459,6 +482,11 @@ impl Automaton {
             progress: progress_cubes,
             trap_guard,
             trap_cnf,
+            admissible,
+            pairs,
+            ranks,
+            goal_alternatives,
+            avoid_cnf,
         })
     }
 }

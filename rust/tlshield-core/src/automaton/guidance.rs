@@ -5,10 +5,12 @@
 
 use smallvec::SmallVec;
 
+use super::regions::GoalAlternative;
 use super::{Automaton, Reading};
-use crate::cnf::{self, Cube, Literal};
+use crate::cnf::{self, Literal};
 use crate::error::{AutomatonError, InputError};
 use crate::predicate::{Center, Predicate};
+use crate::region;
 
 impl Reading<'_> {
     /// The Eq. 5A1 value of being in `q` at this state:
@@ -82,56 +84,82 @@ impl Reading<'_> {
     /// guard, the literal with the LARGEST robustness (the first on ties) and that robustness;
     /// empty without a trap edge. The paper prints argmin, which would keep e.g. "be inside g3"
     /// for the clause (g3 | c1); argmax keeps the literal that holds with the largest margin.
+    /// A literal chosen by two clauses appears once.
     pub fn safe_set(&self, q: usize, out: &mut Vec<(Literal, f64)>) {
+        self.choose(&self.aut.trap_cnf[q], out);
+    }
+
+    /// The progress-preserving safe set (beyond the paper): [`Reading::safe_set`] over the
+    /// avoid CNF of `q`, which also keeps the state out of the guards of edges that would set
+    /// the task back (to a state farther from acceptance). Equal to the Eq. 5C1 safe set where
+    /// the trap is the only setback.
+    pub fn progress_safe_set(&self, q: usize, out: &mut Vec<(Literal, f64)>) {
+        self.choose(&self.aut.avoid_cnf[q], out);
+    }
+
+    fn choose(&self, clauses: &[Vec<Literal>], out: &mut Vec<(Literal, f64)>) {
         let rho = self.rho();
         out.clear();
-        out.extend(self.aut.trap_cnf[q].iter().map(|clause| {
-            clause
+        for clause in clauses {
+            let (lit, h) = clause
                 .iter()
                 .map(|l| (*l, l.robustness(rho)))
                 .fold(None, first_max)
-                .expect("clauses are never empty")
-        }));
+                .expect("clauses are never empty");
+            if !out.iter().any(|(l, _)| *l == lit) {
+                out.push((lit, h));
+            }
+        }
     }
 
-    /// The CLF goal of Eq. 5B1 at `(s, q)` into `goal`: among `q`'s edges to other non-trap
-    /// states the one whose guard has the largest robustness (the first on ties), in its DNF the
-    /// cube with the largest robustness, and the mean of the centres of that cube's positive
-    /// Ball literals. `false` (and `goal` empty) when there is no such edge or the cube has no
-    /// positive Ball literal.
+    /// The CLF goal of Eq. 5B1 at `(s, q)` into `goal`, rank-aware (beyond the paper): among
+    /// `q`'s edges to states strictly closer to acceptance ([`Automaton::ranks`]), every way a
+    /// guard cube can hold (its non-empty goal alternatives: one part of each union, every part
+    /// of each intersection), the most robust at `s` (the first on ties); the goal is that
+    /// alternative's deepest point, the point of maximal least robustness of its regions.
+    /// `false` (and `goal` empty) when `q` cannot reach acceptance or no cube has a region.
     pub fn goal(&self, q: usize, goal: &mut Vec<f64>) -> bool {
         let (aut, s, rho) = (self.aut, self.s, self.rho());
         goal.clear();
-        let Some((cube, _)) = aut
-            .edges
-            .iter()
-            .filter(|e| e.src == q && e.dst != q && Some(e.dst) != aut.trap)
-            .filter_map(|e| best_cube(&e.guard, rho))
-            .fold(None, first_max)
-        else {
+        let Some(rank) = aut.ranks[q] else {
             return false;
         };
-        let mut count = 0.0;
-        for lit in cube.literals().filter(|l| l.positive) {
-            if let Predicate::Ball(ball) = &aut.spec.predicates()[lit.atom] {
-                let len = ball.pos().len();
-                if count == 0.0 {
-                    goal.resize(len, 0.0);
-                } else if goal.len() != len {
-                    continue;
+        let mut best: Option<(&GoalAlternative, f64)> = None;
+        for (e, edge) in aut.edges.iter().enumerate() {
+            if edge.src != q || edge.dst == q || aut.ranks[edge.dst].is_none_or(|d| d >= rank) {
+                continue;
+            }
+            for (cube, alternatives) in edge.guard.iter().zip(&aut.goal_alternatives[e]) {
+                let negatives = cube
+                    .literals()
+                    .filter(|l| !l.positive)
+                    .map(|l| l.robustness(rho))
+                    .fold(f64::INFINITY, f64::min);
+                for alt in alternatives {
+                    let score = alt
+                        .leaves
+                        .iter()
+                        .map(|p| p.value(s))
+                        .fold(negatives, f64::min);
+                    best = first_max(best, (alt, score));
                 }
-                match ball.center() {
-                    Center::Fixed(c) => goal.iter_mut().zip(c).for_each(|(a, b)| *a += b),
-                    Center::Dims(d) => goal.iter_mut().zip(d).for_each(|(a, &i)| *a += s[i]),
-                }
-                count += 1.0;
             }
         }
-        if count == 0.0 {
-            goal.clear();
+        let Some((alt, _)) = best else {
             return false;
+        };
+        match &alt.fixed {
+            Some(x) => goal.extend_from_slice(x),
+            None => {
+                let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
+                let placed = region::pieces(&leaves, &alt.dims, Some(s))
+                    .and_then(|pieces| region::deepest_point(&pieces));
+                match placed {
+                    Some((x, _)) => goal.extend_from_slice(&x),
+                    None => return false,
+                }
+            }
         }
-        goal.iter_mut().for_each(|v| *v /= count);
         true
     }
 }
@@ -179,11 +207,23 @@ impl Automaton {
         Ok((next, reward))
     }
 
-    /// The CBF safe set of Eq. 5C1 at `(s, q)` ([`Reading::safe_set`]), checked.
-    pub fn safe_set(&self, q: usize, s: &[f64]) -> Result<Vec<(Literal, f64)>, AutomatonError> {
+    /// The CBF safe set of Eq. 5C1 at `(s, q)` ([`Reading::safe_set`]), or with
+    /// `preserve_progress` the progress-preserving one ([`Reading::progress_safe_set`]),
+    /// checked.
+    pub fn safe_set(
+        &self,
+        q: usize,
+        s: &[f64],
+        preserve_progress: bool,
+    ) -> Result<Vec<(Literal, f64)>, AutomatonError> {
         self.check_state("q", q as i64)?;
-        let mut out = Vec::with_capacity(self.trap_cnf[q].len());
-        self.read(s)?.safe_set(q, &mut out);
+        let reading = self.read(s)?;
+        let mut out = Vec::with_capacity(self.avoid_cnf[q].len());
+        if preserve_progress {
+            reading.progress_safe_set(q, &mut out);
+        } else {
+            reading.safe_set(q, &mut out);
+        }
         Ok(out)
     }
 
@@ -226,12 +266,4 @@ fn first_max<T>(best: Option<(T, f64)>, cur: (T, f64)) -> Option<(T, f64)> {
         Some(b) if b.1 >= cur.1 => Some(b),
         _ => Some(cur),
     }
-}
-
-/// The cube of a DNF with the largest robustness (the first on ties) and that robustness.
-fn best_cube<'a>(guard: &'a [Cube], rho: &[f64]) -> Option<(&'a Cube, f64)> {
-    guard
-        .iter()
-        .map(|c| (c, c.robustness(rho)))
-        .fold(None, first_max)
 }

@@ -20,6 +20,9 @@ use crate::validate::check_finite;
 
 mod build;
 mod guidance;
+mod regions;
+
+pub use regions::ranks;
 
 /// Most atoms an automaton supports (its alphabet has `2^atoms` letters).
 pub const MAX_ATOMS: usize = 16;
@@ -55,6 +58,16 @@ pub struct Automaton {
     trap_guard: Vec<Vec<Cube>>,
     /// Per state: the CNF of the negated trap guard (empty: no trap edge).
     trap_cnf: Vec<Vec<Vec<Literal>>>,
+    /// Per letter: whether the regions' geometry lets it occur (see `regions`).
+    admissible: Vec<bool>,
+    /// Per atom pair (row-major, atoms x atoms): whether the two can hold together.
+    pairs: Vec<Option<bool>>,
+    /// Per state: transitions to acceptance over admissible letters.
+    ranks: Vec<Option<u32>>,
+    /// Per edge, per guard cube: where the cube can hold, with its goal.
+    goal_alternatives: Vec<Vec<Vec<regions::GoalAlternative>>>,
+    /// Per state: the CNF that keeps away from every setback (the progress-preserving safe set).
+    avoid_cnf: Vec<Vec<Vec<Literal>>>,
 }
 
 /// The atoms of one validated state, read once (see [`Automaton::read`]). Every query takes
@@ -142,6 +155,37 @@ impl Automaton {
     pub fn trap_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
         self.check_state("q", q as i64)?;
         Ok(&self.trap_cnf[q])
+    }
+
+    /// The CNF of the progress-preserving safe set of `q`: the negation of every guard to a
+    /// state farther from acceptance (or the trap); the trap CNF when nothing else sets back.
+    pub fn avoid_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
+        self.check_state("q", q as i64)?;
+        Ok(&self.avoid_cnf[q])
+    }
+
+    /// Transitions to acceptance from each state over the letters the regions' geometry
+    /// admits (`None`: unreachable, e.g. the trap).
+    pub fn ranks(&self) -> &[Option<u32>] {
+        &self.ranks
+    }
+
+    /// Whether the geometry admits valuation `v` (no two disjoint regions, no empty
+    /// intersection, among the atoms that hold). The caller guarantees `v < 2^atoms`.
+    pub fn admissible(&self, v: usize) -> bool {
+        self.admissible[v]
+    }
+
+    /// Whether atoms `i` and `j` can hold at one state: `Some(false)` for disjoint regions,
+    /// `Some(true)` for overlapping ones, `None` when the geometry does not say (moving
+    /// regions). Panics on an index past the atoms.
+    pub fn can_hold_together(&self, i: usize, j: usize) -> Option<bool> {
+        let n = self.spec.atoms().len();
+        assert!(i < n && j < n, "atom index past {n}");
+        if i == j {
+            return Some(true);
+        }
+        self.pairs[i * n + j]
     }
 
     /// The guard of `q`'s edge to the trap (empty: none).
@@ -361,13 +405,13 @@ mod tests {
     fn running_example_safe_set_is_the_papers() {
         // Between a and b, far from c: the kept literals are !a and !b (paper: C(s, q0)).
         let aut = running_example();
-        let kept = aut.safe_set(0, &[2.0, 0.0]).unwrap();
+        let kept = aut.safe_set(0, &[2.0, 0.0], false).unwrap();
         let lit = |atom, positive| Literal { atom, positive };
         assert_eq!(kept, vec![(lit(0, false), 1.0), (lit(1, false), 1.0)]);
         // Inside a the first clause keeps !a (the best literal, though violated: -0.5 > -6.5).
-        let kept = aut.safe_set(0, &[0.5, 0.0]).unwrap();
+        let kept = aut.safe_set(0, &[0.5, 0.0], false).unwrap();
         assert_eq!(kept, vec![(lit(0, false), -0.5), (lit(1, false), 2.5)]);
-        assert!(aut.safe_set(2, &[2.0, 0.0]).unwrap().is_empty());
+        assert!(aut.safe_set(2, &[2.0, 0.0], false).unwrap().is_empty());
     }
 
     #[test]
@@ -429,7 +473,7 @@ mod tests {
             let (next, reward) = aut.advance(q, &s, 2.0, None, &mut safe).unwrap();
             assert_eq!(next, aut.step(q, &s).unwrap());
             assert_eq!(reward, aut.reward(q, &s, 2.0, None).unwrap());
-            assert_eq!(safe, aut.safe_set(next, &s).unwrap());
+            assert_eq!(safe, aut.safe_set(next, &s, false).unwrap());
         }
         assert!(aut.advance(1, &[0.0, 0.0], 2.0, None, &mut safe).is_err());
         assert_eq!(
@@ -451,7 +495,7 @@ mod tests {
         assert_eq!(alone.trap_cnf(0).unwrap(), task.trap_cnf(0).unwrap());
         let s = [0.0; 13];
         assert!(alone.read(&s).is_err() && alone.step(0, &s).is_err());
-        assert!(alone.safe_set(0, &s).is_err() && alone.goal(0, &s).is_err());
+        assert!(alone.safe_set(0, &s, false).is_err() && alone.goal(0, &s).is_err());
     }
 
     #[test]
@@ -487,7 +531,7 @@ mod tests {
         let mut s = [0.0; 13];
         s[1] = 1.4;
         s[3..9].copy_from_slice(&[3.0, 3.0, 5.0, 4.0, 8.0, 8.0]);
-        let kept = aut.safe_set(0, &s).unwrap();
+        let kept = aut.safe_set(0, &s, false).unwrap();
         let names: Vec<_> = kept
             .iter()
             .map(|(l, _)| (aut.spec().atoms()[l.atom].as_str(), l.positive))

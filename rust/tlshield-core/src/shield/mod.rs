@@ -272,6 +272,10 @@ pub struct ShieldConfig {
     /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
     /// to `h = 0` exactly and count as a violation. Small ([`ShieldConfig::DEFAULT_MARGIN`]).
     pub margin: f64,
+    /// Whether the safe set also keeps the state out of guards that set the task back (the
+    /// progress-preserving safe set, [`crate::Reading::progress_safe_set`]; beyond the paper).
+    /// The same as Eq. 5C1's safe set where the trap is the only setback. On by default.
+    pub preserve_progress: bool,
 }
 
 impl ShieldConfig {
@@ -306,6 +310,7 @@ impl ShieldConfig {
             solver: SolverChoice::Auto,
             slack_penalty: Self::DEFAULT_SLACK_PENALTY,
             margin: Self::DEFAULT_MARGIN,
+            preserve_progress: true,
         }
     }
 
@@ -355,6 +360,12 @@ impl ShieldConfig {
     /// The barrier margin.
     pub fn with_margin(mut self, margin: f64) -> Self {
         self.margin = margin;
+        self
+    }
+
+    /// Whether the safe set preserves progress (see [`ShieldConfig::preserve_progress`]).
+    pub fn with_preserve_progress(mut self, on: bool) -> Self {
+        self.preserve_progress = on;
         self
     }
 
@@ -695,14 +706,20 @@ impl Shield {
         }
         if config.use_clf {
             for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
-                if let Predicate::Ball(ball) = p {
-                    if ball.pos().len() != config.pos.len() {
-                        return Err(ShieldError::Config(format!(
-                            "pos has {} dimensions but the goal ball {name:?} has {}; the CLF \
-                             drives s[pos] to ball centres, so they must match",
-                            config.pos.len(),
-                            ball.pos().len()
-                        )));
+                for leaf in crate::region::alternatives(p)
+                    .into_iter()
+                    .flatten()
+                    .flatten()
+                {
+                    if let Predicate::Ball(ball) = leaf {
+                        if ball.pos().len() != config.pos.len() {
+                            return Err(ShieldError::Config(format!(
+                                "pos has {} dimensions but the goal ball {name:?} has {}; the \
+                                 CLF drives s[pos] to points inside balls, so they must match",
+                                config.pos.len(),
+                                ball.pos().len()
+                            )));
+                        }
                     }
                 }
             }
@@ -1253,7 +1270,11 @@ mod tests {
             positive: true
         })));
         let goal = out.goal.clone().unwrap();
-        assert!(goal == vec![4.0, 4.0] || goal == vec![4.5, 6.5], "{goal:?}");
+        assert!(
+            goal == vec![4.0, 4.0] || goal == vec![4.5, 6.5],
+            "{goal:?} {:?}",
+            sh.automaton().edges()
+        );
         // Clarabel agrees.
         let by_clarabel = shield(config(SolverChoice::Clarabel))
             .filter(&s, q, &a_rl, None, None)

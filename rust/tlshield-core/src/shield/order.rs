@@ -67,9 +67,12 @@ impl Orders {
         // Only atoms that some state's safe set can keep are ever enforced.
         let enforced = |atom: usize| {
             (0..automaton.num_states()).any(|q| {
-                automaton
-                    .trap_cnf(q)
-                    .is_ok_and(|cnf| cnf.iter().flatten().any(|l| l.atom == atom))
+                let cnf = if config.preserve_progress {
+                    automaton.avoid_cnf(q)
+                } else {
+                    automaton.trap_cnf(q)
+                };
+                cnf.is_ok_and(|cnf| cnf.iter().flatten().any(|l| l.atom == atom))
             })
         };
         let atoms: Vec<bool> = spec

@@ -146,7 +146,11 @@ impl Program {
         // and right-hand side r + L . a_rl (see the module docs).
         if cfg.use_cbf {
             let spec = automaton.spec();
-            reading.safe_set(q, &mut self.safe);
+            if cfg.preserve_progress {
+                reading.progress_safe_set(q, &mut self.safe);
+            } else {
+                reading.safe_set(q, &mut self.safe);
+            }
             let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
                 let sign = if b.positive { 1.0 } else { -1.0 };
                 let h = sign * b.predicate.value(s);

@@ -1,0 +1,220 @@
+//! What the map adds to the automaton (beyond the paper): which letters can occur at all,
+//! how far each state is from acceptance over those letters, the goal alternatives of every
+//! guard cube, and the progress-preserving safe set's CNF.
+//!
+//! - A letter (the set of atoms that hold) is *admissible* unless the geometry rules it out:
+//!   two of its atoms are regions with no common interior point, or three or more of them
+//!   have an empty intersection ([`region`]), or the spec declares two of them exclusive
+//!   ([`Spec::with_exclusive`]: moving regions, which the geometry cannot judge). Negated
+//!   atoms and half-spaces alone never rule a letter out.
+//! - `rank(q)`: fewest transitions from `q` to acceptance over admissible letters (0 at
+//!   acceptance, `None` when unreachable, e.g. the trap).
+//! - Goal alternatives: a guard cube `a & b & !c` holds where some alternative of its positive
+//!   regions (a union is a choice, an intersection needs every part) holds and the negative
+//!   literals hold. Geometrically empty alternatives are dropped; each fixed one keeps its
+//!   deepest point ([`region::deepest_point`]), the exact goal of Eq. 5B1 for that cube.
+//! - The avoid CNF of `q`: the negation of every guard from `q` to a state farther from
+//!   acceptance than `q` (or from which it is unreachable), the trap's guard included. For a
+//!   formula whose only setback is the trap it equals the trap CNF of Eq. 5C1.
+
+use crate::cnf::{self, Cube, Literal};
+use crate::predicate::Predicate;
+use crate::region::{self, EMPTY_DEPTH};
+use crate::spec::Spec;
+
+use super::Edge;
+
+/// One way a guard cube can hold: the convex leaves of its positive literals' regions.
+#[derive(Debug, Clone)]
+pub(crate) struct GoalAlternative {
+    /// The leaves (balls, half-spaces) that must all hold.
+    pub leaves: Vec<Predicate>,
+    /// The goal space: the `pos` of the first ball.
+    pub dims: Vec<usize>,
+    /// The deepest point when every leaf in the goal space is fixed; `None`: it moves, and is
+    /// placed at each state.
+    pub fixed: Option<Vec<f64>>,
+}
+
+/// Which letters the geometry admits (`true` for all when it says nothing), and per atom pair
+/// whether the two can hold together (`None`: the geometry does not say).
+pub(super) fn admissible_letters(spec: &Spec, letters: usize) -> (Vec<bool>, Vec<Option<bool>>) {
+    let n = spec.atoms().len();
+    if !spec.is_bound() {
+        let admissible = (0..letters)
+            .map(|v| {
+                spec.exclusive()
+                    .iter()
+                    .all(|&g| (v as u32 & g).count_ones() <= 1)
+            })
+            .collect();
+        return (admissible, vec![None; n * n]);
+    }
+    let predicates = spec.predicates();
+    let mut pairs = vec![None; n * n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let c = region::can_hold_together(&predicates[i], &predicates[j]);
+            pairs[i * n + j] = c;
+            pairs[j * n + i] = c;
+        }
+    }
+    let alternatives: Vec<Option<Vec<Vec<&Predicate>>>> =
+        predicates.iter().map(region::alternatives).collect();
+    let mut admissible = vec![true; letters];
+    for (v, ok) in admissible.iter_mut().enumerate() {
+        if spec
+            .exclusive()
+            .iter()
+            .any(|&g| (v as u32 & g).count_ones() > 1)
+        {
+            *ok = false;
+            continue;
+        }
+        let atoms: Vec<usize> = (0..n).filter(|i| v >> i & 1 == 1).collect();
+        let clash = atoms.iter().enumerate().any(|(k, &i)| {
+            atoms[k + 1..]
+                .iter()
+                .any(|&j| pairs[i * n + j] == Some(false))
+        });
+        if clash {
+            *ok = false;
+            continue;
+        }
+        // Three or more regions can overlap pairwise with no common point.
+        let known: Vec<usize> = atoms
+            .iter()
+            .copied()
+            .filter(|&i| {
+                atoms
+                    .iter()
+                    .any(|&j| j != i && pairs[i * n + j] == Some(true))
+            })
+            .collect();
+        if known.len() >= 3 {
+            let mut joint: Option<Vec<Vec<&Predicate>>> = Some(vec![Vec::new()]);
+            for &i in &known {
+                joint = match (joint, &alternatives[i]) {
+                    (Some(acc), Some(alts)) => region::product(&acc, alts),
+                    _ => None,
+                };
+            }
+            if let Some(joint) = joint {
+                if region::region_nonempty(&joint) == Some(false) {
+                    *ok = false;
+                }
+            }
+        }
+    }
+    (admissible, pairs)
+}
+
+/// Fewest transitions from each state to acceptance reading only letters with
+/// `admissible(v)` (`None`: unreachable). `step(q, v)` is the transition table.
+pub fn ranks(
+    num_states: usize,
+    letters: usize,
+    accepting: &[bool],
+    step: impl Fn(usize, usize) -> usize,
+    admissible: impl Fn(usize) -> bool,
+) -> Vec<Option<u32>> {
+    let allowed: Vec<usize> = (0..letters).filter(|&v| admissible(v)).collect();
+    let mut rank: Vec<Option<u32>> = accepting.iter().map(|&a| a.then_some(0)).collect();
+    // Bellman-Ford over at most n rounds: the graph is small (states x admissible letters).
+    for _ in 0..num_states {
+        let mut changed = false;
+        for q in 0..num_states {
+            let best = allowed
+                .iter()
+                .filter_map(|&v| {
+                    let d = step(q, v);
+                    (d != q).then(|| rank[d].map(|r| r + 1)).flatten()
+                })
+                .min();
+            if let Some(b) = best {
+                if rank[q].is_none_or(|r| b < r) {
+                    rank[q] = Some(b);
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    rank
+}
+
+/// The goal alternatives of one guard cube (see the module docs); empty when no alternative
+/// has a ball, or every one is geometrically empty.
+pub(super) fn goal_alternatives(spec: &Spec, cube: &Cube) -> Vec<GoalAlternative> {
+    if !spec.is_bound() {
+        return Vec::new();
+    }
+    let predicates = spec.predicates();
+    let mut joint: Vec<Vec<&Predicate>> = vec![Vec::new()];
+    for lit in cube.literals().filter(|l| l.positive) {
+        let Some(next) = region::alternatives(&predicates[lit.atom])
+            .and_then(|alts| region::product(&joint, &alts))
+        else {
+            return Vec::new();
+        };
+        joint = next;
+    }
+    let mut out = Vec::new();
+    for leaves in joint {
+        let Some(dims) = region::goal_dims(&leaves) else {
+            continue;
+        };
+        let fixed = match region::pieces(&leaves, dims, None) {
+            Some(pieces) => match region::deepest_point(&pieces) {
+                Some((_, depth)) if depth <= EMPTY_DEPTH => continue,
+                Some((x, _)) => Some(x),
+                None => continue,
+            },
+            None => None,
+        };
+        out.push(GoalAlternative {
+            leaves: leaves.into_iter().cloned().collect(),
+            dims: dims.to_vec(),
+            fixed,
+        });
+    }
+    out
+}
+
+/// The avoid CNF of every state (see the module docs): the trap CNF where `q` cannot reach
+/// acceptance, duplicate clauses and literals removed.
+pub(super) fn avoid_cnf(
+    num_states: usize,
+    edges: &[Edge],
+    ranks: &[Option<u32>],
+    trap_cnf: &[Vec<Vec<Literal>>],
+) -> Vec<Vec<Vec<Literal>>> {
+    (0..num_states)
+        .map(|q| {
+            let Some(r) = ranks[q] else {
+                return trap_cnf[q].clone();
+            };
+            let setbacks: Vec<Cube> = edges
+                .iter()
+                .filter(|e| e.src == q && e.dst != q && ranks[e.dst].is_none_or(|d| d > r))
+                .flat_map(|e| e.guard.iter().copied())
+                .collect();
+            dedup_cnf(cnf::complement_cnf(&setbacks))
+        })
+        .collect()
+}
+
+/// Sorted literals per clause, no repeated clause.
+pub(super) fn dedup_cnf(clauses: Vec<Vec<Literal>>) -> Vec<Vec<Literal>> {
+    let mut out: Vec<Vec<Literal>> = Vec::with_capacity(clauses.len());
+    for mut clause in clauses {
+        clause.sort();
+        clause.dedup();
+        if !out.contains(&clause) {
+            out.push(clause);
+        }
+    }
+    out
+}

@@ -1,0 +1,361 @@
+//! The geometry of regions, for guidance (beyond the paper): the convex pieces of a predicate,
+//! the deepest point of an intersection of pieces, and which atoms can hold together.
+//!
+//! A union is a choice among its parts and an intersection needs all of them, so a positive
+//! predicate is a DNF of convex pieces (balls, half-spaces): its *alternatives*. The deepest
+//! point of an alternative maximises the least robustness of its pieces,
+//! `max_x min_i rho_i(x)`: a second-order cone program, solved exactly by Clarabel. Its value
+//! (the depth) is > 0 iff the pieces have a common interior point, so it also tells whether a
+//! conjunction of regions is geometrically empty.
+//!
+//! Only pieces in one coordinate space take part: balls over the same `pos` dimensions and
+//! half-spaces that read no other dimension. A piece whose centre is read from the state
+//! (a moving region) is *dynamic*: it has a deepest point at every state but none fixed.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus,
+    SupportedConeT::{NonnegativeConeT, SecondOrderConeT},
+};
+
+use crate::predicate::{Center, Predicate};
+
+/// Most alternatives one conjunction may expand into (the product of its unions' sizes).
+pub const MAX_ALTERNATIVES: usize = 256;
+
+/// Depths at or below this count as empty: atoms hold strictly inside, so regions that only
+/// touch share no point, and the solver's tolerance must not make them overlap.
+pub const EMPTY_DEPTH: f64 = 1e-7;
+
+/// A convex piece in the coordinates of a goal space (`dims`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Piece {
+    /// `radius - |x - centre|`.
+    Ball {
+        /// The centre.
+        centre: Vec<f64>,
+        /// The radius.
+        radius: f64,
+    },
+    /// `w . x + b`.
+    Halfspace {
+        /// The normal.
+        w: Vec<f64>,
+        /// The offset.
+        b: f64,
+    },
+}
+
+impl Piece {
+    /// Robustness at `x` (goal coordinates).
+    pub fn value(&self, x: &[f64]) -> f64 {
+        match self {
+            Piece::Ball { centre, radius } => {
+                let sq: f64 = x.iter().zip(centre).map(|(a, c)| (a - c) * (a - c)).sum();
+                radius - sq.sqrt()
+            }
+            Piece::Halfspace { w, b } => w.iter().zip(x).map(|(w, x)| w * x).sum::<f64>() + b,
+        }
+    }
+}
+
+/// The convex leaves of a positive predicate as a DNF: the predicate holds iff every leaf of
+/// some alternative holds. `None` when the expansion exceeds [`MAX_ALTERNATIVES`].
+pub fn alternatives(p: &Predicate) -> Option<Vec<Vec<&Predicate>>> {
+    match p {
+        Predicate::Halfspace(_) | Predicate::Ball(_) => Some(vec![vec![p]]),
+        Predicate::Union(parts) => {
+            let mut out = Vec::new();
+            for part in parts {
+                out.extend(alternatives(part)?);
+                if out.len() > MAX_ALTERNATIVES {
+                    return None;
+                }
+            }
+            Some(out)
+        }
+        Predicate::Intersection(parts) => {
+            let mut out: Vec<Vec<&Predicate>> = vec![Vec::new()];
+            for part in parts {
+                out = product(&out, &alternatives(part)?)?;
+            }
+            Some(out)
+        }
+    }
+}
+
+/// Every concatenation of one alternative of `a` with one of `b`.
+pub fn product<'a>(
+    a: &[Vec<&'a Predicate>],
+    b: &[Vec<&'a Predicate>],
+) -> Option<Vec<Vec<&'a Predicate>>> {
+    if a.len() * b.len() > MAX_ALTERNATIVES {
+        return None;
+    }
+    Some(
+        a.iter()
+            .flat_map(|x| b.iter().map(move |y| x.iter().chain(y).copied().collect()))
+            .collect(),
+    )
+}
+
+/// The goal space of a set of leaves: the `pos` of their first ball (`None` without a ball).
+pub fn goal_dims<'a>(leaves: &[&'a Predicate]) -> Option<&'a [usize]> {
+    leaves.iter().find_map(|p| match p {
+        Predicate::Ball(b) => Some(b.pos()),
+        _ => None,
+    })
+}
+
+/// `leaf` as a piece over `dims`: a ball over exactly `dims` (its centre read from `s` when it
+/// moves; `None` for a moving ball without `s`), or a half-space reading only `dims`.
+/// `Some(None)`: the leaf does not live in this space (it takes no part).
+pub fn piece(leaf: &Predicate, dims: &[usize], s: Option<&[f64]>) -> Option<Option<Piece>> {
+    match leaf {
+        Predicate::Ball(b) if b.pos() == dims => {
+            let centre = match (b.center(), s) {
+                (Center::Fixed(c), _) => c.clone(),
+                (Center::Dims(d), Some(s)) => d.iter().map(|&i| s[i]).collect(),
+                (Center::Dims(_), None) => return None,
+            };
+            Some(Some(Piece::Ball {
+                centre,
+                radius: b.radius(),
+            }))
+        }
+        Predicate::Halfspace(h)
+            if (0..h.w().len()).all(|d| h.w()[d] == 0.0 || dims.contains(&d)) =>
+        {
+            Some(Some(Piece::Halfspace {
+                w: dims
+                    .iter()
+                    .map(|&d| h.w().get(d).copied().unwrap_or(0.0))
+                    .collect(),
+                b: h.b(),
+            }))
+        }
+        _ => Some(None),
+    }
+}
+
+/// The pieces of `leaves` over `dims` (`None`: a moving ball and no state to place it).
+pub fn pieces(leaves: &[&Predicate], dims: &[usize], s: Option<&[f64]>) -> Option<Vec<Piece>> {
+    let mut out = Vec::with_capacity(leaves.len());
+    for leaf in leaves {
+        if let Some(p) = piece(leaf, dims, s)? {
+            out.push(p);
+        }
+    }
+    Some(out)
+}
+
+/// The deepest point of the intersection of `pieces` and its depth,
+/// `argmax_x min_i rho_i(x)`; `None` without a ball (the depth may be unbounded) or when the
+/// solver fails. One ball alone is answered in closed form (its centre, depth = radius).
+pub fn deepest_point(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
+    let balls = pieces
+        .iter()
+        .filter(|p| matches!(p, Piece::Ball { .. }))
+        .count();
+    if balls == 0 {
+        return None;
+    }
+    if let [Piece::Ball { centre, radius }] = pieces {
+        return Some((centre.clone(), *radius));
+    }
+    let d = pieces.iter().find_map(|p| match p {
+        Piece::Ball { centre, .. } => Some(centre.len()),
+        _ => None,
+    })?;
+    // Variables z = (x, t); minimise -t subject to, per ball, (r - t, x - c) in the second-order
+    // cone, and per half-space w . x + b - t >= 0. Clarabel's form: A z + s = b, s in K.
+    let n = d + 1;
+    let mut rows: Vec<(Vec<f64>, f64)> = Vec::new(); // (row of A, b)
+    let mut cones = Vec::new();
+    let mut halfspaces = 0;
+    for p in pieces {
+        if let Piece::Halfspace { w, b } = p {
+            let mut a: Vec<f64> = w.iter().map(|v| -v).collect();
+            a.push(1.0);
+            rows.push((a, *b));
+            halfspaces += 1;
+        }
+    }
+    if halfspaces > 0 {
+        cones.push(NonnegativeConeT(halfspaces));
+    }
+    for p in pieces {
+        if let Piece::Ball { centre, radius } = p {
+            let mut a = vec![0.0; n];
+            a[d] = 1.0;
+            rows.push((a, *radius));
+            for (k, c) in centre.iter().enumerate() {
+                let mut a = vec![0.0; n];
+                a[k] = -1.0;
+                rows.push((a, -c));
+            }
+            cones.push(SecondOrderConeT(d + 1));
+        }
+    }
+    let m = rows.len();
+    let mut dense = vec![vec![0.0; n]; m];
+    for (i, (a, _)) in rows.iter().enumerate() {
+        dense[i].copy_from_slice(a);
+    }
+    let a = CscMatrix::from(&dense);
+    let b: Vec<f64> = rows.iter().map(|r| r.1).collect();
+    let p = CscMatrix::zeros((n, n));
+    let mut q = vec![0.0; n];
+    q[d] = -1.0;
+    let settings = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .build()
+        .ok()?;
+    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings).ok()?;
+    solver.solve();
+    if !matches!(
+        solver.solution.status,
+        SolverStatus::Solved | SolverStatus::AlmostSolved
+    ) {
+        return None;
+    }
+    let z = &solver.solution.x;
+    let x = z[..d].to_vec();
+    // The depth at the returned point, exactly (not the solver's t).
+    let depth = pieces
+        .iter()
+        .map(|p| p.value(&x))
+        .fold(f64::INFINITY, f64::min);
+    Some((x, depth))
+}
+
+/// Whether the atoms' regions can hold at one point, per pair: `Some(false)` when every
+/// alternative pair is geometrically disjoint, `Some(true)` when one has a common interior
+/// point, `None` when the geometry does not say (moving regions, no ball, other dimensions).
+pub fn can_hold_together(a: &Predicate, b: &Predicate) -> Option<bool> {
+    let (alts_a, alts_b) = (alternatives(a)?, alternatives(b)?);
+    let joint = product(&alts_a, &alts_b)?;
+    region_nonempty(&joint)
+}
+
+/// Whether some alternative of `alts` (a DNF of leaves) has a common interior point; `None`
+/// when the geometry does not say for some alternative that is not known empty.
+pub fn region_nonempty(alts: &[Vec<&Predicate>]) -> Option<bool> {
+    let mut unknown = false;
+    for leaves in alts {
+        let Some(dims) = goal_dims(leaves) else {
+            unknown = true;
+            continue;
+        };
+        // Every leaf must live in the goal space, fixed, for the answer to be exact.
+        let mut all = true;
+        let mut placed = Vec::with_capacity(leaves.len());
+        for leaf in leaves {
+            match piece(leaf, dims, None) {
+                Some(Some(p)) => placed.push(p),
+                _ => all = false,
+            }
+        }
+        match deepest_point(&placed) {
+            Some((_, depth)) if depth > EMPTY_DEPTH => {
+                if all {
+                    return Some(true);
+                }
+                unknown = true;
+            }
+            // The known pieces alone are disjoint: so is the whole alternative.
+            Some(_) => {}
+            None => unknown = true,
+        }
+    }
+    if unknown {
+        None
+    } else {
+        Some(false)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ball(c: [f64; 2], r: f64) -> Piece {
+        Piece::Ball {
+            centre: c.to_vec(),
+            radius: r,
+        }
+    }
+
+    /// Brute-force depth over a fine grid around the pieces.
+    fn grid_depth(pieces: &[Piece]) -> f64 {
+        let mut best = f64::NEG_INFINITY;
+        let steps = 400;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                let x = [
+                    -3.0 + 6.0 * i as f64 / steps as f64,
+                    -3.0 + 6.0 * j as f64 / steps as f64,
+                ];
+                let v = pieces
+                    .iter()
+                    .map(|p| p.value(&x))
+                    .fold(f64::INFINITY, f64::min);
+                best = best.max(v);
+            }
+        }
+        best
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(40))]
+
+        /// The solver's depth is at least the grid's (it is the maximum) and within the grid's
+        /// resolution of it; the point returned attains it.
+        #[test]
+        fn deepest_point_matches_brute_force(
+            discs in proptest::collection::vec((-1.5..1.5f64, -1.5..1.5f64, 0.1..1.2f64), 1..4),
+            half in proptest::option::of((-1.0..1.0f64, -1.0..1.0f64, -0.5..1.5f64)),
+        ) {
+            let mut pieces: Vec<Piece> = discs.iter().map(|&(x, y, r)| ball([x, y], r)).collect();
+            if let Some((a, b, c)) = half {
+                proptest::prop_assume!(a.abs() + b.abs() > 0.1);
+                pieces.push(Piece::Halfspace { w: vec![a, b], b: c });
+            }
+            let (x, depth) = deepest_point(&pieces).expect("solved");
+            let grid = grid_depth(&pieces);
+            let exact = pieces.iter().map(|p| p.value(&x)).fold(f64::INFINITY, f64::min);
+            proptest::prop_assert!((exact - depth).abs() < 1e-12);
+            proptest::prop_assert!(depth >= grid - 1e-6, "{depth} < grid {grid}");
+            // The grid spacing is 0.015; every piece is 1-Lipschitz up to |w| <= 1.42.
+            proptest::prop_assert!(depth <= grid + 0.015, "{depth} vs grid {grid}");
+        }
+    }
+
+    #[test]
+    fn two_discs_deepest_point_is_on_the_segment() {
+        // Blue (0.1, 0) r 0.8 and aqua (0.8, 0.2) r 0.3: the mean of the centres is outside aqua.
+        let pieces = [ball([0.1, 0.0], 0.8), ball([0.8, 0.2], 0.3)];
+        let (x, depth) = deepest_point(&pieces).unwrap();
+        assert!(depth > 0.0 && pieces.iter().all(|p| p.value(&x) >= depth - 1e-9));
+        // Aqua lies inside blue's disc (|c| = 0.728 + 0.3 > 0.8 just): depth below aqua's radius.
+        assert!(depth <= 0.3 + 1e-9);
+    }
+
+    #[test]
+    fn disjoint_discs_are_empty() {
+        let a = Predicate::ball(vec![0, 1], 0.3, Center::Fixed(vec![0.0, 0.0])).unwrap();
+        let b = Predicate::ball(vec![0, 1], 0.3, Center::Fixed(vec![1.0, 0.0])).unwrap();
+        let c = Predicate::ball(vec![0, 1], 0.8, Center::Fixed(vec![0.5, 0.0])).unwrap();
+        assert_eq!(can_hold_together(&a, &b), Some(false));
+        assert_eq!(can_hold_together(&a, &c), Some(true));
+        let ab = Predicate::union(vec![a.clone(), b.clone()]).unwrap();
+        assert_eq!(can_hold_together(&ab, &c), Some(true));
+        let far = Predicate::ball(vec![0, 1], 0.1, Center::Fixed(vec![5.0, 5.0])).unwrap();
+        assert_eq!(can_hold_together(&ab, &far), Some(false));
+        // Touching discs share no interior point (atoms hold strictly inside).
+        let touch = Predicate::ball(vec![0, 1], 0.7, Center::Fixed(vec![1.0, 0.0])).unwrap();
+        assert_eq!(can_hold_together(&a, &touch), Some(false));
+        let moving = Predicate::ball(vec![0, 1], 0.3, Center::Dims(vec![2, 3])).unwrap();
+        assert_eq!(can_hold_together(&a, &moving), None);
+    }
+}
