@@ -428,11 +428,52 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument("--quiet", action="store_true")
     tune.set_defaults(handler=_tune)
 
+    bench = sub.add_parser(
+        "benchmark", help="published benchmarks: FlatWorld against DeepLTL's table"
+    )
+    bench.add_argument("suite", choices=["flatworld"], help="which benchmark")
+    bench.add_argument(
+        "--formulas", nargs="+", metavar="FORMULA", help="default: DeepLTL's five, as published"
+    )
+    bench.add_argument(
+        "--configs",
+        nargs="+",
+        choices=sorted(CONFIGS),
+        default=["rl_cbf_clf", "rl"],
+        help="trained configurations (default: rl_cbf_clf rl)",
+    )
+    bench.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
+    bench.add_argument("--episodes", type=_positive, default=500, help="evaluation episodes")
+    bench.add_argument("--steps", type=_positive, default=150_000, help="PPO steps per agent")
+    bench.add_argument("--out", default="results_flatworld", help="(default: results_flatworld)")
+    _add_ray(bench)
+    bench.add_argument("--quiet", action="store_true")
+    bench.set_defaults(handler=_benchmark)
+
     plot = sub.add_parser("plot", help="figures and the results table from a results folder")
     plot.add_argument("results", help="results folder (as written by reproduce)")
     plot.add_argument("--out", help="figures folder (default: RESULTS/figures)")
     plot.set_defaults(handler=_plot)
     return parser
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    from tlshield.benchmark import flatworld
+
+    out = flatworld(
+        args.out,
+        formulas=args.formulas,
+        configs=args.configs,
+        seeds=args.seeds,
+        episodes=args.episodes,
+        steps=args.steps,
+        address=args.address,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
+    print((out / "flatworld.md").read_text())
+    print(f"wrote {out / 'flatworld.csv'}, {out / 'flatworld.md'}, {out / 'flatworld_paths.png'}")
+    return 0
 
 
 def _one_line(err: BaseException) -> str:

@@ -1,0 +1,376 @@
+"""``tlshield benchmark flatworld``: tlshield on DeepLTL's FlatWorld formulas, beside the
+published success rates of DeepLTL, GCRL-LTL and LTL2Action.
+
+Per (configuration, formula, seed) a PPO agent is trained on ``tlshield/FlatWorld-v0`` with
+that formula and shield configuration, then evaluated on ``episodes`` episodes with the
+stochastic policy (as published) and the CBF on in every configuration but ``rl`` (the
+unshielded contrast row). Two rows need no training: the shield with a zero policy
+(``tlshield-zero``) and with a uniformly random one (``tlshield-random``), so a reader sees
+what the shield does alone. Training jobs run as Ray tasks (:mod:`tlshield.cluster`).
+
+The comparison is not like for like, and every table says so: DeepLTL learns one policy for
+all formulas (15M steps, zero-shot) with no map and no model; tlshield trains one agent per
+formula, and its shield knows the discs and the dynamics.
+
+Seeds: training env ``i`` of seed ``s`` resets from ``1000 s + i``; evaluation episode ``k``
+from ``EVAL_SEED + 1000 s + k`` (disjoint, and never used for tuning).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tlshield.evaluation import EVAL_SEED
+
+#: The columns of ``flatworld.csv``.
+COLUMNS = (
+    "method",
+    "task",
+    "seed",
+    "success_rate",
+    "mean_steps",
+    "violations",
+    "box_exits",
+    "train_violations",
+    "train_steps",
+)
+
+#: The published numbers: Jackermeier & Abate, "DeepLTL: Learning to Efficiently Satisfy
+#: Complex LTL Specifications for Multi-Task RL", ICLR 2025, Table (FlatWorld), 5 seeds x 500
+#: episodes, stochastic policies; DeepLTL's mean steps of successful episodes in brackets.
+#: Per-seed data: ``results/FlatWorld-v0.csv`` of github.com/mathiasj33/deep-ltl.
+PUBLISHED_SOURCE = (
+    "Jackermeier & Abate, DeepLTL (ICLR 2025), FlatWorld table; 5 seeds x 500 episodes, "
+    "stochastic policy; one policy for all formulas, 15M steps, no map or model"
+)
+PUBLISHED: dict[str, dict[int, tuple[float, float | None]]] = {
+    "DeepLTL": {
+        1: (1.000, 79.7),
+        2: (0.999, 52.8),
+        3: (0.978, 71.8),
+        4: (0.860, 43.9),
+        5: (0.996, 37.0),
+    },
+    "GCRL-LTL": {1: (0.818, None), 2: (0.000, None), 3: (0.726, None), 4: (0.725, None), 5: (0.636, None)},
+    "LTL2Action": {1: (0.999, None), 2: (0.628, None), 3: (0.714, None), 4: (0.073, None), 5: (0.562, None)},
+}
+
+#: Defaults of the command.
+DEFAULT_CONFIGS = ("rl_cbf_clf", "rl")
+DEFAULT_SEEDS = (1, 2, 3)
+DEFAULT_EPISODES = 500
+DEFAULT_STEPS = 150_000
+
+#: PPO settings (SB3 names) shared by every formula: no per-formula settings.
+PPO = {
+    "n_steps": 256,
+    "batch_size": 256,
+    "n_epochs": 10,
+    "learning_rate": 3e-4,
+    "gamma": 0.99,
+    "gae_lambda": 0.95,
+    "ent_coef": 0.0,
+    "clip_range": 0.2,
+}
+N_ENVS = 8
+
+Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+
+
+def _make(formula: str, config: str, evaluation: bool) -> Any:
+    import gymnasium as gym
+
+    return gym.make(
+        "tlshield/FlatWorld-v0",
+        formula=formula,
+        config=config,
+        evaluation=evaluation,
+        gamma=PPO["gamma"],
+        disable_env_checker=True,
+    )
+
+
+def run_episodes(
+    formula: str, config: str, policy: Policy, seed: int, episodes: int, batch: int = 50
+) -> dict[str, Any]:
+    """Evaluation: ``episodes`` episodes (``batch`` side by side, one policy call per step),
+    CBF on unless ``config == "rl"``. Returns the success rate, the mean steps of successful
+    episodes (DeepLTL's measure), trap entries (``violations``: the formula's safety part
+    broken), box exits and a few paths for the figure."""
+    rng = np.random.default_rng(EVAL_SEED + 1000 * seed)
+    evaluation = config != "rl"
+    successes, steps, violations, exits = 0, [], 0, 0
+    paths: list[tuple[np.ndarray, bool]] = []
+    for start in range(0, episodes, batch):
+        idx = list(range(start, min(start + batch, episodes)))
+        envs = [_make(formula, config, evaluation) for _ in idx]
+        obs = np.stack([e.reset(seed=EVAL_SEED + 1000 * seed + k)[0] for e, k in zip(envs, idx)])
+        active = list(range(len(idx)))
+        t = 0
+        while active:
+            t += 1
+            actions = policy(obs[active], rng)
+            still = []
+            for i, a in zip(active, actions, strict=True):
+                o, _, term, trunc, info = envs[i].step(a)
+                obs[i] = o
+                violations += int(info["trap"] and term)
+                if term or trunc:
+                    exits += int(info["box_exit"])
+                    if info["success"]:
+                        successes += 1
+                        steps.append(t)
+                    if len(paths) < 12:
+                        world = envs[i].unwrapped
+                        paths.append((np.asarray(world.path), bool(info["success"])))
+                else:
+                    still.append(i)
+            active = still
+        for e in envs:
+            e.close()
+    return {
+        "success_rate": successes / episodes,
+        "mean_steps": float(np.mean(steps)) if steps else math.nan,
+        "violations": violations,
+        "box_exits": exits,
+        "paths": paths,
+    }
+
+
+def zero_policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The shield alone: the agent proposes nothing."""
+    return np.zeros((len(obs), 2))
+
+
+def random_policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Uniform actions in ``[-1, 1]^2``."""
+    return rng.uniform(-1.0, 1.0, size=(len(obs), 2))
+
+
+def train_agent(formula: str, config: str, seed: int, steps: int) -> tuple[Any, dict[str, int]]:
+    """PPO on one formula and configuration; returns the model and the training counts
+    (trap entries plus box exits, and steps)."""
+    import torch
+    from stable_baselines3 import PPO as SB3PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    torch.set_num_threads(1)
+    venv = DummyVecEnv([partial(_make, formula, config, False)] * N_ENVS)
+    venv.seed(1000 * seed)
+    counts = {"train_violations": 0, "train_steps": 0}
+
+    class Count(BaseCallback):
+        def _on_step(self) -> bool:
+            for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+                if done:
+                    counts["train_violations"] += int(info["trap"]) + int(info["box_exit"])
+            return True
+
+    model = SB3PPO(
+        "MlpPolicy",
+        venv,
+        seed=seed,
+        device="cpu",
+        verbose=0,
+        policy_kwargs={"net_arch": [64, 64]},
+        **PPO,
+    )
+    model.learn(total_timesteps=steps, callback=Count())
+    counts["train_steps"] = int(model.num_timesteps)
+    venv.close()
+    return model, counts
+
+
+def job(formula: str, k: int, config: str, seed: int, steps: int, episodes: int, folder: Path) -> None:
+    """One (config, formula, seed): train, evaluate, write ``result.json`` and ``paths.npz``
+    into ``folder`` (a Ray task)."""
+    start = time.perf_counter()
+    model, counts = train_agent(formula, config, seed, steps)
+
+    def policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return model.predict(obs, deterministic=False)[0]
+
+    result = run_episodes(formula, config, policy, seed, episodes)
+    _write(folder, f"tlshield-{config}", formula, k, seed, result, counts, time.perf_counter() - start)
+
+
+def _write(
+    folder: Path,
+    method: str,
+    formula: str,
+    k: int,
+    seed: int,
+    result: dict[str, Any],
+    counts: dict[str, int],
+    wall: float,
+) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = result.pop("paths")
+    row = {"method": method, "task": formula, "formula": k, "seed": seed, **result, **counts}
+    row["wall_time"] = wall
+    (folder / "result.json").write_text(json.dumps(row, indent=2))
+    np.savez(
+        folder / "paths.npz",
+        **{f"path{i}": p for i, (p, _) in enumerate(paths)},
+        success=np.array([ok for _, ok in paths], dtype=bool),
+    )
+
+
+def flatworld(
+    out: str | Path,
+    *,
+    formulas: Sequence[str] | None = None,
+    configs: Sequence[str] = DEFAULT_CONFIGS,
+    seeds: Sequence[int] = DEFAULT_SEEDS,
+    episodes: int = DEFAULT_EPISODES,
+    steps: int = DEFAULT_STEPS,
+    address: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+) -> Path:
+    """Runs the benchmark into ``out`` (resumable: finished jobs are kept) and writes
+    ``flatworld.csv``, ``flatworld.md`` and ``flatworld_paths.png``."""
+    from tlshield.envs.flatworld import CONFIGS, FORMULAS, flatworld_spec
+
+    formulas = list(formulas or FORMULAS)
+    for f in formulas:
+        flatworld_spec(f)  # a formula over unknown colours fails here, before any job
+    for c in configs:
+        if c not in CONFIGS:
+            raise ValueError(f"config {c!r}: expected one of {', '.join(CONFIGS)}")
+    if not (isinstance(episodes, int) and episodes > 0):
+        raise ValueError(f"episodes = {episodes!r}: expected a positive integer")
+    if not (isinstance(steps, int) and steps > 0):
+        raise ValueError(f"steps = {steps!r}: expected a positive integer")
+    for s in seeds:
+        if not (isinstance(s, int) and 0 <= s < 9):
+            raise ValueError(f"seed = {s!r}: expected an integer in [0, 9)")
+    out = Path(out)
+    runs = out / "runs"
+    runs.mkdir(parents=True, exist_ok=True)
+    # The shield alone: cheap, run here.
+    for k, f in enumerate(formulas, 1):
+        for s in seeds:
+            for name, policy in (("zero", zero_policy), ("random", random_policy)):
+                folder = runs / f"{name}-f{k}-s{s}"
+                if not (folder / "result.json").exists():
+                    t0 = time.perf_counter()
+                    result = run_episodes(f, "rl_cbf_clf", policy, s, episodes)
+                    counts = {"train_violations": 0, "train_steps": 0}
+                    _write(folder, f"tlshield-{name}", f, k, s, result, counts, time.perf_counter() - t0)
+    jobs = {}
+    for c in configs:
+        for k, f in enumerate(formulas, 1):
+            for s in seeds:
+                folder = runs / f"{c}-f{k}-s{s}"
+                if not (folder / "result.json").exists():
+                    jobs[folder] = partial(job, f, k, c, s, steps, episodes)
+    if jobs:
+        from tlshield import cluster
+
+        done = 0
+        with cluster.session(address, workers):
+
+            def tick(folder: Path) -> None:
+                nonlocal done
+                done += 1
+                if progress:
+                    print(f"  {done}/{len(jobs)} {folder.name}", flush=True)
+
+            cluster.run(jobs, on_done=tick)
+    return write_report(out, formulas)
+
+
+def read_rows(out: Path) -> list[dict[str, Any]]:
+    """Every finished job's row, in a stable order."""
+    rows = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*/result.json"))]
+    return sorted(rows, key=lambda r: (r["method"], r["formula"], r["seed"]))
+
+
+def write_report(out: Path, formulas: Sequence[str]) -> Path:
+    """``flatworld.csv``, ``flatworld.md`` and the paths figure from the finished jobs."""
+    out = Path(out)
+    rows = read_rows(out)
+    with (out / "flatworld.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({**r, "mean_steps": _num(r["mean_steps"])})
+    (out / "flatworld.md").write_text(markdown(rows, formulas))
+    _figure(out, rows, formulas)
+    return out
+
+
+def _num(x: float) -> str:
+    return "" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.1f}"
+
+
+def markdown(rows: list[dict[str, Any]], formulas: Sequence[str]) -> str:
+    """The comparison table: per formula and method, the success rate (mean over seeds, and
+    each seed), mean steps, and the evaluation and training safety counts."""
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    lines = [
+        "tlshield trains one agent per formula, and its shield knows the discs and the dynamics; "
+        "DeepLTL learns one policy for all formulas (15M steps, zero-shot) with no map and no "
+        "model. Published rows: " + PUBLISHED_SOURCE + ".",
+        "",
+        "| # | method | success (mean) | per seed | steps | violations | box exits | train violations | train steps |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for k, f in enumerate(formulas, 1):
+        for m in methods:
+            mine = [r for r in rows if r["method"] == m and r["task"] == f]
+            if not mine:
+                continue
+            rates = [r["success_rate"] for r in mine]
+            steps = [r["mean_steps"] for r in mine if r["mean_steps"] is not None and not math.isnan(r["mean_steps"])]
+            per_seed = " ".join(f"{r['success_rate']:.3f}" for r in mine)
+            lines.append(
+                f"| {k} | {m} | {np.mean(rates):.3f} | {per_seed} | "
+                f"{_num(float(np.mean(steps)) if steps else math.nan)} | "
+                f"{sum(r['violations'] for r in mine)} | {sum(r['box_exits'] for r in mine)} | "
+                f"{sum(r['train_violations'] for r in mine)} | {mine[0]['train_steps']} |"
+            )
+        published = formulas[k - 1] == _published_formula(k)
+        for name, table in PUBLISHED.items():
+            if published:
+                rate, steps_ = table[k]
+                lines.append(f"| {k} | {name} (published) | {rate:.3f} | | {_num(steps_)} | | | | |")
+    lines += ["", "Formulas:", ""]
+    lines += [f"{k}. `{f}`" for k, f in enumerate(formulas, 1)]
+    return "\n".join(lines) + "\n"
+
+
+def _published_formula(k: int) -> str | None:
+    from tlshield.envs.flatworld import FORMULAS
+
+    return FORMULAS[k - 1] if k <= len(FORMULAS) else None
+
+
+def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> None:
+    from tlshield.plots.flatworld import plot_paths
+
+    panels = []
+    for k, f in enumerate(formulas, 1):
+        method = "tlshield-rl_cbf_clf"
+        folder = next(iter(sorted((out / "runs").glob(f"rl_cbf_clf-f{k}-s*"))), None)
+        if folder is None:
+            method, folder = "tlshield-zero", next(iter(sorted((out / "runs").glob(f"zero-f{k}-s*"))), None)
+        if folder is None:
+            continue
+        data = np.load(folder / "paths.npz")
+        ok = list(data["success"])
+        paths = [data[f"path{i}"] for i in range(len(ok))]
+        panels.append((f"{k}. {f}\n({method}, 12 evaluation episodes)", paths[:8], ok[:8]))
+    if panels:
+        plot_paths(panels, out / "flatworld_paths.png")
