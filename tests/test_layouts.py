@@ -105,6 +105,17 @@ def _model(cls: type, *a: Any) -> Callable[[], Any]:
 
 TRAJ = STATES[:12]
 DYN_S = np.arange(1.0, 14.0) / 4
+def _region(kind: Any) -> Any:
+    """A union or intersection of a moving ball, a fixed one and a half-space."""
+    return kind(
+        [
+            tlshield.Ball([0, 1], 0.7, center_dims=[3, 4]),
+            tlshield.Ball([0, 1], 0.9, center=S[5:7]),
+            tlshield.Halfspace(S[:13], 0.5),
+        ]
+    )
+
+
 CASES: dict[str, Case] = {
     "Halfspace.__new__": Case(lambda: tlshield.Halfspace, "__call__", {"w": S[:4], "b": 0.5}),
     "Halfspace.robustness": Case(lambda: tlshield.Halfspace(S[:13], 0.5), "robustness", {"s": S}),
@@ -118,6 +129,12 @@ CASES: dict[str, Case] = {
     "Ball.gradient": Case(
         lambda: tlshield.Ball([0, 1], 0.7, center_dims=[3, 4]), "gradient", {"s": S}
     ),
+    "Union.robustness": Case(lambda: _region(tlshield.Union), "robustness", {"s": S}),
+    "Union.gradient": Case(lambda: _region(tlshield.Union), "gradient", {"s": S}),
+    "Intersection.robustness": Case(
+        lambda: _region(tlshield.Intersection), "robustness", {"s": S}
+    ),
+    "Intersection.gradient": Case(lambda: _region(tlshield.Intersection), "gradient", {"s": S}),
     "Spec.atom_robustness": Case(lambda: SPEC, "atom_robustness", {"s": S}),
     "Spec.robustness": Case(lambda: SPEC, "robustness", {"traj": TRAJ}),
     "Spec.satisfied": Case(lambda: SPEC, "satisfied", {"traj": TRAJ}),

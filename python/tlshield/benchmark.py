@@ -86,7 +86,7 @@ N_ENVS = 8
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
 
-def _make(formula: str, config: str, evaluation: bool) -> Any:
+def _make(formula: str, config: str, evaluation: bool, **overrides: Any) -> Any:
     import gymnasium as gym
 
     return gym.make(
@@ -96,23 +96,30 @@ def _make(formula: str, config: str, evaluation: bool) -> Any:
         evaluation=evaluation,
         gamma=PPO["gamma"],
         disable_env_checker=True,
+        **overrides,
     )
 
 
 def run_episodes(
-    formula: str, config: str, policy: Policy, seed: int, episodes: int, batch: int = 50
+    formula: str,
+    config: str,
+    policy: Policy,
+    seed: int,
+    episodes: int,
+    batch: int = 50,
+    **overrides: Any,
 ) -> dict[str, Any]:
     """Evaluation: ``episodes`` episodes (``batch`` side by side, one policy call per step),
     CBF on unless ``config == "rl"``. Returns the success rate, the mean steps of successful
     episodes (DeepLTL's measure), trap entries (``violations``: the formula's safety part
-    broken), box exits and a few paths for the figure."""
+    broken), box exits and a few paths for the figure. ``overrides``: FlatWorld settings."""
     rng = np.random.default_rng(EVAL_SEED + 1000 * seed)
     evaluation = config != "rl"
     successes, steps, violations, exits = 0, [], 0, 0
     paths: list[tuple[np.ndarray, bool]] = []
     for start in range(0, episodes, batch):
         idx = list(range(start, min(start + batch, episodes)))
-        envs = [_make(formula, config, evaluation) for _ in idx]
+        envs = [_make(formula, config, evaluation, **overrides) for _ in idx]
         obs = np.stack([e.reset(seed=EVAL_SEED + 1000 * seed + k)[0] for e, k in zip(envs, idx)])
         active = list(range(len(idx)))
         t = 0

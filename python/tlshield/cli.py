@@ -347,9 +347,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--env",
-        choices=["tlshield/Channel-v0", "tlshield/PointMass-v0"],
         default="tlshield/Channel-v0",
-        help="the environment (default: the paper's case study)",
+        help="a registered Gymnasium id whose factory takes config= and evaluation= and wraps "
+        "the task (tlshield.FsaAugmented, tlshield.Shielded); default: the paper's case study. "
+        "Bundled: tlshield/Channel-v0, tlshield/PointMass-v0, tlshield/FlatWorld-v0 (--set "
+        "formula=...)",
     )
     train.add_argument(
         "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"

@@ -48,7 +48,9 @@ def rollouts(
         {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
         for s in seeds
     ]
-    horizon = envs[0].get_wrapper_attr("cfg").horizon
+    from tlshield.training import env_horizon
+
+    horizon = env_horizon(envs[0]) or 1000
     active = list(range(len(seeds)))
     for t in range(horizon):
         if not active:
@@ -62,11 +64,12 @@ def rollouts(
                 paths[i].append(envs[i].state[[X, Y]])
                 obstacle_paths[i].append(_obstacles(envs[i]))
             out = outcomes[i]
-            out["violations"] += int(info["violation"])
+            out["violations"] += int(info.get("violation", False))
             out["steps"] = t + 1
-            if terminated or truncated or info["collision"]:
+            collision = bool(info.get("collision", False))
+            if terminated or truncated or collision:
                 out["success"] = bool(info["success"])
-                out["collision"] = bool(info["collision"])
+                out["collision"] = collision
             else:
                 still.append(i)
         active = still

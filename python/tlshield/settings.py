@@ -3,9 +3,10 @@
 
 A setting is one of
 
-* an environment constant (a field of :class:`tlshield.envs.ChannelConfig`, or of
-  ``PointMassConfig`` for PointMass-v0): ``c_r``, ``w``, ``alpha``, ``c3``, ``K``,
-  ``clf_bounds``, ``cbf_bounds``, ...;
+* an environment constant (a field of :class:`tlshield.envs.ChannelConfig`, of
+  ``PointMassConfig`` for PointMass-v0 or ``FlatWorldConfig`` for FlatWorld-v0, which also
+  takes ``formula``): ``c_r``, ``w``, ``alpha``, ``c3``, ``K``, ``clf_bounds``, ...; for a
+  user's registered environment, any keyword of its factory (checked when it is built);
 * a PPO setting (:data:`PPO_NAMES`): ``learning_rate``, ``ent_coef``, ``n_epochs``,
   ``batch_size``, ...;
 * a training schedule (:data:`SCHEDULE_NAMES`): ``clf_schedule``, ``clf_final_scale``.
@@ -23,7 +24,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
-from tlshield.envs import ENV_ID, POINT_MASS_ID
+from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
 #: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
@@ -49,8 +50,10 @@ SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
 
 
 def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
-    """The environment constants of ``env_id`` (its config dataclass's fields)."""
-    return tuple(f.name for f in fields(_config_class(env_id)))
+    """The environment constants of ``env_id`` (its config dataclass's fields; empty for a
+    user's environment, whose keywords its own factory checks)."""
+    cls = _config_class(env_id)
+    return () if cls is None else tuple(f.name for f in fields(cls))
 
 
 def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
@@ -60,6 +63,8 @@ def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
 
 def check_names(names: Any, env_id: str = ENV_ID, where: str = "settings") -> None:
     """Raises ValueError naming the unknown settings in ``names`` and listing the known ones."""
+    if _config_class(env_id) is None:  # a user's env: its factory checks its own keywords
+        return
     known = known_names(env_id)
     unknown = sorted(str(n) for n in names if n not in known)
     if unknown:
@@ -79,10 +84,14 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     if ppo:
         out["ppo"] = ppo
     env = {k: _tuples(v) for k, v in settings.items() if k not in PPO_NAMES + SCHEDULE_NAMES}
-    try:
-        replace(_config_class(env_id)(), **env).check()
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"settings: {err}") from None
+    cls = _config_class(env_id)
+    if cls is not None:
+        # FlatWorld's task is a keyword of its factory, not a constant of its config.
+        constants = {k: v for k, v in env.items() if k != "formula" or env_id != FLATWORLD_ID}
+        try:
+            replace(cls(), **constants).check()
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"settings: {err}") from None
     return {**out, **env}
 
 
@@ -123,10 +132,12 @@ def _tuples(value: Any) -> Any:
 
 
 def _config_class(env_id: str) -> Any:
-    from tlshield.envs import ChannelConfig
+    """The config dataclass of a bundled environment; None for a user's registered one (an
+    unregistered id is an error)."""
+    from tlshield.envs import ChannelConfig, check_env_id
+    from tlshield.envs.flatworld import FlatWorldConfig
     from tlshield.envs.point_mass import PointMassConfig
 
-    classes = {ENV_ID: ChannelConfig, POINT_MASS_ID: PointMassConfig}
-    if env_id not in classes:
-        raise ValueError(f"env {env_id!r}: expected one of {', '.join(classes)}")
-    return classes[env_id]
+    classes = {ENV_ID: ChannelConfig, POINT_MASS_ID: PointMassConfig, FLATWORLD_ID: FlatWorldConfig}
+    check_env_id(env_id)
+    return classes.get(env_id)

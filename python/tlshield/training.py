@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.codes import Status
-from tlshield.envs import ENV_ID, POINT_MASS_ID, make
+from tlshield.envs import ENV_ID, check_env_id, make
 from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
 from tlshield.evaluation import EVAL_SEED, evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
@@ -105,7 +105,6 @@ VALIDATION_SEED = 20_000
 MAX_SEED = 10
 SCHEDULES = ("fixed", "linear", "exponential")
 #: Environments :func:`train` and :func:`tlshield.evaluation.evaluate` know.
-ENV_IDS = (ENV_ID, POINT_MASS_ID)
 
 
 def clf_scale(schedule: str, progress: float, final: float) -> float:
@@ -143,6 +142,54 @@ def _check_run_args(
         raise ValueError(f"final CLF scale {final_scale!r}: expected a number in (0, 1]")
 
 
+def env_horizon(env: Any) -> int | None:
+    """The episode length of an environment: its config's ``horizon``, else its registered
+    ``max_episode_steps`` (None when it says neither)."""
+    try:
+        return int(env.get_wrapper_attr("cfg").horizon)
+    except AttributeError:
+        spec = getattr(env, "spec", None)
+        return getattr(spec, "max_episode_steps", None)
+
+
+def check_task_env(env: Any, gamma: float, env_id: str) -> None:
+    """Checks that ``env`` exposes a task that training can read, and that its reward's
+    guarantees hold for this training: an :class:`tlshield.FsaAugmented` in the wrapper chain
+    (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's ``gamma``,
+    and a reward horizon no shorter than the episodes (else finishing late may not out-earn
+    not finishing). Raises ValueError naming what is wrong."""
+    try:
+        tracker = env.get_wrapper_attr("tracker")
+    except AttributeError:
+        raise ValueError(
+            f"env {env_id!r} exposes no task: wrap it in tlshield.FsaAugmented (formula and "
+            "predicates) and, for a shield, tlshield.Shielded (model), and accept the keywords "
+            "config= and evaluation="
+        ) from None
+    progress = tracker.progress
+    if progress is None:
+        return  # the paper's Eq. 5A1: no discount or horizon in its guarantees
+    if abs(progress.gamma - gamma) > 1e-12:
+        raise ValueError(
+            f"env {env_id!r}: its progress reward is sized for gamma = {progress.gamma} but PPO "
+            f"uses gamma = {gamma}; build the reward with the trainer's discount"
+        )
+    horizon = env_horizon(env)
+    if horizon is not None and horizon > progress.horizon:
+        raise ValueError(
+            f"env {env_id!r}: episodes last up to {horizon} steps but the progress reward's bonus "
+            f"is sized for a horizon of {progress.horizon}; pass horizon >= {horizon}"
+        )
+
+
+def _env_config(venv: Any) -> Any:
+    """The first sub-environment's config dataclass, or None (a user's environment)."""
+    try:
+        return venv.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
+    except AttributeError:
+        return None
+
+
 def make_vec_env(
     config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
 ) -> Any:
@@ -178,11 +225,11 @@ class _Metrics:
         self.discounted += self.discount * rewards
         self.discount *= self.gamma
         for i, info in enumerate(infos):
-            h = info["constraints"]  # Channel-v0's c1, c2 (other envs: not recorded)
+            h = info.get("constraints", {})  # Channel-v0's c1, c2 (other envs: not recorded)
             self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
             self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
-            self.min_d = min(self.min_d, info["min_obstacle_distance"])
-            self.violations += info["violation"]
+            self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
+            self.violations += bool(info.get("violation", False))
             self.trap_entries += info["trap"] and not self.was_trapped[i]
             self.was_trapped[i] = info["trap"]
             self.successes += info["success"]
@@ -222,8 +269,7 @@ def train(
     once it is written."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     check_seeds((seed,))
-    if env not in ENV_IDS:
-        raise ValueError(f"env {env!r}: expected one of {', '.join(ENV_IDS)}")
+    check_env_id(env)
     if env != ENV_ID and clf_schedule != "fixed":
         raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
     spec = PRESETS[preset]
@@ -235,8 +281,10 @@ def train(
     from tlshield.policies import policy_class
 
     policy_class(policy_name)  # an unknown name fails here, before any environment is built
-    # The progress reward is shaped for the discount PPO uses.
-    overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
+    # The progress reward is shaped for the discount PPO uses (the bundled environments take
+    # it as a keyword; a user's environment is checked below).
+    if env.startswith("tlshield/"):
+        overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -247,8 +295,9 @@ def train(
     run.mkdir(parents=True, exist_ok=True)
     from stable_baselines3.common.vec_env import VecNormalize
 
+    check_task_env(make(env, config, **overrides), ppo_kwargs["gamma"], env)
     inner = make_vec_env(config, seed, overrides, n_envs, env)
-    cfg: Any = inner.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
+    cfg: Any = _env_config(inner)
     venv = VecNormalize(inner, norm_obs=True, norm_reward=norm_reward, gamma=ppo_kwargs["gamma"])
     record = {
         "env_id": env,
@@ -268,7 +317,7 @@ def train(
             "net_arch": net_arch,
             "activation": "ReLU",
         },
-        "env": asdict(cfg),
+        "env": asdict(cfg) if cfg is not None else {},
         "overrides": overrides,
         "interrupted": False,
         "finished": False,

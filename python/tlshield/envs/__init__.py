@@ -29,6 +29,16 @@ if FLATWORLD_ID not in gym.registry:
     gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
 
 
+def check_env_id(env_id: str) -> None:
+    """Raises ValueError unless ``env_id`` is a registered Gymnasium id."""
+    if env_id not in gym.registry:
+        tlshield_ids = sorted(k for k in gym.registry if k.startswith("tlshield/"))
+        raise ValueError(
+            f"env {env_id!r}: not a registered Gymnasium id (register your environment with "
+            f"gymnasium.register first; bundled: {', '.join(tlshield_ids)})"
+        )
+
+
 def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     """One environment of ``env_id`` in shield configuration ``config``: Channel-v0 unwrapped
     (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
@@ -48,5 +58,6 @@ __all__ = [
     "ChannelEnv",
     "channel_shield",
     "channel_task_spec",
+    "check_env_id",
     "make",
 ]

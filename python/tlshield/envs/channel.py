@@ -73,13 +73,15 @@ def channel_task_spec(
         for k, dims in enumerate(GOAL_DIMS)
     }
     channel = {"c1": Halfspace(c1, half_width), "c2": Halfspace(c2, half_width)}
+    # The goals' centres live in the state, so the geometry cannot tell they are disjoint.
+    exclusive = [list(goals)]
     if obstacle_radius is None:
-        return Spec(TASK, {**goals, **channel})
+        return Spec(TASK, {**goals, **channel}, exclusive=exclusive)
     obstacles = {
         f"o{k + 1}": Ball(pos=[X, Y], radius=obstacle_radius, center_dims=list(dims))
         for k, dims in enumerate(OBSTACLE_DIMS)
     }
-    return Spec(TASK_WITH_OBSTACLES, {**goals, **channel, **obstacles})
+    return Spec(TASK_WITH_OBSTACLES, {**goals, **channel, **obstacles}, exclusive=exclusive)
 
 
 @dataclass(frozen=True)

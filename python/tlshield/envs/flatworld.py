@@ -96,6 +96,8 @@ class FlatWorldConfig:
     clf_bound: float = 0.5
     #: Barriers are kept this far above 0, for the Euler plant inside concave regions.
     cbf_margin: float = 0.02
+    #: Keep out of guards that set the task back, not only the trap's (the shield's default).
+    preserve_progress: bool = True
 
     def check(self) -> None:
         """Raises ValueError naming the first bad constant."""
@@ -157,6 +159,7 @@ def flatworld_shield(cfg: FlatWorldConfig, config: str, spec: Spec) -> Shield | 
         margin=cfg.cbf_margin,
         use_cbf=use_cbf,
         use_clf=use_clf,
+        preserve_progress=bool(cfg.preserve_progress),
     )
 
 
@@ -177,7 +180,8 @@ class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     ) -> None:
         self.cfg = cfg or FlatWorldConfig()
         self.model = SingleIntegrator(pos=list(POS))
-        s = self.cfg.size
+        # The farthest a step can leave the square: the last observation of an exit.
+        s = self.cfg.size + self.cfg.step_size * math.sqrt(2.0)
         self.observation_space = gym.spaces.Box(-s, s, shape=(2,), dtype=np.float64)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
         self.render_mode = render_mode

@@ -80,6 +80,7 @@ pub struct ProgressReward {
     bonus: f64,
     c_r: f64,
     trap_penalty: f64,
+    horizon: u32,
 }
 
 fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
@@ -241,6 +242,7 @@ impl ProgressReward {
             bonus,
             c_r: params.c_r,
             trap_penalty,
+            horizon: params.horizon,
         })
     }
 
@@ -262,6 +264,11 @@ impl ProgressReward {
     /// The per-step reward in the trap (worse than any step outside it).
     pub fn trap_penalty(&self) -> f64 {
         self.trap_penalty
+    }
+
+    /// The episode length the bonus is sized for.
+    pub fn horizon(&self) -> u32 {
+        self.horizon
     }
 
     /// The training discount the bonus is sized for.

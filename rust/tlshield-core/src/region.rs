@@ -151,7 +151,8 @@ pub fn pieces(leaves: &[&Predicate], dims: &[usize], s: Option<&[f64]>) -> Optio
 
 /// The deepest point of the intersection of `pieces` and its depth,
 /// `argmax_x min_i rho_i(x)`; `None` without a ball (the depth may be unbounded) or when the
-/// solver fails. One ball alone is answered in closed form (its centre, depth = radius).
+/// solver fails. One ball whose centre lies at least its radius inside every half-space is
+/// answered in closed form (its centre, depth = radius).
 pub fn deepest_point(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
     let balls = pieces
         .iter()
@@ -160,8 +161,16 @@ pub fn deepest_point(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
     if balls == 0 {
         return None;
     }
-    if let [Piece::Ball { centre, radius }] = pieces {
-        return Some((centre.clone(), *radius));
+    // One ball whose centre is at least its radius inside every half-space: the centre (no
+    // point is deeper than the ball's own centre), the common case of a goal inside walls.
+    if balls == 1 {
+        let (centre, radius) = pieces.iter().find_map(|p| match p {
+            Piece::Ball { centre, radius } => Some((centre, *radius)),
+            _ => None,
+        })?;
+        if pieces.iter().all(|p| p.value(centre) >= radius) {
+            return Some((centre.clone(), radius));
+        }
     }
     let d = pieces.iter().find_map(|p| match p {
         Piece::Ball { centre, .. } => Some(centre.len()),
@@ -329,6 +338,28 @@ mod tests {
             // The grid spacing is 0.015; every piece is 1-Lipschitz up to |w| <= 1.42.
             proptest::prop_assert!(depth <= grid + 0.015, "{depth} vs grid {grid}");
         }
+    }
+
+    #[test]
+    fn a_ball_deep_inside_its_half_spaces_has_its_centre_as_deepest_point() {
+        let inside = [
+            ball([1.0, 1.0], 0.5),
+            Piece::Halfspace {
+                w: vec![1.0, -1.0],
+                b: 1.5,
+            },
+        ];
+        assert_eq!(deepest_point(&inside), Some((vec![1.0, 1.0], 0.5)));
+        // Near the wall the deepest point moves away from it (solved, not the centre).
+        let near = [
+            ball([1.0, 1.0], 0.5),
+            Piece::Halfspace {
+                w: vec![1.0, 0.0],
+                b: -0.8,
+            },
+        ];
+        let (x, depth) = deepest_point(&near).unwrap();
+        assert!(x[0] > 1.0 && depth < 0.5 && depth > 0.0, "{x:?} {depth}");
     }
 
     #[test]

@@ -86,6 +86,12 @@ impl PyProgressReward {
         self.inner.gamma()
     }
 
+    /// The episode length the bonus is sized for (episodes must not be longer).
+    #[getter]
+    fn horizon(&self) -> u32 {
+        self.inner.horizon()
+    }
+
     /// ``Phi(s, q)``.
     fn potential(&self, q: &Bound<'_, PyAny>, s: &Bound<'_, PyAny>) -> PyResult<f64> {
         let q = state(q, "q", &self.automaton)?;

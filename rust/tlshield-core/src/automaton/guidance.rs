@@ -116,51 +116,61 @@ impl Reading<'_> {
     /// `q`'s edges to states strictly closer to acceptance ([`Automaton::ranks`]), every way a
     /// guard cube can hold (its non-empty goal alternatives: one part of each union, every part
     /// of each intersection), the most robust at `s` (the first on ties); the goal is that
-    /// alternative's deepest point, the point of maximal least robustness of its regions.
-    /// `false` (and `goal` empty) when `q` cannot reach acceptance or no cube has a region.
+    /// alternative's deepest point, the point of maximal least robustness of its regions. A
+    /// moving alternative whose regions do not meet at this state is passed over, as fixed
+    /// empty ones are when the automaton is built. `false` (and `goal` empty) when `q` cannot
+    /// reach acceptance or no cube has a region.
     pub fn goal(&self, q: usize, goal: &mut Vec<f64>) -> bool {
         let (aut, s, rho) = (self.aut, self.s, self.rho());
         goal.clear();
         let Some(rank) = aut.ranks[q] else {
             return false;
         };
-        let mut best: Option<(&GoalAlternative, f64)> = None;
-        for (e, edge) in aut.edges.iter().enumerate() {
-            if edge.src != q || edge.dst == q || aut.ranks[edge.dst].is_none_or(|d| d >= rank) {
-                continue;
-            }
-            for (cube, alternatives) in edge.guard.iter().zip(&aut.goal_alternatives[e]) {
-                let negatives = cube
-                    .literals()
-                    .filter(|l| !l.positive)
-                    .map(|l| l.robustness(rho))
-                    .fold(f64::INFINITY, f64::min);
-                for alt in alternatives {
-                    let score = alt
-                        .leaves
-                        .iter()
-                        .map(|p| p.value(s))
-                        .fold(negatives, f64::min);
-                    best = first_max(best, (alt, score));
+        // Moving regions are placed at this state; one that is empty here is passed over.
+        let mut empty_here: SmallVec<[&GoalAlternative; 4]> = SmallVec::new();
+        loop {
+            let mut best: Option<(&GoalAlternative, f64)> = None;
+            for (e, edge) in aut.edges.iter().enumerate() {
+                if edge.src != q || edge.dst == q || aut.ranks[edge.dst].is_none_or(|d| d >= rank) {
+                    continue;
+                }
+                for (cube, alternatives) in edge.guard.iter().zip(&aut.goal_alternatives[e]) {
+                    let negatives = cube
+                        .literals()
+                        .filter(|l| !l.positive)
+                        .map(|l| l.robustness(rho))
+                        .fold(f64::INFINITY, f64::min);
+                    for alt in alternatives {
+                        if empty_here.iter().any(|x| std::ptr::eq(*x, alt)) {
+                            continue;
+                        }
+                        let score = alt
+                            .leaves
+                            .iter()
+                            .map(|p| p.value(s))
+                            .fold(negatives, f64::min);
+                        best = first_max(best, (alt, score));
+                    }
                 }
             }
-        }
-        let Some((alt, _)) = best else {
-            return false;
-        };
-        match &alt.fixed {
-            Some(x) => goal.extend_from_slice(x),
-            None => {
-                let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
-                let placed = region::pieces(&leaves, &alt.dims, Some(s))
-                    .and_then(|pieces| region::deepest_point(&pieces));
-                match placed {
-                    Some((x, _)) => goal.extend_from_slice(&x),
-                    None => return false,
+            let Some((alt, _)) = best else {
+                return false;
+            };
+            if let Some(x) = &alt.fixed {
+                goal.extend_from_slice(x);
+                return true;
+            }
+            let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
+            match region::pieces(&leaves, &alt.dims, Some(s))
+                .and_then(|pieces| region::deepest_point(&pieces))
+            {
+                Some((x, depth)) if depth > region::EMPTY_DEPTH => {
+                    goal.extend_from_slice(&x);
+                    return true;
                 }
+                _ => empty_here.push(alt),
             }
         }
-        true
     }
 }
 

@@ -499,6 +499,21 @@ mod tests {
     }
 
     #[test]
+    fn a_moving_goal_outside_the_channel_is_passed_over() {
+        let aut = crate::fixtures::task_automaton();
+        // Agent at the origin; g1 at (4, 0) lies wholly outside the channel |x - y| < 1.5, g2
+        // at (4, 4) inside it, g3 at (9, 9). g1 is nearer, but its cube (g1 & c1 & c2) cannot
+        // hold: the goal is g2's centre.
+        let mut s = vec![0.0; crate::fixtures::STATE_DIM];
+        s[3..9].copy_from_slice(&[4.0, 0.0, 4.0, 4.0, 9.0, 9.0]);
+        let q = aut.step(aut.initial(), &s).unwrap();
+        assert_eq!(aut.goal(q, &s).unwrap(), Some(vec![4.0, 4.0]));
+        // With g1 inside the channel too, the nearer one wins.
+        s[3..5].copy_from_slice(&[2.0, 1.0]);
+        assert_eq!(aut.goal(q, &s).unwrap(), Some(vec![2.0, 1.0]));
+    }
+
+    #[test]
     fn task_automaton() {
         let aut = task();
         assert_eq!(
