@@ -25,8 +25,9 @@ def measure(formula: str, preserve: bool, policy: str, seed: int, episodes: int)
     successes, setbacks, steps = 0, 0, []
     for k in range(episodes):
         _, info = env.reset(seed=EVAL_SEED + 1000 * seed + k)
-        q = info["fsa_state"]
-        for t in range(1, 501):
+        q, t = info["fsa_state"], 0
+        while t < 500:
+            t += 1
             a = np.zeros(2) if policy == "zero" else rng.uniform(-1, 1, 2)
             _, _, term, trunc, info = env.step(a)
             q_next = info["fsa_state"]
@@ -47,7 +48,9 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    print(f"success / setbacks / mean steps; rl_cbf_clf, {args.episodes} episodes, seed {args.seed}")
+    print(
+        f"success / setbacks / mean steps; rl_cbf_clf, {args.episodes} episodes, seed {args.seed}"
+    )
     print("| # | policy | Eq. 5C1 safe set (trap only) | progress-preserving (default) |")
     print("|---|---|---|---|")
     for k, f in enumerate(FORMULAS, 1):

@@ -143,10 +143,10 @@ def test_shield_info_carries_goal_barriers_slack_and_solver() -> None:
 
 def _return(config: str, policy: Any, seed: int = 10_003, gamma: float = 0.99) -> float:
     env = gym.make(ID, formula="F yellow", config=config)
-    obs, _ = env.reset(seed=seed)
+    env.reset(seed=seed)
     total, discount = 0.0, 1.0
     for _ in range(500):
-        obs, r, term, trunc, info = env.step(policy(env))
+        _, r, term, trunc, _ = env.step(policy(env))
         total += discount * float(r)
         discount *= gamma
         if term or trunc:
@@ -178,24 +178,23 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
     # A user's env whose reward is sized for another discount, or a shorter horizon.
     spec = flatworld_spec("F yellow")
 
-    def user_env(config: str = "rl", evaluation: bool = False, gamma: float = 0.9,
-                 horizon: int = 500) -> gym.Env:
+    def user_env(
+        config: str = "rl", evaluation: bool = False, gamma: float = 0.9, horizon: int = 500
+    ) -> gym.Env:
         from tlshield.envs.flatworld import FlatWorld, FlatWorldConfig
-
         from tlshield.wrappers import FsaAugmented
 
-        return FsaAugmented(
-            FlatWorld(FlatWorldConfig()), spec, gamma=gamma, horizon=horizon
-        )
+        return FsaAugmented(FlatWorld(FlatWorldConfig()), spec, gamma=gamma, horizon=horizon)
 
     gym.register("tests/UserFlat-v0", entry_point=user_env)
     try:
         with pytest.raises(ValueError, match="gamma"):
             train("rl", 0, 1, tmp_path / "b", env="tests/UserFlat-v0")
         with pytest.raises(ValueError, match="horizon"):
-            train("rl", 0, 1, tmp_path / "c", env="tests/UserFlat-v0", gamma=0.99, horizon=100)
-        run = train("rl", 0, 1, tmp_path / "d", env="tests/UserFlat-v0", progress=False,
-                    gamma=0.99)
+            train("rl", 0, 1, tmp_path / "c", env="tests/UserFlat-v0", gamma=0.999, horizon=100)
+        run = train(
+            "rl", 0, 1, tmp_path / "d", env="tests/UserFlat-v0", progress=False, gamma=0.999
+        )
         assert json.loads((run / "config.json").read_text())["finished"]
     finally:
         del gym.registry["tests/UserFlat-v0"]
@@ -204,12 +203,12 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
 def test_train_and_evaluate_flatworld_from_the_cli(tmp_path: Path) -> None:
     from tlshield import cli
     from tlshield.evaluation import evaluate
-    from tlshield.runs import read_metrics
 
     out = tmp_path / "fw"
     args = ["train", "--env", ID, "--config", "rl_cbf_clf", "--set", "formula=F(aqua & blue)"]
     assert cli.main([*args, "--updates", "1", "--out", str(out), "--quiet"]) == 0
-    assert int(read_metrics(out)[0]["violations"]) == 0
+    with (out / "metrics.csv").open() as fh:
+        assert int(next(csv.DictReader(fh))["violations"]) == 0
     result = evaluate(out, trials=3)
     assert result["trials"] == 3 and result["collisions"] == 0
 
@@ -220,8 +219,14 @@ def test_benchmark_pipeline_on_a_formula_outside_the_table(tmp_path: Path) -> No
 
     formula = "F(yellow & F(aqua & blue))"
     out = flatworld(
-        tmp_path / "b", formulas=[formula], configs=["rl_cbf_clf"], seeds=[1], episodes=4,
-        steps=512, workers=1, progress=False,
+        tmp_path / "b",
+        formulas=[formula],
+        configs=["rl_cbf_clf"],
+        seeds=[1],
+        episodes=4,
+        steps=512,
+        workers=1,
+        progress=False,
     )
     with (out / "flatworld.csv").open() as fh:
         rows = list(csv.DictReader(fh))

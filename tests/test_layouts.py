@@ -105,6 +105,8 @@ def _model(cls: type, *a: Any) -> Callable[[], Any]:
 
 TRAJ = STATES[:12]
 DYN_S = np.arange(1.0, 14.0) / 4
+
+
 def _region(kind: Any) -> Any:
     """A union or intersection of a moving ball, a fixed one and a half-space."""
     return kind(
@@ -131,9 +133,7 @@ CASES: dict[str, Case] = {
     ),
     "Union.robustness": Case(lambda: _region(tlshield.Union), "robustness", {"s": S}),
     "Union.gradient": Case(lambda: _region(tlshield.Union), "gradient", {"s": S}),
-    "Intersection.robustness": Case(
-        lambda: _region(tlshield.Intersection), "robustness", {"s": S}
-    ),
+    "Intersection.robustness": Case(lambda: _region(tlshield.Intersection), "robustness", {"s": S}),
     "Intersection.gradient": Case(lambda: _region(tlshield.Intersection), "gradient", {"s": S}),
     "Spec.atom_robustness": Case(lambda: SPEC, "atom_robustness", {"s": S}),
     "Spec.robustness": Case(lambda: SPEC, "robustness", {"traj": TRAJ}),

@@ -20,10 +20,16 @@ def automaton():
 
 def test_ranks_count_transitions_with_exclusive_goals() -> None:
     aut = automaton()
-    loose = aut.progress_reward()
-    tight = aut.progress_reward(exclusive=[["g1", "g2", "g3"]])
+    # The goals' centres live in the state: without the spec's declared exclusivity the
+    # geometry cannot tell them apart, and one valuation could hold g1 and g3 at once.
+    declared = aut.spec
+    assert declared.exclusive == [["g1", "g2", "g3"]]
+    undeclared = Spec(str(declared), declared.predicates).automaton()
+    loose = undeclared.progress_reward()
+    tight = undeclared.progress_reward(exclusive=[["g1", "g2", "g3"]])
     q0, acc, trap = aut.initial, aut.accepting[0], aut.trap
     assert tight.ranks[q0] == 2 and loose.ranks[q0] == 1
+    assert aut.progress_reward().ranks == tight.ranks == aut.ranks
     assert tight.ranks[acc] == 0 and tight.ranks[trap] is None
     # Defaults: step cost (1 - gamma) (max rank + 1); bonus (max rank + 1) gamma^(1 - T).
     assert tight.step_cost == pytest.approx(0.01 * 3)

@@ -60,15 +60,27 @@ PUBLISHED: dict[str, dict[int, tuple[float, float | None]]] = {
         4: (0.860, 43.9),
         5: (0.996, 37.0),
     },
-    "GCRL-LTL": {1: (0.818, None), 2: (0.000, None), 3: (0.726, None), 4: (0.725, None), 5: (0.636, None)},
-    "LTL2Action": {1: (0.999, None), 2: (0.628, None), 3: (0.714, None), 4: (0.073, None), 5: (0.562, None)},
+    "GCRL-LTL": {
+        1: (0.818, None),
+        2: (0.000, None),
+        3: (0.726, None),
+        4: (0.725, None),
+        5: (0.636, None),
+    },
+    "LTL2Action": {
+        1: (0.999, None),
+        2: (0.628, None),
+        3: (0.714, None),
+        4: (0.073, None),
+        5: (0.562, None),
+    },
 }
 
 #: Defaults of the command.
 DEFAULT_CONFIGS = ("rl_cbf_clf", "rl")
 DEFAULT_SEEDS = (1, 2, 3)
 DEFAULT_EPISODES = 500
-DEFAULT_STEPS = 150_000
+DEFAULT_STEPS = 600_000
 
 #: PPO settings (SB3 names) shared by every formula: no per-formula settings.
 PPO = {
@@ -120,7 +132,9 @@ def run_episodes(
     for start in range(0, episodes, batch):
         idx = list(range(start, min(start + batch, episodes)))
         envs = [_make(formula, config, evaluation, **overrides) for _ in idx]
-        obs = np.stack([e.reset(seed=EVAL_SEED + 1000 * seed + k)[0] for e, k in zip(envs, idx)])
+        obs = np.stack(
+            [e.reset(seed=EVAL_SEED + 1000 * seed + k)[0] for e, k in zip(envs, idx, strict=True)]
+        )
         active = list(range(len(idx)))
         t = 0
         while active:
@@ -198,7 +212,9 @@ def train_agent(formula: str, config: str, seed: int, steps: int) -> tuple[Any, 
     return model, counts
 
 
-def job(formula: str, k: int, config: str, seed: int, steps: int, episodes: int, folder: Path) -> None:
+def job(
+    formula: str, k: int, config: str, seed: int, steps: int, episodes: int, folder: Path
+) -> None:
     """One (config, formula, seed): train, evaluate, write ``result.json`` and ``paths.npz``
     into ``folder`` (a Ray task)."""
     start = time.perf_counter()
@@ -208,7 +224,9 @@ def job(formula: str, k: int, config: str, seed: int, steps: int, episodes: int,
         return model.predict(obs, deterministic=False)[0]
 
     result = run_episodes(formula, config, policy, seed, episodes)
-    _write(folder, f"tlshield-{config}", formula, k, seed, result, counts, time.perf_counter() - start)
+    _write(
+        folder, f"tlshield-{config}", formula, k, seed, result, counts, time.perf_counter() - start
+    )
 
 
 def _write(
@@ -274,7 +292,16 @@ def flatworld(
                     t0 = time.perf_counter()
                     result = run_episodes(f, "rl_cbf_clf", policy, s, episodes)
                     counts = {"train_violations": 0, "train_steps": 0}
-                    _write(folder, f"tlshield-{name}", f, k, s, result, counts, time.perf_counter() - t0)
+                    _write(
+                        folder,
+                        f"tlshield-{name}",
+                        f,
+                        k,
+                        s,
+                        result,
+                        counts,
+                        time.perf_counter() - t0,
+                    )
     jobs = {}
     for c in configs:
         for k, f in enumerate(formulas, 1):
@@ -331,7 +358,8 @@ def markdown(rows: list[dict[str, Any]], formulas: Sequence[str]) -> str:
         "DeepLTL learns one policy for all formulas (15M steps, zero-shot) with no map and no "
         "model. Published rows: " + PUBLISHED_SOURCE + ".",
         "",
-        "| # | method | success (mean) | per seed | steps | violations | box exits | train violations | train steps |",
+        "| # | method | success (mean) | per seed | steps | violations | box exits "
+        "| train violations | train steps |",
         "|---|---|---:|---|---:|---:|---:|---:|---:|",
     ]
     for k, f in enumerate(formulas, 1):
@@ -340,7 +368,11 @@ def markdown(rows: list[dict[str, Any]], formulas: Sequence[str]) -> str:
             if not mine:
                 continue
             rates = [r["success_rate"] for r in mine]
-            steps = [r["mean_steps"] for r in mine if r["mean_steps"] is not None and not math.isnan(r["mean_steps"])]
+            steps = [
+                r["mean_steps"]
+                for r in mine
+                if r["mean_steps"] is not None and not math.isnan(r["mean_steps"])
+            ]
             per_seed = " ".join(f"{r['success_rate']:.3f}" for r in mine)
             lines.append(
                 f"| {k} | {m} | {np.mean(rates):.3f} | {per_seed} | "
@@ -352,7 +384,9 @@ def markdown(rows: list[dict[str, Any]], formulas: Sequence[str]) -> str:
         for name, table in PUBLISHED.items():
             if published:
                 rate, steps_ = table[k]
-                lines.append(f"| {k} | {name} (published) | {rate:.3f} | | {_num(steps_)} | | | | |")
+                lines.append(
+                    f"| {k} | {name} (published) | {rate:.3f} | | {_num(steps_)} | | | | |"
+                )
     lines += ["", "Formulas:", ""]
     lines += [f"{k}. `{f}`" for k, f in enumerate(formulas, 1)]
     return "\n".join(lines) + "\n"
@@ -372,7 +406,10 @@ def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> N
         method = "tlshield-rl_cbf_clf"
         folder = next(iter(sorted((out / "runs").glob(f"rl_cbf_clf-f{k}-s*"))), None)
         if folder is None:
-            method, folder = "tlshield-zero", next(iter(sorted((out / "runs").glob(f"zero-f{k}-s*"))), None)
+            method, folder = (
+                "tlshield-zero",
+                next(iter(sorted((out / "runs").glob(f"zero-f{k}-s*"))), None),
+            )
         if folder is None:
             continue
         data = np.load(folder / "paths.npz")

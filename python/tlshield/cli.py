@@ -446,7 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
     bench.add_argument("--episodes", type=_positive, default=500, help="evaluation episodes")
-    bench.add_argument("--steps", type=_positive, default=150_000, help="PPO steps per agent")
+    bench.add_argument("--steps", type=_positive, default=600_000, help="PPO steps per agent")
     bench.add_argument("--out", default="results_flatworld", help="(default: results_flatworld)")
     _add_ray(bench)
     bench.add_argument("--quiet", action="store_true")

@@ -45,6 +45,8 @@ PPO_NAMES = (
     "policy",
     "norm_reward",
 )
+#: Keywords of a bundled environment's factory besides its config's fields (the task).
+TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}
 #: Settings of :func:`tlshield.training.train` itself.
 SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
 
@@ -53,7 +55,9 @@ def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
     """The environment constants of ``env_id`` (its config dataclass's fields; empty for a
     user's environment, whose keywords its own factory checks)."""
     cls = _config_class(env_id)
-    return () if cls is None else tuple(f.name for f in fields(cls))
+    if cls is None:
+        return ()
+    return (*(f.name for f in fields(cls)), *TASK_KEYWORDS.get(env_id, ()))
 
 
 def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
@@ -87,7 +91,8 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     cls = _config_class(env_id)
     if cls is not None:
         # FlatWorld's task is a keyword of its factory, not a constant of its config.
-        constants = {k: v for k, v in env.items() if k != "formula" or env_id != FLATWORLD_ID}
+        task = TASK_KEYWORDS.get(env_id, ())
+        constants = {k: v for k, v in env.items() if k not in task}
         try:
             replace(cls(), **constants).check()
         except (TypeError, ValueError) as err:

@@ -175,9 +175,7 @@ class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(
-        self, cfg: FlatWorldConfig | None = None, render_mode: str | None = None
-    ) -> None:
+    def __init__(self, cfg: FlatWorldConfig | None = None, render_mode: str | None = None) -> None:
         self.cfg = cfg or FlatWorldConfig()
         self.model = SingleIntegrator(pos=list(POS))
         # The farthest a step can leave the square: the last observation of an exit.
@@ -220,7 +218,9 @@ class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         a = np.asarray(action, dtype=np.float64).reshape(2)
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action {a} is not finite")
-        self.state = np.asarray(self.model.step(self.state, np.clip(a, -1.0, 1.0), self.cfg.step_size))
+        self.state = np.asarray(
+            self.model.step(self.state, np.clip(a, -1.0, 1.0), self.cfg.step_size)
+        )
         self.path.append(self.state.copy())
         self._t += 1
         exited = bool(np.any(np.abs(self.state) > self.cfg.size))
