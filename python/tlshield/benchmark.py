@@ -399,6 +399,7 @@ def _published_formula(k: int) -> str | None:
 
 
 def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> None:
+    from tlshield.envs.flatworld import CIRCLES
     from tlshield.plots.flatworld import plot_paths
 
     panels = []
@@ -417,4 +418,4 @@ def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> N
         paths = [data[f"path{i}"] for i in range(len(ok))]
         panels.append((f"{k}. {f}\n({method}, 12 evaluation episodes)", paths[:8], ok[:8]))
     if panels:
-        plot_paths(panels, out / "flatworld_paths.png")
+        plot_paths(panels, out / "flatworld_paths.png", CIRCLES)

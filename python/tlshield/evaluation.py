@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, make
+from tlshield.envs import ENV_ID, env_horizon, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_config
@@ -48,8 +48,6 @@ def rollouts(
         {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
         for s in seeds
     ]
-    from tlshield.training import env_horizon
-
     horizon = env_horizon(envs[0]) or 1000
     active = list(range(len(seeds)))
     for t in range(horizon):

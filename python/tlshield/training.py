@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.codes import Status
-from tlshield.envs import ENV_ID, check_env_id, make
+from tlshield.envs import ENV_ID, check_env_id, check_task_env, make
 from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
 from tlshield.evaluation import EVAL_SEED, evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
@@ -140,46 +140,6 @@ def _check_run_args(
         raise ValueError(f"clf schedule {schedule!r}: expected one of {', '.join(SCHEDULES)}")
     if not (0.0 < final_scale <= 1.0):
         raise ValueError(f"final CLF scale {final_scale!r}: expected a number in (0, 1]")
-
-
-def env_horizon(env: Any) -> int | None:
-    """The episode length of an environment: its config's ``horizon``, else its registered
-    ``max_episode_steps`` (None when it says neither)."""
-    try:
-        return int(env.get_wrapper_attr("cfg").horizon)
-    except AttributeError:
-        spec = getattr(env, "spec", None)
-        return getattr(spec, "max_episode_steps", None)
-
-
-def check_task_env(env: Any, gamma: float, env_id: str) -> None:
-    """Checks that ``env`` exposes a task that training can read, and that its reward's
-    guarantees hold for this training: an :class:`tlshield.FsaAugmented` in the wrapper chain
-    (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's ``gamma``,
-    and a reward horizon no shorter than the episodes (else finishing late may not out-earn
-    not finishing). Raises ValueError naming what is wrong."""
-    try:
-        tracker = env.get_wrapper_attr("tracker")
-    except AttributeError:
-        raise ValueError(
-            f"env {env_id!r} exposes no task: wrap it in tlshield.FsaAugmented (formula and "
-            "predicates) and, for a shield, tlshield.Shielded (model), and accept the keywords "
-            "config= and evaluation="
-        ) from None
-    progress = tracker.progress
-    if progress is None:
-        return  # the paper's Eq. 5A1: no discount or horizon in its guarantees
-    if abs(progress.gamma - gamma) > 1e-12:
-        raise ValueError(
-            f"env {env_id!r}: its progress reward is sized for gamma = {progress.gamma} but PPO "
-            f"uses gamma = {gamma}; build the reward with the trainer's discount"
-        )
-    horizon = env_horizon(env)
-    if horizon is not None and horizon > progress.horizon:
-        raise ValueError(
-            f"env {env_id!r}: episodes last up to {horizon} steps but the progress reward's bonus "
-            f"is sized for a horizon of {progress.horizon}; pass horizon >= {horizon}"
-        )
 
 
 def _env_config(venv: Any) -> Any:

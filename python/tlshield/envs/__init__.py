@@ -39,6 +39,46 @@ def check_env_id(env_id: str) -> None:
         )
 
 
+def env_horizon(env: Any) -> int | None:
+    """The episode length of an environment: its config's ``horizon``, else its registered
+    ``max_episode_steps`` (None when it says neither)."""
+    try:
+        return int(env.get_wrapper_attr("cfg").horizon)
+    except AttributeError:
+        spec = getattr(env, "spec", None)
+        return getattr(spec, "max_episode_steps", None)
+
+
+def check_task_env(env: Any, gamma: float, env_id: str) -> None:
+    """Checks that ``env`` exposes a task that training can read, and that its reward's
+    guarantees hold for this training: an :class:`tlshield.FsaAugmented` in the wrapper chain
+    (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's ``gamma``,
+    and a reward horizon no shorter than the episodes (else finishing late may not out-earn
+    not finishing). Raises ValueError naming what is wrong."""
+    try:
+        tracker = env.get_wrapper_attr("tracker")
+    except AttributeError:
+        raise ValueError(
+            f"env {env_id!r} exposes no task: wrap it in tlshield.FsaAugmented (formula and "
+            "predicates) and, for a shield, tlshield.Shielded (model), and accept the keywords "
+            "config= and evaluation="
+        ) from None
+    progress = tracker.progress
+    if progress is None:
+        return  # the paper's Eq. 5A1: no discount or horizon in its guarantees
+    if abs(progress.gamma - gamma) > 1e-12:
+        raise ValueError(
+            f"env {env_id!r}: its progress reward is sized for gamma = {progress.gamma} but PPO "
+            f"uses gamma = {gamma}; build the reward with the trainer's discount"
+        )
+    horizon = env_horizon(env)
+    if horizon is not None and horizon > progress.horizon:
+        raise ValueError(
+            f"env {env_id!r}: episodes last up to {horizon} steps but the progress reward's bonus "
+            f"is sized for a horizon of {progress.horizon}; pass horizon >= {horizon}"
+        )
+
+
 def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     """One environment of ``env_id`` in shield configuration ``config``: Channel-v0 unwrapped
     (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
@@ -59,5 +99,7 @@ __all__ = [
     "channel_shield",
     "channel_task_spec",
     "check_env_id",
+    "check_task_env",
+    "env_horizon",
     "make",
 ]

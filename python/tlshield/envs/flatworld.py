@@ -232,7 +232,7 @@ class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             return None
         from tlshield.plots.flatworld import draw_paths
 
-        return draw_paths([np.asarray(self.path)], size=self.cfg.size)
+        return draw_paths([np.asarray(self.path)], CIRCLES, size=self.cfg.size)
 
 
 def make_flatworld(

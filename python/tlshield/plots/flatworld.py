@@ -24,13 +24,15 @@ PALETTE = {
 }
 
 
-def draw_map(ax: Any, size: float = 2.0) -> None:
-    """The discs (translucent, so overlaps show) and the square on ``ax``."""
+Circles = Sequence[tuple[tuple[float, float], float, str]]
+
+
+def draw_map(ax: Any, circles: Circles, size: float = 2.0) -> None:
+    """The discs ``(centre, radius, colour)`` (translucent, so overlaps show) and the square
+    ``[-size, size]^2`` on ``ax``."""
     from matplotlib.patches import Circle, Rectangle
 
-    from tlshield.envs.flatworld import CIRCLES
-
-    for centre, radius, colour in CIRCLES:
+    for centre, radius, colour in circles:
         ax.add_patch(Circle(centre, radius, color=PALETTE[colour], alpha=0.45, lw=0))
     ax.add_patch(Rectangle((-size, -size), 2 * size, 2 * size, fill=False, lw=1.2, color="0.2"))
     ax.set_xlim(-size - 0.05, size + 0.05)
@@ -40,11 +42,13 @@ def draw_map(ax: Any, size: float = 2.0) -> None:
     ax.set_yticks([])
 
 
-def draw_paths(paths: Sequence[NDArray[np.float64]], size: float = 2.0) -> NDArray[np.uint8]:
+def draw_paths(
+    paths: Sequence[NDArray[np.float64]], circles: Circles, size: float = 2.0
+) -> NDArray[np.uint8]:
     """The map with ``paths`` (each ``(T, 2)``) as an RGB array (the env's ``render``)."""
     fig = _figure(4, 4)
     ax = fig.add_subplot()
-    draw_map(ax, size)
+    draw_map(ax, circles, size)
     for path in paths:
         ax.plot(path[:, 0], path[:, 1], color="k", lw=1.2)
         ax.plot(*path[0], "o", color="k", ms=4)
@@ -55,6 +59,7 @@ def draw_paths(paths: Sequence[NDArray[np.float64]], size: float = 2.0) -> NDArr
 def plot_paths(
     panels: Sequence[tuple[str, Sequence[NDArray[np.float64]], Sequence[bool]]],
     path: Path,
+    circles: Circles,
     size: float = 2.0,
 ) -> Path:
     """One panel per ``(title, paths, successes)``: successful paths in black, failed in red,
@@ -64,7 +69,7 @@ def plot_paths(
     fig = _figure(3.0 * cols, 3.2 * rows)
     for k, (title, paths, successes) in enumerate(panels):
         ax = fig.add_subplot(rows, cols, k + 1)
-        draw_map(ax, size)
+        draw_map(ax, circles, size)
         for p, ok in zip(paths, successes, strict=True):
             colour = "k" if ok else "#d62728"
             ax.plot(p[:, 0], p[:, 1], color=colour, lw=0.9, alpha=0.85)
