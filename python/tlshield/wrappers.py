@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Automaton, FilterBatch, FilterResult, ProgressReward, Shield, Spec
-from tlshield.codes import Status
+from tlshield.codes import Solver, Status
 
 StateFn = Callable[[Any], NDArray[np.float64]]
 DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
@@ -290,18 +290,29 @@ class Shielded(gym.Wrapper):
 
 
 def _batch_infos(out: FilterBatch, a_rl: NDArray[np.float64]) -> list[dict[str, Any]]:
-    """Per-env ``info["shield"]`` of a batch (lists of floats: cheaper than array rows)."""
+    """Per-env ``info["shield"]`` of a batch (lists of floats: cheaper than array rows): the
+    single-env entry's fields but the goal and the barriers, which a batch does not return."""
     columns = zip(
         a_rl.tolist(),
         out.a_cbf.tolist(),
         out.a_clf.tolist(),
         out.delta.tolist(),
         out.status.tolist(),
+        out.slack.tolist(),
+        out.solver.tolist(),
         strict=True,
     )
     return [
-        {"a_rl": a, "a_cbf": cbf, "a_clf": clf, "delta": delta, "status": Status(status)}
-        for a, cbf, clf, delta, status in columns
+        {
+            "a_rl": a,
+            "a_cbf": cbf,
+            "a_clf": clf,
+            "delta": delta,
+            "status": Status(status),
+            "slack": slack,
+            "solver": Solver(solver),
+        }
+        for a, cbf, clf, delta, status, slack, solver in columns
     ]
 
 

@@ -138,6 +138,56 @@ pub fn piece(leaf: &Predicate, dims: &[usize], s: Option<&[f64]>) -> Option<Opti
     }
 }
 
+/// The allocation-free common case of [`deepest_point`] for leaves placed at state `s`: one
+/// ball over `dims` whose centre (read from `s` when it moves) lies at least its radius inside
+/// every half-space leaf. Writes the centre into `out` and returns `true`; `false` (and `out`
+/// unspecified) otherwise, when the general solve is needed.
+pub fn centre_if_deepest(
+    leaves: &[Predicate],
+    dims: &[usize],
+    s: &[f64],
+    out: &mut Vec<f64>,
+) -> bool {
+    let mut ball = None;
+    for leaf in leaves {
+        match leaf {
+            Predicate::Ball(b) if b.pos() == dims => {
+                if ball.is_some() {
+                    return false;
+                }
+                ball = Some(b);
+            }
+            Predicate::Halfspace(_) => {}
+            _ => {}
+        }
+    }
+    let Some(b) = ball else {
+        return false;
+    };
+    out.clear();
+    match b.center() {
+        Center::Fixed(c) => out.extend_from_slice(c),
+        Center::Dims(d) => out.extend(d.iter().map(|&i| s[i])),
+    }
+    leaves.iter().all(|leaf| match leaf {
+        Predicate::Halfspace(h) => {
+            let w = h.w();
+            // Only half-spaces that read the goal space alone take part (as in `piece`).
+            if (0..w.len()).any(|d| w[d] != 0.0 && !dims.contains(&d)) {
+                return true;
+            }
+            let at: f64 = dims
+                .iter()
+                .zip(out.iter())
+                .map(|(&d, x)| w.get(d).copied().unwrap_or(0.0) * x)
+                .sum::<f64>()
+                + h.b();
+            at >= b.radius()
+        }
+        _ => true,
+    })
+}
+
 /// The pieces of `leaves` over `dims` (`None`: a moving ball and no state to place it).
 pub fn pieces(leaves: &[&Predicate], dims: &[usize], s: Option<&[f64]>) -> Option<Vec<Piece>> {
     let mut out = Vec::with_capacity(leaves.len());
@@ -360,6 +410,26 @@ mod tests {
         ];
         let (x, depth) = deepest_point(&near).unwrap();
         assert!(x[0] > 1.0 && depth < 0.5 && depth > 0.0, "{x:?} {depth}");
+    }
+
+    #[test]
+    fn the_allocation_free_centre_agrees_with_the_solve() {
+        // A moving goal disc (centre in s[2..4]) inside a wall x - y + 1.5 > 0, and near it.
+        let goal = Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![2, 3])).unwrap();
+        let wall = Predicate::halfspace(vec![1.0, -1.0, 0.0, 0.0], 1.5).unwrap();
+        let leaves = [goal, wall];
+        let refs: Vec<&Predicate> = leaves.iter().collect();
+        let mut out = Vec::new();
+        for (centre, fast) in [([2.0, 2.0], true), ([0.0, 1.2], false)] {
+            let s = [0.0, 0.0, centre[0], centre[1]];
+            assert_eq!(centre_if_deepest(&leaves, &[0, 1], &s, &mut out), fast);
+            let (x, _) = deepest_point(&pieces(&refs, &[0, 1], Some(&s)).unwrap()).unwrap();
+            if fast {
+                assert_eq!(out, x);
+            } else {
+                assert!(x != centre.to_vec());
+            }
+        }
     }
 
     #[test]

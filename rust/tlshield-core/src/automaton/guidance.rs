@@ -160,6 +160,10 @@ impl Reading<'_> {
                 goal.extend_from_slice(x);
                 return true;
             }
+            if region::centre_if_deepest(&alt.leaves, &alt.dims, s, goal) {
+                return true;
+            }
+            goal.clear();
             let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
             match region::pieces(&leaves, &alt.dims, Some(s))
                 .and_then(|pieces| region::deepest_point(&pieces))
