@@ -38,7 +38,7 @@ fn automaton(c: &mut Criterion) {
             let q = if k % 2 == 0 { 0 } else { 3 };
             let next = aut.step(q, black_box(s)).unwrap();
             let reward = aut.reward(q, s, 1.0, None).unwrap();
-            let kept = aut.safe_set(q, s).unwrap();
+            let kept = aut.safe_set(q, s, false).unwrap();
             (next, reward, kept.len())
         })
     });

@@ -6,7 +6,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::sync::{Arc, OnceLock};
 
-use tlshield_core::{Automaton, Predicate, Spec, Trajectory, TrajectoryBatch};
+use tlshield_core::{Automaton, Spec, Trajectory, TrajectoryBatch};
 
 use crate::convert::FloatArray;
 use crate::errors::map;
