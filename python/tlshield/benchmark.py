@@ -416,6 +416,8 @@ def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> N
         data = np.load(folder / "paths.npz")
         ok = list(data["success"])
         paths = [data[f"path{i}"] for i in range(len(ok))]
-        panels.append((f"{k}. {f}\n({method}, 12 evaluation episodes)", paths[:8], ok[:8]))
+        seed = folder.name.rsplit("-s", 1)[1]
+        title = f"{k}. {f}\n({method}, seed {seed}, 8 evaluation episodes)"
+        panels.append((title, paths[:8], ok[:8]))
     if panels:
         plot_paths(panels, out / "flatworld_paths.png", CIRCLES)
