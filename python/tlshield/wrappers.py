@@ -3,8 +3,10 @@
 * :class:`FsaAugmented` appends the one-hot FSA state to the observation and rewards progress
   through the task automaton (the progress reward by default, or the paper's Eq. 5A1).
 * :class:`Shielded` filters every action through a :class:`tlshield.Shield` (Eq. 5D2).
-* :class:`ShieldedVecEnv` (Stable-Baselines3 ``VecEnv``) and :class:`ShieldedVectorEnv`
-  (Gymnasium vector API) shield all sub-environments in one ``Shield.filter_batch`` call.
+* :class:`tlshield.sb3.ShieldedVecEnv` (Stable-Baselines3 ``VecEnv``) and
+  :class:`tlshield.vector.ShieldedVectorEnv` (Gymnasium vector API) shield all
+  sub-environments in one ``Shield.filter_batch`` call; both names are also reachable here, and
+  SB3 (with torch) loads only when ``ShieldedVecEnv`` is first used.
 
 Both single-env wrappers are thin: the automaton bookkeeping lives in :class:`FsaTracker`, the
 shield call in :func:`shield_info`, and the paper's case study (``tlshield/Channel-v0``) is built
@@ -20,8 +22,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterBatch, FilterResult, ProgressReward, Shield, Spec
-from tlshield.codes import Solver, Status
+from tlshield._core import Automaton, FilterResult, ProgressReward, Shield, Spec
+from tlshield.vector import ShieldedVectorEnv
 
 StateFn = Callable[[Any], NDArray[np.float64]]
 DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
@@ -289,124 +291,21 @@ class Shielded(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def _batch_infos(out: FilterBatch, a_rl: NDArray[np.float64]) -> list[dict[str, Any]]:
-    """Per-env ``info["shield"]`` of a batch (lists of floats: cheaper than array rows): the
-    single-env entry's fields but the goal and the barriers, which a batch does not return."""
-    columns = zip(
-        a_rl.tolist(),
-        out.a_cbf.tolist(),
-        out.a_clf.tolist(),
-        out.delta.tolist(),
-        out.status.tolist(),
-        out.slack.tolist(),
-        out.solver.tolist(),
-        strict=True,
-    )
-    return [
-        {
-            "a_rl": a,
-            "a_cbf": cbf,
-            "a_clf": clf,
-            "delta": delta,
-            "status": Status(status),
-            "slack": slack,
-            "solver": Solver(solver),
-        }
-        for a, cbf, clf, delta, status, slack, solver in columns
-    ]
+def __getattr__(name: str) -> Any:
+    # ShieldedVecEnv subclasses SB3's VecEnvWrapper: SB3 and torch load on first use only.
+    if name == "ShieldedVecEnv":
+        from tlshield.sb3 import ShieldedVecEnv
+
+        return ShieldedVecEnv
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _rl_actions(actions: Any, action_fn: ActionFn | None) -> NDArray[np.float64]:
-    a = np.asarray(actions, dtype=np.float64)
-    return np.ascontiguousarray(a if action_fn is None else action_fn(a), dtype=np.float64)
-
-
-def _split(obs: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """States and FSA states from a batch of FSA-augmented observations."""
-    return np.ascontiguousarray(obs[:, :-k]), np.argmax(obs[:, -k:], axis=1)
-
-
-ActionFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
-
-
-class ShieldedVectorEnv(gym.vector.VectorWrapper):
-    """Shields every sub-environment of a Gymnasium vector env in one ``filter_batch`` call.
-
-    The sub-environments are FSA-augmented envs without their own shield whose observation is
-    the state vector followed by the one-hot FSA state, and whose ``step`` takes the applied
-    action (as ``tlshield/Channel-v0`` with ``shield_in_env=False``). ``action_fn`` maps the
-    policy's actions ``(N, m)`` to the RL actions in the shield's units (default: as they
-    are). ``infos["shield"]`` holds one dict per sub-env.
-    """
-
-    def __init__(
-        self, env: gym.vector.VectorEnv, shield: Shield, action_fn: ActionFn | None = None
-    ) -> None:
-        super().__init__(env)
-        self.shield = shield
-        self.action_fn = action_fn
-        self._k = shield.automaton.num_states
-        self._obs: NDArray[np.float64] | None = None
-
-    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        obs, info = self.env.reset(**kwargs)
-        self._obs = np.asarray(obs, dtype=np.float64)
-        return obs, info
-
-    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
-        if self._obs is None:
-            raise RuntimeError("call reset() before step()")
-        a_rl = _rl_actions(actions, self.action_fn)
-        states, qs = _split(self._obs, self._k)
-        out = self.shield.filter_batch(states, qs, a_rl)
-        obs, rewards, terminated, truncated, infos = self.env.step(out.action)
-        self._obs = np.asarray(obs, dtype=np.float64)
-        infos = {**infos, "shield": _batch_infos(out, a_rl)}
-        return obs, rewards, terminated, truncated, infos
-
-
-try:  # Stable-Baselines3 is optional (the `train` extra).
-    from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
-except ImportError:  # pragma: no cover - exercised only without SB3
-    VecEnvWrapper = object  # type: ignore[assignment,misc]
-    VecEnv = Any  # type: ignore[assignment,misc]
-
-
-class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc,valid-type]
-    """Stable-Baselines3 ``VecEnv`` wrapper: shields all sub-environments in one
-    ``filter_batch`` call per step (see :class:`ShieldedVectorEnv` for the layout and
-    ``action_fn``). Each sub-env's ``info["shield"]`` carries its correction."""
-
-    def __init__(self, venv: VecEnv, shield: Shield, action_fn: ActionFn | None = None) -> None:
-        if VecEnvWrapper is object:
-            raise ImportError(
-                "ShieldedVecEnv needs stable-baselines3 (pip install tlshield[train])"
-            )
-        super().__init__(venv)
-        self.shield = shield
-        self.action_fn = action_fn
-        self._k = shield.automaton.num_states
-        self._obs: NDArray[np.float64] | None = None
-        self._shield_infos: list[dict[str, Any]] = []
-
-    def reset(self) -> Any:
-        obs = self.venv.reset()
-        self._obs = np.asarray(obs, dtype=np.float64)
-        return obs
-
-    def step_async(self, actions: NDArray[Any]) -> None:
-        if self._obs is None:
-            raise RuntimeError("call reset() before step()")
-        a_rl = _rl_actions(actions, self.action_fn)
-        states, qs = _split(self._obs, self._k)
-        out = self.shield.filter_batch(states, qs, a_rl)
-        self._shield_infos = _batch_infos(out, a_rl)
-        self.venv.step_async(out.action)
-
-    def step_wait(self) -> Any:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        # After an episode ends SB3 has already reset that sub-env: obs is its first state.
-        self._obs = np.asarray(obs, dtype=np.float64)
-        for info, shield in zip(infos, self._shield_infos, strict=True):
-            info["shield"] = shield
-        return obs, rewards, dones, infos
+__all__ = [
+    "REWARDS",
+    "FsaAugmented",
+    "FsaTracker",
+    "Shielded",
+    "ShieldedVectorEnv",
+    "identity_state",
+    "shield_info",
+]
