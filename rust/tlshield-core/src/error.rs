@@ -133,6 +133,9 @@ pub enum AutomatonError {
     /// The trap state has no task reward (the environment pays a trap penalty there).
     #[error("q = {0} is the trap state, which has no task reward; pass trap_penalty to reward it")]
     TrapReward(usize),
+    /// A task monitor was advanced before its episode started.
+    #[error("the monitor has no episode yet: call reset(s0) before advance(s_next)")]
+    NotReset,
     /// Bad numeric input.
     #[error(transparent)]
     Input(#[from] InputError),

@@ -24,6 +24,7 @@ pub mod error;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub mod formula;
+pub mod monitor;
 pub mod parallel;
 pub mod predicate;
 pub mod progress;
@@ -38,6 +39,7 @@ pub use automaton::{Automaton, Edge, Reading};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use formula::Formula;
+pub use monitor::{Monitor, TaskReward, TaskStep};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};

@@ -80,7 +80,13 @@ pub struct Reading<'a> {
     rho: [f64; MAX_ATOMS],
 }
 
-impl Reading<'_> {
+impl<'a> Reading<'a> {
+    /// A reading from atoms computed earlier for the validated state `s` (the task monitor
+    /// keeps its last reading this way).
+    pub(crate) fn from_parts(aut: &'a Automaton, s: &'a [f64], rho: [f64; MAX_ATOMS]) -> Self {
+        Reading { aut, s, rho }
+    }
+
     /// The robustness of every atom, in the spec's atom order.
     #[inline]
     pub fn rho(&self) -> &[f64] {

@@ -35,6 +35,7 @@ use crate::automaton::Automaton;
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::error::{AutomatonError, InputError, ShieldError};
+use crate::monitor::Monitor;
 use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::validate::check_finite;
@@ -900,6 +901,38 @@ impl Shield {
             a_rl,
             fg,
             drift,
+            task: None,
+        };
+        self.checked_step(call, Want::Recorded, |ws| ws.out.clone())
+    }
+
+    /// [`Shield::filter`] at the task monitor's last state and FSA state, reusing its reading
+    /// of the atoms and its CLF goal: with [`Monitor::advance`], one environment step reads
+    /// the atoms once. The monitor must watch this shield's automaton and have started.
+    pub fn filter_monitor(
+        &self,
+        monitor: &Monitor,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
+    ) -> Result<Filtered, ShieldError> {
+        if !Arc::ptr_eq(monitor.automaton(), &self.automaton) {
+            return Err(ShieldError::Config(
+                "monitor: it watches another automaton; build it from this shield's automaton \
+                 (shield.automaton)"
+                    .into(),
+            ));
+        }
+        if !monitor.started() {
+            return Err(AutomatonError::NotReset.into());
+        }
+        let call = Call {
+            s: monitor.state(),
+            q: monitor.q(),
+            a_rl,
+            fg,
+            drift,
+            task: Some(monitor),
         };
         self.checked_step(call, Want::Recorded, |ws| ws.out.clone())
     }
@@ -921,6 +954,7 @@ impl Shield {
             a_rl,
             fg,
             drift,
+            task: None,
         };
         self.checked_step(call, Want::Problem, |ws| ws.qp.clone())
     }
@@ -934,7 +968,7 @@ impl Shield {
     ) -> Result<R, ShieldError> {
         self.check_call(c.s, c.q, c.a_rl, c.fg, c.drift)?;
         Ok(self.with_workspace(c.s.len(), |ws| {
-            self.step(ws, c.s, c.q, c.a_rl, c.fg, c.drift, want);
+            self.step(ws, c.s, c.q, c.a_rl, c.fg, c.drift, c.task, want);
             take(ws)
         }))
     }
@@ -1049,6 +1083,7 @@ impl Shield {
                                 &a[rows_m.clone()],
                                 None,
                                 d,
+                                None,
                                 Want::Solution,
                             );
                             action[rows_m.clone()].copy_from_slice(&ws.out.action);
@@ -1075,6 +1110,7 @@ impl Shield {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
+        task: Option<&Monitor>,
         want: Want,
     ) {
         let record = want == Want::Recorded;
@@ -1090,6 +1126,7 @@ impl Shield {
             a_rl,
             fg,
             drift,
+            task,
             record.then_some(&mut ws.out.barriers),
         );
         let program = &ws.program;
@@ -1167,6 +1204,8 @@ struct Call<'a> {
     a_rl: &'a [f64],
     fg: Option<ControlAffine<'a>>,
     drift: Option<&'a [f64]>,
+    /// The task monitor whose reading and goal the step reuses (it holds `s` and `q`).
+    task: Option<&'a Monitor>,
 }
 
 /// What a shield step is asked for.
@@ -1698,6 +1737,47 @@ mod tests {
         assert!(err.to_string().contains("qs[3]"), "{err}");
     }
 
+    #[test]
+    fn the_monitor_path_equals_state_and_q_calls() {
+        use crate::monitor::{Monitor, TaskReward};
+        let sh = shield(config(SolverChoice::Auto));
+        let paper = TaskReward::Paper {
+            c_r: 1.0,
+            trap_penalty: -10.0,
+        };
+        let mut monitor = Monitor::new(sh.automaton().clone(), paper.clone()).unwrap();
+        let a = [0.3, -0.2];
+        let err = sh.filter_monitor(&monitor, &a, None, None).unwrap_err();
+        assert!(err.to_string().contains("reset"), "{err}");
+        let mut rng = Rng(11);
+        // Along the channel through g1/g2 (at 4) to g3 (at 9), with sideways jitter: every
+        // FSA state of the task is visited.
+        let mut visited = std::collections::BTreeSet::new();
+        for t in 0..120 {
+            let s = state(
+                f64::from(t) * 0.08,
+                rng.uniform(-1.4, 1.4),
+                rng.uniform(-3.2, 3.2),
+            );
+            let q = if t == 0 {
+                monitor.reset(&s).unwrap().q
+            } else {
+                monitor.advance(&s).unwrap().q
+            };
+            visited.insert(q);
+            let a = [rng.uniform(-1.0, 1.0), rng.uniform(-2.0, 2.0)];
+            let via_monitor = sh.filter_monitor(&monitor, &a, None, None).unwrap();
+            let direct = sh.filter(&s, q, &a, None, None).unwrap();
+            assert_eq!(via_monitor, direct, "step {t}");
+        }
+        assert!(visited.len() >= 3, "{visited:?}");
+        let other = Arc::new(task_automaton());
+        let mut foreign = Monitor::new(other, paper).unwrap();
+        foreign.reset(&state(0.0, 0.0, 0.0)).unwrap();
+        let err = sh.filter_monitor(&foreign, &a, None, None).unwrap_err();
+        assert!(err.to_string().contains("another automaton"), "{err}");
+    }
+
     /// xorshift64*, so the simulation is seeded without extra dependencies.
     struct Rng(u64);
 
@@ -1800,7 +1880,7 @@ mod tests {
             prop_assert_eq!(a.status, b.status);
             let gap = a.action.iter().zip(&b.action).fold(0.0f64, |m, (p, r)| m.max((p - r).abs()));
             auto.with_workspace(N, |ws| {
-                auto.step(ws, &s, q, &a_rl, None, None, Want::Solution);
+                auto.step(ws, &s, q, &a_rl, None, None, None, Want::Solution);
                 let (qp, ours) = (&ws.qp, &ws.solvers.solution);
                 let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
                 assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);

@@ -18,6 +18,7 @@ use super::{BarrierSource, ControlAffine, ShieldConfig};
 use crate::automaton::Automaton;
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
+use crate::monitor::Monitor;
 use crate::qp::DenseQp;
 
 /// The rows of Eq. 5D2 at one state, and the buffers they are computed in.
@@ -132,6 +133,7 @@ impl Program {
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
+        task: Option<&Monitor>,
         mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
     ) {
         let m = a_rl.len();
@@ -139,8 +141,12 @@ impl Program {
         self.lg.clear();
         self.rhs.clear();
         self.weights.clear();
-        // The atoms' robustness at s, once for both the safe set and the goal.
-        let reading = automaton.read_validated(s);
+        // The atoms' robustness at s, once for both the safe set and the goal: the task
+        // monitor's reading of this state when there is one.
+        let reading = match task {
+            Some(monitor) => monitor.reading(),
+            None => automaton.read_validated(s),
+        };
 
         // Barriers (the user's, then the safe set of Eq. 5C1): value h, the row's L (m values)
         // and right-hand side r + L . a_rl (see the module docs).
@@ -217,7 +223,15 @@ impl Program {
         // pos directly (second order), e = f[pos] + k (s[pos] - goal) (drive the velocity
         // towards k times the remaining distance);
         // Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
-        self.has_goal = cfg.use_clf && reading.goal(q, &mut self.goal);
+        self.has_goal = cfg.use_clf
+            && match task {
+                Some(monitor) => monitor.goal().is_some_and(|g| {
+                    self.goal.clear();
+                    self.goal.extend_from_slice(g);
+                    true
+                }),
+                None => reading.goal(q, &mut self.goal),
+            };
         self.clf_rhs = 0.0;
         self.delta_0 = 0.0;
         self.clf_lg.clear();

@@ -1,0 +1,289 @@
+//! The task monitor: the automaton along one episode, in one object. It holds the automaton
+//! state `q`, the last reading of the atoms and the task reward's state, so that one call per
+//! step ([`Monitor::advance`]) gives the next FSA state, the task reward, acceptance, the trap
+//! and the CLF goal, and the shield (`Shield::filter_monitor`) reuses the same
+//! reading: the atoms are evaluated once per step.
+
+use std::sync::Arc;
+
+use crate::automaton::{Automaton, Reading, MAX_ATOMS};
+use crate::error::{AutomatonError, InputError};
+use crate::progress::ProgressReward;
+
+/// The task reward a monitor pays.
+#[derive(Debug, Clone)]
+pub enum TaskReward {
+    /// The progress-aware reward (see [`ProgressReward`]), of the monitor's automaton.
+    Progress(ProgressReward),
+    /// The paper's Eq. 5A1 with weight `c_r`; every step in the trap pays `trap_penalty`.
+    Paper {
+        /// The weight of the trap-avoidance term (> 0).
+        c_r: f64,
+        /// The reward of a step in the trap (finite).
+        trap_penalty: f64,
+    },
+}
+
+/// What one step of the task gives (see [`Monitor::advance`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TaskStep {
+    /// The FSA state after reading the state.
+    pub q: usize,
+    /// The task reward of the transition (0 at a reset).
+    pub reward: f64,
+    /// Whether `q` is accepting (the task is done).
+    pub accepted: bool,
+    /// Whether `q` is the trap (the task can no longer be done).
+    pub trapped: bool,
+}
+
+/// The automaton along one episode (see the module docs). Allocation-free per step once the
+/// first state has been read.
+#[derive(Debug, Clone)]
+pub struct Monitor {
+    automaton: Arc<Automaton>,
+    reward: TaskReward,
+    q: usize,
+    phi: f64,
+    started: bool,
+    s: Vec<f64>,
+    rho: [f64; MAX_ATOMS],
+    goal: Vec<f64>,
+    has_goal: bool,
+}
+
+impl Monitor {
+    /// A monitor of `automaton` paying `reward`; checks that a progress reward belongs to this
+    /// automaton and that the paper reward's weights are finite (`c_r > 0`).
+    pub fn new(automaton: Arc<Automaton>, reward: TaskReward) -> Result<Self, AutomatonError> {
+        match &reward {
+            TaskReward::Progress(p) if p.ranks().len() != automaton.num_states() => {
+                return Err(InputError::Value {
+                    what: "progress".into(),
+                    expected: format!(
+                        "a ProgressReward of this automaton ({} states)",
+                        automaton.num_states()
+                    ),
+                    got: format!("one of an automaton with {} states", p.ranks().len()),
+                }
+                .into());
+            }
+            TaskReward::Paper { c_r, trap_penalty } => {
+                if !(c_r.is_finite() && *c_r > 0.0) {
+                    return Err(InputError::Value {
+                        what: "c_r".into(),
+                        expected: "a finite weight > 0".into(),
+                        got: c_r.to_string(),
+                    }
+                    .into());
+                }
+                if !trap_penalty.is_finite() {
+                    return Err(InputError::NonFinite {
+                        what: "trap_penalty".into(),
+                        value: *trap_penalty,
+                    }
+                    .into());
+                }
+            }
+            TaskReward::Progress(_) => {}
+        }
+        let q = automaton.initial();
+        Ok(Monitor {
+            automaton,
+            reward,
+            q,
+            phi: 0.0,
+            started: false,
+            s: Vec::new(),
+            rho: [0.0; MAX_ATOMS],
+            goal: Vec::new(),
+            has_goal: false,
+        })
+    }
+
+    /// Starts an episode at `s0`: `q = step(initial, s0)`, the potential back to 0 (reward 0).
+    pub fn reset(&mut self, s0: &[f64]) -> Result<TaskStep, AutomatonError> {
+        self.read(s0)?;
+        self.q = self.reading().step(self.automaton.initial());
+        self.phi = 0.0;
+        self.started = true;
+        self.update_goal();
+        Ok(self.report(0.0))
+    }
+
+    /// Reads `s_next`: moves `q` to `step(q, s_next)` and returns the reward of that transition.
+    pub fn advance(&mut self, s_next: &[f64]) -> Result<TaskStep, AutomatonError> {
+        if !self.started {
+            return Err(AutomatonError::NotReset);
+        }
+        self.read(s_next)?;
+        let reading = self.reading();
+        let q = self.q;
+        let q_next = reading.step(q);
+        let reward = match &self.reward {
+            TaskReward::Progress(p) => {
+                let phi_next = p.potential(&reading, q_next);
+                let r = p.reward(&self.automaton, q, q_next, self.phi, phi_next);
+                self.phi = phi_next;
+                r
+            }
+            TaskReward::Paper { trap_penalty, .. } if Some(q) == self.automaton.trap() => {
+                *trap_penalty
+            }
+            TaskReward::Paper { c_r, .. } => reading.reward(q, *c_r),
+        };
+        self.q = q_next;
+        self.update_goal();
+        Ok(self.report(reward))
+    }
+
+    /// Validates `s` and reads its atoms into the monitor (the state is copied: its length may
+    /// change only at a reset's first read, so steady steps reuse the buffer).
+    fn read(&mut self, s: &[f64]) -> Result<(), AutomatonError> {
+        let reading = self.automaton.read(s)?;
+        let rho = reading.rho();
+        self.rho[..rho.len()].copy_from_slice(rho);
+        self.s.clear();
+        self.s.extend_from_slice(s);
+        Ok(())
+    }
+
+    fn update_goal(&mut self) {
+        let reading = Reading::from_parts(&self.automaton, &self.s, self.rho);
+        self.has_goal = reading.goal(self.q, &mut self.goal);
+    }
+
+    fn report(&self, reward: f64) -> TaskStep {
+        TaskStep {
+            q: self.q,
+            reward,
+            accepted: self.automaton.is_accepting(self.q),
+            trapped: Some(self.q) == self.automaton.trap(),
+        }
+    }
+
+    /// The last state read, with its atoms (valid once an episode started).
+    pub fn reading(&self) -> Reading<'_> {
+        Reading::from_parts(&self.automaton, &self.s, self.rho)
+    }
+
+    /// The automaton monitored.
+    pub fn automaton(&self) -> &Arc<Automaton> {
+        &self.automaton
+    }
+
+    /// The task reward paid.
+    pub fn task_reward(&self) -> &TaskReward {
+        &self.reward
+    }
+
+    /// The current FSA state.
+    pub fn q(&self) -> usize {
+        self.q
+    }
+
+    /// The progress reward's potential `Phi` at the last state (0 for the paper's reward).
+    pub fn phi(&self) -> f64 {
+        self.phi
+    }
+
+    /// Whether an episode has started (`reset` was called).
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
+    /// The last state read.
+    pub fn state(&self) -> &[f64] {
+        &self.s
+    }
+
+    /// The CLF goal of Eq. 5B1 at the last state and `q` (rank-aware), if there is one.
+    pub fn goal(&self) -> Option<&[f64]> {
+        self.has_goal.then_some(self.goal.as_slice())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::task_automaton;
+    use crate::progress::ProgressParams;
+    use crate::tests_support::seeded;
+    use crate::{Predicate, Spec};
+    use proptest::prelude::*;
+
+    fn task() -> Arc<Automaton> {
+        Arc::new(task_automaton())
+    }
+
+    proptest! {
+        #![proptest_config(seeded(64))]
+
+        /// The monitor equals the separate calls it replaces: `step`, the progress reward's
+        /// `advance`, Eq. 5A1's `reward` and the automaton's `goal`, on random episodes.
+        #[test]
+        fn monitor_matches_the_separate_calls(
+            traj in prop::collection::vec(prop::collection::vec(-2.0f64..12.0, 13), 2..40),
+            paper in any::<bool>(),
+        ) {
+            let aut = task();
+            let progress = ProgressReward::new(&aut, &ProgressParams::default()).unwrap();
+            let reward = if paper {
+                TaskReward::Paper { c_r: 2.0, trap_penalty: -50.0 }
+            } else {
+                TaskReward::Progress(progress.clone())
+            };
+            let mut monitor = Monitor::new(aut.clone(), reward).unwrap();
+            let first = monitor.reset(&traj[0]).unwrap();
+            let mut q = aut.step(aut.initial(), &traj[0]).unwrap();
+            prop_assert_eq!(first.q, q);
+            prop_assert_eq!(first.reward, 0.0);
+            let mut phi = 0.0;
+            for s in &traj[1..] {
+                let got = monitor.advance(s).unwrap();
+                let (q_next, r) = if paper {
+                    let r = aut.reward(q, s, 2.0, Some(-50.0)).unwrap();
+                    (aut.step(q, s).unwrap(), r)
+                } else {
+                    let (q_next, r, phi_next) = progress.advance(&aut, q, phi, s).unwrap();
+                    phi = phi_next;
+                    (q_next, r)
+                };
+                prop_assert_eq!(got.q, q_next);
+                prop_assert_eq!(got.reward.to_bits(), r.to_bits());
+                prop_assert_eq!(got.accepted, aut.is_accepting(q_next));
+                prop_assert_eq!(got.trapped, Some(q_next) == aut.trap());
+                let goal = aut.goal(q_next, s).unwrap();
+                prop_assert_eq!(monitor.goal().map(<[f64]>::to_vec), goal);
+                q = q_next;
+            }
+        }
+    }
+
+    #[test]
+    fn advance_before_reset_and_bad_settings_are_refused() {
+        let aut = task();
+        let mut monitor = Monitor::new(
+            aut.clone(),
+            TaskReward::Paper {
+                c_r: 1.0,
+                trap_penalty: -1.0,
+            },
+        )
+        .unwrap();
+        assert_eq!(
+            monitor.advance(&[0.0; 13]).unwrap_err(),
+            AutomatonError::NotReset
+        );
+        assert!(monitor.reset(&[0.0; 12]).is_err());
+        assert!(monitor.reset(&[f64::NAN; 13]).is_err());
+        for (c_r, trap_penalty) in [(0.0, -1.0), (f64::NAN, -1.0), (1.0, f64::INFINITY)] {
+            let bad = Monitor::new(aut.clone(), TaskReward::Paper { c_r, trap_penalty });
+            assert!(bad.is_err(), "c_r {c_r}, trap_penalty {trap_penalty}");
+        }
+        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
+        let other = Automaton::build(&Spec::new("F p", [("p", p)]).unwrap()).unwrap();
+        let foreign = ProgressReward::new(&other, &ProgressParams::default()).unwrap();
+        assert!(Monitor::new(aut, TaskReward::Progress(foreign)).is_err());
+    }
+}
