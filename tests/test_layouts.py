@@ -118,6 +118,13 @@ def _region(kind: Any) -> Any:
     )
 
 
+def _started_monitor() -> Any:
+    """A monitor of the task one step into an episode (so that ``advance`` has a past)."""
+    monitor = _core.Monitor(AUT, AUT.progress_reward())
+    monitor.reset(STATES[0])
+    return monitor
+
+
 CASES: dict[str, Case] = {
     "Halfspace.__new__": Case(lambda: tlshield.Halfspace, "__call__", {"w": S[:4], "b": 0.5}),
     "Halfspace.robustness": Case(lambda: tlshield.Halfspace(S[:13], 0.5), "robustness", {"s": S}),
@@ -179,6 +186,8 @@ CASES: dict[str, Case] = {
     "Shield.filter_batch": Case(
         _shield, "filter_batch", {"states": STATES, "qs": QS, "a_rl": A_RL, "drift": DRIFT}
     ),
+    "Monitor.reset": Case(lambda: _core.Monitor(AUT, AUT.progress_reward()), "reset", {"s0": S}),
+    "Monitor.advance": Case(_started_monitor, "advance", {"s_next": S}),
 }
 
 
@@ -239,7 +248,7 @@ def _call(key: str, **override: Any) -> Any:
 
 def canon(value: Any) -> Any:
     """A comparable form of any result: arrays and scalars as float arrays, results by field."""
-    if isinstance(value, (_core.FilterResult, _core.FilterBatch)):
+    if isinstance(value, (_core.FilterResult, _core.FilterBatch, _core.TaskStep)):
         names = [n for n in dir(value) if not n.startswith("_")]
         return {n: canon(getattr(value, n)) for n in names}
     if isinstance(value, _core.Halfspace):

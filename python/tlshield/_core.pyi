@@ -1,7 +1,7 @@
 """Type stubs for the compiled module ``tlshield._core`` (hand-written; keep in sync)."""
 
 from collections.abc import Mapping, Sequence
-from typing import Literal, TypeAlias, final
+from typing import Literal, TypeAlias, final, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -176,6 +176,50 @@ class ProgressReward:
     def advance(self, q: int, phi: float, s_next: ArrayLike) -> tuple[int, float, float]: ...
 
 @final
+class TaskStep:
+    """What one step of the task gives (``Monitor.reset`` and ``Monitor.advance``)."""
+
+    @property
+    def q(self) -> int: ...
+    @property
+    def reward(self) -> float: ...
+    @property
+    def accepted(self) -> bool: ...
+    @property
+    def trapped(self) -> bool: ...
+    @property
+    def goal(self) -> NDArray[np.float64] | None: ...
+
+@final
+class Monitor:
+    """The task automaton along one episode: ``q``, the last reading of the atoms and the task
+    reward's state; ``reset(s0)`` and ``advance(s_next)`` give a ``TaskStep`` in one call, and
+    ``Shield.filter(monitor, a_rl)`` reuses the reading."""
+
+    def __new__(
+        cls,
+        automaton: Automaton,
+        progress: ProgressReward | None = None,
+        *,
+        c_r: float = 1.0,
+        trap_penalty: float = -100.0,
+    ) -> Self: ...
+    def reset(self, s0: ArrayLike) -> TaskStep: ...
+    def advance(self, s_next: ArrayLike) -> TaskStep: ...
+    @property
+    def q(self) -> int: ...
+    @property
+    def phi(self) -> float: ...
+    @property
+    def started(self) -> bool: ...
+    @property
+    def automaton(self) -> Automaton: ...
+    @property
+    def state(self) -> NDArray[np.float64]: ...
+    @property
+    def goal(self) -> NDArray[np.float64] | None: ...
+
+@final
 class Unicycle:
     """The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2)."""
 
@@ -298,6 +342,17 @@ class Shield:
         gain of the HOCBF rows that barriers of relative degree 2 need (an error when such a
         barrier exists and it is None); ``clf_gain`` is ``k`` of the second-order CLF
         ``|dp/dt + k (p - goal)|^2`` (None: 1)."""
+    @overload
+    def filter(
+        self,
+        s: Monitor,
+        q: ArrayLike,
+        a_rl: None = None,
+        f: ArrayLike | None = None,
+        g: ArrayLike | None = None,
+        drift: ArrayLike | None = None,
+    ) -> FilterResult: ...
+    @overload
     def filter(
         self,
         s: ArrayLike,

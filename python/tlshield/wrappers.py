@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, ProgressReward, Shield, Spec
+from tlshield._core import Automaton, FilterResult, Monitor, ProgressReward, Shield, Spec, TaskStep
 from tlshield.vector import ShieldedVectorEnv
 
 StateFn = Callable[[Any], NDArray[np.float64]]
@@ -39,7 +39,9 @@ REWARDS = ("progress", "paper")
 
 
 class FsaTracker:
-    """The task automaton along one episode: the current FSA state and the task reward.
+    """The task automaton along one episode: a thin shell over :class:`tlshield.Monitor` (which
+    holds the FSA state, the last reading of the atoms and the reward's state in the core) that
+    adds what the Gymnasium wrappers need (the one-hot FSA state).
 
     The FSA reads every state: ``reset(s_0)`` sets ``q_0 = step(initial, s_0)`` and
     ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition.
@@ -60,42 +62,43 @@ class FsaTracker:
         trap_penalty: float,
         progress: ProgressReward | None = None,
     ) -> None:
-        if not (np.isfinite(c_r) and c_r > 0):
-            raise ValueError(f"c_r = {c_r}: expected a finite number > 0")
-        if not np.isfinite(trap_penalty):
-            raise ValueError(f"trap_penalty = {trap_penalty}: expected a finite number")
-        if progress is not None and len(progress.ranks) != automaton.num_states:
-            raise ValueError("progress: a ProgressReward of another automaton")
+        self.monitor = Monitor(automaton, progress, c_r=c_r, trap_penalty=trap_penalty)
         self.automaton = automaton
         self.c_r = float(c_r)
         self.progress = progress
         self.trap_penalty = float(trap_penalty if progress is None else progress.trap_penalty)
-        self.accepting = frozenset(automaton.accepting)
-        self.q = automaton.initial
-        self.phi = 0.0
+        self._last: TaskStep | None = None
         self._eye = np.eye(automaton.num_states)
 
     def reset(self, s: NDArray[np.float64]) -> int:
-        self.q = self.automaton.step(self.automaton.initial, s)
-        self.phi = 0.0  # the progress reward's episodes start from Phi = 0
-        return self.q
+        self._last = self.monitor.reset(s)
+        return self._last.q
 
     def advance(self, s_next: NDArray[np.float64]) -> tuple[int, float]:
         """Moves to the next FSA state; returns it and the reward of the transition."""
-        if self.progress is not None:
-            q_next, reward, self.phi = self.progress.advance(self.q, self.phi, s_next)
-        else:
-            q_next, reward, _ = self.automaton.advance(self.q, s_next, self.c_r, self.trap_penalty)
-        self.q = q_next
-        return q_next, reward
+        self._last = self.monitor.advance(s_next)
+        return self._last.q, self._last.reward
+
+    @property
+    def q(self) -> int:
+        return self.monitor.q
+
+    @property
+    def phi(self) -> float:
+        return self.monitor.phi
+
+    @property
+    def goal(self) -> NDArray[np.float64] | None:
+        """The CLF goal at the last state and ``q`` (None without one, or before a reset)."""
+        return None if self._last is None else self._last.goal
 
     @property
     def success(self) -> bool:
-        return self.q in self.accepting
+        return self._last is not None and self._last.accepted
 
     @property
     def trapped(self) -> bool:
-        return self.q == self.automaton.trap
+        return self._last is not None and self._last.trapped
 
     def one_hot(self, q: int | None = None) -> NDArray[np.float64]:
         return self._eye[self.q if q is None else q]

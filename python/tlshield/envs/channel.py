@@ -546,7 +546,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         obs[10:14] = ((s[9:13].reshape(2, 2) - p) @ frame.T).ravel()
         obs[14:18] = (self.drift[9:13].reshape(2, 2) @ frame.T).ravel()
         # The task's next goal as the automaton picks it (Eq. 5B1), zero when there is none.
-        goal = self.tracker.automaton.goal(self.tracker.q, s)
+        goal = self.tracker.goal
         obs[18:20] = 0.0 if goal is None else frame @ (goal - p)
         obs[RELATIVE_DIM:] = self.tracker.one_hot()
         return obs
@@ -585,7 +585,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._t = 0
         self._trajectory = [s[X : Y + 1].copy()]
         q = self.tracker.reset(s)
-        goal = self.tracker.automaton.goal(q, s)
+        goal = self.tracker.goal
         info = {
             "fsa_state": q,
             "success": self.tracker.success,
@@ -613,7 +613,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         result = None
         if self.shield is not None and self.shield_in_env:
             drift = self.drift if self.cfg.obstacle_drift else None
-            result = self.shield.filter(s, self.tracker.q, a_rl, drift=drift)
+            # The monitor has read s (reset or the last step): the shield reuses that reading.
+            result = self.shield.filter(self.tracker.monitor, a_rl, drift=drift)
             self.last_slack = result.slack
             applied = result.action
         else:

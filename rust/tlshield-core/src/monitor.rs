@@ -9,12 +9,14 @@ use std::sync::Arc;
 use crate::automaton::{Automaton, Reading, MAX_ATOMS};
 use crate::error::{AutomatonError, InputError};
 use crate::progress::ProgressReward;
+use crate::validate::check_finite;
 
 /// The task reward a monitor pays.
 #[derive(Debug, Clone)]
 pub enum TaskReward {
-    /// The progress-aware reward (see [`ProgressReward`]), of the monitor's automaton.
-    Progress(ProgressReward),
+    /// The progress-aware reward (see [`ProgressReward`]) and the automaton it was built for,
+    /// which must be the monitor's.
+    Progress(ProgressReward, Arc<Automaton>),
     /// The paper's Eq. 5A1 with weight `c_r`; every step in the trap pays `trap_penalty`.
     Paper {
         /// The weight of the trap-avoidance term (> 0).
@@ -57,14 +59,11 @@ impl Monitor {
     /// automaton and that the paper reward's weights are finite (`c_r > 0`).
     pub fn new(automaton: Arc<Automaton>, reward: TaskReward) -> Result<Self, AutomatonError> {
         match &reward {
-            TaskReward::Progress(p) if p.ranks().len() != automaton.num_states() => {
+            TaskReward::Progress(_, of) if !Arc::ptr_eq(of, &automaton) => {
                 return Err(InputError::Value {
                     what: "progress".into(),
-                    expected: format!(
-                        "a ProgressReward of this automaton ({} states)",
-                        automaton.num_states()
-                    ),
-                    got: format!("one of an automaton with {} states", p.ranks().len()),
+                    expected: "a ProgressReward of the monitor's automaton".into(),
+                    got: "one of another automaton".into(),
                 }
                 .into());
             }
@@ -85,7 +84,7 @@ impl Monitor {
                     .into());
                 }
             }
-            TaskReward::Progress(_) => {}
+            TaskReward::Progress(..) => {}
         }
         let q = automaton.initial();
         Ok(Monitor {
@@ -103,7 +102,7 @@ impl Monitor {
 
     /// Starts an episode at `s0`: `q = step(initial, s0)`, the potential back to 0 (reward 0).
     pub fn reset(&mut self, s0: &[f64]) -> Result<TaskStep, AutomatonError> {
-        self.read(s0)?;
+        self.read("s0", s0)?;
         self.q = self.reading().step(self.automaton.initial());
         self.phi = 0.0;
         self.started = true;
@@ -116,12 +115,12 @@ impl Monitor {
         if !self.started {
             return Err(AutomatonError::NotReset);
         }
-        self.read(s_next)?;
+        self.read("s_next", s_next)?;
         let reading = self.reading();
         let q = self.q;
         let q_next = reading.step(q);
         let reward = match &self.reward {
-            TaskReward::Progress(p) => {
+            TaskReward::Progress(p, _) => {
                 let phi_next = p.potential(&reading, q_next);
                 let r = p.reward(&self.automaton, q, q_next, self.phi, phi_next);
                 self.phi = phi_next;
@@ -139,8 +138,21 @@ impl Monitor {
 
     /// Validates `s` and reads its atoms into the monitor (the state is copied: its length may
     /// change only at a reset's first read, so steady steps reuse the buffer).
-    fn read(&mut self, s: &[f64]) -> Result<(), AutomatonError> {
-        let reading = self.automaton.read(s)?;
+    fn read(&mut self, what: &str, s: &[f64]) -> Result<(), AutomatonError> {
+        // The length error names the argument (`s0 length`), as the finiteness check does.
+        self.automaton
+            .spec()
+            .check_state_len(s.len())
+            .map_err(|err| match err {
+                InputError::Shape { expected, got, .. } => InputError::Shape {
+                    what: format!("{what} length"),
+                    expected,
+                    got,
+                },
+                other => other,
+            })?;
+        check_finite(what, s, s.len())?;
+        let reading = self.automaton.read_validated(s);
         let rho = reading.rho();
         self.rho[..rho.len()].copy_from_slice(rho);
         self.s.clear();
@@ -209,7 +221,6 @@ mod tests {
     use crate::fixtures::task_automaton;
     use crate::progress::ProgressParams;
     use crate::tests_support::seeded;
-    use crate::{Predicate, Spec};
     use proptest::prelude::*;
 
     fn task() -> Arc<Automaton> {
@@ -231,7 +242,7 @@ mod tests {
             let reward = if paper {
                 TaskReward::Paper { c_r: 2.0, trap_penalty: -50.0 }
             } else {
-                TaskReward::Progress(progress.clone())
+                TaskReward::Progress(progress.clone(), aut.clone())
             };
             let mut monitor = Monitor::new(aut.clone(), reward).unwrap();
             let first = monitor.reset(&traj[0]).unwrap();
@@ -281,9 +292,9 @@ mod tests {
             let bad = Monitor::new(aut.clone(), TaskReward::Paper { c_r, trap_penalty });
             assert!(bad.is_err(), "c_r {c_r}, trap_penalty {trap_penalty}");
         }
-        let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
-        let other = Automaton::build(&Spec::new("F p", [("p", p)]).unwrap()).unwrap();
+        // Another automaton, even one of the same task and size, is refused.
+        let other = task();
         let foreign = ProgressReward::new(&other, &ProgressParams::default()).unwrap();
-        assert!(Monitor::new(aut, TaskReward::Progress(foreign)).is_err());
+        assert!(Monitor::new(aut, TaskReward::Progress(foreign, other)).is_err());
     }
 }

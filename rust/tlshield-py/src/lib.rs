@@ -9,6 +9,7 @@ mod convert;
 mod dynamics;
 mod errors;
 mod literals;
+mod monitor;
 mod predicate;
 mod progress;
 mod shield;
@@ -41,6 +42,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
     m.add_class::<progress::PyProgressReward>()?;
+    m.add_class::<monitor::PyMonitor>()?;
+    m.add_class::<monitor::PyTaskStep>()?;
     m.add_class::<dynamics::PyUnicycle>()?;
     m.add_class::<dynamics::PySingleIntegrator>()?;
     m.add_class::<dynamics::PyDoubleIntegrator>()?;

@@ -20,8 +20,8 @@ use crate::errors::map;
 /// Made by ``Automaton.progress_reward``.
 #[pyclass(name = "ProgressReward", module = "tlshield._core", frozen)]
 pub struct PyProgressReward {
-    automaton: Arc<Automaton>,
-    inner: ProgressReward,
+    pub(crate) automaton: Arc<Automaton>,
+    pub(crate) inner: ProgressReward,
 }
 
 impl PyProgressReward {

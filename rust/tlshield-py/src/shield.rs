@@ -17,6 +17,7 @@ use crate::convert::{self, state, vector, FloatArray};
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
+use crate::monitor::PyMonitor;
 use crate::predicate::predicate_of;
 use crate::spec::PySpec;
 
@@ -186,6 +187,38 @@ pub struct PyShield {
 }
 
 impl PyShield {
+    /// Runs `call` with the per-call dynamics ``f`` (n,) and ``g`` (n, m) when both are given,
+    /// with the model's when neither is.
+    fn with_dynamics<R>(
+        &self,
+        f: Option<&Bound<'_, PyAny>>,
+        g: Option<&Bound<'_, PyAny>>,
+        call: impl FnOnce(Option<ControlAffine<'_>>) -> PyResult<R>,
+    ) -> PyResult<R> {
+        match (f, g) {
+            (None, None) => call(None),
+            (Some(f), Some(g)) => {
+                let f = FloatArray::extract(f, "f", 1, "(n,)")?;
+                let g = FloatArray::extract(g, "g", 2, "(n, m)")?;
+                if g.shape()[1] != self.inner.inputs() {
+                    return Err(PyValueError::new_err(format!(
+                        "g: expected shape (n, {}), got ({}, {})",
+                        self.inner.inputs(),
+                        g.shape()[0],
+                        g.shape()[1]
+                    )));
+                }
+                call(Some(ControlAffine {
+                    f: &f.values(),
+                    g: &g.values(),
+                }))
+            }
+            _ => Err(PyValueError::new_err(
+                "pass both f and g (the control-affine dynamics at s), or neither",
+            )),
+        }
+    }
+
     fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
         let barriers = out
             .barriers
@@ -315,52 +348,51 @@ impl PyShield {
     }
 
     /// One shield step: state ``s`` (n,), FSA state ``q`` (the state after reading ``s``),
-    /// RL action ``a_rl`` (m,). ``f`` (n,) and ``g`` (n, m) override the dynamics model.
-    /// ``drift`` (n,) is added to ``f``: the motion measured for this step of state
-    /// dimensions the agent does not control (e.g. moving obstacles read by ``center_dims``).
-    #[pyo3(signature = (s, q, a_rl, f=None, g=None, drift=None))]
+    /// RL action ``a_rl`` (m,). Or ``filter(monitor, a_rl)``: at a ``Monitor``'s last state
+    /// and FSA state, reusing its reading of the atoms and its CLF goal (the per-step path:
+    /// ``monitor.advance(s_next)``, then ``shield.filter(monitor, a_rl)``). ``f`` (n,) and
+    /// ``g`` (n, m) override the dynamics model. ``drift`` (n,) is added to ``f``: the motion
+    /// measured for this step of state dimensions the agent does not control (e.g. moving
+    /// obstacles read by ``center_dims``).
+    #[pyo3(signature = (s, q, a_rl=None, f=None, g=None, drift=None))]
     #[allow(clippy::too_many_arguments)]
     fn filter(
         &self,
         py: Python<'_>,
         s: &Bound<'_, PyAny>,
         q: &Bound<'_, PyAny>,
-        a_rl: &Bound<'_, PyAny>,
+        a_rl: Option<&Bound<'_, PyAny>>,
         f: Option<&Bound<'_, PyAny>>,
         g: Option<&Bound<'_, PyAny>>,
         drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
-        let s = vector(s, "s")?;
         let drift = drift.map(|d| vector(d, "drift")).transpose()?;
         let drift = drift.as_deref();
-        let q = state(q, "q", self.inner.automaton())?;
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
-            .values()
-            .into_owned();
-        let out = match (f, g) {
-            (None, None) => map(self.inner.filter(&s, q, &a_rl, None, drift))?,
-            (Some(f), Some(g)) => {
-                let f = FloatArray::extract(f, "f", 1, "(n,)")?;
-                let g = FloatArray::extract(g, "g", 2, "(n, m)")?;
-                if g.shape()[1] != self.inner.inputs() {
-                    return Err(PyValueError::new_err(format!(
-                        "g: expected shape (n, {}), got ({}, {})",
-                        self.inner.inputs(),
-                        g.shape()[0],
-                        g.shape()[1]
-                    )));
-                }
-                let fg = ControlAffine {
-                    f: &f.values(),
-                    g: &g.values(),
-                };
-                map(self.inner.filter(&s, q, &a_rl, Some(fg), drift))?
+        let action = |a: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
+            Ok(FloatArray::extract(a, "a_rl", 1, "(m,)")?
+                .values()
+                .into_owned())
+        };
+        let out = if let Ok(monitor) = s.cast::<PyMonitor>() {
+            if a_rl.is_some() {
+                return Err(PyTypeError::new_err(
+                    "filter(monitor, a_rl): the monitor holds the state and the FSA state; pass \
+                     the RL action second",
+                ));
             }
-            _ => {
-                return Err(PyValueError::new_err(
-                    "pass both f and g (the control-affine dynamics at s), or neither",
-                ))
-            }
+            let a_rl = action(q)?;
+            let monitor = monitor.borrow();
+            self.with_dynamics(f, g, |fg| {
+                map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
+            })?
+        } else {
+            let a_rl = a_rl.ok_or_else(|| {
+                PyTypeError::new_err("filter(s, q, a_rl): missing the RL action a_rl")
+            })?;
+            let s = vector(s, "s")?;
+            let q = state(q, "q", self.inner.automaton())?;
+            let a_rl = action(a_rl)?;
+            self.with_dynamics(f, g, |fg| map(self.inner.filter(&s, q, &a_rl, fg, drift)))?
         };
         Ok(self.result(py, out))
     }

@@ -1,0 +1,124 @@
+"""The task monitor: one call per step gives what the separate automaton calls give, and
+``Shield.filter(monitor, a_rl)`` equals ``Shield.filter(s, q, a_rl)`` on the same step."""
+
+import numpy as np
+import pytest
+
+import tlshield
+from tests.fixtures import task_shield
+
+
+def _episode(rng: np.random.Generator, steps: int) -> np.ndarray:
+    """States along the channel's diagonal with sideways jitter, past g1/g2 (at 4) to g3 (at 9):
+    the task's FSA states all occur, and the wide-jitter episodes leave the channel (the trap)."""
+    s = np.zeros((steps, 13))
+    along = np.linspace(0.0, 10.0, steps)
+    jitter = rng.choice([0.5, 1.8])
+    off = rng.uniform(-jitter, jitter, steps)
+    s[:, 0], s[:, 1] = along + off / 2, along - off / 2
+    s[:, 2] = rng.uniform(-np.pi, np.pi, steps)
+    s[:, 3:9] = [4.0, 4.0, 4.5, 6.5, 9.0, 9.0]
+    s[:, 9:13] = [20.0, 20.0, 20.0, -20.0]
+    return s
+
+
+@pytest.mark.parametrize("reward", ["progress", "paper"])
+def test_monitor_equals_the_separate_calls(reward):
+    shield = task_shield()
+    aut = shield.automaton
+    progress = aut.progress_reward(gamma=0.99, horizon=200, exclusive=[["g1", "g2", "g3"]])
+    if reward == "progress":
+        monitor = tlshield.Monitor(aut, progress)
+    else:
+        monitor = tlshield.Monitor(aut, c_r=2.0, trap_penalty=-30.0)
+    rng = np.random.default_rng(3)
+    seen = set()
+    for _ in range(20):
+        traj = _episode(rng, 60)
+        first = monitor.reset(traj[0])
+        q, phi = aut.step(aut.initial, traj[0]), 0.0
+        assert (first.q, first.reward) == (q, 0.0)
+        for s in traj[1:]:
+            got = monitor.advance(s)
+            if reward == "progress":
+                q_next, r, phi = progress.advance(q, phi, s)
+            else:
+                r = aut.reward(q, s, 2.0, trap_penalty=-30.0)
+                q_next = aut.step(q, s)
+            assert got.q == q_next == monitor.q
+            assert got.reward == r
+            assert got.accepted == (q_next in aut.accepting)
+            assert got.trapped == (q_next == aut.trap)
+            goal = aut.goal(q_next, s)
+            assert (got.goal is None) == (goal is None)
+            if goal is not None:
+                np.testing.assert_array_equal(got.goal, goal)
+                np.testing.assert_array_equal(monitor.goal, goal)
+            np.testing.assert_array_equal(monitor.state, s)
+            a = rng.uniform([-1.0, -2.0], [1.0, 2.0])
+            via_monitor, direct = shield.filter(monitor, a), shield.filter(s, q_next, a)
+            np.testing.assert_array_equal(via_monitor.action, direct.action)
+            assert via_monitor.delta == direct.delta
+            assert via_monitor.barriers == direct.barriers
+            assert via_monitor.status == direct.status
+            seen.add(q_next)
+            q = q_next
+    # Every state of the task was reached: start, after g1/g2, accepting, trap.
+    assert seen == set(range(aut.num_states))
+
+
+def test_monitor_misuse_is_a_clear_error():
+    shield = task_shield()
+    aut = shield.automaton
+    monitor = tlshield.Monitor(aut)
+    with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
+        monitor.advance(np.zeros(13))
+    with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
+        shield.filter(monitor, np.zeros(2))
+    with pytest.raises(ValueError, match="s0"):
+        monitor.reset(np.zeros(12))
+    with pytest.raises(ValueError, match="NaN"):
+        monitor.reset(np.full(13, np.nan))
+    monitor.reset(np.zeros(13))
+    with pytest.raises(TypeError, match="RL action second"):
+        shield.filter(monitor, np.zeros(2), np.zeros(2))
+    with pytest.raises(TypeError, match="missing the RL action"):
+        shield.filter(np.zeros(13), 0)
+    with pytest.raises(ValueError, match="a_rl"):
+        shield.filter(monitor, np.zeros(3))
+    foreign = tlshield.Monitor(task_shield().automaton)
+    foreign.reset(np.zeros(13))
+    with pytest.raises(tlshield.ShieldError, match="another automaton"):
+        shield.filter(foreign, np.zeros(2))
+    with pytest.raises(ValueError, match="c_r"):
+        tlshield.Monitor(aut, c_r=0.0)
+    with pytest.raises(ValueError, match="trap_penalty"):
+        tlshield.Monitor(aut, trap_penalty=float("inf"))
+    # A progress reward of another automaton, even of the same task and size, is refused.
+    with pytest.raises(ValueError, match="another automaton"):
+        tlshield.Monitor(aut, task_shield().automaton.progress_reward())
+    with pytest.raises(TypeError):
+        tlshield.Monitor("F a")  # type: ignore[arg-type]
+
+
+def test_the_monitor_form_reads_any_layout_of_a_rl():
+    shield = task_shield()
+    monitor = tlshield.Monitor(shield.automaton)
+    monitor.reset(_episode(np.random.default_rng(0), 2)[0])
+    a = np.array([0.7, -1.5])
+    want = shield.filter(monitor, a).action
+    big = np.zeros(4)
+    big[::2] = a
+    read_only = a.copy()
+    read_only.flags.writeable = False
+    for layout in (a[::-1].copy()[::-1], big[::2], read_only, a.tolist()):
+        np.testing.assert_array_equal(shield.filter(monitor, layout).action, want)
+    single = a.astype(np.float32)
+    np.testing.assert_array_equal(
+        shield.filter(monitor, single).action, shield.filter(monitor, single.astype(float)).action
+    )
+    np.testing.assert_array_equal(
+        shield.filter(monitor, np.array([1, -2])).action, shield.filter(monitor, [1.0, -2.0]).action
+    )
+    with pytest.raises(TypeError, match="a_rl"):
+        shield.filter(monitor, np.array([1 + 1j, 0]))
