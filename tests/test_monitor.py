@@ -55,6 +55,7 @@ def test_monitor_equals_the_separate_calls(reward):
                 np.testing.assert_array_equal(got.goal, goal)
                 np.testing.assert_array_equal(monitor.goal, goal)
             np.testing.assert_array_equal(monitor.state, s)
+            np.testing.assert_array_equal(got.atom_robustness, aut.spec.atom_robustness(s))
             a = rng.uniform([-1.0, -2.0], [1.0, 2.0])
             via_monitor, direct = shield.filter(monitor, a), shield.filter(s, q_next, a)
             np.testing.assert_array_equal(via_monitor.action, direct.action)

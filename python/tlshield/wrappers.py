@@ -93,6 +93,13 @@ class FsaTracker:
         return None if self._last is None else self._last.goal
 
     @property
+    def atom_robustness(self) -> NDArray[np.float64]:
+        """The atoms' robustness at the last state read (spec order); call ``reset`` first."""
+        if self._last is None:
+            raise RuntimeError("call reset() first")
+        return self._last.atom_robustness
+
+    @property
     def success(self) -> bool:
         return self._last is not None and self._last.accepted
 

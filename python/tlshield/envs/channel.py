@@ -513,8 +513,9 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     def _measure(self, s: NDArray[np.float64]) -> dict[str, Any]:
         cfg = self.cfg
-        # The channel constraints as the task's own predicates evaluate them.
-        rho = self.spec_tl.atom_robustness(s)
+        # The channel constraints as the task's own predicates evaluate them (the monitor has
+        # just read s).
+        rho = self.tracker.atom_robustness
         h1, h2 = rho[self._channel_atoms[0]], rho[self._channel_atoms[1]]
         d = min(float(np.hypot(*(s[X : Y + 1] - s[a : b + 1]))) for a, b in OBSTACLE_DIMS)
         return {

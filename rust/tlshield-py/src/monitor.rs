@@ -116,6 +116,7 @@ impl PyMonitor {
             accepted: step.accepted,
             trapped: step.trapped,
             goal: self.inner.goal().map(<[f64]>::to_vec),
+            atoms: self.inner.reading().rho().to_vec(),
         }
     }
 }
@@ -136,6 +137,7 @@ pub struct PyTaskStep {
     #[pyo3(get)]
     trapped: bool,
     goal: Option<Vec<f64>>,
+    atoms: Vec<f64>,
 }
 
 #[pymethods]
@@ -144,6 +146,13 @@ impl PyTaskStep {
     #[getter]
     fn goal<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
         self.goal.as_ref().map(|g| g.clone().into_pyarray(py))
+    }
+
+    /// The robustness of every atom at the state read, in the spec's atom order (as
+    /// ``Spec.atom_robustness`` gives it).
+    #[getter]
+    fn atom_robustness<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.atoms.clone().into_pyarray(py)
     }
 
     fn __repr__(&self) -> String {
