@@ -1,6 +1,9 @@
 """The task monitor: one call per step gives what the separate automaton calls give, and
 ``Shield.filter(monitor, a_rl)`` equals ``Shield.filter(s, q, a_rl)`` on the same step."""
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -123,3 +126,38 @@ def test_the_monitor_form_reads_any_layout_of_a_rl():
     )
     with pytest.raises(TypeError, match="a_rl"):
         shield.filter(monitor, np.array([1 + 1j, 0]))
+
+
+def test_the_readme_loop_runs():
+    """The README's two-call loop, as printed, on Channel-v0's plant (the env's own shield off,
+    its observation the 13 state values): it runs and the monitor ends in a task state."""
+    import gymnasium as gym
+
+    from tlshield.envs.channel import ChannelEnv, channel_task_spec
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    (loop,) = [b for b in blocks if "monitor.advance" in b]
+
+    class StateOnly(gym.ObservationWrapper):
+        def observation(self, obs):
+            return obs[:13]
+
+    env = StateOnly(ChannelEnv(config="rl", observation="paper"))
+    added = []
+
+    class Buffer:
+        def add(self, *row):
+            added.append(row)
+
+    scope = {
+        "spec": channel_task_spec(),
+        "env": env,
+        "policy": lambda obs: np.array([0.5, 0.0]),
+        "obstacle_motion": lambda s: np.zeros(13),
+        "buffer": Buffer(),
+    }
+    exec(compile(loop, "README.md", "exec"), scope)
+    assert len(added) >= 1
+    assert all(isinstance(r, float) for _, r, _ in added)
+    assert scope["t"] >= 0 and scope["task"].q == scope["monitor"].q
