@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from tlshield.envs.flatworld import FORMULAS, flatworld_spec
-from tlshield.evaluation import EVAL_SEED
+from tlshield.seeds import eval_block_seed
 
 
 def measure(formula: str, preserve: bool, policy: str, seed: int, episodes: int) -> str:
@@ -21,10 +21,10 @@ def measure(formula: str, preserve: bool, policy: str, seed: int, episodes: int)
     env = gym.make(
         "tlshield/FlatWorld-v0", formula=formula, config="rl_cbf_clf", preserve_progress=preserve
     )
-    rng = np.random.default_rng(EVAL_SEED + 1000 * seed)
+    rng = np.random.default_rng(eval_block_seed(seed, 0))
     successes, setbacks, steps = 0, 0, []
     for k in range(episodes):
-        _, info = env.reset(seed=EVAL_SEED + 1000 * seed + k)
+        _, info = env.reset(seed=eval_block_seed(seed, k))
         q, t = info["fsa_state"], 0
         while t < 500:
             t += 1

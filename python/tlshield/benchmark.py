@@ -12,8 +12,8 @@ The comparison is not like for like, and every table says so: DeepLTL learns one
 all formulas (15M steps, zero-shot) with no map and no model; tlshield trains one agent per
 formula, and its shield knows the discs and the dynamics.
 
-Seeds: training env ``i`` of seed ``s`` resets from ``1000 s + i``; evaluation episode ``k``
-from ``EVAL_SEED + 1000 s + k`` (disjoint, and never used for tuning).
+Seeds (:mod:`tlshield.seeds`): training env ``i`` of seed ``s`` resets from ``1000 s + i``;
+evaluation episode ``k`` from ``EVAL_SEED + 1000 s + k`` (disjoint, and never used for tuning).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.evaluation import EVAL_SEED
+from tlshield.seeds import check_block, check_seeds, eval_block_seed, train_seed
 
 #: The columns of ``flatworld.csv``.
 COLUMNS = (
@@ -125,7 +125,7 @@ def run_episodes(
     CBF on unless ``config == "rl"``. Returns the success rate, the mean steps of successful
     episodes (DeepLTL's measure), trap entries (``violations``: the formula's safety part
     broken), box exits and a few paths for the figure. ``overrides``: FlatWorld settings."""
-    rng = np.random.default_rng(EVAL_SEED + 1000 * seed)
+    rng = np.random.default_rng(eval_block_seed(seed, 0))
     evaluation = config != "rl"
     successes, steps, violations, exits = 0, [], 0, 0
     paths: list[tuple[np.ndarray, bool]] = []
@@ -133,7 +133,7 @@ def run_episodes(
         idx = list(range(start, min(start + batch, episodes)))
         envs = [_make(formula, config, evaluation, **overrides) for _ in idx]
         obs = np.stack(
-            [e.reset(seed=EVAL_SEED + 1000 * seed + k)[0] for e, k in zip(envs, idx, strict=True)]
+            [e.reset(seed=eval_block_seed(seed, k))[0] for e, k in zip(envs, idx, strict=True)]
         )
         active = list(range(len(idx)))
         t = 0
@@ -187,7 +187,7 @@ def train_agent(formula: str, config: str, seed: int, steps: int) -> tuple[Any, 
 
     torch.set_num_threads(1)
     venv = DummyVecEnv([partial(_make, formula, config, False)] * N_ENVS)
-    venv.seed(1000 * seed)
+    venv.seed(train_seed(seed))
     counts = {"train_violations": 0, "train_steps": 0}
 
     class Count(BaseCallback):
@@ -273,13 +273,10 @@ def flatworld(
     for c in configs:
         if c not in CONFIGS:
             raise ValueError(f"config {c!r}: expected one of {', '.join(CONFIGS)}")
-    if not (isinstance(episodes, int) and episodes > 0):
-        raise ValueError(f"episodes = {episodes!r}: expected a positive integer")
+    check_block(episodes, "episodes")
     if not (isinstance(steps, int) and steps > 0):
         raise ValueError(f"steps = {steps!r}: expected a positive integer")
-    for s in seeds:
-        if not (isinstance(s, int) and 0 <= s < 9):
-            raise ValueError(f"seed = {s!r}: expected an integer in [0, 9)")
+    check_seeds(seeds)
     out = Path(out)
     runs = out / "runs"
     runs.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from tlshield._core import Automaton, SpecError
+from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
@@ -114,7 +115,7 @@ def _positive(text: str) -> int:
     return value
 
 
-def _settings(args: argparse.Namespace, env_id: str = "tlshield/Channel-v0") -> dict[str, object]:
+def _settings(args: argparse.Namespace, env_id: str = ENV_ID) -> dict[str, object]:
     """``--settings FILE`` then ``--set NAME=VALUE`` (later wins) as :func:`train` keywords,
     over the preset's and the schedule options'; fills ``args.config`` from the file when the
     command line names none."""
@@ -253,10 +254,7 @@ def _preset_options(args: argparse.Namespace) -> dict[str, object]:
     reward, 13-value observation, no moving-obstacle barrier)."""
     from tlshield.envs.channel import PAPER_ENV
 
-    if (
-        args.preset == "paper"
-        and getattr(args, "env", "tlshield/Channel-v0") == "tlshield/Channel-v0"
-    ):
+    if args.preset == "paper" and getattr(args, "env", ENV_ID) == ENV_ID:
         return {"preset": "paper", **PAPER_ENV}
     return {"preset": args.preset}
 
@@ -272,10 +270,12 @@ def _add_preset(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_schedule(parser: argparse.ArgumentParser) -> None:
+    from tlshield.training import SCHEDULES
+
     parser.add_argument(
         "--clf-schedule",
-        choices=("fixed", "linear", "exponential"),
-        default="fixed",
+        choices=SCHEDULES,
+        default=SCHEDULES[0],
         help="shrink the CLF bounds as training progresses (default: fixed)",
     )
     parser.add_argument(
@@ -347,11 +347,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--env",
-        default="tlshield/Channel-v0",
+        default=ENV_ID,
         help="a registered Gymnasium id whose factory takes config= and evaluation= and wraps "
         "the task (tlshield.FsaAugmented, tlshield.Shielded); default: the paper's case study. "
-        "Bundled: tlshield/Channel-v0, tlshield/PointMass-v0, tlshield/FlatWorld-v0 (--set "
-        "formula=...)",
+        f"Bundled: {ENV_ID}, {POINT_MASS_ID}, {FLATWORLD_ID} (--set formula=...)",
     )
     train.add_argument(
         "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"

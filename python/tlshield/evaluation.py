@@ -2,9 +2,8 @@
 episode ends at the horizon, on success or on collision. All trials run side by side with one
 batched policy call per step.
 
-Evaluation reset seeds start at :data:`EVAL_SEED` (10,000 + trial); training environments are
-seeded from the run seed (``seed * 1000 + env index``) and validation episodes from
-``VALIDATION_SEED`` (20,000), so the three never meet.
+Evaluation reset seeds start at ``EVAL_SEED`` (10,000 + trial); the seed ranges of training,
+validation and evaluation live in :mod:`tlshield.seeds`, so the three never meet.
 """
 
 from __future__ import annotations
@@ -20,11 +19,11 @@ from tlshield.envs import ENV_ID, env_horizon, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_config
+from tlshield.seeds import EVAL_SEED
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
 
 #: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
-EVAL_SEED = 10_000
 
 
 def rollouts(

@@ -119,15 +119,17 @@ class Run:
         return _env_config(self.record)
 
 
-def _tuples(value: Any) -> Any:
-    """JSON lists back to the (nested) tuples of :class:`ChannelConfig`."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+def json_tuples(value: Any) -> Any:
+    """JSON lists back into the (nested) tuples the config dataclasses hold."""
+    return tuple(json_tuples(v) for v in value) if isinstance(value, list) else value
 
 
 def _env_config(record: dict[str, Any]) -> ChannelConfig:
     known = ChannelConfig.__dataclass_fields__
     env = record.get("env")
-    values = {k: _tuples(v) for k, v in env.items() if k in known} if isinstance(env, dict) else {}
+    values = (
+        {k: json_tuples(v) for k, v in env.items() if k in known} if isinstance(env, dict) else {}
+    )
     try:
         return ChannelConfig(**values)
     except TypeError:  # pragma: no cover - a config.json from an incompatible version

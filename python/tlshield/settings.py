@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
+from tlshield.runs import json_tuples
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
 #: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
@@ -87,7 +88,7 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     ppo = {k: settings[k] for k in PPO_NAMES if k in settings}
     if ppo:
         out["ppo"] = ppo
-    env = {k: _tuples(v) for k, v in settings.items() if k not in PPO_NAMES + SCHEDULE_NAMES}
+    env = {k: json_tuples(v) for k, v in settings.items() if k not in PPO_NAMES + SCHEDULE_NAMES}
     cls = _config_class(env_id)
     if cls is not None:
         # FlatWorld's task is a keyword of its factory, not a constant of its config.
@@ -129,11 +130,6 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
             out[name.strip()] = text
     check_names(out, env_id, where="--set")
     return out
-
-
-def _tuples(value: Any) -> Any:
-    """JSON lists back into the tuples the config dataclasses hold."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
 
 
 def _config_class(env_id: str) -> Any:

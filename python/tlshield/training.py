@@ -23,9 +23,9 @@ Observations are normalised by running statistics (SB3 ``VecNormalize``, saved a
 says ``norm_reward: False``; the metrics are in raw units. The policy is one of
 :data:`tlshield.policies.POLICIES` (the preset's ``policy``; PPO setting ``policy``).
 
-Evaluation reset seeds start at :data:`tlshield.evaluation.EVAL_SEED` (10,000 + trial);
-training environments are seeded from the run seed (``seed * 1000 + env index``), validation
-episodes from :data:`VALIDATION_SEED`, so the three never meet.
+Reset seeds (:mod:`tlshield.seeds`): training environments from the run seed (``seed * 1000 +
+env index``), validation episodes from ``VALIDATION_SEED`` (20,000+), evaluation trials from
+``EVAL_SEED`` (10,000+), so the three never meet.
 """
 
 from __future__ import annotations
@@ -45,8 +45,9 @@ import numpy as np
 from tlshield.codes import Status
 from tlshield.envs import ENV_ID, check_env_id, check_task_env, make
 from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
-from tlshield.evaluation import EVAL_SEED, evaluate, rollouts
+from tlshield.evaluation import evaluate, rollouts
 from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
+from tlshield.seeds import check_seeds, train_seed, validation_seed
 
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -99,10 +100,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "net_arch": {"pi": [64, 64], "vf": [64, 64]},
     },
 }
-#: Reset seeds of the validation episodes that pick the kept checkpoint (disjoint from both).
-VALIDATION_SEED = 20_000
-#: Training seeds are 0 .. MAX_SEED - 1 (so the reset seed ranges above never meet).
-MAX_SEED = 10
+#: The CLF-bound schedules of :func:`clf_scale` (the CLI and the tuner offer these).
 SCHEDULES = ("fixed", "linear", "exponential")
 #: Environments :func:`train` and :func:`tlshield.evaluation.evaluate` know.
 
@@ -159,7 +157,7 @@ def make_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
-    venv.seed(seed * 1000)
+    venv.seed(train_seed(seed))
     return venv
 
 
@@ -336,7 +334,7 @@ def train(
             if not every or self.update % every:
                 return math.nan
             trials = int(spec["validation_trials"])
-            seeds = [VALIDATION_SEED + seed * 1000 + i for i in range(trials)]
+            seeds = [validation_seed(seed, i) for i in range(trials)]
 
             def policy(obs: np.ndarray) -> np.ndarray:
                 return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
@@ -501,17 +499,6 @@ def reproduce(
     plot_all(root)
     (root / "results.md").write_text(f"{results_table(root)}\n\n{seeds_table(root)}\n")
     return root
-
-
-def check_seeds(seeds: Any) -> None:
-    """Training seeds 0-9: their reset seeds (``seed * 1000 + i``) stay below the evaluation
-    seeds and their validation seeds below the tuning seeds."""
-    for seed in seeds:
-        if not (isinstance(seed, int) and 0 <= seed < MAX_SEED):
-            raise ValueError(
-                f"seed = {seed!r}: expected an integer in [0, {MAX_SEED}) (training reset seeds "
-                f"seed * 1000 + i must stay below the evaluation seeds, {EVAL_SEED}+)"
-            )
 
 
 def _run_jobs(

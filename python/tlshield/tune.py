@@ -32,7 +32,7 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelConfig
 from tlshield.settings import split
-from tlshield.training import PRESETS
+from tlshield.training import PRESETS, SCHEDULES
 
 #: Reset seeds of the tuning evaluation: 30,000 + trial (training < 10,000, evaluation
 #: 10,000+, validation 20,000+).
@@ -50,27 +50,38 @@ SPACE: dict[str, tuple[str, tuple[Any, ...]]] = {
     "c3": ("clf", ("float", 0.1, 10.0, True)),
     "K": ("clf", ("float", 1e2, 1e6, True)),
     "clf_bounds": ("clf", ("float", 0.25, 2.0, True)),
-    "clf_schedule": ("clf", ("choice", ("fixed", "linear", "exponential"))),
+    "clf_schedule": ("clf", ("choice", SCHEDULES)),
     "clf_final_scale": ("clf", ("float", 0.05, 1.0, False)),
     "learning_rate": ("", ("float", 1e-4, 3e-3, True)),
     "ent_coef": ("", ("float", 1e-6, 1e-2, True)),
     "n_epochs": ("", ("int", 3, 20)),
     "batch_size": ("", ("choice", (128, 256, 512, 1024))),
 }
-#: What each searched setting is when it is not searched (tlshield's defaults), as sampled.
+
+
+def _floor(name: str, value: float) -> float:
+    """``value`` raised to the lowest value the search range of ``name`` holds (a log range
+    cannot hold the preset's ``ent_coef`` of 0)."""
+    return max(value, SPACE[name][1][1])
+
+
+_CFG = ChannelConfig()
+_PPO = PRESETS["default"]["ppo"]
+#: What each searched setting is when it is not searched, as sampled (the first trial): read
+#: from :class:`ChannelConfig` and the default preset, never copied.
 DEFAULTS: dict[str, Any] = {
-    "c_r": 1.0,
-    "w": 0.05,
-    "alpha": 2.0,
+    "c_r": _CFG.c_r,
+    "w": _CFG.w,
+    "alpha": _CFG.alpha,
     "cbf_bounds": 1.0,
-    "c3": 1.0,
-    "K": 1e4,
+    "c3": _CFG.c3,
+    "K": _CFG.K,
     "clf_bounds": 1.0,
-    "clf_schedule": "fixed",
-    "learning_rate": PRESETS["default"]["ppo"]["learning_rate"],
-    "ent_coef": 1e-6,
-    "n_epochs": 10,
-    "batch_size": 512,
+    "clf_schedule": SCHEDULES[0],
+    "learning_rate": _PPO["learning_rate"],
+    "ent_coef": _floor("ent_coef", _PPO["ent_coef"]),
+    "n_epochs": _PPO["n_epochs"],
+    "batch_size": _PPO["batch_size"],
 }
 
 
@@ -206,7 +217,7 @@ def tune(
     from ray.tune.search.optuna import OptunaSearch
 
     from tlshield import cluster
-    from tlshield.training import check_seeds
+    from tlshield.seeds import check_seeds
 
     names = tuple(search) if search else searchable(config)
     _check(config, names, samples, updates, trials)

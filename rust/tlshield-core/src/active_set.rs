@@ -23,6 +23,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::dot;
 use crate::qp::{DenseQp, QpSolution, QpStatus};
 
 /// Largest number of variables [`ActiveSetQp`] accepts; larger problems return `Failed`.
@@ -729,10 +730,6 @@ impl ActiveSetQp {
         let scale = mag[..n].iter().fold(f64::MIN_POSITIVE, |m, v| m.max(*v));
         grad[..n].iter().all(|g| g.abs() <= KKT_TOL * scale)
     }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(u, v)| u * v).sum()
 }
 
 /// `J[.., col]' v` over the first `v.len()` rows.

@@ -24,6 +24,7 @@ pub mod error;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub mod formula;
+pub mod linalg;
 pub mod monitor;
 pub mod parallel;
 pub mod predicate;

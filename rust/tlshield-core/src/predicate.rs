@@ -48,7 +48,7 @@ pub enum Predicate {
 }
 
 fn check_finite(what: &str, values: &[f64]) -> Result<(), SpecError> {
-    match values.iter().position(|v| !v.is_finite()) {
+    match crate::validate::first_non_finite(values) {
         Some(i) => Err(SpecError::InvalidPredicate(format!(
             "{what}[{i}] is {} (must be finite)",
             values[i]

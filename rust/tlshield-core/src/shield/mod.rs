@@ -69,8 +69,9 @@ fn within_tolerance(qp: &DenseQp, x: &[f64]) -> bool {
         })
 }
 
-/// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`].
-pub const ACTIVE_SET_MAX_VARS: usize = 16;
+/// Problems up to this many variables go to the active-set path under [`SolverChoice::Auto`]:
+/// as many as its fixed-size workspace holds.
+pub const ACTIVE_SET_MAX_VARS: usize = crate::active_set::MAX_VARS;
 
 /// A user barrier: `h = rho(predicate)` (`positive`) or `h = -rho(predicate)` (keep out of
 /// the predicate's region, e.g. a moving obstacle's disc), kept above the margin.

@@ -18,6 +18,7 @@ use super::{BarrierSource, ControlAffine, ShieldConfig};
 use crate::automaton::Automaton;
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
+use crate::linalg::dot;
 use crate::monitor::Monitor;
 use crate::qp::DenseQp;
 
@@ -50,10 +51,6 @@ pub(super) struct Program {
     /// there is a goal).
     pub(super) cbf_vars: usize,
     pub(super) clf_vars: usize,
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
