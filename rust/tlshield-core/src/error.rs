@@ -126,7 +126,7 @@ pub enum AutomatonError {
         /// Which argument.
         what: String,
         /// The id given.
-        q: i64,
+        q: usize,
         /// Number of states.
         num_states: usize,
     },

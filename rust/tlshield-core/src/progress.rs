@@ -323,7 +323,7 @@ impl ProgressReward {
         phi: f64,
         s_next: &[f64],
     ) -> Result<(usize, f64, f64), AutomatonError> {
-        let q = automaton.check_state("q", q as i64)?;
+        let q = automaton.check_state("q", q)?;
         if self.ranks.len() != automaton.num_states() {
             return Err(InputError::Value {
                 what: "automaton".into(),

@@ -136,10 +136,7 @@ impl PyAutomaton {
         qs: &Bound<'py, PyAny>,
         states: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        let qs: Vec<i64> = crate::convert::states(qs, "qs", &self.inner)?
-            .into_iter()
-            .map(|q| q as i64)
-            .collect();
+        let qs = crate::convert::states(qs, "qs", &self.inner)?;
         let arr = FloatArray::extract(states, "states", 2, "(B, n)")?;
         if arr.shape()[0] != qs.len() {
             return Err(PyValueError::new_err(format!(

@@ -124,14 +124,16 @@ pub fn state(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyRes
         )));
     }
     match obj.extract::<i64>() {
-        Ok(q) => map(automaton.check_state(name, q)),
-        Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => {
-            Err(AutomatonError::new_err(format!(
-                "{name}: state {} does not exist (the automaton has states 0..{})",
-                obj.repr().map_or_else(|_| "?".into(), |r| r.to_string()),
-                automaton.num_states()
-            )))
-        }
+        // A negative id is no usize: refused here, in the words the core uses for the rest.
+        Ok(q) => match usize::try_from(q) {
+            Ok(q) => map(automaton.check_state(name, q)),
+            Err(_) => Err(no_such_state(name, q, automaton)),
+        },
+        Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => Err(no_such_state(
+            name,
+            obj.repr().map_or_else(|_| "?".into(), |r| r.to_string()),
+            automaton,
+        )),
         Err(_) => Err(PyTypeError::new_err(format!(
             "{name}: expected an integer FSA state, got {}",
             type_name(obj)
@@ -139,32 +141,28 @@ pub fn state(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyRes
     }
 }
 
-/// A `(B,)` array-like of FSA states (any integer dtype and layout), each checked as
-/// [`state`] checks one; anything but integers is a `TypeError` naming `name`.
+/// A `(B,)` array-like of FSA states (any integer dtype and layout) as ids; the core function
+/// they are passed to checks that each exists. Anything but integers is a `TypeError` naming
+/// `name`.
 pub fn states(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyResult<Vec<usize>> {
     let kind = dtype_kind(obj).map_err(|_| states_type_error(obj, name))?;
     if kind != b'i' && kind != b'u' {
         return Err(states_type_error(obj, name));
     }
-    let check = |i: usize, q: i64| map(automaton.check_state(&format!("{name}[{i}]"), q));
+    // Only converted here (a negative id is no usize): the core call that takes the ids
+    // checks that each exists, naming it as `{name}[i]`.
+    let check = |i: usize, q: Option<usize>, shown: &dyn std::fmt::Display| {
+        q.ok_or_else(|| no_such_state(&format!("{name}[{i}]"), shown, automaton))
+    };
     if kind == b'u' {
         let qs: PyArrayLike1<'_, u64, AllowTypeChange> = obj
             .extract()
             .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})")))?;
-        let n = automaton.num_states() as u64;
         return qs
             .as_array()
             .iter()
             .enumerate()
-            .map(|(i, &q)| {
-                if q < n {
-                    Ok(q as usize)
-                } else {
-                    Err(AutomatonError::new_err(format!(
-                        "{name}[{i}]: state {q} does not exist (the automaton has states 0..{n})"
-                    )))
-                }
-            })
+            .map(|(i, &q)| check(i, usize::try_from(q).ok(), &q))
             .collect();
     }
     let qs: PyArrayLike1<'_, i64, AllowTypeChange> = obj
@@ -173,8 +171,17 @@ pub fn states(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyRe
     qs.as_array()
         .iter()
         .enumerate()
-        .map(|(i, &q)| check(i, q))
+        .map(|(i, &q)| check(i, usize::try_from(q).ok(), &q))
         .collect()
+}
+
+/// The error of an FSA state id that no usize holds (negative, or past u64), worded as the
+/// core words an id past the last state.
+fn no_such_state(name: &str, shown: impl std::fmt::Display, automaton: &Automaton) -> PyErr {
+    AutomatonError::new_err(format!(
+        "{name}: state {shown} does not exist (the automaton has states 0..{})",
+        automaton.num_states()
+    ))
 }
 
 fn states_type_error(obj: &Bound<'_, PyAny>, name: &str) -> PyErr {

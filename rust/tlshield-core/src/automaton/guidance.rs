@@ -188,7 +188,7 @@ impl Automaton {
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> Result<f64, AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         let reading = self.read(s_next)?;
         check_weight(c_r)?;
         if Some(q) == self.trap {
@@ -208,7 +208,7 @@ impl Automaton {
         trap_penalty: Option<f64>,
         safe: &mut Vec<(Literal, f64)>,
     ) -> Result<(usize, f64), AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         let reading = self.read(s_next)?;
         check_weight(c_r)?;
         let reward = if Some(q) == self.trap {
@@ -230,7 +230,7 @@ impl Automaton {
         s: &[f64],
         preserve_progress: bool,
     ) -> Result<Vec<(Literal, f64)>, AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         let reading = self.read(s)?;
         let mut out = Vec::with_capacity(self.avoid_cnf[q].len());
         if preserve_progress {
@@ -243,7 +243,7 @@ impl Automaton {
 
     /// The CLF goal of Eq. 5B1 at `(s, q)` ([`Reading::goal`]), checked; `None` without one.
     pub fn goal(&self, q: usize, s: &[f64]) -> Result<Option<Vec<f64>>, AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         let mut goal = Vec::new();
         Ok(self.read(s)?.goal(q, &mut goal).then_some(goal))
     }

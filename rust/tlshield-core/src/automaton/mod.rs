@@ -159,14 +159,14 @@ impl Automaton {
 
     /// The CNF of the negated trap guard of `q` (empty: `q` has no trap edge).
     pub fn trap_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         Ok(&self.trap_cnf[q])
     }
 
     /// The CNF of the progress-preserving safe set of `q`: the negation of every guard to a
     /// state farther from acceptance (or the trap); the trap CNF when nothing else sets back.
     pub fn avoid_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         Ok(&self.avoid_cnf[q])
     }
 
@@ -196,20 +196,20 @@ impl Automaton {
 
     /// The guard of `q`'s edge to the trap (empty: none).
     pub fn trap_guard(&self, q: usize) -> Result<&[Cube], AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         Ok(&self.trap_guard[q])
     }
 
     /// The cubes of D_q (Eq. 5A1): the guards of `q`'s edges to other non-trap states.
     pub fn progress_guard(&self, q: usize) -> Result<&[Cube], AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         Ok(&self.progress[q])
     }
 
     /// Checks a state id given by a caller.
-    pub fn check_state(&self, what: &str, q: i64) -> Result<usize, AutomatonError> {
-        match usize::try_from(q) {
-            Ok(q) if q < self.num_states() => Ok(q),
+    pub fn check_state(&self, what: &str, q: usize) -> Result<usize, AutomatonError> {
+        match q {
+            q if q < self.num_states() => Ok(q),
             _ => Err(AutomatonError::UnknownState {
                 what: what.into(),
                 q,
@@ -242,7 +242,7 @@ impl Automaton {
 
     /// The successor of `q` after reading state `s` (validated).
     pub fn step(&self, q: usize, s: &[f64]) -> Result<usize, AutomatonError> {
-        self.check_state("q", q as i64)?;
+        self.check_state("q", q)?;
         Ok(self.read(s)?.step(q))
     }
 
@@ -255,7 +255,7 @@ impl Automaton {
     /// Steps a batch in parallel: row `i` of `states` (row-major, `dim` values) from `qs[i]`.
     pub fn step_batch(
         &self,
-        qs: &[i64],
+        qs: &[usize],
         states: &[f64],
         dim: usize,
     ) -> Result<Vec<usize>, AutomatonError> {
@@ -269,11 +269,9 @@ impl Automaton {
         }
         self.spec.check_state_len(dim)?;
         check_finite("states", states, dim)?;
-        let qs: Vec<usize> = qs
-            .iter()
-            .enumerate()
-            .map(|(i, &q)| self.check_state(&format!("qs[{i}]"), q))
-            .collect::<Result<_, _>>()?;
+        for (i, &q) in qs.iter().enumerate() {
+            self.check_state(&format!("qs[{i}]"), q)?;
+        }
         Ok(crate::parallel::install(|| {
             qs.par_iter()
                 .zip(states.par_chunks(dim))

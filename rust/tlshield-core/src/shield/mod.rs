@@ -874,7 +874,7 @@ impl Shield {
     ) -> Result<(), ShieldError> {
         self.check_state("s", s)?;
         check_finite("s", s, s.len())?;
-        self.automaton.check_state("q", q as i64)?;
+        self.automaton.check_state("q", q)?;
         self.check_action("a_rl", a_rl)?;
         self.check_dynamics(s.len(), fg)?;
         if let Some(d) = drift {
@@ -1015,7 +1015,7 @@ impl Shield {
             check_drift(d, n, rows)?;
         }
         for (i, &q) in qs.iter().enumerate() {
-            self.automaton.check_state(&format!("qs[{i}]"), q as i64)?;
+            self.automaton.check_state(&format!("qs[{i}]"), q)?;
         }
         out.action.resize(rows * m, 0.0);
         out.a_cbf.resize(rows * m, 0.0);
