@@ -29,6 +29,7 @@
 use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
+use smallvec::SmallVec;
 
 use crate::active_set::ActiveSetQp;
 use crate::automaton::Automaton;
@@ -526,6 +527,67 @@ pub struct BatchOutput {
     pub solver: Vec<u8>,
 }
 
+impl BatchOutput {
+    /// Sizes every column for `rows` rows of `m` inputs (reusing the buffers).
+    fn resize(&mut self, rows: usize, m: usize) {
+        self.action.resize(rows * m, 0.0);
+        self.a_cbf.resize(rows * m, 0.0);
+        self.a_clf.resize(rows * m, 0.0);
+        self.delta.resize(rows, 0.0);
+        self.status.resize(rows, 0);
+        self.slack.resize(rows, 0.0);
+        self.solver.resize(rows, 0);
+    }
+
+    /// Views of consecutive runs of `chunk` rows (the last may be shorter), one per worker.
+    fn rows_mut(&mut self, chunk: usize, m: usize) -> impl Iterator<Item = OutRows<'_>> {
+        self.action
+            .chunks_mut(chunk * m)
+            .zip(self.a_cbf.chunks_mut(chunk * m))
+            .zip(self.a_clf.chunks_mut(chunk * m))
+            .zip(self.delta.chunks_mut(chunk))
+            .zip(self.status.chunks_mut(chunk))
+            .zip(self.slack.chunks_mut(chunk))
+            .zip(self.solver.chunks_mut(chunk))
+            .map(
+                |((((((action, a_cbf), a_clf), delta), status), slack), solver)| OutRows {
+                    action,
+                    a_cbf,
+                    a_clf,
+                    delta,
+                    status,
+                    slack,
+                    solver,
+                },
+            )
+    }
+}
+
+/// A run of consecutive rows of a [`BatchOutput`], written by one worker.
+struct OutRows<'a> {
+    action: &'a mut [f64],
+    a_cbf: &'a mut [f64],
+    a_clf: &'a mut [f64],
+    delta: &'a mut [f64],
+    status: &'a mut [u8],
+    slack: &'a mut [f64],
+    solver: &'a mut [u8],
+}
+
+impl OutRows<'_> {
+    /// Row `i` of this run from one step's result.
+    fn write(&mut self, i: usize, m: usize, out: &Filtered) {
+        let cols = i * m..(i + 1) * m;
+        self.action[cols.clone()].copy_from_slice(&out.action);
+        self.a_cbf[cols.clone()].copy_from_slice(&out.a_cbf);
+        self.a_clf[cols].copy_from_slice(&out.a_clf);
+        self.delta[i] = out.delta;
+        self.status[i] = out.status as u8;
+        self.slack[i] = out.slack;
+        self.solver[i] = out.solver as u8;
+    }
+}
+
 /// The TL-CLF-CBF shield of one task automaton and one dynamics model.
 pub struct Shield {
     automaton: Arc<Automaton>,
@@ -1017,13 +1079,7 @@ impl Shield {
         for (i, &q) in qs.iter().enumerate() {
             self.automaton.check_state(&format!("qs[{i}]"), q)?;
         }
-        out.action.resize(rows * m, 0.0);
-        out.a_cbf.resize(rows * m, 0.0);
-        out.a_clf.resize(rows * m, 0.0);
-        out.delta.resize(rows, 0.0);
-        out.status.resize(rows, 0);
-        out.slack.resize(rows, 0.0);
-        out.solver.resize(rows, 0);
+        out.resize(rows, m);
         // One contiguous chunk of rows per worker thread, each with its own workspace; small
         // batches stay on the calling thread (waking the pool costs more than they do).
         if rows < PARALLEL_MIN_ROWS {
@@ -1037,7 +1093,8 @@ impl Shield {
         Ok(())
     }
 
-    /// The rows of [`Shield::filter_batch`] on validated input, in `threads` contiguous chunks.
+    /// The rows of [`Shield::filter_batch`] on validated input, in `threads` contiguous chunks
+    /// of rows, each worker with its own workspace.
     #[allow(clippy::too_many_arguments)]
     fn batch_rows(
         &self,
@@ -1050,54 +1107,21 @@ impl Shield {
         threads: usize,
     ) {
         let m = self.m;
-        let rows = qs.len();
-        let chunk = rows.div_ceil(threads).max(1);
-        let drift_rows = drift.unwrap_or(&[]);
-        states
-            .par_chunks(chunk * n)
-            .zip(qs.par_chunks(chunk))
-            .zip(a_rl.par_chunks(chunk * m))
-            .zip(out.action.par_chunks_mut(chunk * m))
-            .zip(out.a_cbf.par_chunks_mut(chunk * m))
-            .zip(out.a_clf.par_chunks_mut(chunk * m))
-            .zip(out.delta.par_chunks_mut(chunk))
-            .zip(out.status.par_chunks_mut(chunk))
-            .zip(out.slack.par_chunks_mut(chunk))
-            .zip(out.solver.par_chunks_mut(chunk))
-            .enumerate()
-            .for_each(
-                |(
-                    c,
-                    (((((((((s, q), a), action), a_cbf), a_clf), delta), status), slack), solver),
-                )| {
-                    self.with_workspace(n, |ws| {
-                        for (i, &qi) in q.iter().enumerate() {
-                            let rows_m = i * m..(i + 1) * m;
-                            let d = drift.map(|_| {
-                                let start = (c * chunk + i) * n;
-                                &drift_rows[start..start + n]
-                            });
-                            self.step(
-                                ws,
-                                &s[i * n..(i + 1) * n],
-                                qi,
-                                &a[rows_m.clone()],
-                                None,
-                                d,
-                                None,
-                                Want::Solution,
-                            );
-                            action[rows_m.clone()].copy_from_slice(&ws.out.action);
-                            a_cbf[rows_m.clone()].copy_from_slice(&ws.out.a_cbf);
-                            a_clf[rows_m].copy_from_slice(&ws.out.a_clf);
-                            delta[i] = ws.out.delta;
-                            status[i] = ws.out.status as u8;
-                            slack[i] = ws.out.slack;
-                            solver[i] = ws.out.solver as u8;
-                        }
-                    })
-                },
-            );
+        let chunk = qs.len().div_ceil(threads).max(1);
+        // One output view per chunk, on the stack (no allocation for up to 8 workers).
+        let mut parts: SmallVec<[OutRows<'_>; 8]> = out.rows_mut(chunk, m).collect();
+        parts.par_iter_mut().enumerate().for_each(|(c, part)| {
+            self.with_workspace(n, |ws| {
+                for i in 0..part.delta.len() {
+                    let row = c * chunk + i;
+                    let s = &states[row * n..(row + 1) * n];
+                    let a = &a_rl[row * m..(row + 1) * m];
+                    let d = drift.map(|d| &d[row * n..(row + 1) * n]);
+                    self.step(ws, s, qs[row], a, None, d, None, Want::Solution);
+                    part.write(i, m, &ws.out);
+                }
+            });
+        });
     }
 
     /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
