@@ -9,6 +9,7 @@ import pytest
 
 import tlshield
 from tests.fixtures import task_shield
+from tlshield.envs.channel import channel_task_spec
 
 
 def _episode(rng: np.random.Generator, steps: int) -> np.ndarray:
@@ -90,7 +91,9 @@ def test_monitor_misuse_is_a_clear_error():
         shield.filter(np.zeros(13), 0)
     with pytest.raises(ValueError, match="a_rl"):
         shield.filter(monitor, np.zeros(3))
-    foreign = tlshield.Monitor(task_shield().automaton)
+    # Another automaton of the same task (a fresh spec; channel_task_spec shares one).
+    other = channel_task_spec.__wrapped__().automaton()
+    foreign = tlshield.Monitor(other)
     foreign.reset(np.zeros(13))
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
         shield.filter(foreign, np.zeros(2))
@@ -100,7 +103,7 @@ def test_monitor_misuse_is_a_clear_error():
         tlshield.Monitor(aut, trap_penalty=float("inf"))
     # A progress reward of another automaton, even of the same task and size, is refused.
     with pytest.raises(ValueError, match="another automaton"):
-        tlshield.Monitor(aut, task_shield().automaton.progress_reward())
+        tlshield.Monitor(aut, other.progress_reward())
     with pytest.raises(TypeError):
         tlshield.Monitor("F a")  # type: ignore[arg-type]
 
@@ -133,7 +136,7 @@ def test_the_readme_loop_runs():
     its observation the 13 state values): it runs and the monitor ends in a task state."""
     import gymnasium as gym
 
-    from tlshield.envs.channel import ChannelEnv, channel_task_spec
+    from tlshield.envs.channel import ChannelEnv
 
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)

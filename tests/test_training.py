@@ -11,8 +11,9 @@ import pytest
 
 from tlshield import cli
 from tlshield.evaluation import evaluate
+from tlshield.presets import clf_scale
 from tlshield.runs import METRIC_COLUMNS
-from tlshield.training import clf_scale, train
+from tlshield.training import train
 
 
 def read_metrics(run: Path) -> list[dict[str, str]]:
@@ -43,7 +44,7 @@ def test_run_folder_holds_everything(run: Path) -> None:
 
 def test_paper_preset_and_validation(tmp_path: Path) -> None:
     from tlshield.envs.channel import PAPER_ENV
-    from tlshield.training import PRESETS
+    from tlshield.presets import PRESETS
 
     paper = train("rl_cbf", 1, 1, tmp_path / "p", progress=False, preset="paper", **PAPER_ENV)
     record = json.loads((paper / "config.json").read_text())

@@ -270,7 +270,7 @@ def _add_preset(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_schedule(parser: argparse.ArgumentParser) -> None:
-    from tlshield.training import SCHEDULES
+    from tlshield.presets import SCHEDULES
 
     parser.add_argument(
         "--clf-schedule",

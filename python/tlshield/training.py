@@ -30,99 +30,21 @@ env index``), validation episodes from ``VALIDATION_SEED`` (20,000+), evaluation
 
 from __future__ import annotations
 
-import csv
 import json
-import math
-import time
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tlshield.codes import Status
 from tlshield.envs import ENV_ID, check_env_id, check_task_env, make
-from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
-from tlshield.evaluation import evaluate, rollouts
-from tlshield.runs import METRIC_COLUMNS, is_finished, load_run
-from tlshield.seeds import check_seeds, train_seed, validation_seed
-
-#: PPO settings by preset: environments, SB3 PPO keywords and the networks.
-PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {
-        "n_envs": 5,
-        "ppo": {
-            "n_steps": 200,
-            "batch_size": 250,
-            "n_epochs": 10,
-            "learning_rate": 3e-4,
-            "gamma": 0.99,
-            "gae_lambda": 0.95,
-            "clip_range": 0.2,
-            "ent_coef": 0.0,
-        },
-        "net_arch": {"pi": [300, 200, 100], "vf": [300, 200, 100]},
-    },
-    "default": {
-        "n_envs": 8,
-        # The Gaussian's mean is tanh-bounded: SB3's unbounded mean drifted past the action
-        # box, where clipping hides it, on the runs that collapsed (docs/learning.md).
-        "policy": "tanh_mean",
-        # The progress reward is bounded by design (bands of width 1 per FSA state, a bonus of
-        # about 5), so it needs no running normalisation; with it, a run whose returns stopped
-        # varying divided by a tiny std, the value loss reached 1e3-1e4, and the global
-        # gradient clip then starved the policy (approx_kl 1e-9): a permanent collapse.
-        "norm_reward": False,
-        # The learning rate decays linearly to 0 (without it the policy found the task and then
-        # lost it again within the same run, measured).
-        "lr_schedule": "linear",
-        # Every 10 updates the deterministic policy runs 20 validation episodes (reset seeds
-        # from VALIDATION_SEED, never used for evaluation); the best checkpoint is kept (the
-        # policy found the task and lost it again in some runs, measured).
-        "validate_every": 10,
-        "validation_trials": 20,
-        "ppo": {
-            "n_steps": 128,
-            "batch_size": 512,
-            "n_epochs": 10,
-            # With raw rewards, 3e-4 left rl_cbf without a single success on 3 of 3 seeds;
-            # 1e-3 (decaying linearly) found the task on 2 of 3 (docs/learning.md).
-            "learning_rate": 1e-3,
-            "gamma": 0.999,
-            "gae_lambda": 0.95,
-            # 0.2 let single updates undo what the policy had learned (measured: validation
-            # success 0.85 -> 0 within 10 updates); 0.1 kept it rising.
-            "clip_range": 0.1,
-            "ent_coef": 0.0,
-        },
-        "net_arch": {"pi": [64, 64], "vf": [64, 64]},
-    },
-}
-#: The CLF-bound schedules of :func:`clf_scale` (the CLI and the tuner offer these).
-SCHEDULES = ("fixed", "linear", "exponential")
-#: Environments :func:`train` and :func:`tlshield.evaluation.evaluate` know.
-
-
-def clf_scale(schedule: str, progress: float, final: float) -> float:
-    """Scale of the CLF bounds at ``progress`` in [0, 1] of training (the paper's suggested
-    improvement: trust the CLF less as the policy learns). ``final`` is the scale at the end."""
-    if schedule == "fixed":
-        return 1.0
-    if schedule == "linear":
-        return 1.0 + (final - 1.0) * progress
-    if schedule == "exponential":
-        return float(final**progress)
-    raise ValueError(f"clf schedule {schedule!r}: expected one of {SCHEDULES}")
-
-
-def _scaled(cfg: ChannelConfig, scale: float) -> ChannelConfig:
-    (lo_v, lo_w), (hi_v, hi_w) = cfg.clf_bounds
-    return replace(
-        cfg,
-        clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)),
-    )
+from tlshield.envs.channel import CONFIGS
+from tlshield.evaluation import evaluate
+from tlshield.presets import PRESETS, SCHEDULES
+from tlshield.runs import is_finished, load_run
+from tlshield.seeds import check_seeds, train_seed
 
 
 def _check_run_args(
@@ -161,49 +83,6 @@ def make_vec_env(
     return venv
 
 
-class _Metrics:
-    """Accumulates one update's statistics from the step infos."""
-
-    def __init__(self, n_envs: int, gamma: float) -> None:
-        self.gamma = gamma
-        self.discounted = np.zeros(n_envs)
-        self.discount = np.ones(n_envs)
-        self.was_trapped = np.zeros(n_envs, dtype=bool)
-        self.reset_update()
-
-    def reset_update(self) -> None:
-        self.returns: list[float] = []
-        self.min_h = [math.inf, math.inf]
-        self.min_d = math.inf
-        self.violations = self.trap_entries = self.successes = 0
-        self.relaxed = self.failed = self.steps = 0
-        self.correction = 0.0
-
-    def step(self, rewards: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
-        self.discounted += self.discount * rewards
-        self.discount *= self.gamma
-        for i, info in enumerate(infos):
-            h = info.get("constraints", {})  # Channel-v0's c1, c2 (other envs: not recorded)
-            self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
-            self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
-            self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
-            self.violations += bool(info.get("violation", False))
-            self.trap_entries += info["trap"] and not self.was_trapped[i]
-            self.was_trapped[i] = info["trap"]
-            self.successes += info["success"]
-            shield = info.get("shield", {})
-            status = shield.get("status")
-            self.relaxed += status in (Status.RELAXED, Status.INACCURATE)
-            self.failed += status == Status.FAILED
-            self.steps += 1
-            if "a_cbf" in shield:  # |a_applied - a_rl|: what the shield and the CLF overruled
-                self.correction += float(np.linalg.norm(shield["a_cbf"] + shield["a_clf"]))
-            if dones[i]:
-                self.returns.append(float(self.discounted[i]))
-                self.discounted[i], self.discount[i] = 0.0, 1.0
-                self.was_trapped[i] = False
-
-
 def train(
     config: str,
     seed: int,
@@ -230,49 +109,113 @@ def train(
     check_env_id(env)
     if env != ENV_ID and clf_schedule != "fixed":
         raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
-    spec = PRESETS[preset]
-    ppo_kwargs, n_envs, net_arch = {**spec["ppo"], **(ppo or {})}, spec["n_envs"], spec["net_arch"]
-    log_std_init = float(ppo_kwargs.pop("log_std_init", spec.get("log_std_init", 0.0)))
-    n_envs = int(ppo_kwargs.pop("n_envs", n_envs))
-    policy_name = str(ppo_kwargs.pop("policy", spec.get("policy", "gaussian")))
-    norm_reward = bool(ppo_kwargs.pop("norm_reward", spec.get("norm_reward", True)))
-    from tlshield.policies import policy_class
-
-    policy_class(policy_name)  # an unknown name fails here, before any environment is built
+    settings = _ppo_settings(preset, ppo)
     # The progress reward is shaped for the discount PPO uses (the bundled environments take
     # it as a keyword; a user's environment is checked below).
     if env.startswith("tlshield/"):
-        overrides = {"gamma": ppo_kwargs["gamma"], **overrides}
+        overrides = {"gamma": settings.ppo["gamma"], **overrides}
     import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.logger import configure
-
-    torch.set_num_threads(1)
-    run = Path(out)
-    run.mkdir(parents=True, exist_ok=True)
     from stable_baselines3.common.vec_env import VecNormalize
 
-    check_task_env(make(env, config, **overrides), ppo_kwargs["gamma"], env)
-    inner = make_vec_env(config, seed, overrides, n_envs, env)
-    cfg: Any = _env_config(inner)
-    venv = VecNormalize(inner, norm_obs=True, norm_reward=norm_reward, gamma=ppo_kwargs["gamma"])
-    record = {
+    from tlshield.callbacks import TrainingCallback, TrainingRun
+
+    torch.set_num_threads(1)
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    check_task_env(make(env, config, **overrides), settings.ppo["gamma"], env)
+    inner = make_vec_env(config, seed, overrides, settings.n_envs, env)
+    venv = VecNormalize(
+        inner, norm_obs=True, norm_reward=settings.norm_reward, gamma=settings.ppo["gamma"]
+    )
+    cfg = _env_config(inner)
+    schedule = (clf_schedule, clf_final_scale)
+    record = _run_record(env, config, seed, updates, preset, schedule, settings, cfg, overrides)
+    (folder / "config.json").write_text(json.dumps(record, indent=2))
+    model = _ppo(settings, venv, seed)
+    run = TrainingRun(
+        folder=folder,
+        record=record,
+        model=model,
+        venv=venv,
+        inner=inner,
+        env_id=env,
+        config=config,
+        cfg=cfg,
+        seed=seed,
+        updates=updates,
+        overrides=overrides,
+        clf_schedule=clf_schedule,
+        clf_final_scale=clf_final_scale,
+        validate_every=PRESETS[preset].get("validate_every"),
+        validation_trials=int(PRESETS[preset].get("validation_trials", 0)),
+        on_update=on_update,
+        progress=progress,
+    )
+    _learn(run, updates * settings.n_envs * settings.ppo["n_steps"], TrainingCallback(run))
+    return folder
+
+
+@dataclass(frozen=True)
+class PpoSettings:
+    """What one run's PPO is made of: SB3 keywords, environments, networks and the policy."""
+
+    ppo: dict[str, Any]
+    n_envs: int
+    net_arch: dict[str, list[int]]
+    log_std_init: float
+    policy: str
+    norm_reward: bool
+    lr_schedule: str
+
+
+def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
+    """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
+    ``policy``, ``norm_reward``, ``log_std_init``) are taken out of SB3's keywords."""
+    from tlshield.policies import policy_class
+
+    spec = PRESETS[preset]
+    kwargs = {**spec["ppo"], **(ppo or {})}
+    settings = PpoSettings(
+        log_std_init=float(kwargs.pop("log_std_init", spec.get("log_std_init", 0.0))),
+        n_envs=int(kwargs.pop("n_envs", spec["n_envs"])),
+        policy=str(kwargs.pop("policy", spec.get("policy", "gaussian"))),
+        norm_reward=bool(kwargs.pop("norm_reward", spec.get("norm_reward", True))),
+        ppo=kwargs,
+        net_arch=spec["net_arch"],
+        lr_schedule=spec.get("lr_schedule", "constant"),
+    )
+    policy_class(settings.policy)  # an unknown name fails here, before any environment is built
+    return settings
+
+
+def _run_record(
+    env: str,
+    config: str,
+    seed: int,
+    updates: int,
+    preset: str,
+    schedule: tuple[str, float],
+    settings: PpoSettings,
+    cfg: Any,
+    overrides: dict[str, Any],
+) -> dict[str, Any]:
+    """The run's ``config.json``: what it ran with (:mod:`tlshield.runs` reads it back)."""
+    return {
         "env_id": env,
         "config": config,
         "seed": seed,
         "updates": updates,
         "preset": preset,
-        "clf_schedule": clf_schedule,
-        "clf_final_scale": clf_final_scale,
-        "n_envs": n_envs,
+        "clf_schedule": schedule[0],
+        "clf_final_scale": schedule[1],
+        "n_envs": settings.n_envs,
         "ppo": {
-            **ppo_kwargs,
-            "lr_schedule": spec.get("lr_schedule", "constant"),
-            "log_std_init": log_std_init,
-            "policy": policy_name,
-            "norm_reward": norm_reward,
-            "net_arch": net_arch,
+            **settings.ppo,
+            "lr_schedule": settings.lr_schedule,
+            "log_std_init": settings.log_std_init,
+            "policy": settings.policy,
+            "norm_reward": settings.norm_reward,
+            "net_arch": settings.net_arch,
             "activation": "ReLU",
         },
         "env": asdict(cfg) if cfg is not None else {},
@@ -280,160 +223,59 @@ def train(
         "interrupted": False,
         "finished": False,
     }
-    (run / "config.json").write_text(json.dumps(record, indent=2))
 
-    learning_rate: Any = ppo_kwargs["learning_rate"]
-    if spec.get("lr_schedule") == "linear":
+
+def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
+    """The SB3 PPO model of ``settings`` on ``venv`` (CPU, seeded)."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from tlshield.policies import policy_class
+
+    learning_rate: Any = settings.ppo["learning_rate"]
+    if settings.lr_schedule == "linear":
         start_lr = float(learning_rate)
         learning_rate = lambda remaining: start_lr * remaining  # noqa: E731
-    from tlshield.saved import save_normalization
-
-    model = PPO(
-        policy_class(policy_name),
+    return PPO(
+        policy_class(settings.policy),
         venv,
         seed=seed,
         device="cpu",
         verbose=0,
         policy_kwargs={
-            "net_arch": net_arch,
+            "net_arch": settings.net_arch,
             "activation_fn": torch.nn.ReLU,
-            "log_std_init": log_std_init,
+            "log_std_init": settings.log_std_init,
         },
-        **{**ppo_kwargs, "learning_rate": learning_rate},
+        **{**settings.ppo, "learning_rate": learning_rate},
     )
-    model.set_logger(configure(str(run / "tb"), ["tensorboard"]))
-    metrics = _Metrics(n_envs, ppo_kwargs["gamma"])
-    csv_file = (run / "metrics.csv").open("w", newline="")
-    writer = csv.DictWriter(csv_file, fieldnames=METRIC_COLUMNS)
-    writer.writeheader()
-    csv_file.flush()
-    start = time.perf_counter()
-    bar = _progress_bar(updates, f"{config} seed {seed}", progress)
 
-    class Callback(BaseCallback):
-        def __init__(self) -> None:
-            super().__init__()
-            self.update = 0
-            self.scale = 1.0
-            self.best = -1.0
 
-        def _on_rollout_start(self) -> None:
-            self.scale = clf_scale(clf_schedule, self.update / max(updates - 1, 1), clf_final_scale)
-            if CONFIGS[config][1] and clf_schedule != "fixed":
-                inner.set_attr("shield", channel_shield(_scaled(cfg, self.scale), config))
+def _learn(run: Any, timesteps: int, callback: Any) -> None:
+    """Trains, then keeps the last policy (and the kept one when validation chose none) and the
+    final ``config.json``, also when interrupted (Ctrl-C is raised again afterwards)."""
+    from tlshield.saved import save_normalization
 
-        def _on_step(self) -> bool:
-            raw = venv.get_original_reward()  # metrics in raw units, not normalised
-            metrics.step(raw, self.locals["dones"], self.locals["infos"])
-            return True
-
-        def _validate(self) -> float:
-            """Every ``validate_every`` updates: validation success of the deterministic
-            policy; the best so far (ties: the later) is saved as the run's model."""
-            every = spec.get("validate_every")
-            if not every or self.update % every:
-                return math.nan
-            trials = int(spec["validation_trials"])
-            seeds = [validation_seed(seed, i) for i in range(trials)]
-
-            def policy(obs: np.ndarray) -> np.ndarray:
-                return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
-
-            outcomes = rollouts(config, overrides, policy, seeds, env)[0]
-            success = sum(o["success"] for o in outcomes) / trials
-            if success >= self.best:
-                self.best = success
-                model.save(run / "model.zip")
-                save_normalization(venv, run / "normalization.json")
-                record["kept"] = {"update": self.update, "validation_success": success}
-            return success
-
-        def _on_rollout_end(self) -> None:
-            self.update += 1
-            returns = metrics.returns
-            row = {
-                "update": self.update,
-                "timesteps": self.num_timesteps,
-                "episodes": len(returns),
-                "return_mean": float(np.mean(returns)) if returns else math.nan,
-                "return_std": float(np.std(returns)) if returns else math.nan,
-                "min_h_c1": metrics.min_h[0],
-                "min_h_c2": metrics.min_h[1],
-                "min_obstacle_distance": metrics.min_d,
-                "violations": metrics.violations,
-                "trap_entries": metrics.trap_entries,
-                "successes": metrics.successes,
-                "relaxed": metrics.relaxed,
-                "failed": metrics.failed,
-                "clf_scale": self.scale,
-                "validation_success": self._validate(),
-                "wall_time": time.perf_counter() - start,
-                **_diagnostics(self.model, metrics),
-            }
-            writer.writerow(row)
-            csv_file.flush()
-            if on_update is not None:
-                on_update(row)
-            for key, value in row.items():
-                if key not in ("update", "timesteps"):
-                    self.logger.record(f"tlshield/{key}", value)
-            metrics.reset_update()
-            bar.update(1)
-            bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=row["violations"])
-
+    model, venv, record, folder = run.model, run.venv, run.record, run.folder
     try:
-        model.learn(total_timesteps=updates * n_envs * ppo_kwargs["n_steps"], callback=Callback())
+        model.learn(total_timesteps=timesteps, callback=callback)
         record["finished"] = True
     except KeyboardInterrupt:
         record["interrupted"] = True
     finally:
-        bar.close()
-        csv_file.close()
+        callback.close()
         # The last policy is kept beside the validated one (model.zip, what evaluate reads);
         # without validation they are the same.
-        model.save(run / "last_model.zip")
-        save_normalization(venv, run / "last_normalization.json")
+        model.save(folder / "last_model.zip")
+        save_normalization(venv, folder / "last_normalization.json")
         if "kept" not in record:
-            model.save(run / "model.zip")
-            save_normalization(venv, run / "normalization.json")
-        record["wall_time"] = time.perf_counter() - start
-        (run / "config.json").write_text(json.dumps(record, indent=2))
+            model.save(folder / "model.zip")
+            save_normalization(venv, folder / "normalization.json")
+        record["wall_time"] = callback.elapsed()
+        (folder / "config.json").write_text(json.dumps(record, indent=2))
         venv.close()
     if record["interrupted"]:
         raise KeyboardInterrupt
-    return run
-
-
-def _diagnostics(model: Any, metrics: _Metrics) -> dict[str, float]:
-    """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
-    policy's std per dimension, the sampled actions outside the box, the shield's mean
-    correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
-    before this rollout; NaN before the first)."""
-    import torch
-
-    log_std = getattr(model.policy, "log_std", None)
-    std = torch.exp(log_std).detach().cpu().numpy() if log_std is not None else np.array([])
-    actions = np.asarray(model.rollout_buffer.actions).reshape(-1, model.action_space.shape[0])
-    low, high = model.action_space.low, model.action_space.high
-    logged = model.logger.name_to_value
-    steps = max(metrics.steps, 1)
-    return {
-        "policy_std_0": float(std[0]) if len(std) > 0 else math.nan,
-        "policy_std_1": float(std[1]) if len(std) > 1 else math.nan,
-        "out_of_box": float(np.mean(np.any((actions < low) | (actions > high), axis=1))),
-        "mean_correction": metrics.correction / steps,
-        "relaxed_rate": metrics.relaxed / steps,
-        **{
-            name: float(logged.get(f"train/{name}", math.nan))
-            for name in (
-                "approx_kl",
-                "clip_fraction",
-                "explained_variance",
-                "value_loss",
-                "entropy_loss",
-            )
-        },
-    }
 
 
 def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") -> Any:

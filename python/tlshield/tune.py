@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelConfig
+from tlshield.presets import PRESETS, SCHEDULES
 from tlshield.settings import split
-from tlshield.training import PRESETS, SCHEDULES
 
 #: Reset seeds of the tuning evaluation: 30,000 + trial (training < 10,000, evaluation
 #: 10,000+, validation 20,000+).

@@ -18,6 +18,7 @@ can be overridden by keyword in ``gymnasium.make("tlshield/Channel-v0", ...)``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
@@ -55,10 +56,13 @@ SQRT2 = math.sqrt(2.0)
 TASK_WITH_OBSTACLES = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2 & !o1 & !o2) U g3)"
 
 
+@functools.lru_cache(maxsize=64)
 def channel_task_spec(
     half_width: float = 1.5, goal_radius: float = 0.5, obstacle_radius: float | None = None
 ) -> Spec:
-    """The task spec over the 13-value state.
+    """The task spec over the 13-value state, one per parameters (cached, so that every
+    environment, shield and monitor of the task shares one automaton: a monitor and the shield
+    that reads it must have the same one).
 
     Goals are balls of ``goal_radius`` around centres read from the state; the channel is
     ``c1: x - y + w > 0`` and ``c2: y - x + w > 0`` with ``w = half_width`` (paper Sec. VI).

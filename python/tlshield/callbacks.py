@@ -1,0 +1,242 @@
+"""The training loop's callback, in the style of SB3's own ``callbacks.py``: per-step metrics,
+the CLF-bound schedule, validation (the kept checkpoint) and one ``metrics.csv`` row per update.
+Importing this module loads SB3 (and torch); :func:`tlshield.training.train` does so when it
+trains."""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import configure
+
+from tlshield.codes import Status
+from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
+from tlshield.evaluation import rollouts
+from tlshield.presets import clf_scale
+from tlshield.runs import METRIC_COLUMNS
+from tlshield.saved import save_normalization
+from tlshield.seeds import validation_seed
+
+
+@dataclass
+class TrainingRun:
+    """What the callback of one run needs: its folder and record, the model and the
+    environments, and the run's settings."""
+
+    folder: Path
+    record: dict[str, Any]
+    model: Any
+    venv: Any  # VecNormalize over ``inner``
+    inner: Any
+    env_id: str
+    config: str
+    cfg: Any  # the environment's config dataclass (None for a user's env)
+    seed: int
+    updates: int
+    overrides: dict[str, Any]
+    clf_schedule: str
+    clf_final_scale: float
+    validate_every: int | None
+    validation_trials: int
+    on_update: Callable[[dict[str, float]], Any] | None
+    progress: bool
+
+
+class UpdateMetrics:
+    """Accumulates one update's statistics from the step infos (raw rewards)."""
+
+    def __init__(self, n_envs: int, gamma: float) -> None:
+        self.gamma = gamma
+        self.discounted = np.zeros(n_envs)
+        self.discount = np.ones(n_envs)
+        self.was_trapped = np.zeros(n_envs, dtype=bool)
+        self.reset_update()
+
+    def reset_update(self) -> None:
+        self.returns: list[float] = []
+        self.min_h = [math.inf, math.inf]
+        self.min_d = math.inf
+        self.violations = self.trap_entries = self.successes = 0
+        self.relaxed = self.failed = self.steps = 0
+        self.correction = 0.0
+
+    def step(self, rewards: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
+        self.discounted += self.discount * rewards
+        self.discount *= self.gamma
+        for i, info in enumerate(infos):
+            h = info.get("constraints", {})  # Channel-v0's c1, c2 (other envs: not recorded)
+            self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
+            self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
+            self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
+            self.violations += bool(info.get("violation", False))
+            self.trap_entries += info["trap"] and not self.was_trapped[i]
+            self.was_trapped[i] = info["trap"]
+            self.successes += info["success"]
+            shield = info.get("shield", {})
+            status = shield.get("status")
+            self.relaxed += status in (Status.RELAXED, Status.INACCURATE)
+            self.failed += status == Status.FAILED
+            self.steps += 1
+            if "a_cbf" in shield:  # |a_applied - a_rl|: what the shield and the CLF overruled
+                self.correction += float(np.linalg.norm(shield["a_cbf"] + shield["a_clf"]))
+            if dones[i]:
+                self.returns.append(float(self.discounted[i]))
+                self.discounted[i], self.discount[i] = 0.0, 1.0
+                self.was_trapped[i] = False
+
+
+def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
+    """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
+    policy's std per dimension, the sampled actions outside the box, the shield's mean
+    correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
+    before this rollout; NaN before the first)."""
+    import torch
+
+    log_std = getattr(model.policy, "log_std", None)
+    std = torch.exp(log_std).detach().cpu().numpy() if log_std is not None else np.array([])
+    actions = np.asarray(model.rollout_buffer.actions).reshape(-1, model.action_space.shape[0])
+    low, high = model.action_space.low, model.action_space.high
+    logged = model.logger.name_to_value
+    steps = max(metrics.steps, 1)
+    return {
+        "policy_std_0": float(std[0]) if len(std) > 0 else math.nan,
+        "policy_std_1": float(std[1]) if len(std) > 1 else math.nan,
+        "out_of_box": float(np.mean(np.any((actions < low) | (actions > high), axis=1))),
+        "mean_correction": metrics.correction / steps,
+        "relaxed_rate": metrics.relaxed / steps,
+        **{
+            name: float(logged.get(f"train/{name}", math.nan))
+            for name in (
+                "approx_kl",
+                "clip_fraction",
+                "explained_variance",
+                "value_loss",
+                "entropy_loss",
+            )
+        },
+    }
+
+
+def scaled_clf(cfg: ChannelConfig, scale: float) -> ChannelConfig:
+    """``cfg`` with its CLF box scaled by ``scale``."""
+    (lo_v, lo_w), (hi_v, hi_w) = cfg.clf_bounds
+    return replace(
+        cfg,
+        clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)),
+    )
+
+
+class TrainingCallback(BaseCallback):  # type: ignore[misc]
+    """Collects the metrics of every step; per update, applies the CLF schedule, validates,
+    writes a ``metrics.csv`` row (and TensorBoard) and calls ``run.on_update``."""
+
+    def __init__(self, run: TrainingRun) -> None:
+        from tqdm.auto import tqdm
+
+        super().__init__()
+        self.run = run
+        self.update = 0
+        self.scale = 1.0
+        self.best = -1.0
+        self.metrics = UpdateMetrics(run.inner.num_envs, run.model.gamma)
+        run.model.set_logger(configure(str(run.folder / "tb"), ["tensorboard"]))
+        self.csv_file = (run.folder / "metrics.csv").open("w", newline="")
+        self.writer = csv.DictWriter(self.csv_file, fieldnames=METRIC_COLUMNS)
+        self.writer.writeheader()
+        self.csv_file.flush()
+        self.start = time.perf_counter()
+        self.bar = tqdm(
+            total=run.updates,
+            desc=f"{run.config} seed {run.seed}",
+            unit="update",
+            disable=not run.progress,
+            leave=False,
+        )
+
+    def elapsed(self) -> float:
+        """Seconds since the run started."""
+        return time.perf_counter() - self.start
+
+    def close(self) -> None:
+        """Closes the metrics file and the progress bar (the run is over)."""
+        self.bar.close()
+        self.csv_file.close()
+
+    def _on_rollout_start(self) -> None:
+        run = self.run
+        self.scale = clf_scale(
+            run.clf_schedule, self.update / max(run.updates - 1, 1), run.clf_final_scale
+        )
+        if CONFIGS[run.config][1] and run.clf_schedule != "fixed":
+            run.inner.set_attr(
+                "shield", channel_shield(scaled_clf(run.cfg, self.scale), run.config)
+            )
+
+    def _on_step(self) -> bool:
+        raw = self.run.venv.get_original_reward()  # metrics in raw units, not normalised
+        self.metrics.step(raw, self.locals["dones"], self.locals["infos"])
+        return True
+
+    def _validate(self) -> float:
+        """Every ``validate_every`` updates: validation success of the deterministic policy;
+        the best so far (ties: the later) is saved as the run's model."""
+        run = self.run
+        if not run.validate_every or self.update % run.validate_every:
+            return math.nan
+        trials = run.validation_trials
+        seeds = [validation_seed(run.seed, i) for i in range(trials)]
+        model, venv = run.model, run.venv
+
+        def policy(obs: np.ndarray) -> np.ndarray:
+            return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
+
+        outcomes = rollouts(run.config, run.overrides, policy, seeds, run.env_id)[0]
+        success = sum(o["success"] for o in outcomes) / trials
+        if success >= self.best:
+            self.best = success
+            model.save(run.folder / "model.zip")
+            save_normalization(venv, run.folder / "normalization.json")
+            run.record["kept"] = {"update": self.update, "validation_success": success}
+        return success
+
+    def _on_rollout_end(self) -> None:
+        self.update += 1
+        metrics = self.metrics
+        returns = metrics.returns
+        row = {
+            "update": self.update,
+            "timesteps": self.num_timesteps,
+            "episodes": len(returns),
+            "return_mean": float(np.mean(returns)) if returns else math.nan,
+            "return_std": float(np.std(returns)) if returns else math.nan,
+            "min_h_c1": metrics.min_h[0],
+            "min_h_c2": metrics.min_h[1],
+            "min_obstacle_distance": metrics.min_d,
+            "violations": metrics.violations,
+            "trap_entries": metrics.trap_entries,
+            "successes": metrics.successes,
+            "relaxed": metrics.relaxed,
+            "failed": metrics.failed,
+            "clf_scale": self.scale,
+            "validation_success": self._validate(),
+            "wall_time": self.elapsed(),
+            **diagnostics(self.model, metrics),
+        }
+        self.writer.writerow(row)
+        self.csv_file.flush()
+        if self.run.on_update is not None:
+            self.run.on_update(row)
+        for key, value in row.items():
+            if key not in ("update", "timesteps"):
+                self.logger.record(f"tlshield/{key}", value)
+        metrics.reset_update()
+        self.bar.update(1)
+        self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=row["violations"])

@@ -1,0 +1,89 @@
+"""A fingerprint of what the bundled environments and training produce: hashes of seeded random
+rollouts of Channel-v0 (every configuration and observation), FlatWorld-v0 and PointMass-v0,
+and of a 12-update training run (metrics, kept and last policy weights). Run it in two
+checkouts (or with two PYTHONPATHs) to show that a refactor left every number as it was:
+
+    python scripts/fingerprint.py > before.txt   # in the old checkout
+    python scripts/fingerprint.py > after.txt    # in the new one
+    diff before.txt after.txt
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import tempfile
+import zipfile
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import tlshield  # noqa: F401  (registers the environments)
+
+
+def _digest(parts: list[str]) -> str:
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+
+
+def rollout(env: gym.Env, steps: int = 1000) -> str:
+    """Random actions (seed 5) from reset seed 7, resetting from drawn seeds at episode ends;
+    every other episode drives ahead and turns (into walls and obstacles, so the shield acts)."""
+    rng = np.random.default_rng(5)
+    obs, _ = env.reset(seed=7)
+    parts = [np.asarray(obs).tobytes().hex()]
+    episode = 0
+    for _ in range(steps):
+        action = rng.uniform(-1, 1, env.action_space.shape)
+        if episode % 2:  # full speed ahead, turning slowly: into a wall, unless shielded
+            action = 0.1 * action + 0.2
+            action[0] = 1.0
+        obs, reward, term, trunc, info = env.step(action)
+        shield = info.get("shield", {})
+        parts.append(
+            f"{np.asarray(obs).tobytes().hex()}|{reward!r}|{term}|{trunc}|{info.get('fsa_state')}"
+            f"|{np.asarray(shield.get('a_cbf', [])).tobytes().hex()}"
+            f"|{np.asarray(shield.get('a_clf', [])).tobytes().hex()}"
+        )
+        if term or trunc:
+            episode += 1
+            obs, _ = env.reset(seed=int(rng.integers(1000)))
+            parts.append(np.asarray(obs).tobytes().hex())
+    return _digest(parts)
+
+
+def training() -> str:
+    from tlshield.training import train
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = train("rl_cbf_clf", 0, 12, Path(tmp) / "run", progress=False)
+        rows = list(csv.DictReader((folder / "metrics.csv").open()))
+        for row in rows:
+            row.pop("wall_time")
+        weights = [
+            zipfile.ZipFile(folder / name).read("policy.pth").hex()
+            for name in ("model.zip", "last_model.zip")
+        ]
+        kept = json.loads((folder / "config.json").read_text()).get("kept")
+        return _digest([json.dumps(rows), *weights, json.dumps(kept)])
+
+
+def main() -> None:
+    from tlshield.envs.channel import CONFIGS
+
+    for config in CONFIGS:
+        for observation in ("relative", "paper"):
+            env = gym.make("tlshield/Channel-v0", config=config, observation=observation)
+            print(f"Channel-v0 {config} {observation}: {rollout(env.unwrapped)}")
+    for env_id, kwargs in (
+        ("tlshield/FlatWorld-v0", {"formula": "F(orange & (!red U magenta))"}),
+        ("tlshield/PointMass-v0", {}),
+    ):
+        for config in ("rl", "rl_cbf_clf"):
+            print(f"{env_id} {config}: {rollout(gym.make(env_id, config=config, **kwargs))}")
+    print(f"train rl_cbf_clf seed 0, 12 updates: {training()}")
+
+
+if __name__ == "__main__":
+    main()
