@@ -267,9 +267,10 @@ impl PyAutomaton {
         Ok((next, reward, self.kept(py, &kept)))
     }
 
-    /// The CLF goal at ``(s, q)`` (paper Eq. 5B1): among ``q``'s edges to other non-trap
-    /// states the most robust one, in its guard the most robust cube, and the mean centre of
-    /// that cube's positive Ball literals; None when there is none.
+    /// The CLF goal at ``(s, q)`` (paper Eq. 5B1, rank-aware): among ``q``'s edges to states
+    /// strictly closer to acceptance, the most robust way a guard cube can hold, and the
+    /// deepest point of its regions (the point of largest least robustness); None when ``q``
+    /// cannot reach acceptance or no cube has a region.
     fn goal<'py>(
         &self,
         py: Python<'py>,
