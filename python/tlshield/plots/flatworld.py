@@ -3,6 +3,7 @@ and the benchmark's figure)."""
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -74,5 +75,7 @@ def plot_paths(
             colour = "k" if ok else "#d62728"
             ax.plot(p[:, 0], p[:, 1], color=colour, lw=0.9, alpha=0.85)
             ax.plot(*p[0], "o", color=colour, ms=3)
-        ax.set_title(title, fontsize=7)
+        # Long formulas wrap inside their panel instead of running into the next one.
+        lines = [textwrap.fill(line, 46) for line in title.split("\n")]
+        ax.set_title("\n".join(lines), fontsize=7)
     return _save(fig, path)
