@@ -18,6 +18,8 @@ use clarabel::solver::{
     SupportedConeT::{NonnegativeConeT, SecondOrderConeT},
 };
 
+use smallvec::SmallVec;
+
 use crate::predicate::{Center, Predicate};
 
 /// Most alternatives one conjunction may expand into (the product of its unions' sizes).
@@ -186,6 +188,61 @@ pub fn centre_if_deepest(
         }
         _ => true,
     })
+}
+
+/// Whether two of `leaves` (placed at state `s`) are separated in the goal space `dims`, so that
+/// no point holds them all (the region is empty), decided in closed form: a ball wholly on the
+/// negative side of a half-space (`w . c + b + r |w| <= 0`), or two balls no closer than the sum
+/// of their radii. A cheap exact test before the cone program (`false` says nothing). Only the
+/// pieces [`piece`] would keep take part.
+pub fn separated(leaves: &[Predicate], dims: &[usize], s: &[f64]) -> bool {
+    let centre = |b: &crate::predicate::Ball, k: usize| match b.center() {
+        Center::Fixed(c) => c[k],
+        Center::Dims(d) => s[d[k]],
+    };
+    let balls = || {
+        leaves.iter().filter_map(|leaf| match leaf {
+            Predicate::Ball(b) if b.pos() == dims => Some(b),
+            _ => None,
+        })
+    };
+    for leaf in leaves {
+        let Predicate::Halfspace(h) = leaf else {
+            continue;
+        };
+        let w = h.w();
+        if (0..w.len()).any(|d| w[d] != 0.0 && !dims.contains(&d)) {
+            continue;
+        }
+        let wd: SmallVec<[f64; 4]> = dims
+            .iter()
+            .map(|&d| w.get(d).copied().unwrap_or(0.0))
+            .collect();
+        let norm = wd.iter().map(|v| v * v).sum::<f64>().sqrt();
+        for b in balls() {
+            let at: f64 = wd
+                .iter()
+                .enumerate()
+                .map(|(k, v)| v * centre(b, k))
+                .sum::<f64>();
+            if at + h.b() + b.radius() * norm <= 0.0 {
+                return true;
+            }
+        }
+    }
+    let all: SmallVec<[&crate::predicate::Ball; 4]> = balls().collect();
+    for (i, a) in all.iter().enumerate() {
+        for b in &all[i + 1..] {
+            let gap = (0..dims.len())
+                .map(|k| (centre(a, k) - centre(b, k)).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if gap >= a.radius() + b.radius() {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// The pieces of `leaves` over `dims` (`None`: a moving ball and no state to place it).
@@ -388,6 +445,57 @@ mod tests {
             // The grid spacing is 0.015; every piece is 1-Lipschitz up to |w| <= 1.42.
             proptest::prop_assert!(depth <= grid + 0.015, "{depth} vs grid {grid}");
         }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(200))]
+
+        /// The closed-form separation never calls a region empty that the cone program finds
+        /// room in.
+        #[test]
+        fn separation_agrees_with_the_cone_program(
+            discs in proptest::collection::vec((-2.0..2.0f64, -2.0..2.0f64, 0.1..1.0f64), 1..3),
+            half in proptest::option::of((-1.5..1.5f64, -1.5..1.5f64, -2.0..2.0f64)),
+        ) {
+            // Moving discs: centres read from s[2..], goal space s[0..2].
+            let mut s = vec![0.0; 2];
+            let mut leaves = Vec::new();
+            for (k, &(x, y, r)) in discs.iter().enumerate() {
+                s.extend([x, y]);
+                let dims = vec![2 + 2 * k, 3 + 2 * k];
+                leaves.push(Predicate::ball(vec![0, 1], r, Center::Dims(dims)).unwrap());
+            }
+            if let Some((a, b, c)) = half {
+                proptest::prop_assume!(a.abs() + b.abs() > 0.1);
+                let mut w = vec![0.0; s.len()];
+                w[0] = a;
+                w[1] = b;
+                leaves.push(Predicate::halfspace(w, c).unwrap());
+            }
+            let refs: Vec<&Predicate> = leaves.iter().collect();
+            let pieces = pieces(&refs, &[0, 1], Some(&s)).expect("pieces");
+            let (_, depth) = deepest_point(&pieces).expect("solved");
+            if separated(&leaves, &[0, 1], &s) {
+                proptest::prop_assert!(depth <= 1e-9, "separated but depth {depth}");
+            }
+        }
+    }
+
+    #[test]
+    fn separated_pieces_are_found_in_closed_form() {
+        let wall = Predicate::halfspace(vec![1.0, -1.0, 0.0, 0.0], 1.5).unwrap();
+        let disc = || Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![2, 3])).unwrap();
+        // A goal disc wholly outside the channel wall x - y + 1.5 > 0 (centre 1.66 beyond it).
+        let outside = [0.0, 0.0, 0.0, 3.9];
+        assert!(separated(&[disc(), wall.clone()], &[0, 1], &outside));
+        // Straddling the wall: not separated (the cone program decides).
+        let straddling = [0.0, 0.0, 0.0, 1.8];
+        assert!(!separated(&[disc(), wall], &[0, 1], &straddling));
+        let a = Predicate::ball(vec![0, 1], 0.3, Center::Fixed(vec![0.0, 0.0])).unwrap();
+        let b = Predicate::ball(vec![0, 1], 0.3, Center::Fixed(vec![0.6, 0.0])).unwrap();
+        let c = Predicate::ball(vec![0, 1], 0.3, Center::Fixed(vec![0.5, 0.0])).unwrap();
+        assert!(separated(&[a.clone(), b], &[0, 1], &[0.0, 0.0]));
+        assert!(!separated(&[a, c], &[0, 1], &[0.0, 0.0]));
     }
 
     #[test]

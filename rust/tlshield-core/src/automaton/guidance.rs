@@ -164,6 +164,10 @@ impl Reading<'_> {
                 return true;
             }
             goal.clear();
+            if region::separated(&alt.leaves, &alt.dims, s) {
+                empty_here.push(alt); // empty in closed form: no cone program this step
+                continue;
+            }
             let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
             match region::pieces(&leaves, &alt.dims, Some(s))
                 .and_then(|pieces| region::deepest_point(&pieces))
