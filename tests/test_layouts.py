@@ -125,6 +125,13 @@ def _started_monitor() -> Any:
     return monitor
 
 
+def _started_batch() -> Any:
+    """A batch of four monitors one step into their episodes."""
+    batch = _core.MonitorBatch(AUT, 4, AUT.progress_reward())
+    batch.reset(STATES[:4])
+    return batch
+
+
 CASES: dict[str, Case] = {
     "Halfspace.__new__": Case(lambda: tlshield.Halfspace, "__call__", {"w": S[:4], "b": 0.5}),
     "Halfspace.robustness": Case(lambda: tlshield.Halfspace(S[:13], 0.5), "robustness", {"s": S}),
@@ -188,11 +195,17 @@ CASES: dict[str, Case] = {
     ),
     "Monitor.reset": Case(lambda: _core.Monitor(AUT, AUT.progress_reward()), "reset", {"s0": S}),
     "Monitor.advance": Case(_started_monitor, "advance", {"s_next": S}),
+    "MonitorBatch.reset": Case(
+        lambda: _core.MonitorBatch(AUT, 4),
+        "reset",
+        {"states": STATES[:4], "rows": np.array([2, 0, 3, 1])},
+    ),
+    "MonitorBatch.advance": Case(_started_batch, "advance", {"states": STATES[4:8]}),
 }
 
 
 #: Integer parameters (FSA states); every other ArrayLike parameter holds real numbers.
-INTEGER_PARAMS = {"qs"}
+INTEGER_PARAMS = {"qs", "rows"}
 
 
 def _flip_view(x: np.ndarray) -> np.ndarray:
@@ -248,7 +261,7 @@ def _call(key: str, **override: Any) -> Any:
 
 def canon(value: Any) -> Any:
     """A comparable form of any result: arrays and scalars as float arrays, results by field."""
-    if isinstance(value, (_core.FilterResult, _core.FilterBatch, _core.TaskStep)):
+    if isinstance(value, (_core.FilterResult, _core.FilterBatch, _core.TaskStep, _core.TaskBatch)):
         names = [n for n in dir(value) if not n.startswith("_")]
         return {n: canon(getattr(value, n)) for n in names}
     if isinstance(value, _core.Halfspace):

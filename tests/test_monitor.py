@@ -164,3 +164,74 @@ def test_the_readme_loop_runs():
     assert len(added) >= 1
     assert all(isinstance(r, float) for _, r, _ in added)
     assert scope["t"] >= 0 and scope["task"].q == scope["monitor"].q
+
+
+@pytest.mark.parametrize("rows", [5, 40])  # 40: past the parallel threshold
+def test_monitor_batch_equals_single_monitors_and_the_state_batch(rows):
+    shield = task_shield()
+    aut = shield.automaton
+    progress = aut.progress_reward(gamma=0.99, horizon=200, exclusive=[["g1", "g2", "g3"]])
+    batch = tlshield.MonitorBatch(aut, rows, progress)
+    singles = [tlshield.Monitor(aut, progress) for _ in range(rows)]
+    rng = np.random.default_rng(11)
+    episodes = np.stack([_episode(rng, 40) for _ in range(rows)])  # (rows, T, 13)
+    for t in range(episodes.shape[1]):
+        states = episodes[:, t]
+        got = batch.reset(states) if t == 0 else batch.advance(states)
+        want = [
+            m.reset(s) if t == 0 else m.advance(s) for m, s in zip(singles, states, strict=True)
+        ]
+        np.testing.assert_array_equal(got.q, [w.q for w in want])
+        np.testing.assert_array_equal(got.reward, [w.reward for w in want])
+        np.testing.assert_array_equal(got.accepted, [w.accepted for w in want])
+        np.testing.assert_array_equal(got.trapped, [w.trapped for w in want])
+        np.testing.assert_array_equal(batch.q, got.q)
+        a = rng.uniform([-1.0, -2.0], [1.0, 2.0], size=(rows, 2))
+        via_monitors = shield.filter_batch(batch, a)
+        via_states = shield.filter_batch(states, got.q, a)
+        np.testing.assert_array_equal(via_monitors.action, via_states.action)
+        np.testing.assert_array_equal(via_monitors.status, via_states.status)
+        for i in (0, rows - 1):
+            np.testing.assert_array_equal(
+                via_monitors.action[i], shield.filter(singles[i], a[i]).action
+            )
+    # Restarting some rows: the others go on.
+    again = batch.reset(episodes[[3, 1], 0], rows=[3, 1])
+    assert len(again) == 2 and list(again.reward) == [0.0, 0.0]
+
+
+def test_monitor_batch_misuse_is_a_clear_error():
+    shield = task_shield()
+    batch = tlshield.MonitorBatch(shield.automaton, 3)
+    states = np.zeros((3, 13))
+    with pytest.raises(ValueError, match="row 0"):
+        batch.advance(states)
+    with pytest.raises(ValueError, match="monitors row 0"):
+        shield.filter_batch(batch, np.zeros((3, 2)))
+    batch.reset(states)
+    with pytest.raises(ValueError, match="states"):
+        batch.advance(np.zeros((2, 13)))
+    with pytest.raises(ValueError, match=r"states\[1, 4\]"):
+        bad = states.copy()
+        bad[1, 4] = np.nan
+        batch.advance(bad)
+    with pytest.raises(ValueError, match=r"rows\[1\]"):
+        batch.reset(np.zeros((2, 13)), rows=[2, 2])
+    with pytest.raises(ValueError, match=r"rows\[0\]"):
+        batch.reset(np.zeros((1, 13)), rows=[3])
+    with pytest.raises(ValueError, match=r"rows\[0\] = -1"):
+        batch.reset(np.zeros((1, 13)), rows=[-1])
+    with pytest.raises(TypeError, match="rows"):
+        batch.reset(np.zeros((1, 13)), rows=[0.5])
+    with pytest.raises(ValueError, match="a_rl"):
+        shield.filter_batch(batch, np.zeros((2, 2)))
+    with pytest.raises(TypeError, match="RL actions second"):
+        shield.filter_batch(batch, np.zeros((3, 2)), np.zeros((3, 2)))
+    with pytest.raises(TypeError, match="missing the RL actions"):
+        shield.filter_batch(states, np.zeros(3, dtype=int))
+    other = tlshield.MonitorBatch(channel_task_spec.__wrapped__().automaton(), 3)
+    other.reset(states)
+    with pytest.raises(tlshield.ShieldError, match="another automaton"):
+        shield.filter_batch(other, np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="count"):
+        tlshield.MonitorBatch(shield.automaton, 0)

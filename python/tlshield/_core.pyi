@@ -222,6 +222,42 @@ class Monitor:
     def goal(self) -> NDArray[np.float64] | None: ...
 
 @final
+class TaskBatch:
+    """What one batch step of the task gives, one row per monitor."""
+
+    @property
+    def q(self) -> NDArray[np.int64]: ...
+    @property
+    def reward(self) -> NDArray[np.float64]: ...
+    @property
+    def accepted(self) -> NDArray[np.bool_]: ...
+    @property
+    def trapped(self) -> NDArray[np.bool_]: ...
+    def __len__(self) -> int: ...
+
+@final
+class MonitorBatch:
+    """``num`` task monitors of one automaton, stepped together (the batch twin of
+    ``Monitor``); ``Shield.filter_batch(monitors, a_rl)`` reuses the rows' readings."""
+
+    def __new__(
+        cls,
+        automaton: Automaton,
+        num: int,
+        progress: ProgressReward | None = None,
+        *,
+        c_r: float = 1.0,
+        trap_penalty: float = -100.0,
+    ) -> Self: ...
+    def reset(self, states: ArrayLike, rows: ArrayLike | None = None) -> TaskBatch: ...
+    def advance(self, states: ArrayLike) -> TaskBatch: ...
+    @property
+    def q(self) -> NDArray[np.int64]: ...
+    @property
+    def automaton(self) -> Automaton: ...
+    def __len__(self) -> int: ...
+
+@final
 class Unicycle:
     """The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2)."""
 
@@ -364,6 +400,15 @@ class Shield:
         g: ArrayLike | None = None,
         drift: ArrayLike | None = None,
     ) -> FilterResult: ...
+    @overload
+    def filter_batch(
+        self,
+        states: MonitorBatch,
+        qs: ArrayLike,
+        a_rl: None = None,
+        drift: ArrayLike | None = None,
+    ) -> FilterBatch: ...
+    @overload
     def filter_batch(
         self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike, drift: ArrayLike | None = None
     ) -> FilterBatch: ...

@@ -6,6 +6,8 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use crate::automaton::{Automaton, Reading, MAX_ATOMS};
 use crate::error::{AutomatonError, InputError};
 use crate::progress::ProgressReward;
@@ -102,12 +104,18 @@ impl Monitor {
 
     /// Starts an episode at `s0`: `q = step(initial, s0)`, the potential back to 0 (reward 0).
     pub fn reset(&mut self, s0: &[f64]) -> Result<TaskStep, AutomatonError> {
-        self.read("s0", s0)?;
+        self.check("s0", s0)?;
+        Ok(self.reset_checked(s0))
+    }
+
+    /// [`Monitor::reset`] of a state already checked with [`Monitor::check`].
+    fn reset_checked(&mut self, s0: &[f64]) -> TaskStep {
+        self.read(s0);
         self.q = self.reading().step(self.automaton.initial());
         self.phi = 0.0;
         self.started = true;
         self.update_goal();
-        Ok(self.report(0.0))
+        self.report(0.0)
     }
 
     /// Reads `s_next`: moves `q` to `step(q, s_next)` and returns the reward of that transition.
@@ -115,7 +123,13 @@ impl Monitor {
         if !self.started {
             return Err(AutomatonError::NotReset);
         }
-        self.read("s_next", s_next)?;
+        self.check("s_next", s_next)?;
+        Ok(self.advance_checked(s_next))
+    }
+
+    /// [`Monitor::advance`] of a started monitor and a state checked with [`Monitor::check`].
+    fn advance_checked(&mut self, s_next: &[f64]) -> TaskStep {
+        self.read(s_next);
         let reading = self.reading();
         let q = self.q;
         let q_next = reading.step(q);
@@ -133,13 +147,12 @@ impl Monitor {
         };
         self.q = q_next;
         self.update_goal();
-        Ok(self.report(reward))
+        self.report(reward)
     }
 
-    /// Validates `s` and reads its atoms into the monitor (the state is copied: its length may
-    /// change only at a reset's first read, so steady steps reuse the buffer).
-    fn read(&mut self, what: &str, s: &[f64]) -> Result<(), AutomatonError> {
-        // The length error names the argument (`s0 length`), as the finiteness check does.
+    /// Checks a state for this monitor's automaton: its length (the error names it `{what}
+    /// length`) and finiteness.
+    fn check(&self, what: &str, s: &[f64]) -> Result<(), AutomatonError> {
         self.automaton
             .spec()
             .check_state_len(s.len())
@@ -151,13 +164,17 @@ impl Monitor {
                 },
                 other => other,
             })?;
-        check_finite(what, s, s.len())?;
+        Ok(check_finite(what, s, s.len())?)
+    }
+
+    /// Reads the atoms of a checked state into the monitor (the state is copied into a buffer
+    /// that steady steps reuse).
+    fn read(&mut self, s: &[f64]) {
         let reading = self.automaton.read_validated(s);
         let rho = reading.rho();
         self.rho[..rho.len()].copy_from_slice(rho);
         self.s.clear();
         self.s.extend_from_slice(s);
-        Ok(())
     }
 
     fn update_goal(&mut self) {
@@ -212,6 +229,139 @@ impl Monitor {
     /// The CLF goal of Eq. 5B1 at the last state and `q` (rank-aware), if there is one.
     pub fn goal(&self) -> Option<&[f64]> {
         self.has_goal.then_some(self.goal.as_slice())
+    }
+}
+
+/// N task monitors of one automaton, stepped together: the batch twin of [`Monitor`] for vector
+/// environments (no one-hot argmax to recover `q`: each row's monitor holds it). Large batches
+/// run in parallel.
+#[derive(Debug, Clone)]
+pub struct MonitorBatch {
+    monitors: Vec<Monitor>,
+}
+
+impl MonitorBatch {
+    /// `count` monitors of `automaton` paying `reward` (see [`Monitor::new`]), none started.
+    pub fn new(
+        automaton: Arc<Automaton>,
+        reward: TaskReward,
+        count: usize,
+    ) -> Result<Self, AutomatonError> {
+        if count == 0 {
+            return Err(InputError::Value {
+                what: "count".into(),
+                expected: "at least one monitor".into(),
+                got: "0".into(),
+            }
+            .into());
+        }
+        let monitor = Monitor::new(automaton, reward)?;
+        Ok(MonitorBatch {
+            monitors: vec![monitor; count],
+        })
+    }
+
+    /// The monitors, one per row.
+    pub fn monitors(&self) -> &[Monitor] {
+        &self.monitors
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.monitors.len()
+    }
+
+    /// Always false: a batch has at least one row.
+    pub fn is_empty(&self) -> bool {
+        self.monitors.is_empty()
+    }
+
+    /// Starts the episodes of `rows` at the rows of `states` (`(rows.len(), dim)` row-major,
+    /// in the order of `rows`) and writes their steps into `out`. Everything is checked first:
+    /// an error changes no monitor.
+    pub fn reset(
+        &mut self,
+        rows: &[usize],
+        states: &[f64],
+        dim: usize,
+        out: &mut Vec<TaskStep>,
+    ) -> Result<(), AutomatonError> {
+        self.check_states(states, dim, rows.len())?;
+        for (i, &row) in rows.iter().enumerate() {
+            if row >= self.monitors.len() || rows[..i].contains(&row) {
+                return Err(InputError::Value {
+                    what: format!("rows[{i}]"),
+                    expected: format!("distinct rows of the batch (0..{})", self.monitors.len()),
+                    got: row.to_string(),
+                }
+                .into());
+            }
+        }
+        out.clear();
+        for (&row, s) in rows.iter().zip(states.chunks(dim)) {
+            out.push(self.monitors[row].reset_checked(s));
+        }
+        Ok(())
+    }
+
+    /// Advances every row's monitor on its row of `states` (`(len, dim)` row-major) and writes
+    /// the steps into `out`; every monitor must have started. Checked first: an error changes
+    /// no monitor.
+    pub fn advance(
+        &mut self,
+        states: &[f64],
+        dim: usize,
+        out: &mut Vec<TaskStep>,
+    ) -> Result<(), AutomatonError> {
+        self.check_states(states, dim, self.monitors.len())?;
+        if let Some(row) = self.monitors.iter().position(|m| !m.started) {
+            return Err(InputError::Value {
+                what: format!("row {row}"),
+                expected: "a started episode (reset it first)".into(),
+                got: "a monitor without one".into(),
+            }
+            .into());
+        }
+        let step = |(monitor, s): (&mut Monitor, &[f64])| monitor.advance_checked(s);
+        if self.monitors.len() < crate::parallel::MIN_ROWS {
+            out.clear();
+            out.extend(self.monitors.iter_mut().zip(states.chunks(dim)).map(step));
+        } else {
+            let monitors = &mut self.monitors;
+            crate::parallel::install(|| {
+                monitors
+                    .par_iter_mut()
+                    .zip(states.par_chunks(dim))
+                    .map(step)
+                    .collect_into_vec(out);
+            });
+        }
+        Ok(())
+    }
+
+    /// Checks `(rows, dim)` states for the automaton: shape, length and finiteness.
+    fn check_states(&self, states: &[f64], dim: usize, rows: usize) -> Result<(), AutomatonError> {
+        if dim == 0 || states.len() != rows * dim {
+            return Err(InputError::Shape {
+                what: "states".into(),
+                expected: format!("({rows}, n): one row per monitor"),
+                got: format!("{} values in rows of {dim}", states.len()),
+            }
+            .into());
+        }
+        self.monitors[0]
+            .automaton
+            .spec()
+            .check_state_len(dim)
+            .map_err(|err| match err {
+                InputError::Shape { expected, got, .. } => InputError::Shape {
+                    what: "states row length".into(),
+                    expected,
+                    got,
+                },
+                other => other,
+            })?;
+        Ok(check_finite("states", states, dim)?)
     }
 }
 

@@ -10,6 +10,10 @@ use std::sync::{Arc, Mutex};
 
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
+/// Batches under this many rows run on the calling thread: waking the pool costs more than a few
+/// microsecond-sized rows.
+pub const MIN_ROWS: usize = 32;
+
 /// The pool and the id of the process whose threads it owns.
 static POOL: Mutex<Option<(u32, Arc<ThreadPool>)>> = Mutex::new(None);
 

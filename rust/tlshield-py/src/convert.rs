@@ -219,6 +219,30 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
         .collect()
 }
 
+/// A `(k,)` array-like of row indices of a batch (any integer dtype); a negative index is a
+/// `ValueError` naming `name[i]` (the core checks the upper bound).
+pub fn row_indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
+    let kind = dtype_kind(obj).map_err(|_| states_type_error(obj, name))?;
+    if kind != b'i' && kind != b'u' {
+        return Err(PyTypeError::new_err(format!(
+            "{name}: expected integer row indices, got {}",
+            type_name(obj)
+        )));
+    }
+    let rows: PyArrayLike1<'_, i64, AllowTypeChange> = obj
+        .extract()
+        .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (k,) ({e})")))?;
+    rows.as_array()
+        .iter()
+        .enumerate()
+        .map(|(i, &r)| {
+            usize::try_from(r).map_err(|_| {
+                PyValueError::new_err(format!("{name}[{i}] = {r}: expected a row index >= 0"))
+            })
+        })
+        .collect()
+}
+
 /// A shape as Python prints it: `(3,)`, `(2, 4)`, `()`.
 pub fn shape_text(shape: &[usize]) -> String {
     match shape {

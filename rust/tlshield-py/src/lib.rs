@@ -44,6 +44,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<progress::PyProgressReward>()?;
     m.add_class::<monitor::PyMonitor>()?;
     m.add_class::<monitor::PyTaskStep>()?;
+    m.add_class::<monitor::PyMonitorBatch>()?;
+    m.add_class::<monitor::PyTaskBatch>()?;
     m.add_class::<dynamics::PyUnicycle>()?;
     m.add_class::<dynamics::PySingleIntegrator>()?;
     m.add_class::<dynamics::PyDoubleIntegrator>()?;

@@ -1,11 +1,12 @@
-//! `Monitor`: the task along one episode (core `monitor`), and `TaskStep`, what one step gives.
+//! `Monitor`: the task along one episode (core `monitor`), and `TaskStep`, what one step gives;
+//! `MonitorBatch` and `TaskBatch`, their batch twins.
 
-use numpy::{IntoPyArray, PyArray1};
+use numpy::{IntoPyArray, PyArray1, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use tlshield_core::{Monitor, TaskReward, TaskStep};
+use tlshield_core::{Monitor, MonitorBatch, TaskReward, TaskStep};
 
 use crate::automaton::PyAutomaton;
-use crate::convert::vector;
+use crate::convert::{vector, FloatArray};
 use crate::errors::map;
 use crate::progress::PyProgressReward;
 
@@ -34,10 +35,7 @@ impl PyMonitor {
         c_r: f64,
         trap_penalty: f64,
     ) -> PyResult<Self> {
-        let reward = match &progress {
-            Some(p) => TaskReward::Progress(p.inner.clone(), p.automaton.clone()),
-            None => TaskReward::Paper { c_r, trap_penalty },
-        };
+        let reward = task_reward(progress.as_deref(), c_r, trap_penalty);
         let inner = map(Monitor::new(automaton.get().inner.clone(), reward))?;
         Ok(PyMonitor {
             inner,
@@ -168,5 +166,148 @@ impl PyTaskStep {
             py_bool(self.accepted),
             py_bool(self.trapped),
         )
+    }
+}
+
+/// ``num`` task monitors of one automaton, stepped together (the batch twin of ``Monitor``,
+/// for vector environments): each row's monitor holds its FSA state, so nothing is recovered
+/// from observations. ``reset(states, rows=None)`` starts the episodes of ``rows`` (all by
+/// default) and ``advance(states)`` moves every row on; both return a ``TaskBatch``, and
+/// ``Shield.filter_batch(monitors, a_rl)`` reuses the rows' readings. Large batches run in
+/// parallel with the GIL released.
+#[pyclass(name = "MonitorBatch", module = "tlshield._core")]
+pub struct PyMonitorBatch {
+    pub(crate) inner: MonitorBatch,
+    automaton: Py<PyAutomaton>,
+    steps: Vec<TaskStep>,
+}
+
+#[pymethods]
+impl PyMonitorBatch {
+    #[new]
+    #[pyo3(
+        signature = (automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0),
+        text_signature = "(automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0)"
+    )]
+    fn new(
+        automaton: Bound<'_, PyAutomaton>,
+        num: usize,
+        progress: Option<PyRef<'_, PyProgressReward>>,
+        c_r: f64,
+        trap_penalty: f64,
+    ) -> PyResult<Self> {
+        let reward = task_reward(progress.as_deref(), c_r, trap_penalty);
+        let inner = map(MonitorBatch::new(
+            automaton.get().inner.clone(),
+            reward,
+            num,
+        ))?;
+        Ok(PyMonitorBatch {
+            inner,
+            automaton: automaton.unbind(),
+            steps: Vec::new(),
+        })
+    }
+
+    /// Starts the episodes of ``rows`` (distinct row indices; all rows by default) at the rows
+    /// of ``states`` ``(len(rows), n)``; returns their ``TaskBatch`` (in the order of ``rows``).
+    #[pyo3(signature = (states, rows=None))]
+    fn reset(
+        &mut self,
+        py: Python<'_>,
+        states: &Bound<'_, PyAny>,
+        rows: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyTaskBatch> {
+        let rows = match rows {
+            Some(r) => crate::convert::row_indices(r, "rows")?,
+            None => (0..self.inner.len()).collect(),
+        };
+        let arr = FloatArray::extract(states, "states", 2, "(len(rows), n)")?;
+        let (dim, values) = (arr.shape()[1], arr.values());
+        let (inner, steps) = (&mut self.inner, &mut self.steps);
+        map(py.detach(|| inner.reset(&rows, &values, dim, steps)))?;
+        Ok(PyTaskBatch::new(py, &self.steps))
+    }
+
+    /// Moves every row on: row ``i`` reads row ``i`` of ``states`` ``(num, n)``. Every row must
+    /// have started. Returns the ``TaskBatch`` of all rows.
+    fn advance(&mut self, py: Python<'_>, states: &Bound<'_, PyAny>) -> PyResult<PyTaskBatch> {
+        let arr = FloatArray::extract(states, "states", 2, "(num, n)")?;
+        let (dim, values) = (arr.shape()[1], arr.values());
+        let (inner, steps) = (&mut self.inner, &mut self.steps);
+        map(py.detach(|| inner.advance(&values, dim, steps)))?;
+        Ok(PyTaskBatch::new(py, &self.steps))
+    }
+
+    /// Every row's FSA state (num,).
+    #[getter]
+    fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        let qs: Vec<i64> = self.inner.monitors().iter().map(|m| m.q() as i64).collect();
+        qs.into_pyarray(py)
+    }
+
+    /// The automaton monitored.
+    #[getter]
+    fn automaton(&self, py: Python<'_>) -> Py<PyAutomaton> {
+        self.automaton.clone_ref(py)
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("MonitorBatch(num={})", self.inner.len())
+    }
+}
+
+/// What one batch step of the task gives, one row per monitor (``MonitorBatch.reset`` and
+/// ``MonitorBatch.advance``).
+#[pyclass(name = "TaskBatch", module = "tlshield._core", frozen, get_all)]
+pub struct PyTaskBatch {
+    /// The FSA states (B,).
+    q: Py<PyArray1<i64>>,
+    /// The task rewards (B,) (0 at a reset).
+    reward: Py<PyArray1<f64>>,
+    /// Whether each row's task is done (B,).
+    accepted: Py<PyArray1<bool>>,
+    /// Whether each row is in the trap (B,).
+    trapped: Py<PyArray1<bool>>,
+}
+
+impl PyTaskBatch {
+    fn new(py: Python<'_>, steps: &[TaskStep]) -> Self {
+        let column = |f: fn(&TaskStep) -> f64| steps.iter().map(f).collect::<Vec<_>>();
+        let flag = |f: fn(&TaskStep) -> bool| steps.iter().map(f).collect::<Vec<_>>();
+        PyTaskBatch {
+            q: steps
+                .iter()
+                .map(|s| s.q as i64)
+                .collect::<Vec<_>>()
+                .into_pyarray(py)
+                .unbind(),
+            reward: column(|s| s.reward).into_pyarray(py).unbind(),
+            accepted: flag(|s| s.accepted).into_pyarray(py).unbind(),
+            trapped: flag(|s| s.trapped).into_pyarray(py).unbind(),
+        }
+    }
+}
+
+#[pymethods]
+impl PyTaskBatch {
+    fn __len__(&self, py: Python<'_>) -> usize {
+        self.reward.bind(py).len()
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!("TaskBatch(rows={})", self.reward.bind(py).len())
+    }
+}
+
+/// The core's task reward from the Python arguments.
+fn task_reward(progress: Option<&PyProgressReward>, c_r: f64, trap_penalty: f64) -> TaskReward {
+    match progress {
+        Some(p) => TaskReward::Progress(p.inner.clone(), p.automaton.clone()),
+        None => TaskReward::Paper { c_r, trap_penalty },
     }
 }

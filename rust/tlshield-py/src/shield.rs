@@ -17,7 +17,7 @@ use crate::convert::{self, state, vector, FloatArray};
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
-use crate::monitor::PyMonitor;
+use crate::monitor::{PyMonitor, PyMonitorBatch};
 use crate::predicate::predicate_of;
 use crate::spec::PySpec;
 
@@ -219,6 +219,30 @@ impl PyShield {
         }
     }
 
+    /// A batch's columns as numpy arrays, ``(rows, m)`` matrices for the actions.
+    fn batch_result(
+        &self,
+        py: Python<'_>,
+        out: BatchOutput,
+        rows: usize,
+    ) -> PyResult<PyFilterBatch> {
+        let m = self.inner.inputs();
+        let matrix = |v: Vec<f64>| {
+            numpy::ndarray::Array2::from_shape_vec((rows, m), v)
+                .map(|a| a.into_pyarray(py).unbind())
+                .map_err(|e| PyValueError::new_err(e.to_string()))
+        };
+        Ok(PyFilterBatch {
+            action: matrix(out.action)?,
+            a_cbf: matrix(out.a_cbf)?,
+            a_clf: matrix(out.a_clf)?,
+            delta: out.delta.into_pyarray(py).unbind(),
+            slack: out.slack.into_pyarray(py).unbind(),
+            status: out.status.into_pyarray(py).unbind(),
+            solver: out.solver.into_pyarray(py).unbind(),
+        })
+    }
+
     fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
         let barriers = out
             .barriers
@@ -402,15 +426,49 @@ impl PyShield {
     /// ``action``, ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,)
     /// ``tlshield.Status`` values and ``solver`` (B,) ``tlshield.Solver`` values (uint8).
     /// ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
-    #[pyo3(signature = (states, qs, a_rl, drift=None))]
+    /// Or ``filter_batch(monitors, a_rl, drift=None)``: at the rows of a ``MonitorBatch``,
+    /// reusing each row's reading of the atoms and its goal.
+    #[pyo3(signature = (states, qs, a_rl=None, drift=None))]
     fn filter_batch<'py>(
         &self,
         py: Python<'py>,
         states: &Bound<'py, PyAny>,
         qs: &Bound<'py, PyAny>,
-        a_rl: &Bound<'py, PyAny>,
+        a_rl: Option<&Bound<'py, PyAny>>,
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<PyFilterBatch> {
+        if let Ok(monitors) = states.cast::<PyMonitorBatch>() {
+            if a_rl.is_some() {
+                return Err(PyTypeError::new_err(
+                    "filter_batch(monitors, a_rl): the monitors hold the states and the FSA \
+                     states; pass the RL actions second",
+                ));
+            }
+            let monitors = monitors.borrow();
+            let rows = monitors.inner.len();
+            let a_rl = FloatArray::extract(qs, "a_rl", 2, "(B, m)")?;
+            let drift = drift
+                .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
+                .transpose()?;
+            let m = self.inner.inputs();
+            if a_rl.shape() != [rows, m] {
+                return Err(PyValueError::new_err(format!(
+                    "filter_batch: expected a_rl ({rows}, {m}) for {rows} monitors, got {}",
+                    crate::convert::shape_text(a_rl.shape())
+                )));
+            }
+            let (actions, drift_values) = (a_rl.values(), drift.as_ref().map(|d| d.values()));
+            let shield = &self.inner;
+            let mut out = BatchOutput::default();
+            let batch = &monitors.inner;
+            map(py.detach(|| {
+                shield.filter_monitors(batch, &actions, drift_values.as_deref(), &mut out)
+            }))?;
+            return self.batch_result(py, out, rows);
+        }
+        let a_rl = a_rl.ok_or_else(|| {
+            PyTypeError::new_err("filter_batch(states, qs, a_rl): missing the RL actions a_rl")
+        })?;
         let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
         let drift = drift
             .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
@@ -441,20 +499,7 @@ impl PyShield {
         let mut out = BatchOutput::default();
         let drift = drift_values.as_deref();
         map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, drift, &mut out)))?;
-        let matrix = |v: Vec<f64>| {
-            numpy::ndarray::Array2::from_shape_vec((rows, m), v)
-                .map(|a| a.into_pyarray(py).unbind())
-                .map_err(|e| PyValueError::new_err(e.to_string()))
-        };
-        Ok(PyFilterBatch {
-            action: matrix(out.action)?,
-            a_cbf: matrix(out.a_cbf)?,
-            a_clf: matrix(out.a_clf)?,
-            delta: out.delta.into_pyarray(py).unbind(),
-            slack: out.slack.into_pyarray(py).unbind(),
-            status: out.status.into_pyarray(py).unbind(),
-            solver: out.solver.into_pyarray(py).unbind(),
-        })
+        self.batch_result(py, out, rows)
     }
 
     /// Number of inputs m.

@@ -36,7 +36,7 @@ use crate::automaton::Automaton;
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::error::{AutomatonError, InputError, ShieldError};
-use crate::monitor::Monitor;
+use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::validate::check_finite;
@@ -47,7 +47,7 @@ use order::Orders;
 use program::Program;
 
 /// Batches smaller than this are shielded on the calling thread.
-pub const PARALLEL_MIN_ROWS: usize = 32;
+pub const PARALLEL_MIN_ROWS: usize = crate::parallel::MIN_ROWS;
 
 /// Every QP answer is checked against the constraints it was asked to satisfy: row `i` of
 /// `G x <= h` may exceed its right-hand side by at most `RESIDUAL_TOL * (1 + |h_i| +
@@ -1082,42 +1082,103 @@ impl Shield {
         out.resize(rows, m);
         // One contiguous chunk of rows per worker thread, each with its own workspace; small
         // batches stay on the calling thread (waking the pool costs more than they do).
-        if rows < PARALLEL_MIN_ROWS {
-            self.batch_rows(states, n, qs, a_rl, drift, out, 1);
-        } else {
-            crate::parallel::install(|| {
-                let threads = rayon::current_num_threads().max(1);
-                self.batch_rows(states, n, qs, a_rl, drift, out, threads);
-            });
-        }
+        self.run_batch(BatchRows::States { states, n, qs }, a_rl, drift, out);
         Ok(())
     }
 
-    /// The rows of [`Shield::filter_batch`] on validated input, in `threads` contiguous chunks
-    /// of rows, each worker with its own workspace.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Shield::filter_batch`] at the monitors' last states and FSA states, reusing their
+    /// readings and goals (with [`MonitorBatch::advance`], a vector environment reads each
+    /// row's atoms once per step). `a_rl` is `(B, m)`, `drift` (optional) `(B, n)`.
+    pub fn filter_monitors(
+        &self,
+        batch: &MonitorBatch,
+        a_rl: &[f64],
+        drift: Option<&[f64]>,
+        out: &mut BatchOutput,
+    ) -> Result<(), ShieldError> {
+        let monitors = batch.monitors();
+        if !Arc::ptr_eq(monitors[0].automaton(), &self.automaton) {
+            return Err(ShieldError::Config(
+                "monitors: they watch another automaton; build them from this shield's \
+                 automaton (shield.automaton)"
+                    .into(),
+            ));
+        }
+        if let Some(row) = monitors.iter().position(|m| !m.started()) {
+            return Err(InputError::Value {
+                what: format!("monitors row {row}"),
+                expected: "a started episode (reset it first)".into(),
+                got: "a monitor without one".into(),
+            }
+            .into());
+        }
+        let (rows, m) = (monitors.len(), self.m);
+        if a_rl.len() != rows * m {
+            return Err(InputError::Shape {
+                what: "a_rl".into(),
+                expected: format!("({rows}, {m})"),
+                got: format!("{} values", a_rl.len()),
+            }
+            .into());
+        }
+        // Every monitor of the batch read a state of its automaton: one length for all.
+        let n = monitors[0].state().len();
+        self.check_dynamics(n, None)?;
+        self.check_state("monitor state", monitors[0].state())?;
+        check_finite("a_rl", a_rl, m)?;
+        if let Some(rl) = &self.config.rl_bounds {
+            check_within("a_rl", a_rl, rl)?;
+        }
+        if let Some(d) = drift {
+            check_drift(d, n, rows)?;
+        }
+        out.resize(rows, m);
+        self.run_batch(BatchRows::Monitors(monitors), a_rl, drift, out);
+        Ok(())
+    }
+
+    /// The rows of a validated batch: one contiguous chunk of rows per worker thread, each
+    /// with its own workspace; small batches stay on the calling thread (waking the pool
+    /// costs more than they do).
+    fn run_batch(
+        &self,
+        rows: BatchRows<'_>,
+        a_rl: &[f64],
+        drift: Option<&[f64]>,
+        out: &mut BatchOutput,
+    ) {
+        if rows.len() < PARALLEL_MIN_ROWS {
+            self.batch_rows(rows, a_rl, drift, out, 1);
+        } else {
+            crate::parallel::install(|| {
+                let threads = rayon::current_num_threads().max(1);
+                self.batch_rows(rows, a_rl, drift, out, threads);
+            });
+        }
+    }
+
+    /// The rows of a validated batch in `threads` contiguous chunks of rows, each worker with
+    /// its own workspace.
     fn batch_rows(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        rows: BatchRows<'_>,
         a_rl: &[f64],
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
         threads: usize,
     ) {
-        let m = self.m;
-        let chunk = qs.len().div_ceil(threads).max(1);
+        let (m, n) = (self.m, rows.state_len());
+        let chunk = rows.len().div_ceil(threads).max(1);
         // One output view per chunk, on the stack (no allocation for up to 8 workers).
         let mut parts: SmallVec<[OutRows<'_>; 8]> = out.rows_mut(chunk, m).collect();
         parts.par_iter_mut().enumerate().for_each(|(c, part)| {
             self.with_workspace(n, |ws| {
                 for i in 0..part.delta.len() {
                     let row = c * chunk + i;
-                    let s = &states[row * n..(row + 1) * n];
+                    let (s, q, task) = rows.row(row);
                     let a = &a_rl[row * m..(row + 1) * m];
                     let d = drift.map(|d| &d[row * n..(row + 1) * n]);
-                    self.step(ws, s, qs[row], a, None, d, None, Want::Solution);
+                    self.step(ws, s, q, a, None, d, task, Want::Solution);
                     part.write(i, m, &ws.out);
                 }
             });
@@ -1218,6 +1279,46 @@ impl Shield {
         }
         out.status = status;
         out.solver = by;
+    }
+}
+
+/// Where the rows of a batch read their state and FSA state.
+#[derive(Clone, Copy)]
+enum BatchRows<'a> {
+    /// Given: `(B, n)` states row-major and `(B,)` FSA states.
+    States {
+        states: &'a [f64],
+        n: usize,
+        qs: &'a [usize],
+    },
+    /// Each row's task monitor (its last state, FSA state, reading and goal).
+    Monitors(&'a [Monitor]),
+}
+
+impl<'a> BatchRows<'a> {
+    fn len(&self) -> usize {
+        match self {
+            BatchRows::States { qs, .. } => qs.len(),
+            BatchRows::Monitors(monitors) => monitors.len(),
+        }
+    }
+
+    fn state_len(&self) -> usize {
+        match self {
+            BatchRows::States { n, .. } => *n,
+            BatchRows::Monitors(monitors) => monitors[0].state().len(),
+        }
+    }
+
+    /// Row `i`: its state, FSA state and monitor (if any).
+    fn row(&self, i: usize) -> (&'a [f64], usize, Option<&'a Monitor>) {
+        match *self {
+            BatchRows::States { states, n, qs } => (&states[i * n..(i + 1) * n], qs[i], None),
+            BatchRows::Monitors(monitors) => {
+                let monitor = &monitors[i];
+                (monitor.state(), monitor.q(), Some(monitor))
+            }
+        }
     }
 }
 

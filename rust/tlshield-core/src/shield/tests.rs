@@ -548,6 +548,87 @@ fn the_monitor_path_equals_state_and_q_calls() {
     assert!(err.to_string().contains("another automaton"), "{err}");
 }
 
+#[test]
+fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
+    use crate::monitor::{Monitor, MonitorBatch, TaskReward};
+    let sh = shield(config(SolverChoice::Auto));
+    let paper = TaskReward::Paper {
+        c_r: 1.0,
+        trap_penalty: -10.0,
+    };
+    let mut rng = Rng(5);
+    // 40 rows: past PARALLEL_MIN_ROWS, so the parallel path runs too.
+    let rows = 40;
+    let mut batch = MonitorBatch::new(sh.automaton().clone(), paper.clone(), rows).unwrap();
+    let mut singles: Vec<Monitor> = (0..rows)
+        .map(|_| Monitor::new(sh.automaton().clone(), paper.clone()).unwrap())
+        .collect();
+    let mut steps = Vec::new();
+    let mut out = BatchOutput::default();
+    assert!(sh
+        .filter_monitors(&batch, &vec![0.0; 2 * rows], None, &mut out)
+        .is_err());
+    for t in 0..30 {
+        let states: Vec<f64> = (0..rows)
+            .flat_map(|_| {
+                state(
+                    f64::from(t) * 0.3 + rng.uniform(0.0, 1.0),
+                    rng.uniform(-1.4, 1.4),
+                    rng.uniform(-3.2, 3.2),
+                )
+            })
+            .collect();
+        let a_rl: Vec<f64> = (0..rows)
+            .flat_map(|_| [rng.uniform(-1.0, 1.0), rng.uniform(-2.0, 2.0)])
+            .collect();
+        let all: Vec<usize> = (0..rows).collect();
+        if t == 0 {
+            batch.reset(&all, &states, N, &mut steps).unwrap();
+        } else {
+            batch.advance(&states, N, &mut steps).unwrap();
+        }
+        let qs: Vec<usize> = steps.iter().map(|s| s.q).collect();
+        sh.filter_monitors(&batch, &a_rl, None, &mut out).unwrap();
+        let mut by_state = BatchOutput::default();
+        sh.filter_batch(&states, N, &qs, &a_rl, None, &mut by_state)
+            .unwrap();
+        assert_eq!(out, by_state, "step {t}");
+        for (i, single) in singles.iter_mut().enumerate() {
+            let s = &states[i * N..(i + 1) * N];
+            let step = if t == 0 {
+                single.reset(s).unwrap()
+            } else {
+                single.advance(s).unwrap()
+            };
+            assert_eq!(step, steps[i], "step {t} row {i}");
+            let f = sh
+                .filter_monitor(single, &a_rl[2 * i..2 * i + 2], None, None)
+                .unwrap();
+            assert_eq!(&out.action[2 * i..2 * i + 2], &f.action[..]);
+        }
+    }
+    // Bad input changes nothing and names what was wrong.
+    let before = batch.monitors().iter().map(Monitor::q).collect::<Vec<_>>();
+    let err = batch
+        .advance(&vec![f64::NAN; rows * N], N, &mut steps)
+        .unwrap_err();
+    assert!(err.to_string().contains("states[0, 0]"), "{err}");
+    let err = batch
+        .reset(&[0, 0], &vec![0.0; 2 * N], N, &mut steps)
+        .unwrap_err();
+    assert!(err.to_string().contains("rows[1]"), "{err}");
+    assert!(batch.reset(&[rows], &vec![0.0; N], N, &mut steps).is_err());
+    assert_eq!(
+        before,
+        batch.monitors().iter().map(Monitor::q).collect::<Vec<_>>()
+    );
+    let foreign = MonitorBatch::new(Arc::new(task_automaton()), paper, 2).unwrap();
+    let err = sh
+        .filter_monitors(&foreign, &[0.0; 4], None, &mut out)
+        .unwrap_err();
+    assert!(err.to_string().contains("another automaton"), "{err}");
+}
+
 /// xorshift64*, so the simulation is seeded without extra dependencies.
 struct Rng(u64);
 
