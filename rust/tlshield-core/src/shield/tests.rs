@@ -617,7 +617,7 @@ fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
         .reset(&[0, 0], &vec![0.0; 2 * N], N, &mut steps)
         .unwrap_err();
     assert!(err.to_string().contains("rows[1]"), "{err}");
-    assert!(batch.reset(&[rows], &vec![0.0; N], N, &mut steps).is_err());
+    assert!(batch.reset(&[rows], &[0.0; N], N, &mut steps).is_err());
     assert_eq!(
         before,
         batch.monitors().iter().map(Monitor::q).collect::<Vec<_>>()
