@@ -15,6 +15,7 @@ import tlshield
 
 #: Modules of the public API, in reading order (the per-step path first).
 MODULES = (
+    "tlshield.tracking",
     "tlshield.wrappers",
     "tlshield.vector",
     "tlshield.sb3",

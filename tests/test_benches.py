@@ -22,7 +22,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("compare_automaton.py", ["--quick"], "tlshield speedup"),
         ("compare_shield.py", ["--quick", "--memory-calls", "2000"], "tlshield speedup"),
         ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
-        ("step_crossings.py", ["--steps", "1000"], "| rl_cbf_clf | 3.00 |"),
+        ("step_crossings.py", ["--steps", "1000"], "| rl_cbf_clf | 1.00 |"),
         ("import_cost.py", ["--runs", "1"], "| `import tlshield` |"),
         ("moving_obstacles.py", ["--steps", "2000"], "moving-obstacle barrier"),
         ("compare_cbfpy.py", ["--quick"], "tlshield speedup"),

@@ -203,8 +203,10 @@ def test_overrides_and_bad_input() -> None:
         ChannelEnv(render_mode="ascii")
     env = ChannelEnv()
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="not finite"):
+    with pytest.raises(ValueError, match=r"action\[0\] is NaN"):
         env.step(np.array([np.nan, 0.0]))
+    with pytest.raises(ValueError, match=r"action: expected 2 values"):
+        env.step(np.zeros(3))
 
 
 def test_a_channel_too_narrow_for_the_goals_is_rejected_at_make() -> None:
@@ -413,3 +415,46 @@ def test_the_moving_obstacle_barrier_prevents_most_collisions() -> None:
     assert moving["violations"] == 0 and moving["failed"] == 0
     assert moving["collisions"] * 10 < static["collisions"]
     assert moving["min_distance"] > static["min_distance"]
+
+
+@pytest.mark.parametrize("config", ["rl", "rl_cbf_clf"])
+def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
+    """Plant, obstacles, drift, observation and reward terms of the world the core steps,
+    against an independent numpy version (tests/channel_reference.py), over seeded episodes
+    that drive into walls (the shield acts) and through the task."""
+    from tests import channel_reference as ref
+
+    env = ChannelEnv(config=config)
+    cfg = env.cfg
+    rng = np.random.default_rng(2)
+    steps = 0
+    for episode in range(6):
+        env.reset(seed=100 + episode)
+        paths = env._obstacles.copy()
+        s = env.state
+        for t in range(1, cfg.horizon + 1):
+            action = rng.uniform(-1, 1, 2)
+            if episode % 2:  # full speed ahead, turning slowly: into a wall
+                action = np.array([1.0, 0.2])
+            obs, reward, terminated, truncated, info = env.step(action)
+            want = ref.next_state(cfg, s, info["action"], paths, t)
+            np.testing.assert_allclose(env.state, want, rtol=0, atol=1e-12)
+            drift = np.zeros(13)
+            drift[9:13] = (want[9:13] - s[9:13]) / cfg.dt
+            np.testing.assert_allclose(env.drift, drift, rtol=0, atol=1e-12)
+            one_hot = np.eye(env.tracker.automaton.num_states)[info["fsa_state"]]
+            expected = ref.observation(cfg, want, drift, env.tracker.goal, one_hot)
+            np.testing.assert_allclose(obs, expected, rtol=0, atol=1e-12)
+            rho = env.spec_tl.atom_robustness(want)
+            c1, c2 = env.spec_tl.atoms.index("c1"), env.spec_tl.atoms.index("c2")
+            assert info["constraints"] == {"c1": rho[c1], "c2": rho[c2]}
+            d = min(float(np.hypot(*(want[:2] - want[a : b + 1]))) for a, b in ref.OBSTACLE_DIMS)
+            assert info["min_obstacle_distance"] == d
+            collision = d < cfg.obstacle_radius
+            terms = cfg.w * min(d - cfg.safe_distance, 0.0) - cfg.collision_penalty * collision
+            assert reward == pytest.approx(info["tl_reward"] + terms, abs=1e-12)
+            s = want
+            steps += 1
+            if terminated or truncated:
+                break
+    assert steps > 300

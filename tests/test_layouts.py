@@ -125,6 +125,24 @@ def _started_monitor() -> Any:
     return monitor
 
 
+def _world_reset() -> Any:
+    """``reset(s0, obstacles)`` of a Channel-v0 world, returning what it then holds."""
+    world = ChannelEnv(config="rl_cbf_clf")._world
+
+    def reset(s0: Any, obstacles: Any) -> Any:
+        world.reset(s0, obstacles)
+        return world.state, world.drift
+
+    return reset
+
+
+def _world_step() -> Any:
+    """A shielded Channel-v0 world one reset into an episode, as ``step(action)``."""
+    env = ChannelEnv(config="rl_cbf_clf")
+    env.reset(seed=3)
+    return lambda action: env._world.step(action, env.tracker.monitor, env.shield)
+
+
 def _started_batch() -> Any:
     """A batch of four monitors one step into their episodes."""
     batch = _core.MonitorBatch(AUT, 4, AUT.progress_reward())
@@ -201,6 +219,12 @@ CASES: dict[str, Case] = {
         {"states": STATES[:4], "rows": np.array([2, 0, 3, 1])},
     ),
     "MonitorBatch.advance": Case(_started_batch, "advance", {"states": STATES[4:8]}),
+    "ChannelWorld.reset": Case(
+        _world_reset,
+        "__call__",
+        {"s0": S, "obstacles": np.array([[4.0, 1.0, 0.3, 0.5], [6.0, 0.9, 0.2, 2.0]])},
+    ),
+    "ChannelWorld.step": Case(_world_step, "__call__", {"action": A_RL[5] / 4}),
 }
 
 
@@ -261,7 +285,14 @@ def _call(key: str, **override: Any) -> Any:
 
 def canon(value: Any) -> Any:
     """A comparable form of any result: arrays and scalars as float arrays, results by field."""
-    if isinstance(value, (_core.FilterResult, _core.FilterBatch, _core.TaskStep, _core.TaskBatch)):
+    results = (
+        _core.FilterResult,
+        _core.FilterBatch,
+        _core.TaskStep,
+        _core.TaskBatch,
+        _core.ChannelStep,
+    )
+    if isinstance(value, results):
         names = [n for n in dir(value) if not n.startswith("_")]
         return {n: canon(getattr(value, n)) for n in names}
     if isinstance(value, _core.Halfspace):

@@ -117,17 +117,18 @@ def test_the_paper_reward_pays_parking() -> None:
 
 
 def _static_obstacle_on_the_way(env: ChannelEnv, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Resets, then freezes obstacle 1 halfway to the first goal and moves obstacle 2 away."""
+    """Resets with obstacle 1 standing halfway to the first goal and obstacle 2 far away (the
+    episode's own start and goals: the same seed, the paths given as reset options)."""
     env.reset(seed=seed)
     p, g = env.state[:2].copy(), first_goal(env)
     middle = (p + g) / 2
     # (u, amplitude, frequency, phase): frequency 0 stands still at v = amplitude.
     u, v = (middle[0] + middle[1]) / math.sqrt(2), (middle[1] - middle[0]) / math.sqrt(2)
-    env._obstacles[0] = (u, v, 0.0, math.pi / 2)
-    env._obstacles[1] = (50.0, 0.0, 0.0, 0.0)
-    for k, (a, b) in enumerate(OBSTACLE_DIMS):
-        env.state[a : b + 1] = env._obstacle_positions(0.0)[k]
-    env.drift[:] = 0.0
+    paths = [(u, v, 0.0, math.pi / 2), (50.0, 0.0, 0.0, 0.0)]
+    env.reset(seed=seed, options={"obstacles": paths})
+    assert np.allclose(env.state[:2], p) and np.allclose(first_goal(env), g)
+    assert np.allclose(env.state[list(OBSTACLE_DIMS[0])], middle)
+    assert not env.drift.any()
     return middle, g
 
 

@@ -47,3 +47,76 @@ class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc]
         for info, shield in zip(infos, self._shield_infos, strict=True):
             info["shield"] = shield
         return obs, rewards, dones, infos
+
+
+class ChannelVecEnv(VecEnv):  # type: ignore[misc]
+    """Stable-Baselines3 ``VecEnv`` of ``num_envs`` Channel-v0 envs stepped in one core call
+    (:class:`tlshield.vector.ChannelBatch`). It gives what SB3's ``DummyVecEnv`` over the same
+    :class:`tlshield.envs.ChannelEnv` envs gives, bit for bit (observations, float32 rewards,
+    dones, ``terminal_observation``, the reset seeds ``seed + i``), and every env's ``info`` as
+    the single env builds it (no CLF goal or barrier list in ``info["shield"]``)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.vector import ChannelBatch
+
+        self.batch = ChannelBatch(num_envs, config, **kwargs)
+        super().__init__(num_envs, self.batch.observation_space, self.batch.action_space)
+        self._actions: NDArray[np.float64] | None = None
+
+    @property
+    def envs(self) -> list[Any]:
+        """The single environments."""
+        return self.batch.envs
+
+    def reset(self) -> NDArray[np.float64]:
+        for i in range(self.num_envs):
+            options = {"options": self._options[i]} if self._options[i] else {}
+            _, self.reset_infos[i] = self.batch.reset_env(i, seed=self._seeds[i], **options)
+        self._reset_seeds()
+        self._reset_options()
+        return self.batch.obs.copy()
+
+    def step_async(self, actions: NDArray[Any]) -> None:
+        self._actions = np.asarray(actions, dtype=np.float64)
+
+    def step_wait(self) -> Any:
+        if self._actions is None:
+            raise RuntimeError("call step_async() before step_wait()")
+        out = self.batch.step(self._actions)
+        self._actions = None
+        rewards = out.reward.astype(np.float32)  # DummyVecEnv's reward buffer is float32
+        dones = out.terminated | out.truncated
+        infos = self.batch.infos(out)
+        for i, info in enumerate(infos):
+            info["TimeLimit.truncated"] = bool(out.truncated[i] and not out.terminated[i])
+        for i in np.flatnonzero(dones):
+            infos[i]["terminal_observation"] = self.batch.obs[i].copy()
+            _, self.reset_infos[i] = self.batch.reset_env(int(i))
+        return self.batch.obs.copy(), rewards, dones, infos
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+    def _indices(self, indices: Any) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        return [indices] if isinstance(indices, int) else list(indices)
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self.envs[i], attr_name) for i in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        for i in self._indices(indices):
+            setattr(self.envs[i], attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
+        return [
+            getattr(self.envs[i], method_name)(*method_args, **method_kwargs)
+            for i in self._indices(indices)
+        ]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False for _ in self._indices(indices)]

@@ -73,12 +73,18 @@ def _env_config(venv: Any) -> Any:
 def make_vec_env(
     config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
 ) -> Any:
-    """The training VecEnv: ``n_envs`` copies of ``env_id`` (Channel-v0 by default), each
-    shielding its own steps (Channel-v0's shield needs each env's measured obstacle motion; at
-    3 us a call, batching 8 rows would save nothing), seeded ``seed * 1000 + i``."""
+    """The training VecEnv: ``n_envs`` copies of ``env_id``, seeded ``seed * 1000 + i``.
+    Channel-v0 steps all its envs in one core call (:class:`tlshield.sb3.ChannelVecEnv`, the
+    same numbers as SB3's ``DummyVecEnv`` over the single envs, bit for bit); other envs run in
+    a ``DummyVecEnv``."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
+    from tlshield.sb3 import ChannelVecEnv
+
+    if env_id == ENV_ID:
+        venv = ChannelVecEnv(n_envs, config, **overrides)
+    else:
+        venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
     venv.seed(train_seed(seed))
     return venv
 

@@ -1,18 +1,21 @@
-"""Shielding N environments in one call: the per-env ``info["shield"]`` of a batch, the
-layout of FSA-augmented observations, and :class:`ShieldedVectorEnv` (Gymnasium's vector API).
-The Stable-Baselines3 twin, :class:`tlshield.sb3.ShieldedVecEnv`, lives apart so that SB3 and
-torch load only when it is used."""
+"""N environments in one call. :func:`make` and :class:`ChannelVectorEnv`: Channel-v0 as a
+Gymnasium ``VectorEnv`` whose N envs step in one core call (:class:`ChannelBatch`, as EnvPool
+does for Atari and MuJoCo). :class:`ShieldedVectorEnv`: any FSA-augmented vector env shielded in
+one ``filter_batch`` call, with the per-env ``info["shield"]`` of a batch and the layout of
+FSA-augmented observations. The Stable-Baselines3 twins, :class:`tlshield.sb3.ChannelVecEnv`
+and :class:`tlshield.sb3.ShieldedVecEnv`, live apart so that SB3 and torch load only when they
+are used."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import FilterBatch, Shield
+from tlshield._core import FilterBatch, Shield, WorldsStep, step_worlds
 from tlshield.codes import Solver, Status
 
 #: Maps the policy's actions ``(N, m)`` to the RL actions in the shield's units.
@@ -91,3 +94,179 @@ class ShieldedVectorEnv(gym.vector.VectorWrapper):
         self._obs = np.asarray(obs, dtype=np.float64)
         infos = {**infos, "shield": batch_infos(out, a_rl)}
         return obs, rewards, terminated, truncated, infos
+
+
+class ChannelBatch:
+    """``num_envs`` Channel-v0 environments whose steps run in one core call
+    (``tlshield._core.step_worlds``: plant, obstacles, shield, monitor, reward and observation
+    of every env, in parallel past 32 envs, GIL released). Each env is a real
+    :class:`tlshield.envs.ChannelEnv`: it draws its own episodes (its resets run in Python, one
+    env at a time), so a batch row follows exactly the trajectory the single env follows for
+    the same seed and actions. All envs share one configuration, and so one shield."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.envs.channel import ChannelEnv
+
+        if not (isinstance(num_envs, int) and num_envs > 0):
+            raise ValueError(f"num_envs = {num_envs!r}: expected a positive integer")
+        self.envs = [ChannelEnv(config=config, **kwargs) for _ in range(num_envs)]
+        first = self.envs[0]
+        self.observation_space = first.observation_space
+        self.action_space = first.action_space
+        self.obs = np.zeros((num_envs, *first.observation_space.shape))
+
+    def reset_env(self, i: int, **kwargs: Any) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        """Resets env ``i`` (its own draws); its observation becomes row ``i``."""
+        obs, info = self.envs[i].reset(**kwargs)
+        self.obs[i] = obs
+        return obs, info
+
+    def step(self, actions: Any, active: NDArray[np.bool_] | None = None) -> WorldsStep:
+        """Steps every env (or the ``active`` ones) on its row of ``actions`` in one call."""
+        first = self.envs[0]
+        shield = first.shield if first.shield_in_env else None
+        out = step_worlds(
+            [e._world for e in self.envs],
+            [e.tracker.monitor for e in self.envs],
+            np.asarray(actions, dtype=np.float64),
+            self.obs,
+            None if active is None else [bool(a) for a in active],
+            shield,
+            first.shield_in_env,
+        )
+        self.obs = out.observation
+        for env, slack in zip(self.envs, out.slack.tolist(), strict=True):
+            env.last_slack = slack
+        return out
+
+    def infos(self, out: WorldsStep) -> list[dict[str, Any]]:
+        """Each env's ``info`` as :meth:`ChannelEnv.step` gives it (a batch does not return the
+        CLF goal and the barrier list: None and empty)."""
+        shielded = self.envs[0].shield is not None and self.envs[0].shield_in_env
+        columns = zip(
+            out.q.tolist(),
+            out.action,
+            out.accepted.tolist(),
+            out.trapped.tolist(),
+            out.tl_reward.tolist(),
+            out.constraints.tolist(),
+            out.min_obstacle_distance.tolist(),
+            out.collision.tolist(),
+            out.violation.tolist(),
+            out.a_rl,
+            out.a_cbf,
+            out.a_clf,
+            out.delta.tolist(),
+            out.status.tolist(),
+            out.slack.tolist(),
+            out.solver.tolist(),
+            strict=True,
+        )
+        infos = []
+        for q, action, ok, trap, r_tl, (c1, c2), d, hit, out_of, a_rl, cbf, clf, *qp in columns:
+            delta, status, slack, solver = qp
+            infos.append(
+                {
+                    "fsa_state": q,
+                    "action": action,
+                    "success": ok,
+                    "trap": trap,
+                    "tl_reward": r_tl,
+                    "constraints": {"c1": c1, "c2": c2},
+                    "min_obstacle_distance": d,
+                    "collision": hit,
+                    "violation": out_of,
+                    "shield": {
+                        "a_rl": a_rl,
+                        "a_cbf": cbf,
+                        "a_clf": clf,
+                        "delta": delta,
+                        "status": Status(status) if shielded else None,
+                        "slack": slack,
+                        "solver": Solver(solver) if shielded else None,
+                        "goal": None,
+                        "barriers": {},
+                    },
+                }
+            )
+        return infos
+
+
+class ChannelVectorEnv(gym.vector.VectorEnv):
+    """``tlshield/Channel-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
+    :class:`ChannelBatch`); an env whose episode ended is reset on the next step
+    (``AutoresetMode.NEXT_STEP``, Gymnasium's default). ``infos`` holds arrays: ``fsa_state``,
+    ``success``, ``trap``, ``tl_reward``, ``constraints`` (N, 2), ``min_obstacle_distance``,
+    ``collision``, ``violation``, and the shield's ``a_cbf``, ``a_clf``, ``status``."""
+
+    metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        self.batch = ChannelBatch(num_envs, config, **kwargs)
+        self.num_envs = num_envs
+        self.single_observation_space = self.batch.observation_space
+        self.single_action_space = self.batch.action_space
+        self.observation_space = gym.vector.utils.batch_space(
+            self.single_observation_space, num_envs
+        )
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self._autoreset = np.zeros(num_envs, dtype=bool)
+
+    @property
+    def envs(self) -> list[Any]:
+        """The single environments."""
+        return self.batch.envs
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        n = self.num_envs
+        seeds = [seed + i for i in range(n)] if isinstance(seed, int) else seed or [None] * n
+        if len(seeds) != n:
+            raise ValueError(f"seed: expected {n} seeds (one per env), got {len(seeds)}")
+        for i in range(n):
+            self.batch.reset_env(i, seed=seeds[i], options=options)
+        self._autoreset[:] = False
+        return self.batch.obs.copy(), {}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], Any, Any, dict[str, Any]]:
+        resetting = self._autoreset.copy()
+        out = self.batch.step(actions, active=~resetting)
+        rewards = out.reward.copy()
+        terminated, truncated = out.terminated.copy(), out.truncated.copy()
+        for i in np.flatnonzero(resetting):
+            self.batch.reset_env(int(i))
+        rewards[resetting] = 0.0
+        terminated[resetting] = truncated[resetting] = False
+        self._autoreset = terminated | truncated
+        infos = {
+            "fsa_state": out.q,
+            "success": out.accepted,
+            "trap": out.trapped,
+            "tl_reward": out.tl_reward,
+            "constraints": out.constraints,
+            "min_obstacle_distance": out.min_obstacle_distance,
+            "collision": out.collision,
+            "violation": out.violation,
+            "a_cbf": out.a_cbf,
+            "a_clf": out.a_clf,
+            "status": out.status,
+        }
+        return self.batch.obs.copy(), rewards, terminated, truncated, infos
+
+
+def make(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
+    """A vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
+    ``tlshield/Channel-v0`` only so far (PointMass-v0 and FlatWorld-v0 still step in Python:
+    use Gymnasium's ``SyncVectorEnv``). For Stable-Baselines3 use
+    :class:`tlshield.sb3.ChannelVecEnv`."""
+    from tlshield.envs import ENV_ID
+
+    if env_id != ENV_ID:
+        raise ValueError(
+            f"env {env_id!r}: tlshield.vector.make steps {ENV_ID} in the core; for other envs "
+            "use gymnasium.vector.SyncVectorEnv"
+        )
+    return ChannelVectorEnv(num_envs, config, **kwargs)

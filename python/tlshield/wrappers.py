@@ -22,7 +22,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, Monitor, ProgressReward, Shield, Spec, TaskStep
+from tlshield._core import Shield, Spec
+from tlshield.tracking import REWARDS, FsaTracker, shield_info
 from tlshield.vector import ShieldedVectorEnv
 
 StateFn = Callable[[Any], NDArray[np.float64]]
@@ -32,114 +33,6 @@ DynamicsFn = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[
 def identity_state(obs: Any) -> NDArray[np.float64]:
     """The default ``state_fn``: the observation is the state vector."""
     return np.asarray(obs, dtype=np.float64)
-
-
-#: The task rewards a tracker can pay: the progress reward or the paper's Eq. 5A1.
-REWARDS = ("progress", "paper")
-
-
-class FsaTracker:
-    """The task automaton along one episode: a thin shell over :class:`tlshield.Monitor` (which
-    holds the FSA state, the last reading of the atoms and the reward's state in the core) that
-    adds what the Gymnasium wrappers need (the one-hot FSA state).
-
-    The FSA reads every state: ``reset(s_0)`` sets ``q_0 = step(initial, s_0)`` and
-    ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition.
-
-    With ``progress`` (a :class:`tlshield.ProgressReward` of the same automaton, from
-    ``automaton.progress_reward(...)``) the reward is the progress-aware one: reaching
-    acceptance out-earns not reaching it, entering a state closer to acceptance never lowers
-    the potential, Eq. 5A1 shapes within a state, and the trap (``progress.trap_penalty``) is
-    worst. Without it the reward is the paper's Eq. 5A1, and every step in the trap pays
-    ``trap_penalty`` (which must be no better than the worst reward reachable outside it, so
-    that entering the trap never pays).
-    """
-
-    def __init__(
-        self,
-        automaton: Automaton,
-        c_r: float,
-        trap_penalty: float,
-        progress: ProgressReward | None = None,
-    ) -> None:
-        self.monitor = Monitor(automaton, progress, c_r=c_r, trap_penalty=trap_penalty)
-        self.automaton = automaton
-        self.c_r = float(c_r)
-        self.progress = progress
-        self.trap_penalty = float(trap_penalty if progress is None else progress.trap_penalty)
-        self._last: TaskStep | None = None
-        self._eye = np.eye(automaton.num_states)
-
-    def reset(self, s: NDArray[np.float64]) -> int:
-        self._last = self.monitor.reset(s)
-        return self._last.q
-
-    def advance(self, s_next: NDArray[np.float64]) -> tuple[int, float]:
-        """Moves to the next FSA state; returns it and the reward of the transition."""
-        self._last = self.monitor.advance(s_next)
-        return self._last.q, self._last.reward
-
-    @property
-    def q(self) -> int:
-        return self.monitor.q
-
-    @property
-    def phi(self) -> float:
-        return self.monitor.phi
-
-    @property
-    def goal(self) -> NDArray[np.float64] | None:
-        """The CLF goal at the last state and ``q`` (None without one, or before a reset)."""
-        return None if self._last is None else self._last.goal
-
-    @property
-    def atom_robustness(self) -> NDArray[np.float64]:
-        """The atoms' robustness at the last state read (spec order); call ``reset`` first."""
-        if self._last is None:
-            raise RuntimeError("call reset() first")
-        return self._last.atom_robustness
-
-    @property
-    def success(self) -> bool:
-        return self._last is not None and self._last.accepted
-
-    @property
-    def trapped(self) -> bool:
-        return self._last is not None and self._last.trapped
-
-    def one_hot(self, q: int | None = None) -> NDArray[np.float64]:
-        return self._eye[self.q if q is None else q]
-
-
-def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
-    """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta``, the
-    :class:`tlshield.Status`, the largest barrier ``slack``, the :class:`tlshield.Solver`, the
-    CLF ``goal`` (or None) and the enforced ``barriers`` as ``{name: h(s)}`` (zeros, None and
-    empty when no shield ran)."""
-    if result is None:
-        zeros = np.zeros_like(a_rl)
-        return {
-            "a_rl": a_rl,
-            "a_cbf": zeros,
-            "a_clf": zeros,
-            "delta": 0.0,
-            "status": None,
-            "slack": 0.0,
-            "solver": None,
-            "goal": None,
-            "barriers": {},
-        }
-    return {
-        "a_rl": a_rl,
-        "a_cbf": result.a_cbf,
-        "a_clf": result.a_clf,
-        "delta": result.delta,
-        "status": result.status,
-        "slack": result.slack,
-        "solver": result.solver,
-        "goal": result.goal,
-        "barriers": dict(result.barriers),
-    }
 
 
 class FsaAugmented(gym.Wrapper):

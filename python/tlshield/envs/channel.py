@@ -27,9 +27,9 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
+from tlshield._core import Ball, ChannelWorld, Halfspace, Shield, Spec, Unicycle
 from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
-from tlshield.wrappers import FsaTracker, shield_info
+from tlshield.tracking import FsaTracker, shield_info
 
 #: The task: visit g1 or g2, then g3, staying inside the channel until g3 (paper Eq. 6C1).
 TASK = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
@@ -475,15 +475,44 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         rl_lo, rl_hi = (np.asarray(b, dtype=np.float64) for b in cfg.rl_bounds)
         self._rl_centre, self._rl_half = (rl_hi + rl_lo) / 2, (rl_hi - rl_lo) / 2
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
-        self.state = np.zeros(STATE_DIM)
-        #: The measured motion of the obstacle dimensions (finite differences), for the shield.
-        self.drift = np.zeros(STATE_DIM)
+        #: The world the core steps: plant, obstacles, shield call, monitor, reward terms and
+        #: observation in one call (this class draws the episodes and builds ``info``).
+        self._world = ChannelWorld(
+            self.model,
+            dt=cfg.dt,
+            horizon=cfg.horizon,
+            arena=cfg.arena,
+            half_width=cfg.half_width,
+            obstacle_radius=cfg.obstacle_radius,
+            safe_distance=cfg.safe_distance,
+            w=cfg.w,
+            collision_penalty=cfg.collision_penalty,
+            intervention_penalty=cfg.intervention_penalty,
+            relative=cfg.observation == "relative",
+            rl_bounds=cfg.rl_bounds,
+            obstacle_drift=cfg.obstacle_drift,
+            evaluation=evaluation,
+            channel_atoms=self._channel_atoms,
+        )
         #: The barrier slack of the last shielded step (> 0 only when the QP was relaxed).
         self.last_slack = 0.0
         self._obstacles = np.zeros((2, 4))  # per obstacle: u, amplitude, frequency, phase
-        self._t = 0
         self._trajectory: list[NDArray[np.float64]] = []
         self._renderer: Any = None
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """The current 13-value state (a copy)."""
+        return self._world.state
+
+    @property
+    def drift(self) -> NDArray[np.float64]:
+        """The obstacles' motion measured over the last step (a copy), for the shield."""
+        return self._world.drift
+
+    @property
+    def _t(self) -> int:
+        return int(self._world.steps)
 
     # --- the world ------------------------------------------------------------------------
 
@@ -515,46 +544,19 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         far = self._xy(rng.uniform(*cfg.far_goal_u), rng.uniform(-inside_v, inside_v))
         return np.vstack([near, far]), outside
 
-    def _measure(self, s: NDArray[np.float64]) -> dict[str, Any]:
-        cfg = self.cfg
-        # The channel constraints as the task's own predicates evaluate them (the monitor has
-        # just read s).
-        rho = self.tracker.atom_robustness
-        h1, h2 = rho[self._channel_atoms[0]], rho[self._channel_atoms[1]]
-        d = min(float(np.hypot(*(s[X : Y + 1] - s[a : b + 1]))) for a, b in OBSTACLE_DIMS)
+    def _measure(self) -> dict[str, Any]:
+        c1, c2, d, collision, violation = self._world.measure(self.tracker.monitor)
         return {
-            "constraints": {"c1": float(h1), "c2": float(h2)},
+            "constraints": {"c1": c1, "c2": c2},
             "min_obstacle_distance": d,
-            "collision": d < cfg.obstacle_radius,
-            "violation": bool(min(h1, h2) < 0.0),
+            "collision": collision,
+            "violation": violation,
         }
 
     def rl_action(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """The RL action ``(a_v, a_theta)`` in physical units of policy actions in
         ``[-1, 1]^2`` (clipped); works on one action or a batch ``(N, 2)``."""
         return self._rl_centre + np.clip(action, -1.0, 1.0) * self._rl_half
-
-    def _observe(self) -> NDArray[np.float64]:
-        s = self.state
-        if self.cfg.observation == "paper":
-            return np.concatenate([s, self.tracker.one_hot()])
-        p = s[X : Y + 1]
-        w = self.cfg.half_width
-        obs = np.empty(RELATIVE_DIM + len(self.tracker.one_hot()))
-        obs[0], obs[1] = math.cos(s[THETA]), math.sin(s[THETA])
-        obs[2], obs[3] = s[X] - s[Y] + w, s[Y] - s[X] + w
-        # Goals, obstacles and obstacle velocities in the agent's frame (x ahead, y left):
-        # "ahead" and "to the left" map straight onto a_v and a_theta.
-        c, si = obs[0], obs[1]
-        frame = np.array([[c, si], [-si, c]])
-        obs[4:10] = ((s[3:9].reshape(3, 2) - p) @ frame.T).ravel()
-        obs[10:14] = ((s[9:13].reshape(2, 2) - p) @ frame.T).ravel()
-        obs[14:18] = (self.drift[9:13].reshape(2, 2) @ frame.T).ravel()
-        # The task's next goal as the automaton picks it (Eq. 5B1), zero when there is none.
-        goal = self.tracker.goal
-        obs[18:20] = 0.0 if goal is None else frame @ (goal - p)
-        obs[RELATIVE_DIM:] = self.tracker.one_hot()
-        return obs
 
     # --- Gymnasium API ------------------------------------------------------------------------
 
@@ -571,6 +573,16 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
                 rng.uniform(*cfg.obstacle_frequency),
                 rng.uniform(0.0, 2 * math.pi),
             )
+        if options and "obstacles" in options:
+            # Given paths (u, amplitude, frequency, phase) replace the drawn ones; the draws
+            # still happen, so the rest of the episode is the seed's.
+            paths = np.asarray(options["obstacles"], dtype=np.float64)
+            if paths.shape != (2, 4) or not np.all(np.isfinite(paths)):
+                raise ValueError(
+                    "options['obstacles']: expected finite (2, 4) paths (u, amplitude, "
+                    f"frequency, phase), got {paths.tolist()}"
+                )
+            self._obstacles[:] = paths
         s = np.zeros(STATE_DIM)
         s[X], s[Y] = self._xy(
             rng.uniform(-cfg.start_spread, cfg.start_spread),
@@ -582,12 +594,8 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         obstacles = self._obstacle_positions(0.0)
         for k, (a, b) in enumerate(OBSTACLE_DIMS):
             s[a], s[b] = obstacles[k]
-        # Velocity measured from the positions one step before the start and at the start.
-        before = self._obstacle_positions(-cfg.dt)
-        self.drift = np.zeros(STATE_DIM)
-        self.drift[9:13] = ((obstacles - before) / cfg.dt).ravel()
-        self.state = s
-        self._t = 0
+        # The world measures the obstacles' velocity over the step before the start.
+        self._world.reset(s, self._obstacles)
         self._trajectory = [s[X : Y + 1].copy()]
         q = self.tracker.reset(s)
         goal = self.tracker.goal
@@ -598,69 +606,40 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             "goal_outside_channel": outside,
             # Whether the goal the CLF heads for first lies outside the channel.
             "clf_goal_outside": bool(goal is not None and abs(goal[1] - goal[0]) > cfg.half_width),
-            **self._measure(s),
+            **self._measure(),
         }
         if self.render_mode == "human":
             self.render()
-        return self._observe(), info
+        return self._world.observe(self.tracker.monitor), info
 
     def step(
         self, action: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
-        cfg = self.cfg
-        a_rl = np.asarray(action, dtype=np.float64).reshape(2)
-        if not np.all(np.isfinite(a_rl)):
-            raise ValueError(f"action {a_rl} is not finite")
-        if self.shield_in_env:
-            a_rl = self.rl_action(a_rl)
-        # else: a vector shield wrapper already scaled, shielded and passed the applied action.
-        s = self.state
-        result = None
-        if self.shield is not None and self.shield_in_env:
-            drift = self.drift if self.cfg.obstacle_drift else None
-            # The monitor has read s (reset or the last step): the shield reuses that reading.
-            result = self.shield.filter(self.tracker.monitor, a_rl, drift=drift)
-            self.last_slack = result.slack
-            applied = result.action
-        else:
-            applied = a_rl
-        # Euler step of the reference point (Eq. 6A2) through the shield's own model (one model
-        # of the dynamics), held in the arena, heading wrapped; then the obstacles.
-        nxt = self.model.step(s, applied, cfg.dt)
-        lo, hi = cfg.arena
-        nxt[X] = min(max(nxt[X], lo), hi)
-        nxt[Y] = min(max(nxt[Y], lo), hi)
-        nxt[THETA] = (nxt[THETA] + math.pi) % (2 * math.pi) - math.pi
-        self._t += 1
-        obstacles = self._obstacle_positions(self._t * cfg.dt)
-        for k, (a, b) in enumerate(OBSTACLE_DIMS):
-            nxt[a], nxt[b] = obstacles[k]
-        self.drift = np.zeros(STATE_DIM)
-        self.drift[9:13] = (nxt[9:13] - s[9:13]) / cfg.dt
-        self.state = nxt
-        self._trajectory.append(nxt[X : Y + 1].copy())
-
-        q, r_tl = self.tracker.advance(nxt)
-        measured = self._measure(nxt)
-        r_obstacle = min(measured["min_obstacle_distance"] - cfg.safe_distance, 0.0)
-        reward = r_tl + cfg.w * r_obstacle - cfg.collision_penalty * measured["collision"]
-        if result is not None:
-            reward -= cfg.intervention_penalty * float(result.a_cbf @ result.a_cbf)
-        success = self.tracker.success
-        terminated = success or (self.evaluation and measured["collision"])
-        truncated = self._t >= cfg.horizon and not terminated
+        # One call into the core: the RL action scaled from [-1, 1] (unless a vector shield
+        # wrapper already scaled, shielded and passed the applied action), the shield reusing
+        # the monitor's reading, the plant through the shield's own model, the obstacles, the
+        # monitor, the reward terms and the observation.
+        shield = self.shield if self.shield_in_env else None
+        out = self._world.step(action, self.tracker.monitor, shield, scale=self.shield_in_env)
+        if out.shield is not None:
+            self.last_slack = out.shield.slack
+        if self.render_mode is not None:
+            self._trajectory.append(self.state[X : Y + 1])
         info = {
-            "fsa_state": q,
-            "action": np.asarray(applied, dtype=np.float64),
-            "success": success,
-            "trap": self.tracker.trapped,
-            "tl_reward": r_tl,
-            **measured,
-            "shield": shield_info(result, a_rl),
+            "fsa_state": out.q,
+            "action": out.action,
+            "success": out.accepted,
+            "trap": out.trapped,
+            "tl_reward": out.tl_reward,
+            "constraints": {"c1": out.c1, "c2": out.c2},
+            "min_obstacle_distance": out.min_obstacle_distance,
+            "collision": out.collision,
+            "violation": out.violation,
+            "shield": shield_info(out.shield, out.a_rl),
         }
         if self.render_mode == "human":
             self.render()
-        return self._observe(), float(reward), bool(terminated), bool(truncated), info
+        return out.observation, out.reward, out.terminated, out.truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

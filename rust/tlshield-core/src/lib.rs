@@ -18,6 +18,7 @@
 
 pub mod active_set;
 pub mod automaton;
+pub mod channel;
 pub mod cnf;
 pub mod dynamics;
 pub mod error;

@@ -4,6 +4,7 @@
 //! Python exceptions; all logic lives in `tlshield-core`.
 
 mod automaton;
+mod channel;
 mod codes;
 mod convert;
 mod dynamics;
@@ -53,6 +54,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;
     m.add_class::<shield::PyFilterBatch>()?;
+    m.add_class::<channel::PyChannelWorld>()?;
+    m.add_class::<channel::PyChannelStep>()?;
+    m.add_class::<channel::PyWorldsStep>()?;
+    m.add_function(wrap_pyfunction!(channel::step_worlds, m)?)?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

@@ -187,6 +187,11 @@ pub struct PyShield {
 }
 
 impl PyShield {
+    /// The core shield.
+    pub(crate) fn core(&self) -> &Shield {
+        &self.inner
+    }
+
     /// Runs `call` with the per-call dynamics ``f`` (n,) and ``g`` (n, m) when both are given,
     /// with the model's when neither is.
     fn with_dynamics<R>(
@@ -243,7 +248,7 @@ impl PyShield {
         })
     }
 
-    fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
+    pub(crate) fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
         let barriers = out
             .barriers
             .iter()

@@ -1,0 +1,406 @@
+//! The paper's case study (Sec. VI) as a world the core steps: the unicycle's reference point
+//! in a channel, three goal discs and two obstacles oscillating across the channel, whose motion
+//! the agent and the shield only measure. One step applies the RL action (scaled from the
+//! policy's box), shields it with the task monitor's reading, moves the plant through the
+//! shield's own model and the obstacles along their paths, advances the monitor and returns the
+//! reward terms and measurements; [`ChannelWorld::observe`] writes the observation.
+//!
+//! The episode draws (goals, obstacle paths, start) stay with the caller: the Gymnasium class
+//! draws them from its own generator and hands the world the start.
+
+use std::f64::consts::SQRT_2;
+
+use rayon::prelude::*;
+
+use crate::dynamics::Dynamics;
+use crate::error::{InputError, ShieldError};
+use crate::monitor::{Monitor, TaskStep};
+use crate::shield::{Filtered, Shield};
+
+/// State length: x, y, theta, three goal centres, two obstacle centres.
+pub const STATE_DIM: usize = 13;
+/// Length of the relative observation, before the one-hot FSA state.
+pub const RELATIVE_DIM: usize = 20;
+const X: usize = 0;
+const Y: usize = 1;
+const THETA: usize = 2;
+const GOALS: usize = 3;
+const OBSTACLES: usize = 9;
+
+/// The constants a step reads (the Python `ChannelConfig` holds and checks them all).
+#[derive(Debug, Clone)]
+pub struct ChannelParams {
+    /// Euler step (s).
+    pub dt: f64,
+    /// Episode length in steps.
+    pub horizon: u32,
+    /// The arena `[lo, hi]^2` the reference point is held in.
+    pub arena: (f64, f64),
+    /// `w` of the channel constraints.
+    pub half_width: f64,
+    /// Collision distance to an obstacle centre.
+    pub obstacle_radius: f64,
+    /// The obstacle reward term is `w * min(d - safe_distance, 0)`.
+    pub safe_distance: f64,
+    /// Weight of the obstacle term.
+    pub w: f64,
+    /// Paid per step in collision.
+    pub collision_penalty: f64,
+    /// Paid per shielded step as `intervention_penalty * |a_cbf|^2`.
+    pub intervention_penalty: f64,
+    /// The relative body-frame observation (else the paper's: the 13 state values).
+    pub relative: bool,
+    /// The RL action box, `(lo, hi)` per input: policy actions in `[-1, 1]` are scaled to it.
+    pub rl_bounds: ([f64; 2], [f64; 2]),
+    /// Whether the shield is told the obstacles' measured velocity.
+    pub obstacle_drift: bool,
+    /// The paper's evaluation rules: an episode also ends on a collision.
+    pub evaluation: bool,
+    /// Spec atom indices of the channel constraints c1, c2.
+    pub channel_atoms: [usize; 2],
+}
+
+/// One obstacle's path: centre at channel coordinates `(u, amplitude sin(frequency t + phase))`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Obstacle {
+    /// Position along the channel.
+    pub u: f64,
+    /// Amplitude across it.
+    pub amplitude: f64,
+    /// Angular frequency (rad/s).
+    pub frequency: f64,
+    /// Phase (rad).
+    pub phase: f64,
+}
+
+impl Obstacle {
+    /// The centre at time `t`.
+    pub fn position(&self, t: f64) -> [f64; 2] {
+        xy(
+            self.u,
+            self.amplitude * (self.frequency * t + self.phase).sin(),
+        )
+    }
+}
+
+/// Channel coordinates `(u, v)` to `(x, y)`.
+pub fn xy(u: f64, v: f64) -> [f64; 2] {
+    [(u - v) / SQRT_2, (u + v) / SQRT_2]
+}
+
+/// What the world measures at a state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measure {
+    /// The channel constraints c1, c2 as the task's predicates evaluate them.
+    pub h: [f64; 2],
+    /// Distance from the reference point to the nearer obstacle centre.
+    pub min_obstacle_distance: f64,
+    /// Closer than the collision distance.
+    pub collision: bool,
+    /// Outside the channel.
+    pub violation: bool,
+}
+
+/// What one step gives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelStep {
+    /// The RL action in physical units.
+    pub a_rl: [f64; 2],
+    /// The action applied to the plant.
+    pub applied: [f64; 2],
+    /// The shield's answer, when it ran.
+    pub shield: Option<Filtered>,
+    /// The task's step (FSA state, task reward, acceptance, trap).
+    pub task: TaskStep,
+    /// The environment's reward: task reward plus the obstacle, collision and intervention
+    /// terms.
+    pub reward: f64,
+    /// The episode ended (success, or a collision under the evaluation rules).
+    pub terminated: bool,
+    /// The horizon was reached.
+    pub truncated: bool,
+    /// Measurements at the new state.
+    pub measure: Measure,
+}
+
+/// The case study's world (see the module docs).
+#[derive(Debug, Clone)]
+pub struct ChannelWorld {
+    params: ChannelParams,
+    model: Dynamics,
+    s: [f64; STATE_DIM],
+    drift: [f64; STATE_DIM],
+    obstacles: [Obstacle; 2],
+    t: u32,
+    next: Vec<f64>,
+}
+
+impl ChannelWorld {
+    /// A world with these constants stepping through `model` (the shield's model).
+    pub fn new(params: ChannelParams, model: Dynamics) -> Self {
+        ChannelWorld {
+            params,
+            model,
+            s: [0.0; STATE_DIM],
+            drift: [0.0; STATE_DIM],
+            obstacles: [Obstacle::default(); 2],
+            t: 0,
+            next: vec![0.0; STATE_DIM],
+        }
+    }
+
+    /// Starts an episode at `s0` with these obstacle paths; the obstacles' measured velocity is
+    /// their motion over the step before the start.
+    pub fn reset(&mut self, s0: [f64; STATE_DIM], obstacles: [Obstacle; 2]) {
+        self.s = s0;
+        self.obstacles = obstacles;
+        self.t = 0;
+        self.drift = [0.0; STATE_DIM];
+        for (k, o) in obstacles.iter().enumerate() {
+            let (now, before) = (o.position(0.0), o.position(-self.params.dt));
+            for d in 0..2 {
+                self.drift[OBSTACLES + 2 * k + d] = (now[d] - before[d]) / self.params.dt;
+            }
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> &[f64; STATE_DIM] {
+        &self.s
+    }
+
+    /// The obstacles' motion measured over the last step (zero elsewhere).
+    pub fn drift(&self) -> &[f64; STATE_DIM] {
+        &self.drift
+    }
+
+    /// Steps taken in this episode.
+    pub fn steps(&self) -> u32 {
+        self.t
+    }
+
+    /// The constants.
+    pub fn params(&self) -> &ChannelParams {
+        &self.params
+    }
+
+    /// One step for the policy action `action` (in `[-1, 1]^2`, clipped, scaled to the RL box;
+    /// with `scale` false it is already the physical RL action), shielded by `shield` when
+    /// given. `monitor` must have read the current state (its reset or last advance).
+    pub fn step(
+        &mut self,
+        action: [f64; 2],
+        scale: bool,
+        monitor: &mut Monitor,
+        shield: Option<&Shield>,
+    ) -> Result<ChannelStep, ShieldError> {
+        let p = &self.params;
+        if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+            return Err(InputError::NonFinite {
+                what: format!("action[{i}]"),
+                value: action[i],
+            }
+            .into());
+        }
+        let a_rl = if scale {
+            let (lo, hi) = p.rl_bounds;
+            [0, 1].map(|i| {
+                (hi[i] + lo[i]) / 2.0 + action[i].clamp(-1.0, 1.0) * ((hi[i] - lo[i]) / 2.0)
+            })
+        } else {
+            action
+        };
+        let filtered = match shield {
+            Some(shield) => {
+                let drift = p.obstacle_drift.then_some(&self.drift[..]);
+                Some(shield.filter_monitor(monitor, &a_rl, None, drift)?)
+            }
+            None => None,
+        };
+        let applied = match &filtered {
+            Some(f) => [f.action[0], f.action[1]],
+            None => a_rl,
+        };
+        // The plant through the shield's own model, held in the arena, heading wrapped.
+        self.model
+            .euler_step(&self.s, &applied, p.dt, &mut self.next);
+        let (lo, hi) = p.arena;
+        let mut nxt = [0.0; STATE_DIM];
+        nxt.copy_from_slice(&self.next);
+        nxt[X] = nxt[X].max(lo).min(hi);
+        nxt[Y] = nxt[Y].max(lo).min(hi);
+        nxt[THETA] = (nxt[THETA] + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+            - std::f64::consts::PI;
+        self.t += 1;
+        let time = f64::from(self.t) * p.dt;
+        for (k, o) in self.obstacles.iter().enumerate() {
+            let at = o.position(time);
+            nxt[OBSTACLES + 2 * k] = at[0];
+            nxt[OBSTACLES + 2 * k + 1] = at[1];
+        }
+        self.drift = [0.0; STATE_DIM];
+        for ((v, new), old) in self.drift[OBSTACLES..]
+            .iter_mut()
+            .zip(&nxt[OBSTACLES..])
+            .zip(&self.s[OBSTACLES..])
+        {
+            *v = (new - old) / p.dt;
+        }
+        self.s = nxt;
+        let task = monitor.advance(&self.s)?;
+        let measure = self.measure(monitor);
+        let mut reward = task.reward
+            + p.w * (measure.min_obstacle_distance - p.safe_distance).min(0.0)
+            - p.collision_penalty * f64::from(u8::from(measure.collision));
+        if let Some(f) = &filtered {
+            let push = f.a_cbf[0] * f.a_cbf[0] + f.a_cbf[1] * f.a_cbf[1];
+            reward -= p.intervention_penalty * push;
+        }
+        let terminated = task.accepted || (p.evaluation && measure.collision);
+        Ok(ChannelStep {
+            a_rl,
+            applied,
+            shield: filtered,
+            task,
+            reward,
+            terminated,
+            truncated: self.t >= p.horizon && !terminated,
+            measure,
+        })
+    }
+
+    /// The measurements at the current state, the channel read from the monitor's atoms.
+    pub fn measure(&self, monitor: &Monitor) -> Measure {
+        let reading = monitor.reading();
+        let rho = reading.rho();
+        let h = [
+            rho[self.params.channel_atoms[0]],
+            rho[self.params.channel_atoms[1]],
+        ];
+        let s = &self.s;
+        let d = (0..2)
+            .map(|k| (s[X] - s[OBSTACLES + 2 * k]).hypot(s[Y] - s[OBSTACLES + 2 * k + 1]))
+            .fold(f64::INFINITY, f64::min);
+        Measure {
+            h,
+            min_obstacle_distance: d,
+            collision: d < self.params.obstacle_radius,
+            violation: h[0].min(h[1]) < 0.0,
+        }
+    }
+
+    /// The observation at the current state into `out` (its length: the observation's, then
+    /// the one-hot FSA state of `monitor`, `num_states` values).
+    pub fn observe(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {
+        let s = &self.s;
+        let head = if self.params.relative {
+            let (si, c) = s[THETA].sin_cos();
+            let w = self.params.half_width;
+            out[0] = c;
+            out[1] = si;
+            out[2] = s[X] - s[Y] + w;
+            out[3] = s[Y] - s[X] + w;
+            // Goals, obstacles and obstacle velocities in the agent's frame (x ahead, y left).
+            let frame = |dx: f64, dy: f64| [dx * c + dy * si, dx * -si + dy * c];
+            for k in 0..5 {
+                let r = frame(s[GOALS + 2 * k] - s[X], s[GOALS + 2 * k + 1] - s[Y]);
+                out[4 + 2 * k..6 + 2 * k].copy_from_slice(&r);
+            }
+            for k in 0..2 {
+                let r = frame(
+                    self.drift[OBSTACLES + 2 * k],
+                    self.drift[OBSTACLES + 2 * k + 1],
+                );
+                out[14 + 2 * k..16 + 2 * k].copy_from_slice(&r);
+            }
+            // The task's next goal as the automaton picks it (Eq. 5B1), zero without one.
+            out[18..20].copy_from_slice(&match monitor.goal() {
+                Some(g) => frame(g[0] - s[X], g[1] - s[Y]),
+                None => [0.0, 0.0],
+            });
+            RELATIVE_DIM
+        } else {
+            out[..STATE_DIM].copy_from_slice(s);
+            STATE_DIM
+        };
+        let onehot = &mut out[head..head + num_states];
+        onehot.fill(0.0);
+        onehot[monitor.q()] = 1.0;
+    }
+}
+
+/// Steps many worlds in one call, in parallel past [`crate::parallel::MIN_ROWS`] rows: row `i`
+/// steps `worlds[i]` with `actions[2i..2i + 2]` and `monitors[i]`, shielded by `shield`, and
+/// writes its observation into row `i` of `obs` (`width` values: the observation, then the
+/// one-hot FSA state). Rows with `active[i]` false are left alone (`None`, observation row
+/// untouched). The actions are checked first; an error steps no world.
+#[allow(clippy::too_many_arguments)]
+pub fn step_many(
+    worlds: &mut [&mut ChannelWorld],
+    monitors: &mut [&mut Monitor],
+    actions: &[f64],
+    active: &[bool],
+    scale: bool,
+    shield: Option<&Shield>,
+    obs: &mut [f64],
+    width: usize,
+) -> Result<Vec<Option<ChannelStep>>, ShieldError> {
+    let rows = worlds.len();
+    if monitors.len() != rows || active.len() != rows || actions.len() != 2 * rows {
+        return Err(InputError::Shape {
+            what: "step_many".into(),
+            expected: format!("{rows} monitors, {rows} active flags and ({rows}, 2) actions"),
+            got: format!(
+                "{} monitors, {} flags, {} action values",
+                monitors.len(),
+                active.len(),
+                actions.len()
+            ),
+        }
+        .into());
+    }
+    if obs.len() != rows * width {
+        return Err(InputError::Shape {
+            what: "observations".into(),
+            expected: format!("({rows}, {width})"),
+            got: format!("{} values", obs.len()),
+        }
+        .into());
+    }
+    crate::validate::check_finite("actions", actions, 2)?;
+    let states = monitors.first().map_or(0, |m| m.automaton().num_states());
+    let step = |((world, monitor), (a, (row, on))): (
+        (&mut &mut ChannelWorld, &mut &mut Monitor),
+        (&[f64], (&mut [f64], &bool)),
+    )| {
+        if !*on {
+            return Ok(None);
+        }
+        let out = world.step([a[0], a[1]], scale, monitor, shield)?;
+        world.observe(monitor, states, row);
+        Ok(Some(out))
+    };
+    let results: Vec<Result<Option<ChannelStep>, ShieldError>> = if rows < crate::parallel::MIN_ROWS
+    {
+        worlds
+            .iter_mut()
+            .zip(monitors.iter_mut())
+            .zip(actions.chunks(2).zip(obs.chunks_mut(width).zip(active)))
+            .map(step)
+            .collect()
+    } else {
+        crate::parallel::install(|| {
+            worlds
+                .par_iter_mut()
+                .zip(monitors.par_iter_mut())
+                .zip(
+                    actions
+                        .par_chunks(2)
+                        .zip(obs.par_chunks_mut(width).zip(active)),
+                )
+                .map(step)
+                .collect()
+        })
+    };
+    results.into_iter().collect()
+}

@@ -1,0 +1,108 @@
+"""Channel-v0 stepped N at a time in one core call: the SB3 VecEnv gives exactly what SB3's
+DummyVecEnv over the single envs gives, and the Gymnasium VectorEnv follows the single envs
+with next-step autoreset."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+import tlshield.vector
+from tlshield.envs.channel import ChannelEnv
+from tlshield.sb3 import ChannelVecEnv
+
+
+def _actions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Random actions, half the envs driving full speed ahead and turning slowly (into walls,
+    so the shield acts)."""
+    a = rng.uniform(-1, 1, size=(n, 2))
+    a[::2] = [1.0, 0.2]
+    return a
+
+
+@pytest.mark.parametrize(("config", "n"), [("rl_cbf_clf", 5), ("rl", 3), ("rl_cbf_clf", 40)])
+def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(config: str, n: int) -> None:
+    ours = ChannelVecEnv(n, config)
+    theirs = DummyVecEnv([lambda: ChannelEnv(config=config)] * n)
+    ours.seed(7)
+    theirs.seed(7)
+    np.testing.assert_array_equal(ours.reset(), theirs.reset())
+    rng = np.random.default_rng(0)
+    dones_seen = 0
+    for _ in range(250):
+        a = _actions(rng, n)
+        ours.step_async(a)
+        theirs.step_async(a)
+        obs, rew, done, infos = ours.step_wait()
+        obs2, rew2, done2, infos2 = theirs.step_wait()
+        np.testing.assert_array_equal(obs, obs2)
+        np.testing.assert_array_equal(rew, rew2)
+        assert rew.dtype == rew2.dtype
+        np.testing.assert_array_equal(done, done2)
+        for i, (mine, want) in enumerate(zip(infos, infos2, strict=True)):
+            for key in (
+                "fsa_state",
+                "success",
+                "trap",
+                "tl_reward",
+                "constraints",
+                "min_obstacle_distance",
+                "collision",
+                "violation",
+                "TimeLimit.truncated",
+            ):
+                assert mine[key] == want[key], (i, key)
+            np.testing.assert_array_equal(mine["action"], want["action"])
+            for key in ("a_rl", "a_cbf", "a_clf", "delta", "status", "slack", "solver"):
+                np.testing.assert_array_equal(mine["shield"][key], want["shield"][key])
+            if done[i]:
+                np.testing.assert_array_equal(
+                    mine["terminal_observation"], want["terminal_observation"]
+                )
+        dones_seen += int(done.sum())
+    assert dones_seen > 0  # episodes ended and were reset along the way
+
+
+def test_the_gymnasium_vector_env_follows_the_single_envs() -> None:
+    n = 4
+    venv = tlshield.vector.make("tlshield/Channel-v0", n, config="rl_cbf_clf")
+    singles = [ChannelEnv(config="rl_cbf_clf") for _ in range(n)]
+    obs, _ = venv.reset(seed=3)
+    assert obs.shape == (n, *singles[0].observation_space.shape)
+    want = np.stack([env.reset(seed=3 + i)[0] for i, env in enumerate(singles)])
+    np.testing.assert_array_equal(obs, want)
+    assert venv.observation_space.shape == obs.shape
+    rng = np.random.default_rng(1)
+    resetting = np.zeros(n, dtype=bool)
+    ended = 0
+    for _ in range(300):
+        a = _actions(rng, n)
+        obs, rew, term, trunc, infos = venv.step(a)
+        for i, env in enumerate(singles):
+            if resetting[i]:  # next-step autoreset: this step reset env i, reward 0
+                o = env.reset()[0]
+                r, t, u = 0.0, False, False
+            else:
+                o, r, t, u, _ = env.step(a[i])
+            np.testing.assert_array_equal(obs[i], o)
+            assert (rew[i], term[i], trunc[i]) == (r, t, u)
+        resetting = term | trunc
+        ended += int(resetting.sum())
+        assert infos["constraints"].shape == (n, 2)
+    assert ended > 0
+
+
+def test_bad_vector_input_is_a_clear_error() -> None:
+    with pytest.raises(ValueError, match="SyncVectorEnv"):
+        tlshield.vector.make("tlshield/PointMass-v0", 2)
+    with pytest.raises(ValueError, match="num_envs"):
+        tlshield.vector.make("tlshield/Channel-v0", 0)
+    venv = tlshield.vector.make("tlshield/Channel-v0", 2)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"actions\[1, 0\] is NaN"):
+        venv.step(np.array([[0.0, 0.0], [np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="actions"):
+        venv.step(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="seeds"):
+        venv.reset(seed=[1, 2, 3])
