@@ -369,13 +369,7 @@ pub fn step_many(
     }
     crate::validate::check_finite("actions", actions, 2)?;
     let states = monitors.first().map_or(0, |m| m.automaton().num_states());
-    let step = |((world, monitor), (a, (row, on))): (
-        (&mut &mut ChannelWorld, &mut &mut Monitor),
-        (&[f64], (&mut [f64], &bool)),
-    )| {
-        if !*on {
-            return Ok(None);
-        }
+    let step = |world: &mut ChannelWorld, monitor: &mut Monitor, a: &[f64], row: &mut [f64]| {
         let out = world.step([a[0], a[1]], scale, monitor, shield)?;
         world.observe(monitor, states, row);
         Ok(Some(out))
@@ -386,7 +380,7 @@ pub fn step_many(
             .iter_mut()
             .zip(monitors.iter_mut())
             .zip(actions.chunks(2).zip(obs.chunks_mut(width).zip(active)))
-            .map(step)
+            .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
             .collect()
     } else {
         crate::parallel::install(|| {
@@ -398,7 +392,7 @@ pub fn step_many(
                         .par_chunks(2)
                         .zip(obs.par_chunks_mut(width).zip(active)),
                 )
-                .map(step)
+                .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
                 .collect()
         })
     };
