@@ -1,5 +1,6 @@
 """Environment steps per second of tlshield/Channel-v0 with and without the shield, single and
-vectorised (SB3 ``DummyVecEnv`` of 8 and 64 environments), in one run.
+vectorised (SB3 ``DummyVecEnv`` of 8 and 64 environments, and the core's vector envs that step
+all environments in one call), in one run.
 
 The vectorised shield is :class:`tlshield.wrappers.ShieldedVecEnv`: one ``filter_batch`` call
 shields every sub-environment. For comparison the table also shows each sub-environment
@@ -46,7 +47,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from stable_baselines3.common.vec_env import DummyVecEnv
 
+    import tlshield.vector
     from tlshield.envs import ChannelConfig, ChannelEnv, channel_shield
+    from tlshield.sb3 import ChannelVecEnv
     from tlshield.wrappers import ShieldedVecEnv
 
     rng = np.random.default_rng(0)
@@ -116,7 +119,39 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{1e6 / batched:.1f} | {overhead:+.0%} (target <= +{TARGET_OVERHEAD:.0%}"
             f"{'' if verdicts[-1] else ', MISSED'}) |"
         )
+        # The core's vector envs (every env's step in one call) against SB3's DummyVecEnv over
+        # the same single envs, default settings (relative observation, shield in the env).
+        dummy, core_sb3, core_gym = steps_per_second(
+            [
+                stepper(DummyVecEnv([partial(ChannelEnv, config="rl_cbf_clf")] * n)),
+                stepper(ChannelVecEnv(n, "rl_cbf_clf")),
+                gym_stepper(tlshield.vector.make("tlshield/Channel-v0", n), actions),
+            ],
+            seconds,
+        )
+        dummy, core_sb3, core_gym = dummy * n, core_sb3 * n, core_gym * n
+        print(f"| DummyVecEnv x{n}, default settings | {dummy:,.0f} | {1e6 / dummy:.1f} | |")
+        print(
+            f"| tlshield.sb3.ChannelVecEnv x{n} (one core call per step) | {core_sb3:,.0f} | "
+            f"{1e6 / core_sb3:.1f} | {core_sb3 / dummy:.1f}x DummyVecEnv |"
+        )
+        print(
+            f"| tlshield.vector.make x{n} (Gymnasium, one core call per step) | {core_gym:,.0f} | "
+            f"{1e6 / core_gym:.1f} | {core_gym / dummy:.1f}x DummyVecEnv |"
+        )
     return 0 if all(verdicts) else 2
+
+
+def gym_stepper(venv: object, actions: np.ndarray) -> Callable[[], object]:
+    """Steps a Gymnasium vector env through ``actions`` (it resets its own finished envs)."""
+    venv.reset(seed=0)  # type: ignore[attr-defined]
+    k = [0]
+
+    def step() -> None:
+        k[0] += 1
+        venv.step(actions[k[0] % len(actions)])  # type: ignore[attr-defined]
+
+    return step
 
 
 if __name__ == "__main__":
