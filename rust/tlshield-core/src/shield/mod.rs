@@ -879,6 +879,24 @@ impl Shield {
         Ok(())
     }
 
+    /// Checks a batch's `(rows, m)` RL actions: shape, finiteness and the RL box.
+    fn check_batch_actions(&self, a_rl: &[f64], rows: usize) -> Result<(), ShieldError> {
+        let m = self.m;
+        if a_rl.len() != rows * m {
+            return Err(InputError::Shape {
+                what: "a_rl".into(),
+                expected: format!("({rows}, {m})"),
+                got: format!("{} values", a_rl.len()),
+            }
+            .into());
+        }
+        check_finite("a_rl", a_rl, m)?;
+        if let Some(rl) = &self.config.rl_bounds {
+            check_within("a_rl", a_rl, rl)?;
+        }
+        Ok(())
+    }
+
     fn check_action(&self, what: &str, a: &[f64]) -> Result<(), ShieldError> {
         if a.len() != self.m {
             return Err(InputError::Shape {
@@ -1058,21 +1076,10 @@ impl Shield {
             }
             .into());
         }
-        if a_rl.len() != rows * m {
-            return Err(InputError::Shape {
-                what: "a_rl".into(),
-                expected: format!("({rows}, {m})"),
-                got: format!("{} values", a_rl.len()),
-            }
-            .into());
-        }
+        self.check_batch_actions(a_rl, rows)?;
         self.check_dynamics(n, None)?;
         self.check_state("states row", &states[..n.min(states.len())])?;
         check_finite("states", states, n)?;
-        check_finite("a_rl", a_rl, m)?;
-        if let Some(rl) = &self.config.rl_bounds {
-            check_within("a_rl", a_rl, rl)?;
-        }
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
@@ -1113,22 +1120,11 @@ impl Shield {
             .into());
         }
         let (rows, m) = (monitors.len(), self.m);
-        if a_rl.len() != rows * m {
-            return Err(InputError::Shape {
-                what: "a_rl".into(),
-                expected: format!("({rows}, {m})"),
-                got: format!("{} values", a_rl.len()),
-            }
-            .into());
-        }
+        self.check_batch_actions(a_rl, rows)?;
         // Every monitor of the batch read a state of its automaton: one length for all.
         let n = monitors[0].state().len();
         self.check_dynamics(n, None)?;
         self.check_state("monitor state", monitors[0].state())?;
-        check_finite("a_rl", a_rl, m)?;
-        if let Some(rl) = &self.config.rl_bounds {
-            check_within("a_rl", a_rl, rl)?;
-        }
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
