@@ -520,12 +520,6 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     def _xy(u: float, v: float) -> tuple[float, float]:
         return (u - v) / SQRT2, (u + v) / SQRT2
 
-    def _obstacle_positions(self, t: float) -> NDArray[np.float64]:
-        out = np.empty((2, 2))
-        for i, (u, amplitude, frequency, phase) in enumerate(self._obstacles):
-            out[i] = self._xy(u, amplitude * math.sin(frequency * t + phase))
-        return out
-
     def _draw_goals(self) -> tuple[NDArray[np.float64], bool]:
         """g3 and one of g1/g2 inside the channel; the other outside with the configured
         probability. Returns the (3, 2) centres and whether one lies outside."""
@@ -591,11 +585,10 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         s[THETA] = math.pi / 4 + rng.uniform(-cfg.start_heading, cfg.start_heading)
         for k, (a, b) in enumerate(GOAL_DIMS):
             s[a], s[b] = goals[k]
-        obstacles = self._obstacle_positions(0.0)
-        for k, (a, b) in enumerate(OBSTACLE_DIMS):
-            s[a], s[b] = obstacles[k]
-        # The world measures the obstacles' velocity over the step before the start.
+        # The world places the obstacles on their paths and measures their velocity over the
+        # step before the start (one model of their motion: the core's).
         self._world.reset(s, self._obstacles)
+        s = self.state
         self._trajectory = [s[X : Y + 1].copy()]
         q = self.tracker.reset(s)
         goal = self.tracker.goal

@@ -132,7 +132,6 @@ pub struct ChannelWorld {
     drift: [f64; STATE_DIM],
     obstacles: [Obstacle; 2],
     t: u32,
-    next: Vec<f64>,
 }
 
 impl ChannelWorld {
@@ -145,12 +144,12 @@ impl ChannelWorld {
             drift: [0.0; STATE_DIM],
             obstacles: [Obstacle::default(); 2],
             t: 0,
-            next: vec![0.0; STATE_DIM],
         }
     }
 
-    /// Starts an episode at `s0` with these obstacle paths; the obstacles' measured velocity is
-    /// their motion over the step before the start.
+    /// Starts an episode at `s0` (its obstacle dimensions are ignored) with these obstacle
+    /// paths: the obstacles are placed where their paths put them at time 0, and their measured
+    /// velocity is their motion over the step before the start.
     pub fn reset(&mut self, s0: [f64; STATE_DIM], obstacles: [Obstacle; 2]) {
         self.s = s0;
         self.obstacles = obstacles;
@@ -159,6 +158,7 @@ impl ChannelWorld {
         for (k, o) in obstacles.iter().enumerate() {
             let (now, before) = (o.position(0.0), o.position(-self.params.dt));
             for d in 0..2 {
+                self.s[OBSTACLES + 2 * k + d] = now[d];
                 self.drift[OBSTACLES + 2 * k + d] = (now[d] - before[d]) / self.params.dt;
             }
         }
@@ -222,11 +222,9 @@ impl ChannelWorld {
             None => a_rl,
         };
         // The plant through the shield's own model, held in the arena, heading wrapped.
-        self.model
-            .euler_step(&self.s, &applied, p.dt, &mut self.next);
-        let (lo, hi) = p.arena;
         let mut nxt = [0.0; STATE_DIM];
-        nxt.copy_from_slice(&self.next);
+        self.model.euler_step(&self.s, &applied, p.dt, &mut nxt);
+        let (lo, hi) = p.arena;
         nxt[X] = nxt[X].max(lo).min(hi);
         nxt[Y] = nxt[Y].max(lo).min(hi);
         nxt[THETA] = (nxt[THETA] + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
@@ -287,6 +285,16 @@ impl ChannelWorld {
             collision: d < self.params.obstacle_radius,
             violation: h[0].min(h[1]) < 0.0,
         }
+    }
+
+    /// Length of the observation, one-hot FSA state of `num_states` values included.
+    pub fn observation_len(&self, num_states: usize) -> usize {
+        let head = if self.params.relative {
+            RELATIVE_DIM
+        } else {
+            STATE_DIM
+        };
+        head + num_states
     }
 
     /// The observation at the current state into `out` (its length: the observation's, then

@@ -153,17 +153,7 @@ impl Monitor {
     /// Checks a state for this monitor's automaton: its length (the error names it `{what}
     /// length`) and finiteness.
     fn check(&self, what: &str, s: &[f64]) -> Result<(), AutomatonError> {
-        self.automaton
-            .spec()
-            .check_state_len(s.len())
-            .map_err(|err| match err {
-                InputError::Shape { expected, got, .. } => InputError::Shape {
-                    what: format!("{what} length"),
-                    expected,
-                    got,
-                },
-                other => other,
-            })?;
+        check_len(&self.automaton, what, s.len())?;
         Ok(check_finite(what, s, s.len())?)
     }
 
@@ -230,6 +220,21 @@ impl Monitor {
     pub fn goal(&self) -> Option<&[f64]> {
         self.has_goal.then_some(self.goal.as_slice())
     }
+}
+
+/// Checks a state length `n` for `automaton`'s spec; the error names it `{what} length`.
+fn check_len(automaton: &Automaton, what: &str, n: usize) -> Result<(), InputError> {
+    automaton
+        .spec()
+        .check_state_len(n)
+        .map_err(|err| match err {
+            InputError::Shape { expected, got, .. } => InputError::Shape {
+                what: format!("{what} length"),
+                expected,
+                got,
+            },
+            other => other,
+        })
 }
 
 /// N task monitors of one automaton, stepped together: the batch twin of [`Monitor`] for vector
@@ -349,18 +354,7 @@ impl MonitorBatch {
             }
             .into());
         }
-        self.monitors[0]
-            .automaton
-            .spec()
-            .check_state_len(dim)
-            .map_err(|err| match err {
-                InputError::Shape { expected, got, .. } => InputError::Shape {
-                    what: "states row length".into(),
-                    expected,
-                    got,
-                },
-                other => other,
-            })?;
+        check_len(&self.monitors[0].automaton, "states row", dim)?;
         Ok(check_finite("states", states, dim)?)
     }
 }

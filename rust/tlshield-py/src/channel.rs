@@ -26,6 +26,16 @@ fn pair(values: Vec<f64>, name: &str) -> PyResult<[f64; 2]> {
         .map_err(|v| PyValueError::new_err(format!("{name}: expected 2 values, got {}", v.len())))
 }
 
+impl PyChannelWorld {
+    /// The observation at the current state, then the monitor's one-hot FSA state.
+    fn observation(&self, monitor: &tlshield_core::Monitor) -> Vec<f64> {
+        let n = monitor.automaton().num_states();
+        let mut obs = vec![0.0; self.inner.observation_len(n)];
+        self.inner.observe(monitor, n, &mut obs);
+        obs
+    }
+}
+
 #[pymethods]
 impl PyChannelWorld {
     #[new]
@@ -121,14 +131,7 @@ impl PyChannelWorld {
             &mut monitor.inner,
             shield.as_deref().map(PyShield::core),
         ))?;
-        let n = monitor.inner.automaton().num_states();
-        let width = if self.inner.params().relative {
-            20
-        } else {
-            STATE_DIM
-        };
-        let mut obs = vec![0.0; width + n];
-        self.inner.observe(&monitor.inner, n, &mut obs);
+        let obs = self.observation(&monitor.inner);
         Ok(PyChannelStep {
             observation: obs.into_pyarray(py).unbind(),
             a_rl: step.a_rl.to_vec().into_pyarray(py).unbind(),
@@ -158,15 +161,7 @@ impl PyChannelWorld {
         py: Python<'py>,
         monitor: PyRef<'_, PyMonitor>,
     ) -> Bound<'py, PyArray1<f64>> {
-        let n = monitor.inner.automaton().num_states();
-        let width = if self.inner.params().relative {
-            20
-        } else {
-            STATE_DIM
-        };
-        let mut obs = vec![0.0; width + n];
-        self.inner.observe(&monitor.inner, n, &mut obs);
-        obs.into_pyarray(py)
+        self.observation(&monitor.inner).into_pyarray(py)
     }
 
     /// ``(c1, c2, min_obstacle_distance, collision, violation)`` at the current state, the
