@@ -30,8 +30,8 @@ trajectory generator):
 2. **Per-step FSA work** at an automaton state q (every non-accepting, non-trap state) for a
    state vector s: what an RL loop asks of the automaton every step, next state, Eq. 5A1
    reward for leaving q and the Eq. 5C1 safe set at (s, q') for the next action. tlshield: one
-   call, ``aut.advance(q, s, c_r)`` (the three separate calls ``aut.step(q, s)``,
-   ``aut.reward(q, s, c_r)``, ``aut.safe_set(q', s)`` are timed too and must give the same
+   call, ``aut.advance(q, s, c_r)`` (the three separate calls ``aut.step(s, q)``,
+   ``aut.reward(s, q, c_r)``, ``aut.safe_set(s, q')`` are timed too and must give the same
    result). The Python alternative, as reference
    implementations of the paper do it: the five predicate robustness values with numpy, then
    the guard strings of ``aut.edges()`` (parsed once, at setup, into cubes of literals)
@@ -276,7 +276,7 @@ def check_step(
         atom_rho = np.asarray(spec.atom_robustness(s))[perm]
         atom_diff = float(np.max(np.abs(atom_rho - np.array(predicate_values(s)))))
         got = aut.advance(q, s, C_R)
-        separate = (aut.step(q, s), aut.reward(q, s, C_R), aut.safe_set(got[0], s))
+        separate = (aut.step(s, q), aut.reward(s, q, C_R), aut.safe_set(s, got[0]))
         if separate != got:
             failures.append(f"q={q} s={s.tolist()}: advance {got} != separate calls {separate}")
         want = pyfsa.evaluate(q, s, C_R)
@@ -679,8 +679,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     # --- timing: per step -------------------------------------------------------------------
     def tlshield_separate(item: tuple[int, np.ndarray]) -> object:
         q, s = item
-        nxt = aut.step(q, s)
-        return nxt, aut.reward(q, s, C_R), aut.safe_set(nxt, s)
+        nxt = aut.step(s, q)
+        return nxt, aut.reward(s, q, C_R), aut.safe_set(s, nxt)
 
     def python_next(item: tuple[int, np.ndarray]) -> object:
         q, s = item
@@ -690,9 +690,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "tlshield": lambda item: aut.advance(item[0], item[1], C_R),
         "python": lambda item: pyfsa.evaluate(item[0], item[1], C_R),
         "tlshield 3 calls": tlshield_separate,
-        "tlshield step": lambda item: aut.step(item[0], item[1]),
-        "tlshield reward": lambda item: aut.reward(item[0], item[1], C_R),
-        "tlshield safe_set": lambda item: aut.safe_set(item[0], item[1]),
+        "tlshield step": lambda item: aut.step(item[1], item[0]),
+        "tlshield reward": lambda item: aut.reward(item[1], item[0], C_R),
+        "tlshield safe_set": lambda item: aut.safe_set(item[1], item[0]),
         "python predicates + next state": python_next,
         "python predicates": lambda item: predicate_values(item[1]),
     }

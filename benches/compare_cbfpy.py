@@ -47,7 +47,7 @@ def tlshield_filter() -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         alpha=ALPHA1,
         alpha2=ALPHA2,
         c3=1.0,
-        K=1e4,
+        k=1e4,
         cbf_bounds=(-1e3, 1e3),
         clf_bounds=(-1.0, 1.0),
         use_clf=False,

@@ -86,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             tlshield.Unicycle(task.eps),
             alpha=params.alpha,
             c3=params.c3,
-            K=params.K,
+            k=params.k,
             cbf_bounds=params.cbf,
             clf_bounds=params.clf,
             margin=params.margin,
@@ -106,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     used: dict[str, int] = {}
     unsolved = 0
     for s, a in steps:
-        q = aut.step(q0, s)
+        q = aut.step(s, q0)
         got = shield.filter(s, q, a)
         used[got.solver] = used.get(got.solver, 0) + 1
         rows = build_rows(task, structure, params, s, q, a)
@@ -144,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def tlshield_step(item: tuple[np.ndarray, np.ndarray]) -> object:
         s, a = item
-        return shield.filter(s, aut.step(q0, s), a)
+        return shield.filter(s, aut.step(s, q0), a)
 
     def python_step(impl: CvxpyShield | ClarabelShield):
         def step(item: tuple[np.ndarray, np.ndarray]) -> object:
@@ -163,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("active_set", "clarabel"):
         sh = make_shield(name)
         solver_only[name] = measure(
-            lambda item, sh=sh: sh.filter(item[0], aut.step(q0, item[0]), item[1]),
+            lambda item, sh=sh: sh.filter(item[0], aut.step(item[0], q0), item[1]),
             timed,
             budget,
             5,
@@ -172,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     batch_steps = make_steps(rng, BATCH)
     states = np.stack([s for s, _ in batch_steps])
     actions = np.stack([a for _, a in batch_steps])
-    qs = aut.step_batch(np.full(BATCH, q0), states)
+    qs = aut.step_batch(states, np.full(BATCH, q0))
     batch = measure(lambda _: shield.filter_batch(states, qs, actions), [None], budget, 5)[0]
     singles = measure(
         lambda _: [shield.filter(states[i], int(qs[i]), actions[i]) for i in range(BATCH)],
@@ -183,7 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # --- memory ------------------------------------------------------------------------------
     s0, a0 = timed[0]
-    q_first = aut.step(q0, s0)
+    q_first = aut.step(s0, q0)
     marks = []
     start = time.perf_counter()
     for i in range(args.memory_calls):

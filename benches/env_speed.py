@@ -48,7 +48,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     import tlshield.vector
-    from tlshield.envs import ChannelConfig, ChannelEnv, channel_shield
+    from tlshield.envs import ChannelEnv, ChannelParams, channel_shield
     from tlshield.sb3 import ChannelVecEnv
     from tlshield.wrappers import ShieldedVecEnv
 
@@ -100,7 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             DummyVecEnv([partial(ChannelEnv, config="rl_cbf_clf", observation="paper")] * n),
             ShieldedVecEnv(
                 DummyVecEnv([partial(ChannelEnv, shield_in_env=False, observation="paper")] * n),
-                channel_shield(ChannelConfig(), "rl_cbf_clf"),
+                channel_shield(ChannelParams(), "rl_cbf_clf"),
                 action_fn=template.rl_action,
             ),
         ]

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use tlshield_core::{Automaton, Bounds, Dynamics, Shield, ShieldConfig, SolverChoice};
+use tlshield_core::{Automaton, Bounds, Dynamics, Shield, ShieldParams, SolverChoice};
 
 pub use tlshield_core::fixtures::{task_spec, STATE_DIM, TASK};
 
@@ -37,9 +37,9 @@ pub fn task_shield(automaton: Arc<Automaton>, solver: SolverChoice) -> Shield {
         lo: vec![-v; 2],
         hi: vec![v; 2],
     };
-    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(6.0), bounds(0.5)).with_solver(solver);
+    let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(6.0), bounds(0.5)).with_solver(solver);
     let unicycle = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
-    Shield::new(automaton, Some(unicycle), config).unwrap()
+    Shield::new(automaton, Some(unicycle), params).unwrap()
 }
 
 /// `count` seeded shield steps `(s, q, a_rl)`: the reference point anywhere across the channel

@@ -79,7 +79,7 @@ def make_shield(
         alpha=alpha,
         alpha2=alpha,
         c3=1.0,
-        K=1e4,
+        k=1e4,
         cbf_bounds=(-20.0, 20.0),
         clf_bounds=(-0.5, 0.5),
         action_bounds=((-MAX_ACCEL, -2.0), (MAX_ACCEL, 2.0)),
@@ -127,7 +127,7 @@ def run(
         spec = make_spec(env)
         shield = make_shield(env, spec, car_radius, alpha) if shielded else None
         aut = spec.automaton()
-        q = aut.step(aut.initial, state_of(env))
+        q = aut.step(state_of(env), aut.initial)
         while counts["steps"] < steps:
             accel, turn = naive(env, rng)
             s = state_of(env)
@@ -138,7 +138,7 @@ def run(
                 counts["failed"] += out.status == tlshield.Status.FAILED
             _, _, terminated, truncated, info = env.step(to_env_action(accel, turn, s[3]))
             counts["steps"] += 1
-            q = aut.step(q, state_of(env))
+            q = aut.step(state_of(env), q)
             if info["crashed"]:
                 counts["crashes"] += 1
                 x, y = state_of(env)[:2]

@@ -21,6 +21,7 @@ MODULES = (
     "tlshield.sb3",
     "tlshield.envs",
     "tlshield.envs.channel",
+    "tlshield.envs.channel_task",
     "tlshield.envs.point_mass",
     "tlshield.envs.flatworld",
     "tlshield.presets",

@@ -65,7 +65,9 @@ def training() -> str:
             zipfile.ZipFile(folder / name).read("policy.pth").hex()
             for name in ("model.zip", "last_model.zip")
         ]
-        kept = json.loads((folder / "config.json").read_text()).get("kept")
+        # The run's record: run.json since 0.2, config.json before (so old checkouts compare).
+        record = next(p for p in (folder / "run.json", folder / "config.json") if p.is_file())
+        kept = json.loads(record.read_text()).get("kept")
         return _digest([json.dumps(rows), *weights, json.dumps(kept)])
 
 

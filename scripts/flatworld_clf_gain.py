@@ -31,7 +31,7 @@ def main() -> None:
     for k in args.gains:
         cells = []
         for f in FORMULAS:
-            r = run_episodes(f, "rl_cbf_clf", zero_policy, args.seed, args.episodes, K=k)
+            r = run_episodes(f, "rl_cbf_clf", zero_policy, args.seed, args.episodes, k=k)
             cells.append(f"{r['success_rate']:.3f} ({r['mean_steps']:.0f})")
         print(f"| {k:g} | " + " | ".join(cells) + " |", flush=True)
 

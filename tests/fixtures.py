@@ -16,7 +16,7 @@ def task_shield(model: object | None = None, **overrides: object) -> tlshield.Sh
     kwargs: dict[str, object] = {
         "alpha": PARAMS.alpha,
         "c3": PARAMS.c3,
-        "K": PARAMS.K,
+        "k": PARAMS.k,
         "cbf_bounds": PARAMS.cbf,
         "clf_bounds": PARAMS.clf,
         **overrides,

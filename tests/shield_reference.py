@@ -187,7 +187,7 @@ class Params:
 
     alpha: float = 2.0
     c3: float = 1.0
-    K: float = 1e4
+    k: float = 1e4
     cbf: tuple[float, float] = (-6.0, 6.0)
     clf: tuple[float, float] = (-0.5, 0.5)
     slack_penalty: float = 1e6
@@ -253,7 +253,7 @@ class CvxpyShield:
         self.clf_lo = cp.Parameter(2)
         self.clf_hi = cp.Parameter(2)
         barrier = -self.lg @ (self.a_cbf + self.a_clf)
-        cost = cp.sum_squares(self.a_cbf) + cp.sum_squares(self.a_clf) + params.K * self.d
+        cost = cp.sum_squares(self.a_cbf) + cp.sum_squares(self.a_clf) + params.k * self.d
         self.sigma = cp.Variable(MAX_BARRIERS, nonneg=True) if relaxed else None
         if self.sigma is not None:
             barrier = barrier - self.sigma
@@ -316,7 +316,7 @@ class ClarabelShield:
         n = 5  # a_cbf (2), a_clf (2), d
         self.rows = MAX_BARRIERS + 2 + 8
         self.P = sp.csc_matrix(np.diag([2.0, 2.0, 2.0, 2.0, 0.0]))
-        self.q = np.array([0.0, 0.0, 0.0, 0.0, params.K])
+        self.q = np.array([0.0, 0.0, 0.0, 0.0, params.k])
         self.A = np.zeros((self.rows, n))
         self.b = np.zeros(self.rows)
         lo, hi = params.cbf

@@ -59,15 +59,15 @@ def test_running_example_structure(running: tlshield.Automaton) -> None:
 def test_running_example_safe_set_and_reward(running: tlshield.Automaton) -> None:
     s = np.array([2.0, 0.0])  # between a and b, far from c
     # The paper's C(s, q0) = {!a, !b}.
-    assert running.safe_set(0, s) == [("!a", 1.0), ("!b", 1.0)]
-    assert running.safe_set(2, s) == []
+    assert running.safe_set(s, 0) == [("!a", 1.0), ("!b", 1.0)]
+    assert running.safe_set(s, 2) == []
     # rho(D_q0) = -5 (c is 5 beyond reach); rho(!psi_trap) = 1; min(-5, 2 * 1).
-    assert running.reward(0, s, 2.0) == -5.0
+    assert running.reward(s, 0, 2.0) == -5.0
     # Inside a: D_q0 = -6.5; negated trap guard -0.5 -> c_r = 20 makes it -10.
-    assert running.reward(0, [0.5, 0.0], 20.0) == -10.0
-    assert running.reward(2, s, 2.0) == -1.0  # rho(a | b), no trap edge
-    assert running.reward(3, s, 2.0) == 0.0  # accepting
-    assert running.reward(1, s, 2.0, trap_penalty=-7.0) == -7.0
+    assert running.reward([0.5, 0.0], 0, 20.0) == -10.0
+    assert running.reward(s, 2, 2.0) == -1.0  # rho(a | b), no trap edge
+    assert running.reward(s, 3, 2.0) == 0.0  # accepting
+    assert running.reward(s, 1, 2.0, trap_penalty=-7.0) == -7.0
 
 
 def test_running_example_runs(running: tlshield.Automaton) -> None:
@@ -75,8 +75,8 @@ def test_running_example_runs(running: tlshield.Automaton) -> None:
     bad = np.array([[2.0, 0.0], [0.0, 0.0], [8.0, 0.0]])
     assert running.run(good) == 3 and running.accepts(good)
     assert running.run(bad) == 1 and not running.accepts(bad)
-    q0 = running.step(running.initial, good[0])
-    assert running.step(q0, good[1]) == 2
+    q0 = running.step(good[0], running.initial)
+    assert running.step(good[1], q0) == 2
 
 
 def test_task_automaton(task: tlshield.Automaton) -> None:
@@ -91,7 +91,7 @@ def test_task_safe_set_near_the_channel_border(task: tlshield.Automaton) -> None
     s = np.zeros(STATE_DIM)
     s[1] = 1.4  # x = 0, y = 1.4: c1 = 0.1 (close to the border), c2 = 2.9
     s[3:9] = [3.0, 3.0, 5.0, 4.0, 8.0, 8.0]
-    kept = task.safe_set(0, s)
+    kept = task.safe_set(s, 0)
     assert [lit for lit, _ in kept] == ["c1", "c2", "!g3"]
     np.testing.assert_allclose([v for _, v in kept], [0.1, 2.9, math.hypot(8.0, 6.6) - 0.5])
     # Reward at the same point: D_q0 is led by reaching g1 (rho(g1) = 0.5 - |(0,1.4)-(3,3)|).
@@ -100,7 +100,7 @@ def test_task_safe_set_near_the_channel_border(task: tlshield.Automaton) -> None
         min(0.5 - math.hypot(3, 1.6), -(0.5 - math.hypot(8, 6.6)), 0.1, 2.9),  # g1 & !g3 & ...
         min(0.5 - math.hypot(5, 2.6), -(0.5 - math.hypot(8, 6.6)), 0.1, 2.9),
     )
-    assert task.reward(0, s, 1.0) == pytest.approx(min(d_q0, 0.1))
+    assert task.reward(s, 0, 1.0) == pytest.approx(min(d_q0, 0.1))
 
 
 def test_dot_and_pickle(task: tlshield.Automaton) -> None:
@@ -115,9 +115,9 @@ def test_step_batch_equals_step(task: tlshield.Automaton) -> None:
     rng = np.random.default_rng(3)
     states = rng.normal(scale=2.0, size=(64, STATE_DIM))
     qs = rng.integers(0, task.num_states, size=64)
-    out = task.step_batch(qs, states)
+    out = task.step_batch(states, qs)
     assert out.dtype == np.int64
-    assert out.tolist() == [task.step(int(q), s) for q, s in zip(qs, states, strict=True)]
+    assert out.tolist() == [task.step(s, int(q)) for q, s in zip(qs, states, strict=True)]
 
 
 @settings(max_examples=600, deadline=None)
@@ -153,7 +153,7 @@ def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
         if q == aut.trap:
             continue
         if q in aut.accepting:
-            assert aut.reward(q, s, c_r) == 0.0
+            assert aut.reward(s, q, c_r) == 0.0
             continue
         progress = [g for src, dst, g in aut.edges() if src == q and dst not in (q, aut.trap)]
         expected = max(dnf(g) for g in progress)
@@ -161,13 +161,12 @@ def test_reward_is_eq_5a1(formula: tuple, s: np.ndarray, c_r: float) -> None:
         if clauses:
             cnf = min(max(signed(rho, lit) for lit in c) for c in clauses)
             expected = min(expected, c_r * cnf)
-            kept = aut.safe_set(q, s)
-            assert [v for _, v in kept] == [max(signed(rho, lit) for lit in c) for c in clauses]
-            # The kept literal is the clause's first most robust one (Eq. 5C1 with argmax).
-            assert [lit for lit, _ in kept] == [
-                max(c, key=lambda lit: signed(rho, lit)) for c in clauses
-            ]
-        assert aut.reward(q, s, c_r) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+            # The kept literal is the clause's first most robust one (Eq. 5C1 with argmax),
+            # each literal once (two clauses may keep the same one).
+            picks = [max(c, key=lambda lit: signed(rho, lit)) for c in clauses]
+            once = list(dict.fromkeys(picks))
+            assert aut.safe_set(s, q) == [(lit, signed(rho, lit)) for lit in once]
+        assert aut.reward(s, q, c_r) == pytest.approx(expected, rel=1e-12, abs=1e-12)
 
 
 # --- bad input ----------------------------------------------------------------------------
@@ -177,38 +176,38 @@ def test_bad_state_ids(task: tlshield.Automaton) -> None:
     s = np.zeros(STATE_DIM)
     for q in (-1, 4, 10**6):
         with pytest.raises(ValueError, match=rf"q: state {q} does not exist \(the automaton"):
-            task.step(q, s)
+            task.step(s, q)
         with pytest.raises(ValueError, match="does not exist"):
-            task.reward(q, s, 1.0)
+            task.reward(s, q, 1.0)
         with pytest.raises(ValueError, match="does not exist"):
-            task.safe_set(q, s)
+            task.safe_set(s, q)
         with pytest.raises(ValueError, match="does not exist"):
             task.trap_cnf(q)
     with pytest.raises(ValueError, match=r"qs\[1\]: state 9 does not exist"):
-        task.step_batch([0, 9], np.zeros((2, STATE_DIM)))
+        task.step_batch(np.zeros((2, STATE_DIM)), [0, 9])
     with pytest.raises(TypeError):
-        task.step(1.5, s)  # type: ignore[arg-type]
+        task.step(s, 1.5)  # type: ignore[arg-type]
 
 
 def test_bad_vectors(task: tlshield.Automaton) -> None:
     with pytest.raises(ValueError, match="state length: expected 13, got 3"):
-        task.step(0, [0.0, 0.0, 0.0])
+        task.step([0.0, 0.0, 0.0], 0)
     with pytest.raises(ValueError, match=r"s\[2\] is NaN"):
-        task.safe_set(0, [0.0, 0.0, math.nan] + [0.0] * 10)
+        task.safe_set([0.0, 0.0, math.nan] + [0.0] * 10, 0)
     with pytest.raises(ValueError, match=r"is inf"):
-        task.reward(0, [math.inf] + [0.0] * 12, 1.0)
+        task.reward([math.inf] + [0.0] * 12, 0, 1.0)
     with pytest.raises(ValueError, match="expected 3 rows to match qs, got 2"):
-        task.step_batch([0, 0, 0], np.zeros((2, STATE_DIM)))
+        task.step_batch(np.zeros((2, STATE_DIM)), [0, 0, 0])
     with pytest.raises(ValueError, match=r"states\[1, 0\] is NaN"):
-        task.step_batch([0, 0], np.array([[0.0] * 13, [math.nan] + [0.0] * 12]))
+        task.step_batch(np.array([[0.0] * 13, [math.nan] + [0.0] * 12]), [0, 0])
     with pytest.raises(ValueError, match="expected a 2-D array"):
         task.run(np.zeros(STATE_DIM))
     with pytest.raises(ValueError, match="c_r: expected a finite weight > 0"):
-        task.reward(0, np.zeros(STATE_DIM), 0.0)
+        task.reward(np.zeros(STATE_DIM), 0, 0.0)
     with pytest.raises(ValueError, match="trap state, which has no task reward"):
-        task.reward(task.trap, np.zeros(STATE_DIM), 1.0)
+        task.reward(np.zeros(STATE_DIM), task.trap, 1.0)
     with pytest.raises(ValueError, match="trap_penalty is NaN"):
-        task.reward(task.trap, np.zeros(STATE_DIM), 1.0, trap_penalty=math.nan)
+        task.reward(np.zeros(STATE_DIM), task.trap, 1.0, trap_penalty=math.nan)
 
 
 def test_too_many_atoms() -> None:
@@ -249,20 +248,21 @@ def test_advance_equals_the_separate_calls(formula: tuple, s: np.ndarray) -> Non
     aut = tlshield.Spec(to_text(formula), RUST_PREDICATES).automaton()
     for q in range(aut.num_states):
         penalty = -100.0 if q == aut.trap else None
-        nxt, reward, safe = aut.advance(q, s, 2.0, trap_penalty=penalty)
-        assert nxt == aut.step(q, s)
-        assert reward == aut.reward(q, s, 2.0, trap_penalty=penalty)
-        assert safe == aut.safe_set(nxt, s)
+        with pytest.warns(DeprecationWarning, match="use tlshield.Monitor"):
+            nxt, reward, safe = aut.advance(q, s, 2.0, trap_penalty=penalty)
+        assert nxt == aut.step(s, q)
+        assert reward == aut.reward(s, q, 2.0, trap_penalty=penalty)
+        assert safe == aut.safe_set(s, nxt)
 
 
 def test_advance_bad_input(task: tlshield.Automaton) -> None:
-    with pytest.raises(ValueError, match="does not exist"):
+    with pytest.raises(ValueError, match="does not exist"), pytest.warns(DeprecationWarning):
         task.advance(7, np.zeros(STATE_DIM), 1.0)
-    with pytest.raises(ValueError, match="expected 13, got 2"):
+    with pytest.raises(ValueError, match="expected 13, got 2"), pytest.warns(DeprecationWarning):
         task.advance(0, [0.0, 0.0], 1.0)
-    with pytest.raises(ValueError, match="c_r"):
+    with pytest.raises(ValueError, match="c_r"), pytest.warns(DeprecationWarning):
         task.advance(0, np.zeros(STATE_DIM), -1.0)
-    with pytest.raises(ValueError, match="trap state"):
+    with pytest.raises(ValueError, match="trap state"), pytest.warns(DeprecationWarning):
         task.advance(task.trap, np.zeros(STATE_DIM), 1.0)
 
 
@@ -273,16 +273,34 @@ def test_an_automaton_from_a_formula_alone() -> None:
     assert (alone.initial, alone.trap, alone.accepting) == (task.initial, task.trap, task.accepting)
     assert alone.to_dot() == task.to_dot()
     with pytest.raises(ValueError, match="a formula alone"):
-        alone.step(0, np.zeros(STATE_DIM))
+        alone.step(np.zeros(STATE_DIM), 0)
     with pytest.raises(tlshield.ShieldError, match="formula alone"):
         tlshield.Shield(
             alone,
             tlshield.Unicycle(0.1),
             alpha=1.0,
             c3=1.0,
-            K=1.0,
+            k=1.0,
             cbf_bounds=(-1.0, 1.0),
             clf_bounds=(-1.0, 1.0),
         )
     with pytest.raises(tlshield.SpecError):
         tlshield.Automaton.from_formula("G a")
+
+
+def test_the_old_argument_order_is_refused_with_a_hint(task: tlshield.Automaton) -> None:
+    """0.1 took ``(q, s)``; every call now takes the state first, like ``Shield.filter``. A call
+    in the old order is a TypeError that says so, never a wrong answer."""
+    s = np.zeros(STATE_DIM)
+    progress = task.progress_reward()
+    calls = {
+        "step": lambda: task.step(0, s),  # type: ignore[arg-type]
+        "reward": lambda: task.reward(0, s, 1.0),  # type: ignore[arg-type]
+        "safe_set": lambda: task.safe_set(0, s),  # type: ignore[arg-type]
+        "goal": lambda: task.goal(0, s),  # type: ignore[arg-type]
+        "potential": lambda: progress.potential(0, s),  # type: ignore[arg-type]
+        "step_batch": lambda: task.step_batch([0], s[None]),
+    }
+    for call in calls.values():
+        with pytest.raises(TypeError, match=r"the states? first"):
+            call()

@@ -23,12 +23,12 @@ def test_errors_are_typed_value_errors() -> None:
         assert issubclass(cls, ValueError)
     aut = channel_task_spec().automaton()
     with pytest.raises(tlshield.AutomatonError, match="state 99 does not exist"):
-        aut.step(99, np.zeros(STATE_DIM))
+        aut.step(np.zeros(STATE_DIM), 99)
     with pytest.raises(tlshield.ShieldError, match="alpha"):
         shield(tlshield.Unicycle(0.1), alpha=-1.0)
     # Malformed numbers stay plain ValueErrors, wherever they are passed.
     with pytest.raises(ValueError, match="finite") as info:
-        aut.step(0, np.full(STATE_DIM, np.nan))
+        aut.step(np.full(STATE_DIM, np.nan), 0)
     assert not isinstance(info.value, tlshield.AutomatonError)
 
 
@@ -66,12 +66,12 @@ def test_channel_plant_is_the_shields_model() -> None:
     checked = 0
     for episode in range(5):
         env.reset(seed=episode)
-        for _ in range(cfg.horizon):
+        for _ in range(cfg.task.horizon):
             s = env.state.copy()
             _, _, term, trunc, info = env.step(rng.uniform(-1, 1, size=2))
             f, g = model.eval(s)
-            want = s + cfg.dt * (f + g @ info["action"])
-            lo, hi = cfg.arena
+            want = s + cfg.agent.dt * (f + g @ info["action"])
+            lo, hi = cfg.agent.arena
             want[X], want[Y] = np.clip(want[[X, Y]], lo, hi)
             want[THETA] = (want[THETA] + math.pi) % (2 * math.pi) - math.pi
             np.testing.assert_allclose(env.state[: THETA + 1], want[: THETA + 1], atol=1e-12)

@@ -82,12 +82,12 @@ CASES: dict[str, list[Case]] = {
         ("a file, not a folder", lambda b, r: ["evaluate", str(_file(b))]),
         ("a folder without a run", lambda b, r: ["evaluate", str(b)]),
         (
-            "corrupt config.json",
-            lambda b, r: ["evaluate", _run_copy(r, b, lambda f: _file(f, "config.json"))],
+            "corrupt run.json",
+            lambda b, r: ["evaluate", _run_copy(r, b, lambda f: _file(f, "run.json"))],
         ),
         (
-            "truncated config.json",
-            lambda b, r: ["evaluate", _run_copy(r, b, lambda f: _truncate(f / "config.json"))],
+            "truncated run.json",
+            lambda b, r: ["evaluate", _run_copy(r, b, lambda f: _truncate(f / "run.json"))],
         ),
         (
             "corrupt model.zip",
@@ -216,3 +216,15 @@ if __name__ == "__main__":
             code = cli.main(make(scratch, the_run))
         line = stderr.getvalue().strip().replace(str(scratch), "DIR").replace(str(base), "DIR")
         print(f"| {command} | {what} | {code} | `{line}` |")
+
+
+def test_a_run_folder_of_tlshield_0_1_still_loads(run: Path, tmp_path: Path) -> None:
+    """0.1 wrote the record as ``config.json``; it is read where no ``run.json`` is."""
+    from tlshield.runs import RUN_FILE, load_run, read_record
+
+    old = tmp_path / "old"
+    shutil.copytree(run, old)
+    (old / RUN_FILE).rename(old / "config.json")
+    assert read_record(old) == read_record(run)
+    loaded = load_run(old)
+    assert loaded is not None and loaded.config == load_run(run).config  # type: ignore[union-attr]

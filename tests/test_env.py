@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 import tlshield
 from tlshield.envs import CONFIGS, ENV_ID, ChannelEnv, channel_shield
-from tlshield.envs.channel import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, ChannelConfig
+from tlshield.envs.channel import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, ChannelParams
 from tlshield.wrappers import FsaAugmented, Shielded, ShieldedVecEnv, ShieldedVectorEnv
 
 INFO_KEYS = {
@@ -95,7 +95,7 @@ def test_observation_layout_and_info(observation: str) -> None:
         np.testing.assert_allclose(obs[4:6], frame @ (s[3:5] - s[:2]))  # g1
         np.testing.assert_allclose(obs[10:12], frame @ (s[9:11] - s[:2]))  # o1
         np.testing.assert_allclose(obs[14:16], frame @ env.unwrapped.drift[9:11])
-        goal = env.unwrapped.tracker.automaton.goal(info["fsa_state"], s)
+        goal = env.unwrapped.tracker.automaton.goal(s, info["fsa_state"])
         np.testing.assert_allclose(obs[18:20], frame @ (goal - s[:2]))
         ahead = s[:2] + 2.0 * np.array([c, si])  # a point 2 m straight ahead reads (2, 0)
         np.testing.assert_allclose(frame @ (ahead - s[:2]), [2.0, 0.0], atol=1e-12)
@@ -163,12 +163,12 @@ def test_goal_draws() -> None:
     channel occur, and the CLF never prefers one (its cube with the channel cannot hold, so the
     rank-aware goal passes it over; before issue 22 it did in some episodes)."""
     env = ChannelEnv()
-    w = env.cfg.half_width
+    w = env.cfg.task.half_width
     n, outside, clf_outside = 500, 0, 0
     for seed in range(n):
         _, info = env.reset(seed=seed)
         centres = [env.state[a : b + 1] for a, b in GOAL_DIMS]
-        inside = [abs(c[0] - c[1]) < w - env.cfg.goal_radius * math.sqrt(2) for c in centres]
+        inside = [abs(c[0] - c[1]) < w - env.cfg.task.goal_radius * math.sqrt(2) for c in centres]
         assert inside[2] and (inside[0] or inside[1])
         outside += info["goal_outside_channel"]
         clf_outside += info["clf_goal_outside"]
@@ -181,8 +181,8 @@ def test_goal_draws() -> None:
 
 
 def test_overrides_and_bad_input() -> None:
-    env = gym.make(ENV_ID, config="rl_clf", K=1e3, dt=0.05, horizon=10, c_r=2.0)
-    assert env.unwrapped.cfg.horizon == 10 and env.unwrapped.cfg.K == 1e3
+    env = gym.make(ENV_ID, config="rl_clf", k=1e3, dt=0.05, horizon=10, c_r=2.0)
+    assert env.unwrapped.cfg.task.horizon == 10 and env.unwrapped.cfg.shield.k == 1e3
     env.reset(seed=0)
     steps = 0
     while True:
@@ -280,14 +280,14 @@ def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
     assert obs.shape == (2 + aut.num_states,) and info["fsa_state"] == env.fsa_state
     q = env.fsa_state
     obs, reward, _, _, info = env.step(np.array([1.0, 0.0]))
-    expected = aut.reward(q, obs[:2], 1.0) + 0.5 * -1.0
+    expected = aut.reward(obs[:2], q, 1.0) + 0.5 * -1.0
     assert reward == pytest.approx(expected)
     shield = tlshield.Shield(
         spec,
         tlshield.SingleIntegrator([0, 1]),
         alpha=5.0,
         c3=1.0,
-        K=1e4,
+        k=1e4,
         cbf_bounds=(-3, 3),
         clf_bounds=(-0.5, 0.5),
     )
@@ -326,7 +326,8 @@ def test_fsa_augmented_pays_the_progress_reward_by_default() -> None:
     q, phi = env.fsa_state, 0.0
     for _ in range(5):
         obs, reward, _, _, info = env.step(np.array([1.0, 0.0]))
-        q, expected, phi = progress.advance(q, phi, obs[:2])
+        with pytest.warns(DeprecationWarning):  # the reference: the 0.1 call
+            q, expected, phi = progress.advance(q, phi, obs[:2])
         assert reward == pytest.approx(expected) and info["tl_reward"] == pytest.approx(expected)
     with pytest.raises(ValueError, match="reward"):
         FsaAugmented(PointEnv(), spec, reward="eq5a1")
@@ -337,7 +338,7 @@ def test_gymnasium_vector_shield_equals_per_env_shield() -> None:
     vec = gym.vector.SyncVectorEnv(
         [lambda: ChannelEnv(shield_in_env=False, **STATE_OBS) for _ in range(n)]
     )
-    cfg = ChannelConfig(**STATE_OBS)
+    cfg = ChannelParams.from_flat(STATE_OBS)
     singles = [ChannelEnv(**STATE_OBS) for _ in range(n)]
     shielded = ShieldedVectorEnv(
         vec, channel_shield(cfg, "rl_cbf_clf"), action_fn=singles[0].rl_action
@@ -362,7 +363,9 @@ def test_sb3_vecenv_shield_equals_per_env_shield() -> None:
     venv.seed(5)
     singles = [ChannelEnv(config="rl_cbf", **STATE_OBS) for _ in range(n)]
     shielded = ShieldedVecEnv(
-        venv, channel_shield(ChannelConfig(**STATE_OBS), "rl_cbf"), action_fn=singles[0].rl_action
+        venv,
+        channel_shield(ChannelParams.from_flat(STATE_OBS), "rl_cbf"),
+        action_fn=singles[0].rl_action,
     )
     obs = shielded.reset()
     expected = np.stack([env.reset(seed=5 + i)[0] for i, env in enumerate(singles)])
@@ -394,7 +397,7 @@ def test_obstacle_velocity_is_measured_and_passed_to_the_shield() -> None:
     env.reset(seed=3)
     before = env.state[9:13].copy()
     env.step(np.zeros(2))
-    np.testing.assert_allclose(env.drift[9:13], (env.state[9:13] - before) / env.cfg.dt)
+    np.testing.assert_allclose(env.drift[9:13], (env.state[9:13] - before) / env.cfg.agent.dt)
     assert env.drift[:9].tolist() == [0.0] * 9
     out = env.shield.filter(env.state, env.tracker.q, np.zeros(2), drift=env.drift)
     assert {"!o1", "!o2"} <= {name for name, _ in out.barriers}
@@ -432,7 +435,7 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
         env.reset(seed=100 + episode)
         paths = env._obstacles.copy()
         s = env.state
-        for t in range(1, cfg.horizon + 1):
+        for t in range(1, cfg.task.horizon + 1):
             action = rng.uniform(-1, 1, 2)
             if episode % 2:  # full speed ahead, turning slowly: into a wall
                 action = np.array([1.0, 0.2])
@@ -440,7 +443,7 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
             want = ref.next_state(cfg, s, info["action"], paths, t)
             np.testing.assert_allclose(env.state, want, rtol=0, atol=1e-12)
             drift = np.zeros(13)
-            drift[9:13] = (want[9:13] - s[9:13]) / cfg.dt
+            drift[9:13] = (want[9:13] - s[9:13]) / cfg.agent.dt
             np.testing.assert_allclose(env.drift, drift, rtol=0, atol=1e-12)
             one_hot = np.eye(env.tracker.automaton.num_states)[info["fsa_state"]]
             expected = ref.observation(cfg, want, drift, env.tracker.goal, one_hot)
@@ -450,8 +453,11 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
             assert info["constraints"] == {"c1": rho[c1], "c2": rho[c2]}
             d = min(float(np.hypot(*(want[:2] - want[a : b + 1]))) for a, b in ref.OBSTACLE_DIMS)
             assert info["min_obstacle_distance"] == d
-            collision = d < cfg.obstacle_radius
-            terms = cfg.w * min(d - cfg.safe_distance, 0.0) - cfg.collision_penalty * collision
+            collision = d < cfg.obstacles.obstacle_radius
+            terms = (
+                cfg.obstacles.w * min(d - cfg.obstacles.safe_distance, 0.0)
+                - cfg.obstacles.collision_penalty * collision
+            )
             assert reward == pytest.approx(info["tl_reward"] + terms, abs=1e-12)
             s = want
             steps += 1

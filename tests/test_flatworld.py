@@ -95,12 +95,12 @@ def test_exclusive_groups_are_checked_against_the_geometry() -> None:
 def test_rank_aware_goal_and_progress_safe_set_on_formula_2_as_written() -> None:
     spec = flatworld_spec(F2)
     aut = spec.automaton()
-    q = aut.step(aut.step(aut.initial, [-1.9, -0.5]), [-1.53, -0.5])  # into orange
+    q = aut.step([-1.53, -0.5], aut.step([-1.9, -0.5], aut.initial))  # into orange
     assert aut.ranks[q] == 1 and aut.ranks[aut.initial] == 2
-    goal = aut.goal(q, [-1.53, -0.5])
+    goal = aut.goal([-1.53, -0.5], q)
     assert goal is not None and _inside("magenta", goal)
-    assert aut.safe_set(q, [-1.53, -0.5]) == []  # Eq. 5C1: no trap, nothing kept
-    kept = dict(aut.safe_set(q, [-1.53, -0.5], preserve_progress=True))
+    assert aut.safe_set([-1.53, -0.5], q) == []  # Eq. 5C1: no trap, nothing kept
+    kept = dict(aut.safe_set([-1.53, -0.5], q, preserve_progress=True))
     assert kept.get("!red", 0.0) > 0.0
 
 
@@ -137,7 +137,7 @@ def test_shield_info_carries_goal_barriers_slack_and_solver() -> None:
     for s in np.random.default_rng(2).uniform(-2, 2, size=(30, 2)):
         for q in range(aut.num_states):
             for progress in (False, True):
-                names = [n for n, _ in aut.safe_set(q, s, preserve_progress=progress)]
+                names = [n for n, _ in aut.safe_set(s, q, preserve_progress=progress)]
                 assert len(names) == len(set(names))
 
 
@@ -181,10 +181,10 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
     def user_env(
         config: str = "rl", evaluation: bool = False, gamma: float = 0.9, horizon: int = 500
     ) -> gym.Env:
-        from tlshield.envs.flatworld import FlatWorld, FlatWorldConfig
+        from tlshield.envs.flatworld import FlatWorld, FlatWorldParams
         from tlshield.wrappers import FsaAugmented
 
-        return FsaAugmented(FlatWorld(FlatWorldConfig()), spec, gamma=gamma, horizon=horizon)
+        return FsaAugmented(FlatWorld(FlatWorldParams()), spec, gamma=gamma, horizon=horizon)
 
     gym.register("tests/UserFlat-v0", entry_point=user_env)
     try:
@@ -195,7 +195,7 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
         run = train(
             "rl", 0, 1, tmp_path / "d", env="tests/UserFlat-v0", progress=False, gamma=0.999
         )
-        assert json.loads((run / "config.json").read_text())["finished"]
+        assert json.loads((run / "run.json").read_text())["finished"]
     finally:
         del gym.registry["tests/UserFlat-v0"]
 

@@ -14,7 +14,7 @@ import pytest
 
 import tlshield
 from tlshield.envs import ENV_ID
-from tlshield.envs.channel import ChannelConfig, channel_shield, channel_task_spec
+from tlshield.envs.channel import ChannelParams, channel_shield, channel_task_spec
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX-only")
 
@@ -37,7 +37,7 @@ def _everything(shield: tlshield.Shield, spec: tlshield.Spec) -> list[np.ndarray
     """Every parallel batch call of the native API on ROWS rows."""
     states, _, a_rl = _batch_inputs(ROWS)
     aut = spec.automaton()
-    qs = aut.step_batch(np.full(ROWS, aut.initial), states)
+    qs = aut.step_batch(states, np.full(ROWS, aut.initial))
     out = shield.filter_batch(states, qs, a_rl)
     trajs = states[: ROWS // 8 * 8].reshape(-1, 8, 13)
     return [qs, out.action, out.status, spec.robustness_batch(trajs)]
@@ -45,7 +45,7 @@ def _everything(shield: tlshield.Shield, spec: tlshield.Spec) -> list[np.ndarray
 
 def test_batch_calls_finish_in_a_forked_child() -> None:
     spec = channel_task_spec()
-    shield = channel_shield(ChannelConfig(), "rl_cbf_clf", spec)
+    shield = channel_shield(ChannelParams(), "rl_cbf_clf", spec)
     assert shield is not None
     want = _everything(shield, spec)  # the parent's pool is running now
     read, write = os.pipe()
@@ -80,7 +80,7 @@ class BatchProbe(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self.probe = channel_shield(ChannelConfig(), "rl_cbf_clf")
+        self.probe = channel_shield(ChannelParams(), "rl_cbf_clf")
 
     def step(self, action):  # type: ignore[no-untyped-def]
         states, qs, a_rl = _batch_inputs(64, seed=1)
@@ -91,7 +91,7 @@ class BatchProbe(gym.Wrapper):
 
 def test_async_vector_env_with_fork_over_shielded_envs() -> None:
     spec = channel_task_spec()
-    shield = channel_shield(ChannelConfig(), "rl_cbf_clf", spec)
+    shield = channel_shield(ChannelParams(), "rl_cbf_clf", spec)
     _everything(shield, spec)  # start the parent's pool before the workers fork
 
     def make() -> gym.Env:

@@ -14,7 +14,7 @@ from tests.shield_reference import CvxpyShield, Params, Rows, assert_matches
 
 OBSTACLE, RADIUS = np.array([2.0, 0.1]), 0.5
 GOAL = np.array([4.0, 0.0])
-PARAMS = Params(alpha=1.5, c3=1.0, K=1e4, cbf=(-6.0, 6.0), clf=(-0.5, 0.5))
+PARAMS = Params(alpha=1.5, c3=1.0, k=1e4, cbf=(-6.0, 6.0), clf=(-0.5, 0.5))
 ALPHA2, CLF_GAIN = 2.0, 0.8
 
 
@@ -24,7 +24,7 @@ def make_shield(**overrides: object) -> tlshield.Shield:
         "alpha": PARAMS.alpha,
         "alpha2": ALPHA2,
         "c3": PARAMS.c3,
-        "K": PARAMS.K,
+        "k": PARAMS.k,
         "cbf_bounds": PARAMS.cbf,
         "clf_bounds": PARAMS.clf,
         "clf_gain": CLF_GAIN,
@@ -99,7 +99,7 @@ def test_first_order_models_are_unchanged_and_alpha2_is_required_where_needed() 
     obstacle = {"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)}
     # A velocity-level model: the barrier has relative degree 1, alpha2 is not needed.
     spec = tlshield.Spec("F g", {"g": tlshield.Ball(pos=[0, 1], radius=0.3, center=GOAL)})
-    gains = {"alpha": 1.0, "c3": 1.0, "K": 1e4, "cbf_bounds": (-6.0, 6.0)}
+    gains = {"alpha": 1.0, "c3": 1.0, "k": 1e4, "cbf_bounds": (-6.0, 6.0)}
     model = tlshield.SingleIntegrator([0, 1])
     tlshield.Shield(spec, model, **gains, clf_bounds=(-1.0, 1.0), barriers=obstacle)
     with pytest.raises(tlshield.ShieldError, match=r"relative degree 2.*alpha2"):
@@ -129,7 +129,7 @@ def test_models_that_do_not_fit_are_clear_errors() -> None:
     # The spec's half-space fixes the state length at 3; the double integrator reads 4 values.
     spec = tlshield.Spec("F h", {"h": tlshield.Halfspace([1.0, 0.0, 0.0], 1.0)})
     model = tlshield.DoubleIntegrator(pos=[0, 1], vel=[2, 3])
-    gains = {"alpha": 1.0, "alpha2": 1.0, "c3": 1.0, "K": 1e4}
+    gains = {"alpha": 1.0, "alpha2": 1.0, "c3": 1.0, "k": 1e4}
     bounds = {"cbf_bounds": (-5.0, 5.0), "clf_bounds": (-1.0, 1.0)}
     with pytest.raises(tlshield.ShieldError, match="state length at 3"):
         tlshield.Shield(spec, model, **gains, **bounds)  # type: ignore[arg-type]

@@ -40,20 +40,21 @@ def test_monitor_equals_the_separate_calls(reward):
     for _ in range(20):
         traj = _episode(rng, 60)
         first = monitor.reset(traj[0])
-        q, phi = aut.step(aut.initial, traj[0]), 0.0
+        q, phi = aut.step(traj[0], aut.initial), 0.0
         assert (first.q, first.reward) == (q, 0.0)
         for s in traj[1:]:
             got = monitor.advance(s)
             if reward == "progress":
-                q_next, r, phi = progress.advance(q, phi, s)
+                with pytest.warns(DeprecationWarning):  # the reference: the 0.1 call
+                    q_next, r, phi = progress.advance(q, phi, s)
             else:
-                r = aut.reward(q, s, 2.0, trap_penalty=-30.0)
-                q_next = aut.step(q, s)
+                r = aut.reward(s, q, 2.0, trap_penalty=-30.0)
+                q_next = aut.step(s, q)
             assert got.q == q_next == monitor.q
             assert got.reward == r
             assert got.accepted == (q_next in aut.accepting)
             assert got.trapped == (q_next == aut.trap)
-            goal = aut.goal(q_next, s)
+            goal = aut.goal(s, q_next)
             assert (got.goal is None) == (goal is None)
             if goal is not None:
                 np.testing.assert_array_equal(got.goal, goal)
@@ -140,7 +141,7 @@ def test_the_readme_loop_runs():
 
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
-    (loop,) = [b for b in blocks if "monitor.advance" in b]
+    (loop,) = [b for b in blocks if "shield.filter(monitor" in b]
 
     class StateOnly(gym.ObservationWrapper):
         def observation(self, obs):
@@ -164,6 +165,18 @@ def test_the_readme_loop_runs():
     assert len(added) >= 1
     assert all(isinstance(r, float) for _, r, _ in added)
     assert scope["t"] >= 0 and scope["task"].q == scope["monitor"].q
+
+
+def test_the_readme_automaton_loops_run_and_agree():
+    """The README's spec and automaton blocks, as printed: the per-query loop (state first) and
+    the monitor's one call per step end in the same FSA state."""
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    (spec_block,) = [b for b in blocks if "tlshield.Spec(" in b and "robustness_batch" in b]
+    (aut_block,) = [b for b in blocks if "aut.step(traj[0], aut.initial)" in b]
+    scope: dict = {}
+    exec(compile(spec_block + aut_block, "README.md", "exec"), scope)
+    assert scope["task"].q == scope["q"] == scope["monitor"].q
 
 
 @pytest.mark.parametrize("rows", [5, 40])  # 40: past the parallel threshold

@@ -26,7 +26,7 @@ SEEDS = (0, 1)
 UPDATES = 3
 TRIALS = 3
 #: The small files of a run folder (what plotting reads).
-RUN_FILES = ("config.json", "metrics.csv", "evaluation.json", "trajectories.npz")
+RUN_FILES = ("run.json", "metrics.csv", "evaluation.json", "trajectories.npz")
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def copy_results(results: Path, target: Path) -> Path:
     """A copy of the plotted files of every run of ``results``."""
     for run in results.iterdir():
-        if run.is_dir() and (run / "config.json").is_file():
+        if run.is_dir() and (run / "run.json").is_file():
             (target / run.name).mkdir(parents=True)
             for name in RUN_FILES:
                 if (run / name).is_file():
@@ -79,7 +79,7 @@ def test_load_results(results: Path) -> None:
             starts, paths = run.trajectories
             assert starts.shape == (TRIALS, 13) and len(paths) == TRIALS
             assert all(p.ndim == 2 and p.shape[1] == 2 for p in paths)
-            assert run.env.obstacle_radius == pytest.approx(0.3)
+            assert run.env.obstacles.obstacle_radius == pytest.approx(0.3)
 
 
 def test_plot_all_writes_decodable_figures(results: Path, tmp_path: Path) -> None:
@@ -120,7 +120,7 @@ def test_results_table(results: Path) -> None:
 def test_no_runs(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="no runs"):
         load_results(tmp_path)
-    (tmp_path / "notes").mkdir()  # a folder without config.json is not a run
+    (tmp_path / "notes").mkdir()  # a folder without run.json is not a run
     with pytest.raises(FileNotFoundError, match="no runs"):
         plot_all(tmp_path)
     with pytest.raises(FileNotFoundError, match="no such results folder"):
@@ -132,8 +132,8 @@ def test_partial_runs_are_tolerated(results: Path, tmp_path: Path) -> None:
     # A run that has not finished its first update: header-only metrics, no evaluation.
     empty = root / "rl_cbf_s0"
     empty.mkdir()
-    record = json.loads((root / "rl_s0" / "config.json").read_text())
-    (empty / "config.json").write_text(json.dumps({**record, "config": "rl_cbf"}))
+    record = json.loads((root / "rl_s0" / "run.json").read_text())
+    (empty / "run.json").write_text(json.dumps({**record, "config": "rl_cbf"}))
     (empty / "metrics.csv").write_text(",".join(METRIC_COLUMNS) + "\n")
     # An interrupted run: its last metrics row was cut short, its evaluation is missing.
     cut = root / "rl_s1"
@@ -166,7 +166,7 @@ def test_only_missing_pieces(results: Path, tmp_path: Path) -> None:
     for config in CONFIGS:
         run = root / f"{config}_s0"
         run.mkdir(parents=True)
-        shutil.copy(results / f"{config}_s0" / "config.json", run / "config.json")
+        shutil.copy(results / f"{config}_s0" / "run.json", run / "run.json")
         (run / "metrics.csv").write_text("")
     paths = plot_all(root, tmp_path / "figs")
     assert [p.name for p in paths] == list(FIGURES) and all(p.is_file() for p in paths)

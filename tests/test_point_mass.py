@@ -12,9 +12,9 @@ from gymnasium.utils.env_checker import check_env
 
 import tlshield
 from tlshield.envs import POINT_MASS_ID
-from tlshield.envs.point_mass import CONFIGS, PointMassConfig, make_point_mass
+from tlshield.envs.point_mass import CONFIGS, PointMassParams, make_point_mass
 
-CFG = PointMassConfig()
+CFG = PointMassParams()
 
 
 # The whole stack is checked on purpose (a user's env is the wrapped one), so the checker's

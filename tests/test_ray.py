@@ -286,13 +286,13 @@ def test_a_two_sample_tune_writes_settings_that_train_reads(
     best = json.loads((root / "best.json").read_text())
     assert best["config"] == "rl_cbf_clf" and 0.0 <= best["objective"] <= 1.0
     # The first sample is the defaults: a default sample maps back to the default settings.
-    from tlshield.envs.channel import ChannelConfig
+    from tlshield.envs.channel import ChannelParams
     from tlshield.tune import to_settings
 
     as_settings = to_settings(dict(DEFAULTS), "rl_cbf_clf")
-    cfg = ChannelConfig()
-    assert as_settings["clf_bounds"] == [list(b) for b in cfg.clf_bounds]
-    assert as_settings["cbf_bounds"] == [list(b) for b in cfg.cbf_bounds]
+    cfg = ChannelParams()
+    assert as_settings["clf_bounds"] == [list(b) for b in cfg.shield.clf_bounds]
+    assert as_settings["cbf_bounds"] == [list(b) for b in cfg.shield.cbf_bounds]
     # Run again with the same arguments, the finished search is restored, not redone; with
     # other arguments it is refused.
     again = tune(tmp_path / "tune", samples=2, updates=3, trials=2, workers=2, progress=False)
@@ -314,7 +314,7 @@ def test_a_two_sample_tune_writes_settings_that_train_reads(
         ]
     )
     assert code == 0, capsys.readouterr().err
-    record = json.loads((run / "config.json").read_text())
+    record = json.loads((run / "run.json").read_text())
     assert record["config"] == "rl_cbf_clf"
     for name, value in best["settings"].items():
         if name in settings.PPO_NAMES:
@@ -356,6 +356,6 @@ def test_set_on_the_command_line_reaches_the_run(tmp_path: Path) -> None:
     args = ["train", "--config", "rl_cbf", "--updates", "1", "--out", str(run), "--quiet"]
     sets = ["--set", "alpha=3", "--set", "learning_rate=0.001", "--set", "clf_schedule=linear"]
     assert cli.main([*args, *sets]) == 0
-    record = json.loads((run / "config.json").read_text())
+    record = json.loads((run / "run.json").read_text())
     assert record["env"]["alpha"] == 3 and record["ppo"]["learning_rate"] == 0.001
     assert record["clf_schedule"] == "linear"

@@ -90,7 +90,7 @@ def outcome(overrides: dict[str, Any], episodes: int) -> tuple[str, int | None, 
 #: The issue's probe: settings that were accepted and then violated, and settings that were safe.
 PROBE: dict[str, dict[str, Any]] = {
     "defaults": {},
-    "cbf_margin=0.0": {"cbf_margin": 0.0},
+    "margin=0.0": {"margin": 0.0},
     "cbf_bounds=((-0.2,-0.4),(0.2,0.4))": {"cbf_bounds": ((-0.2, -0.4), (0.2, 0.4))},
     "rl_bounds 5x": {"rl_bounds": tuple(map(tuple, 5 * DEFAULT_RL))},
     "rl_bounds 5x, cbf_bounds widened to cover": {
@@ -103,12 +103,12 @@ PROBE: dict[str, dict[str, Any]] = {
     "clf_bounds 3x": {"clf_bounds": tuple(map(tuple, 3 * DEFAULT_CLF))},
     "cbf_bounds = the RL box exactly": {"cbf_bounds": tuple(map(tuple, DEFAULT_RL))},
     "cbf_bounds 0.9x the RL box": {"cbf_bounds": tuple(map(tuple, 0.9 * DEFAULT_RL))},
-    "cbf_margin=1e-6": {"cbf_margin": 1e-6},
+    "margin=1e-6": {"margin": 1e-6},
 }
 
 #: Settings a probe entry expects refused (the rest must be accepted with 0 violations).
 REFUSED = {
-    "cbf_margin=0.0": "cbf_margin",
+    "margin=0.0": "margin",
     "cbf_bounds=((-0.2,-0.4),(0.2,0.4))": "cbf_bounds",
     "rl_bounds 5x": "cbf_bounds",
     "cbf_bounds 0.9x the RL box": "cbf_bounds",
@@ -138,9 +138,9 @@ def channel_settings(draw: st.DrawFn) -> dict[str, Any]:
         "dt": dt,
         "alpha": draw(st.floats(0.2, 1.0)) / dt,
         "eps": draw(st.sampled_from([0.01, 0.05, 0.1, 0.3])),
-        "cbf_margin": draw(st.sampled_from([0.0, 1e-6, 1e-4, 1e-3, 0.05])),
+        "margin": draw(st.sampled_from([0.0, 1e-6, 1e-4, 1e-3, 0.05])),
         "c3": draw(st.sampled_from([0.1, 1.0, 10.0])),
-        "K": draw(st.sampled_from([1.0, 1e4, 1e8])),
+        "k": draw(st.sampled_from([1.0, 1e4, 1e8])),
     }
     rl = draw(st.floats(0.3, 5.0))
     clf = draw(st.floats(0.0, 3.0))

@@ -75,7 +75,7 @@ def test_equals_an_independent_cvxpy_solve(
     can hold within the CLF bounds."""
     structure, cvx, cvx_relaxed = reference
     s, v, w = instance
-    q = shield.automaton.step(q0, s)
+    q = shield.automaton.step(s, q0)
     a_rl = np.array([v, w])
     got = shield.filter(s, q, a_rl)
     rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
@@ -95,7 +95,7 @@ def test_clarabel_python_baseline_agrees(
     stalled = 0
     for _ in range(300):
         s = state(rng.uniform(0, 8), rng.uniform(-1.4, 1.4), rng.uniform(-3, 3))
-        q = shield.automaton.step(0, s)
+        q = shield.automaton.step(s, 0)
         a_rl = rng.uniform([-4, -6], [4, 6])
         rows = build_rows(TASK, structure, PARAMS, s, q, a_rl)
         want = baseline.solve(rows)
@@ -113,7 +113,7 @@ def test_clarabel_python_baseline_agrees(
 
 def test_border_step_is_corrected_and_reported(shield: tlshield.Shield) -> None:
     s = state(1.0, -1.4, math.pi / 2)  # near c1's wall, heading out
-    q = shield.automaton.step(0, s)
+    q = shield.automaton.step(s, 0)
     out = shield.filter(s, q, [3.0, 0.0])
     assert out.status == Status.SOLVED and out.solver == Solver.ACTIVE_SET
     names = [name for name, _ in out.barriers]
@@ -130,7 +130,7 @@ def test_border_step_is_corrected_and_reported(shield: tlshield.Shield) -> None:
 def test_solver_choice_is_honoured(solver: str) -> None:
     sh = make_shield(solver=solver)
     s = state(1.0, -1.4, math.pi / 2)
-    out = sh.filter(s, sh.automaton.step(0, s), [3.0, 0.0])
+    out = sh.filter(s, sh.automaton.step(s, 0), [3.0, 0.0])
     assert str(out.solver) == {"auto": "active_set"}.get(solver, solver)
     reference = make_shield(solver="clarabel").filter(s, 0, [3.0, 0.0])
     np.testing.assert_allclose(out.action, reference.action, atol=1e-6)
@@ -171,7 +171,7 @@ def test_user_barriers_and_per_call_dynamics() -> None:
         None,
         alpha=2.0,
         c3=1.0,
-        K=1e4,
+        k=1e4,
         cbf_bounds=([-6, -6], [6, 6]),
         clf_bounds=(-0.5, 0.5),
     )
@@ -189,7 +189,7 @@ def test_single_integrator_keeps_a_disc_invariant() -> None:
         tlshield.SingleIntegrator([0, 1]),
         alpha=5.0,
         c3=1.0,
-        K=1e4,
+        k=1e4,
         cbf_bounds=(-10, 10),
         clf_bounds=(-1, 1),
         barriers=[arena],
@@ -207,7 +207,7 @@ def test_batch_equals_single_calls(shield: tlshield.Shield) -> None:
     states = np.stack(
         [state(rng.uniform(0, 8), rng.uniform(-1.6, 1.6), rng.uniform(-3, 3)) for _ in range(64)]
     )
-    qs = np.array([shield.automaton.step(0, s) for s in states])
+    qs = np.array([shield.automaton.step(s, 0) for s in states])
     a_rl = rng.uniform([-4, -6], [4, 6], size=(64, 2))
     batch = shield.filter_batch(states, qs, a_rl)
     assert isinstance(batch, tlshield.FilterBatch) and len(batch) == 64
@@ -236,7 +236,7 @@ def test_same_input_same_output(shield: tlshield.Shield) -> None:
 BAD_CONSTRUCTION = [
     ({"alpha": 0.0}, ValueError, "alpha"),
     ({"alpha": float("nan")}, ValueError, "alpha"),
-    ({"K": -1.0}, ValueError, "K"),
+    ({"k": -1.0}, ValueError, "k"),
     ({"cbf_bounds": (1.0, -1.0)}, ValueError, "lower bound above upper"),
     ({"cbf_bounds": ([0.0], [1.0])}, ValueError, "cbf_bounds"),
     ({"clf_bounds": (0.0, float("inf"))}, ValueError, "finite"),
@@ -264,7 +264,7 @@ def test_bad_spec_or_dynamics() -> None:
             tlshield.Unicycle(0.1),
             alpha=1,
             c3=1,
-            K=1,
+            k=1,
             cbf_bounds=(-1, 1),
             clf_bounds=(-1, 1),
         )
@@ -274,7 +274,7 @@ def test_bad_spec_or_dynamics() -> None:
             "unicycle",
             alpha=1,
             c3=1,
-            K=1,
+            k=1,
             cbf_bounds=(-1, 1),
             clf_bounds=(-1, 1),
         )
@@ -337,12 +337,12 @@ def test_bad_batches(shield: tlshield.Shield) -> None:
 def test_automaton_goal_from_python(shield: tlshield.Shield) -> None:
     aut = shield.automaton
     s = state(3.9, 0.0, 0.0)  # next to g1 (4, 4)
-    np.testing.assert_allclose(aut.goal(0, s), [4.0, 4.0])
-    assert aut.goal(aut.accepting[0], s) is None
+    np.testing.assert_allclose(aut.goal(s, 0), [4.0, 4.0])
+    assert aut.goal(s, aut.accepting[0]) is None
     with pytest.raises(ValueError, match="state 99"):
-        aut.goal(99, s)
+        aut.goal(s, 99)
     with pytest.raises(ValueError):
-        aut.goal(0, s[:4])
+        aut.goal(s[:4], 0)
 
 
 def obstacle_shield() -> tlshield.Shield:
@@ -389,7 +389,7 @@ def test_bad_drift_is_a_clear_error() -> None:
 
 
 def test_bounds_given_as_lists_equal_tuples() -> None:
-    # Bounds read back from JSON (a run's config.json, a tune best.json) are lists.
+    # Bounds read back from JSON (a run's run.json, a tune best.json) are lists.
     state = np.zeros(STATE_DIM)
     state[:2] = (0.3, -0.9)  # near the c1 wall, so the corrections are not zero
     state[3:] = (1.0, 2.0, 3.0, 1.0, 5.0, 5.2, 1.0, 3.0, 4.0, 2.0)  # goals, obstacles

@@ -28,12 +28,12 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_run_folder_holds_everything(run: Path) -> None:
     files = {p.name for p in run.iterdir()}
-    assert files >= {"config.json", "metrics.csv", "model.zip", "last_model.zip", "tb"}
+    assert files >= {"run.json", "metrics.csv", "model.zip", "last_model.zip", "tb"}
     rows = read_metrics(run)
     assert len(rows) == 3 and tuple(rows[0]) == METRIC_COLUMNS
     assert [int(r["timesteps"]) for r in rows] == [1024, 2048, 3072]
     assert all(int(r["violations"]) == 0 for r in rows)  # the CBF is on
-    record = json.loads((run / "config.json").read_text())
+    record = json.loads((run / "run.json").read_text())
     assert record["finished"] and record["config"] == "rl_cbf_clf"
     assert record["preset"] == "default" and record["n_envs"] == 8
     assert record["ppo"]["net_arch"] == {"pi": [64, 64], "vf": [64, 64]}
@@ -47,13 +47,13 @@ def test_paper_preset_and_validation(tmp_path: Path) -> None:
     from tlshield.presets import PRESETS
 
     paper = train("rl_cbf", 1, 1, tmp_path / "p", progress=False, preset="paper", **PAPER_ENV)
-    record = json.loads((paper / "config.json").read_text())
+    record = json.loads((paper / "run.json").read_text())
     assert record["ppo"]["net_arch"] == {"pi": [300, 200, 100], "vf": [300, 200, 100]}
     assert record["n_envs"] == 5 and read_metrics(paper)[0]["timesteps"] == "1000"
     assert record["env"]["reward"] == "paper" and record["env"]["gamma"] == 0.99
     every = PRESETS["default"]["validate_every"]
     checked = train("rl_cbf_clf", 2, every, tmp_path / "v", progress=False)
-    record = json.loads((checked / "config.json").read_text())
+    record = json.loads((checked / "run.json").read_text())
     rows = read_metrics(checked)
     assert record["kept"]["update"] == every
     assert float(rows[-1]["validation_success"]) == record["kept"]["validation_success"]
@@ -170,7 +170,7 @@ def test_train_and_evaluate_point_mass_from_the_cli(tmp_path: Path) -> None:
     out = tmp_path / "pm"
     args = ["train", "--env", "tlshield/PointMass-v0", "--config", "rl_cbf_clf"]
     assert cli.main([*args, "--updates", "1", "--out", str(out), "--quiet"]) == 0
-    record = json.loads((out / "config.json").read_text())
+    record = json.loads((out / "run.json").read_text())
     assert record["env_id"] == "tlshield/PointMass-v0" and record["finished"]
     rows = read_metrics(out)
     assert len(rows) == 1 and int(rows[0]["violations"]) == 0  # the HOCBF holds in training

@@ -9,7 +9,7 @@ import csv
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
-from tlshield.envs.channel import CONFIGS, ChannelConfig, channel_shield
+from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.evaluation import rollouts
 from tlshield.presets import clf_scale
 from tlshield.runs import METRIC_COLUMNS
@@ -125,13 +125,10 @@ def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
     }
 
 
-def scaled_clf(cfg: ChannelConfig, scale: float) -> ChannelConfig:
+def scaled_clf(cfg: ChannelParams, scale: float) -> ChannelParams:
     """``cfg`` with its CLF box scaled by ``scale``."""
-    (lo_v, lo_w), (hi_v, hi_w) = cfg.clf_bounds
-    return replace(
-        cfg,
-        clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)),
-    )
+    (lo_v, lo_w), (hi_v, hi_w) = cfg.shield.clf_bounds
+    return cfg.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
 
 
 class TrainingCallback(BaseCallback):  # type: ignore[misc]

@@ -149,7 +149,7 @@ def _train(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         **options,  # type: ignore[arg-type]
     )
-    print(f"wrote {run} (metrics.csv, model.zip, tb/, config.json)")
+    print(f"wrote {run} (metrics.csv, model.zip, tb/, run.json)")
     if args.evaluate:
         _print_evaluation(_evaluate_run(run, args.trials))
     return 0

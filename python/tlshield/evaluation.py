@@ -18,7 +18,7 @@ import numpy as np
 from tlshield.envs import ENV_ID, env_horizon, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
-from tlshield.runs import read_config
+from tlshield.runs import read_record
 from tlshield.seeds import EVAL_SEED
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
@@ -100,7 +100,7 @@ def evaluate(
     ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
     trial: reset seed, success, collision, steps, violating steps) and, for Channel-v0,
     ``trajectories.npz`` (each trial's start state, agent path and obstacle paths). The run's
-    environment is the one its config.json names (``env_id``; Channel-v0 when absent).
+    environment is the one its run.json names (``env_id``; Channel-v0 when absent).
     ``which="last"`` evaluates the last policy instead of the kept one and writes
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
     folder's pickled statistics load (see :mod:`tlshield.saved`)."""
@@ -108,7 +108,7 @@ def evaluate(
         raise ValueError(f"trials = {trials!r}: expected a positive integer")
     if which not in EVALUATION_FILES:
         raise ValueError(f"which = {which!r}: expected one of {', '.join(EVALUATION_FILES)}")
-    record = read_config(run)
+    record = read_record(run)
     if policy is None:
         policy = saved_policy(Path(run), which, trust_pickles=trust_pickles)
     evaluation_file, trajectories_file = EVALUATION_FILES[which]

@@ -3,8 +3,9 @@ figures.
 
 A results folder holds one run folder per configuration and seed (``<config>_s<seed>/``):
 
-* ``config.json``: what the run trained with (configuration, seed, preset, environment
-  overrides, PPO settings), whether it finished and which checkpoint was kept;
+* ``run.json`` (:data:`RUN_FILE`): the run's record, what it trained with (configuration,
+  seed, preset, environment overrides, PPO settings), whether it finished and which checkpoint
+  was kept (``config.json`` in folders written by tlshield 0.1, still read);
 * ``metrics.csv``: one row per PPO update (:data:`METRIC_COLUMNS`), written as it goes;
 * ``model.zip`` (SB3) with ``normalization.json`` (observation statistics: ``obs_mean``,
   ``obs_var``, ``epsilon``, ``clip_obs``), the kept policy, and ``last_model.zip`` with
@@ -30,18 +31,37 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield.envs.channel import CONFIGS, ChannelConfig
+from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.envs.layout import STATE_DIM
+from tlshield.envs.params import upgrade
 
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
     "METRIC_COLUMNS",
+    "RUN_FILE",
     "Run",
     "is_finished",
     "load_results",
     "load_run",
-    "read_config",
+    "read_record",
+    "record_path",
 ]
+
+#: The run's record in a run folder. "config" means one thing in tlshield, a configuration of
+#: the shield (rl, rl_cbf, rl_clf, rl_cbf_clf), so the file is no longer ``config.json``.
+RUN_FILE = "run.json"
+#: The record's name in run folders written by tlshield 0.1 (still read).
+OLD_RUN_FILE = "config.json"
+
+
+def record_path(folder: str | Path) -> Path:
+    """The record of the run in ``folder``: ``run.json``, else a 0.1 folder's ``config.json``
+    (``run.json``, which may not exist, when neither does)."""
+    folder = Path(folder)
+    new = folder / RUN_FILE
+    old = folder / OLD_RUN_FILE
+    return old if not new.is_file() and old.is_file() else new
+
 
 #: Diagnostics of learning, per update (the last columns of metrics.csv; NaN in older runs):
 #: the policy's std per action dimension (of the Gaussian before any squashing), the fraction
@@ -101,7 +121,7 @@ class Run:
     #: ``(starts, paths)`` of trajectories.npz: the ``(trials, 13)`` initial states and one
     #: ``(length, 2)`` xy path per trial; None when missing.
     trajectories: tuple[NDArray[np.float64], list[NDArray[np.float64]]] | None
-    #: The whole config.json.
+    #: The whole record (run.json).
     record: dict[str, Any] = field(default_factory=dict)
     #: One ``(length, 4)`` path of the two obstacle centres per trial (None when missing).
     obstacle_paths: list[NDArray[np.float64]] | None = None
@@ -114,9 +134,9 @@ class Run:
         return len(self.metrics["update"])
 
     @property
-    def env(self) -> ChannelConfig:
+    def env(self) -> ChannelParams:
         """The environment constants the run trained with (defaults for missing fields)."""
-        return _env_config(self.record)
+        return _env_params(self.record)
 
 
 def json_tuples(value: Any) -> Any:
@@ -124,16 +144,16 @@ def json_tuples(value: Any) -> Any:
     return tuple(json_tuples(v) for v in value) if isinstance(value, list) else value
 
 
-def _env_config(record: dict[str, Any]) -> ChannelConfig:
-    known = ChannelConfig.__dataclass_fields__
+def _env_params(record: dict[str, Any]) -> ChannelParams:
     env = record.get("env")
-    values = (
-        {k: json_tuples(v) for k, v in env.items() if k in known} if isinstance(env, dict) else {}
-    )
+    # A 0.1 record spells some parameters the old way: read them as data, without a warning.
+    env = upgrade(env, "run record", warn=False) if isinstance(env, dict) else {}
+    known = set(ChannelParams.flat_names())
+    values = {k: json_tuples(v) for k, v in env.items() if k in known}
     try:
-        return ChannelConfig(**values)
-    except TypeError:  # pragma: no cover - a config.json from an incompatible version
-        return ChannelConfig()
+        return ChannelParams.from_flat(values)
+    except TypeError:  # pragma: no cover - a record from an incompatible version
+        return ChannelParams()
 
 
 def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:
@@ -211,9 +231,9 @@ def _read_obstacle_paths(path: Path, lengths: list[int]) -> list[NDArray[np.floa
 
 
 def load_run(folder: str | Path) -> Run | None:
-    """The run in ``folder``; None when it has no readable ``config.json``."""
+    """The run in ``folder``; None when it has no readable record (``run.json``)."""
     folder = Path(folder)
-    record = _read_json(folder / "config.json")
+    record = _read_json(record_path(folder))
     if record is None or "config" not in record:
         return None
     try:
@@ -244,17 +264,17 @@ def load_results(results: str | Path) -> dict[str, list[Run]]:
     """The runs of a results folder: configuration -> runs sorted by seed, configurations in
     the paper's order ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf", then any other).
 
-    A run is a sub-folder with a ``config.json`` (``results`` itself counts when it is a run
+    A run is a sub-folder with a record (``run.json``; ``results`` itself counts when it is a run
     folder). Raises FileNotFoundError when the folder does not exist or holds no run.
     """
     root = Path(results)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: no such results folder")
-    folders = [root] if (root / "config.json").is_file() else sorted(root.iterdir())
+    folders = [root] if record_path(root).is_file() else sorted(root.iterdir())
     runs = [run for folder in folders if folder.is_dir() and (run := load_run(folder))]
     if not runs:
         raise FileNotFoundError(
-            f"{root}: no runs found (expected sub-folders <config>_s<seed>/ with a config.json, "
+            f"{root}: no runs found (expected sub-folders <config>_s<seed>/ with a run.json, "
             "as written by `tlshield reproduce --out`)"
         )
     grouped: dict[str, list[Run]] = {}
@@ -263,24 +283,24 @@ def load_results(results: str | Path) -> dict[str, list[Run]]:
     return grouped
 
 
-def read_config(run: str | Path) -> dict[str, Any]:
-    """The run's config.json (FileNotFoundError or ValueError with a clear message)."""
-    path = Path(run) / "config.json"
+def read_record(run: str | Path) -> dict[str, Any]:
+    """The run's record, ``run.json`` (FileNotFoundError or ValueError with a clear message)."""
+    path = record_path(run)
     if not path.is_file():
-        raise FileNotFoundError(f"{run}: not a tlshield run folder (no config.json)")
+        raise FileNotFoundError(f"{run}: not a tlshield run folder (no {RUN_FILE})")
     try:
         record = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{path}: not JSON ({err})") from None
     if not isinstance(record, dict) or "config" not in record:
-        raise ValueError(f'{path}: not a run\'s config.json (no "config" entry)')
+        raise ValueError(f'{path}: not a run\'s record (no "config" entry)')
     return record
 
 
 def is_finished(folder: str | Path, updates: int) -> bool:
     """Whether the run in ``folder`` finished training ``updates`` updates."""
     try:
-        record = read_config(folder)
+        record = read_record(folder)
     except FileNotFoundError:
         return False
     return bool(record.get("finished")) and record.get("updates") == updates

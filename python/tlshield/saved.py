@@ -10,7 +10,7 @@ and an observation is normalised as ``clip((obs - obs_mean) / sqrt(obs_var + eps
 -clip_obs, clip_obs)``.
 
 ``model.zip`` is read without unpickling anything: the policy network is rebuilt from the run's
-``config.json`` (policy class, layers, activation, initial log std) and the spaces of its
+``run.json`` (policy class, layers, activation, initial log std) and the spaces of its
 environment, and only ``policy.pth`` is loaded, with ``torch.load(weights_only=True)``, which
 accepts tensors and nothing else. The zip's ``data`` entry, where SB3 keeps cloudpickled
 fields (spaces, schedules, the policy class), is never read.
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs import ENV_ID, make
-from tlshield.runs import read_config
+from tlshield.runs import read_record
 
 __all__ = [
     "POLICY_FILES",
@@ -114,7 +114,7 @@ def _activation(name: str) -> Any:
 
 
 def _policy_network(record: dict[str, Any], model: Path) -> Any:
-    """The SB3 policy of a run, built from its config.json, with the weights of ``model``."""
+    """The SB3 policy of a run, built from its run.json, with the weights of ``model``."""
     import pickle
 
     import torch
@@ -150,9 +150,7 @@ def _policy_network(record: dict[str, Any], model: Path) -> Any:
         policy.load_state_dict(state)
     except (RuntimeError, TypeError, AttributeError) as err:
         first = str(err).strip().splitlines()[0]
-        raise ValueError(
-            f"{model}: the weights do not fit the run's config.json ({first})"
-        ) from None
+        raise ValueError(f"{model}: the weights do not fit the run's run.json ({first})") from None
     policy.set_training_mode(False)
     return policy
 
@@ -165,7 +163,7 @@ def load_policy(
     if which not in POLICY_FILES:
         raise ValueError(f"which = {which!r}: expected one of {', '.join(POLICY_FILES)}")
     run = Path(run)
-    record = read_config(run)
+    record = read_record(run)
     model_name, stats_name, pickle_name = POLICY_FILES[which]
     model = run / model_name
     if not model.is_file():

@@ -3,9 +3,9 @@
 
 A setting is one of
 
-* an environment constant (a field of :class:`tlshield.envs.ChannelConfig`, of
-  ``PointMassConfig`` for PointMass-v0 or ``FlatWorldConfig`` for FlatWorld-v0, which also
-  takes ``formula``): ``c_r``, ``w``, ``alpha``, ``c3``, ``K``, ``clf_bounds``, ...; for a
+* an environment constant (a field of :class:`tlshield.envs.ChannelParams`, of
+  ``PointMassParams`` for PointMass-v0 or ``FlatWorldParams`` for FlatWorld-v0, which also
+  takes ``formula``): ``c_r``, ``w``, ``alpha``, ``c3``, ``k``, ``clf_bounds``, ...; for a
   user's registered environment, any keyword of its factory (checked when it is built);
 * a PPO setting (:data:`PPO_NAMES`): ``learning_rate``, ``ent_coef``, ``n_epochs``,
   ``batch_size``, ...;
@@ -20,11 +20,11 @@ checked where they are given, against the list of known ones.
 from __future__ import annotations
 
 import json
-from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
+from tlshield.envs.params import flat_names, from_flat, upgrade
 from tlshield.runs import json_tuples
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
@@ -58,7 +58,7 @@ def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
     cls = _config_class(env_id)
     if cls is None:
         return ()
-    return (*(f.name for f in fields(cls)), *TASK_KEYWORDS.get(env_id, ()))
+    return (*flat_names(cls), *TASK_KEYWORDS.get(env_id, ()))
 
 
 def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
@@ -83,6 +83,7 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     """Keyword arguments of :func:`tlshield.training.train` for ``settings``: the schedule
     settings as themselves, the PPO ones under ``ppo``, the rest as environment overrides.
     Checks the names, and the environment constants by building the environment's config."""
+    settings = upgrade(settings, "settings")
     check_names(settings, env_id)
     out: dict[str, Any] = {k: settings[k] for k in SCHEDULE_NAMES if k in settings}
     ppo = {k: settings[k] for k in PPO_NAMES if k in settings}
@@ -95,7 +96,7 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
         task = TASK_KEYWORDS.get(env_id, ())
         constants = {k: v for k, v in env.items() if k not in task}
         try:
-            replace(cls(), **constants).check()
+            from_flat(cls, constants).check()
         except (TypeError, ValueError) as err:
             raise ValueError(f"settings: {err}") from None
     return {**out, **env}
@@ -112,6 +113,7 @@ def load(path: str | Path) -> tuple[dict[str, Any], str | None]:
     if not isinstance(settings, dict):
         raise ValueError(f"{path}: expected a JSON object of settings, {{name: value}}")
     config = data.get("config") if "settings" in data else None
+    settings = upgrade(settings, str(path))
     check_names(settings, data.get("env_id", ENV_ID), where=str(path))
     return settings, config
 
@@ -128,6 +130,7 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
             out[name.strip()] = json.loads(text)
         except json.JSONDecodeError:
             out[name.strip()] = text
+    out = upgrade(out, "--set")
     check_names(out, env_id, where="--set")
     return out
 
@@ -135,10 +138,10 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
 def _config_class(env_id: str) -> Any:
     """The config dataclass of a bundled environment; None for a user's registered one (an
     unregistered id is an error)."""
-    from tlshield.envs import ChannelConfig, check_env_id
-    from tlshield.envs.flatworld import FlatWorldConfig
-    from tlshield.envs.point_mass import PointMassConfig
+    from tlshield.envs import ChannelParams, check_env_id
+    from tlshield.envs.flatworld import FlatWorldParams
+    from tlshield.envs.point_mass import PointMassParams
 
-    classes = {ENV_ID: ChannelConfig, POINT_MASS_ID: PointMassConfig, FLATWORLD_ID: FlatWorldConfig}
+    classes = {ENV_ID: ChannelParams, POINT_MASS_ID: PointMassParams, FLATWORLD_ID: FlatWorldParams}
     check_env_id(env_id)
     return classes.get(env_id)

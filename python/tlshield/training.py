@@ -1,7 +1,7 @@
 """PPO on tlshield/Channel-v0 (Stable-Baselines3) with per-update metrics; the reproduction
 and the ablation of the README (training, then :func:`tlshield.evaluation.evaluate`).
 
-A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``config.json`` (what it ran
+A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``run.json`` (what it ran
 with, and which checkpoint was kept), ``metrics.csv`` (one row per update, written as it goes,
 so an interrupted run stays readable; with the learning diagnostics of
 :data:`tlshield.runs.DIAGNOSTIC_COLUMNS`), ``tb/`` (TensorBoard), ``model.zip`` with
@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -41,9 +41,10 @@ import numpy as np
 
 from tlshield.envs import ENV_ID, check_env_id, check_task_env, make
 from tlshield.envs.channel import CONFIGS
+from tlshield.envs.params import as_flat
 from tlshield.evaluation import evaluate
 from tlshield.presets import PRESETS, SCHEDULES
-from tlshield.runs import is_finished, load_run
+from tlshield.runs import RUN_FILE, is_finished, load_run
 from tlshield.seeds import check_seeds, train_seed
 
 
@@ -62,8 +63,8 @@ def _check_run_args(
         raise ValueError(f"final CLF scale {final_scale!r}: expected a number in (0, 1]")
 
 
-def _env_config(venv: Any) -> Any:
-    """The first sub-environment's config dataclass, or None (a user's environment)."""
+def _env_params(venv: Any) -> Any:
+    """The first sub-environment's parameters (``cfg``), or None (a user's environment)."""
     try:
         return venv.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
     except AttributeError:
@@ -106,8 +107,8 @@ def train(
 ) -> Path:
     """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
     ``"tlshield/PointMass-v0"``); returns the run folder. ``overrides`` are the environment's
-    config fields (``ChannelConfig``, ``PointMassConfig``). Ctrl-C stops cleanly: the metrics
-    so far and the model are kept (``config.json`` then says ``"interrupted": true``).
+    config fields (``ChannelParams``, ``PointMassParams``). Ctrl-C stops cleanly: the metrics
+    so far and the model are kept (``run.json`` then says ``"interrupted": true``).
     ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
     once it is written."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
@@ -133,10 +134,10 @@ def train(
     venv = VecNormalize(
         inner, norm_obs=True, norm_reward=settings.norm_reward, gamma=settings.ppo["gamma"]
     )
-    cfg = _env_config(inner)
+    cfg = _env_params(inner)
     schedule = (clf_schedule, clf_final_scale)
     record = _run_record(env, config, seed, updates, preset, schedule, settings, cfg, overrides)
-    (folder / "config.json").write_text(json.dumps(record, indent=2))
+    (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
     model = _ppo(settings, venv, seed)
     run = TrainingRun(
         folder=folder,
@@ -205,7 +206,7 @@ def _run_record(
     cfg: Any,
     overrides: dict[str, Any],
 ) -> dict[str, Any]:
-    """The run's ``config.json``: what it ran with (:mod:`tlshield.runs` reads it back)."""
+    """The run's ``run.json``: what it ran with (:mod:`tlshield.runs` reads it back)."""
     return {
         "env_id": env,
         "config": config,
@@ -224,7 +225,7 @@ def _run_record(
             "net_arch": settings.net_arch,
             "activation": "ReLU",
         },
-        "env": asdict(cfg) if cfg is not None else {},
+        "env": as_flat(cfg),
         "overrides": overrides,
         "interrupted": False,
         "finished": False,
@@ -259,7 +260,7 @@ def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
 
 def _learn(run: Any, timesteps: int, callback: Any) -> None:
     """Trains, then keeps the last policy (and the kept one when validation chose none) and the
-    final ``config.json``, also when interrupted (Ctrl-C is raised again afterwards)."""
+    final ``run.json``, also when interrupted (Ctrl-C is raised again afterwards)."""
     from tlshield.saved import save_normalization
 
     model, venv, record, folder = run.model, run.venv, run.record, run.folder
@@ -278,7 +279,7 @@ def _learn(run: Any, timesteps: int, callback: Any) -> None:
             model.save(folder / "model.zip")
             save_normalization(venv, folder / "normalization.json")
         record["wall_time"] = callback.elapsed()
-        (folder / "config.json").write_text(json.dumps(record, indent=2))
+        (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
         venv.close()
     if record["interrupted"]:
         raise KeyboardInterrupt

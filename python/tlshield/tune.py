@@ -30,7 +30,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from tlshield.envs.channel import CONFIGS, ChannelConfig
+from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.presets import PRESETS, SCHEDULES
 from tlshield.settings import split
 
@@ -48,7 +48,7 @@ SPACE: dict[str, tuple[str, tuple[Any, ...]]] = {
     "alpha": ("cbf", ("float", 0.5, 10.0, True)),
     "cbf_bounds": ("cbf", ("float", 0.75, 2.0, False)),
     "c3": ("clf", ("float", 0.1, 10.0, True)),
-    "K": ("clf", ("float", 1e2, 1e6, True)),
+    "k": ("clf", ("float", 1e2, 1e6, True)),
     "clf_bounds": ("clf", ("float", 0.25, 2.0, True)),
     "clf_schedule": ("clf", ("choice", SCHEDULES)),
     "clf_final_scale": ("clf", ("float", 0.05, 1.0, False)),
@@ -65,17 +65,17 @@ def _floor(name: str, value: float) -> float:
     return max(value, SPACE[name][1][1])
 
 
-_CFG = ChannelConfig()
+_CFG = ChannelParams()
 _PPO = PRESETS["default"]["ppo"]
 #: What each searched setting is when it is not searched, as sampled (the first trial): read
-#: from :class:`ChannelConfig` and the default preset, never copied.
+#: from :class:`ChannelParams` and the default preset, never copied.
 DEFAULTS: dict[str, Any] = {
-    "c_r": _CFG.c_r,
-    "w": _CFG.w,
-    "alpha": _CFG.alpha,
+    "c_r": _CFG.task.c_r,
+    "w": _CFG.obstacles.w,
+    "alpha": _CFG.shield.alpha,
     "cbf_bounds": 1.0,
-    "c3": _CFG.c3,
-    "K": _CFG.K,
+    "c3": _CFG.shield.c3,
+    "k": _CFG.shield.k,
     "clf_bounds": 1.0,
     "clf_schedule": SCHEDULES[0],
     "learning_rate": _PPO["learning_rate"],
@@ -97,16 +97,18 @@ def to_settings(params: dict[str, Any], config: str) -> dict[str, Any]:
     scales become boxes, the rest is as sampled."""
     out = {k: v for k, v in params.items() if k not in ("clf_bounds", "cbf_bounds")}
     if "clf_bounds" in params or "cbf_bounds" in params:
-        cfg = ChannelConfig()
+        cfg = ChannelParams()
         cbf, clf = CONFIGS[config]
-        clf_hi = [b * params.get("clf_bounds", 1.0) for b in cfg.clf_bounds[1]]
+        clf_hi = [b * params.get("clf_bounds", 1.0) for b in cfg.shield.clf_bounds[1]]
         if clf:
             out["clf_bounds"] = [[-b for b in clf_hi], clf_hi]
         if cbf:
             scale = params.get("cbf_bounds", 1.0)
             cbf_hi = [
                 max(b * scale, r + (c if clf else 0.0))
-                for b, r, c in zip(cfg.cbf_bounds[1], cfg.rl_bounds[1], clf_hi, strict=True)
+                for b, r, c in zip(
+                    cfg.shield.cbf_bounds[1], cfg.agent.rl_bounds[1], clf_hi, strict=True
+                )
             ]
             out["cbf_bounds"] = [[-b for b in cbf_hi], cbf_hi]
     return out

@@ -11,11 +11,12 @@ from tlshield.envs.channel import (
     CONFIGS,
     STATE_DIM,
     TASK,
-    ChannelConfig,
     ChannelEnv,
+    ChannelParams,
     channel_shield,
     channel_task_spec,
 )
+from tlshield.envs.params import renamed_class
 
 ENV_ID = "tlshield/Channel-v0"
 POINT_MASS_ID = "tlshield/PointMass-v0"
@@ -94,8 +95,8 @@ __all__ = [
     "POINT_MASS_ID",
     "STATE_DIM",
     "TASK",
-    "ChannelConfig",
     "ChannelEnv",
+    "ChannelParams",
     "channel_shield",
     "channel_task_spec",
     "check_env_id",
@@ -103,3 +104,8 @@ __all__ = [
     "env_horizon",
     "make",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The 0.1 names of the classes exported here, with a DeprecationWarning."""
+    return renamed_class(globals(), __name__, name)

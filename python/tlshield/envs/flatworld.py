@@ -20,7 +20,7 @@ trained per formula and its shield knows the discs and the dynamics.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
+from tlshield.envs.params import build, renamed_class
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -69,7 +70,7 @@ POS = (0, 1)
 
 
 @dataclass(frozen=True)
-class FlatWorldConfig:
+class FlatWorldParams:
     """Every constant of ``tlshield/FlatWorld-v0`` (each a keyword override of ``make``)."""
 
     # --- world (as published) ----------------------------------------------------------------
@@ -90,12 +91,12 @@ class FlatWorldConfig:
     #: exact for the Euler plant.
     alpha: float = 5.0
     c3: float = 1.0
-    #: CLF relaxation cost (see the README's note on K and the CLF box).
-    K: float = 1.0
+    #: CLF relaxation cost (the paper's K; see the README's note on it and the CLF box).
+    k: float = 1.0
     #: Box on a_clf, per axis.
     clf_bound: float = 0.5
     #: Barriers are kept this far above 0, for the Euler plant inside concave regions.
-    cbf_margin: float = 0.02
+    margin: float = 0.02
     #: Keep out of guards that set the task back, not only the trap's (the shield's default).
     preserve_progress: bool = True
 
@@ -105,7 +106,7 @@ class FlatWorldConfig:
             value = getattr(self, f.name)
             if not (isinstance(value, (int, float)) and math.isfinite(value)):
                 raise ValueError(f"{f.name} = {value!r}: expected a finite number")
-        for name in ("size", "step_size", "alpha", "c3", "K", "clf_bound", "cbf_margin"):
+        for name in ("size", "step_size", "alpha", "c3", "k", "clf_bound", "margin"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} = {getattr(self, name)!r}: expected a number > 0")
         if self.progress_scale <= 0:
@@ -139,7 +140,7 @@ def wall_barriers(size: float) -> dict[str, Halfspace]:
     }
 
 
-def flatworld_shield(cfg: FlatWorldConfig, config: str, spec: Spec) -> Shield | None:
+def flatworld_shield(cfg: FlatWorldParams, config: str, spec: Spec) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``): the safe set and the walls as
     barriers, the CLF towards the next region, the applied action in ``[-1, 1]^2``."""
     use_cbf, use_clf = CONFIGS[config]
@@ -150,13 +151,13 @@ def flatworld_shield(cfg: FlatWorldConfig, config: str, spec: Spec) -> Shield | 
         SingleIntegrator(pos=list(POS)),
         alpha=cfg.alpha,
         c3=cfg.c3,
-        K=cfg.K,
+        k=cfg.k,
         cbf_bounds=(-2.0, 2.0),
         clf_bounds=(-cfg.clf_bound, cfg.clf_bound),
         action_bounds=(-1.0, 1.0),
         rl_bounds=(-1.0, 1.0),
         barriers=wall_barriers(cfg.size),
-        margin=cfg.cbf_margin,
+        margin=cfg.margin,
         use_cbf=use_cbf,
         use_clf=use_clf,
         preserve_progress=bool(cfg.preserve_progress),
@@ -175,8 +176,8 @@ class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, cfg: FlatWorldConfig | None = None, render_mode: str | None = None) -> None:
-        self.cfg = cfg or FlatWorldConfig()
+    def __init__(self, cfg: FlatWorldParams | None = None, render_mode: str | None = None) -> None:
+        self.cfg = cfg or FlatWorldParams()
         self.model = SingleIntegrator(pos=list(POS))
         # The farthest a step can leave the square: the last observation of an exit.
         s = self.cfg.size + self.cfg.step_size * math.sqrt(2.0)
@@ -249,16 +250,11 @@ def make_flatworld(
     configuration. Observation: ``[x, y]`` then the one-hot automaton state. Reward: the
     progress-aware task reward. Terminated on success, on entering the trap (the formula is
     violated) and on leaving the square (both failures, paying the trap penalty); truncated at
-    the horizon. Any :class:`FlatWorldConfig` field is a keyword override.
+    the horizon. Any :class:`FlatWorldParams` field is a keyword override.
     """
     if config not in CONFIGS:
         raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
-    known = {f.name for f in fields(FlatWorldConfig)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        raise TypeError(f"unknown FlatWorld-v0 parameter(s) {unknown}; known: {sorted(known)}")
-    cfg = replace(FlatWorldConfig(), **overrides)
-    cfg.check()
+    cfg = build(FlatWorldParams, overrides, "FlatWorld-v0")
     spec = flatworld_spec(formula)
     env: gym.Env = FsaAugmented(
         FlatWorld(cfg, render_mode=render_mode),
@@ -276,3 +272,8 @@ def make_flatworld(
     if shield is not None:
         env = Shielded(env, shield)
     return env
+
+
+def __getattr__(name: str) -> Any:
+    """The 0.1 names of this module's classes, with a DeprecationWarning."""
+    return renamed_class(globals(), __name__, name)

@@ -12,7 +12,7 @@ second-order CLF (see the README's Semantics).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Ball, DoubleIntegrator, Shield, Spec
+from tlshield.envs.params import build, renamed_class
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: Visit a, then b; stay out of both obstacles until b.
@@ -39,7 +40,7 @@ POS, VEL = (0, 1), (2, 3)
 
 
 @dataclass(frozen=True)
-class PointMassConfig:
+class PointMassParams:
     """Every constant of ``tlshield/PointMass-v0`` (each a keyword override of ``make``)."""
 
     # --- room and task --------------------------------------------------------------------
@@ -75,12 +76,12 @@ class PointMassConfig:
     alpha: float = 1.0
     alpha2: float = 2.0
     c3: float = 0.5
-    K: float = 1e4
+    k: float = 1e4
     clf_gain: float = 0.5
     #: Box on a_clf: narrow, so the RL action can overpower the CLF.
     clf_bound: float = 0.3
     #: Barriers are kept this far above 0 (m), so the Euler plant's error stays outside.
-    cbf_margin: float = 0.02
+    margin: float = 0.02
 
     def check(self) -> None:
         """Raises ValueError naming the first bad constant."""
@@ -90,7 +91,7 @@ class PointMassConfig:
                 if not (isinstance(v, (int, float)) and math.isfinite(v)):
                     raise ValueError(f"{f.name} = {value!r}: expected finite numbers")
         positive = ("goal_radius", "obstacle_radius", "max_accel", "dt", "alpha", "alpha2")
-        positive += ("c3", "K", "clf_gain", "clf_bound", "progress_scale", "cbf_margin")
+        positive += ("c3", "k", "clf_gain", "clf_bound", "progress_scale", "margin")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} = {getattr(self, name)!r}: expected a number > 0")
@@ -118,9 +119,9 @@ class PointMassConfig:
                     )
 
 
-def point_mass_spec(cfg: PointMassConfig | None = None) -> Spec:
+def point_mass_spec(cfg: PointMassParams | None = None) -> Spec:
     """The task spec over the state ``[x, y, vx, vy]``."""
-    cfg = cfg or PointMassConfig()
+    cfg = cfg or PointMassParams()
 
     def disc(centre: tuple[float, float], radius: float) -> Ball:
         return Ball(pos=list(POS), radius=radius, center=list(centre))
@@ -136,7 +137,7 @@ def point_mass_spec(cfg: PointMassConfig | None = None) -> Spec:
     )
 
 
-def point_mass_shield(cfg: PointMassConfig, config: str, spec: Spec) -> Shield | None:
+def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``): HOCBF rows for the obstacles and the
     goals' literals, the second-order CLF, the applied action kept in the acceleration box."""
     use_cbf, use_clf = CONFIGS[config]
@@ -149,13 +150,13 @@ def point_mass_shield(cfg: PointMassConfig, config: str, spec: Spec) -> Shield |
         alpha=cfg.alpha,
         alpha2=cfg.alpha2,
         c3=cfg.c3,
-        K=cfg.K,
+        k=cfg.k,
         cbf_bounds=(-2 * accel, 2 * accel),
         clf_bounds=(-cfg.clf_bound, cfg.clf_bound),
         action_bounds=(-accel, accel),
         rl_bounds=(-accel, accel),
         clf_gain=cfg.clf_gain,
-        margin=cfg.cbf_margin,
+        margin=cfg.margin,
         use_cbf=use_cbf,
         use_clf=use_clf,
     )
@@ -175,7 +176,7 @@ class PointMassRoom(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
-    def __init__(self, cfg: PointMassConfig) -> None:
+    def __init__(self, cfg: PointMassParams) -> None:
         self.cfg = cfg
         self.model = DoubleIntegrator(pos=list(POS), vel=list(VEL))
         lo, hi = cfg.room
@@ -243,16 +244,11 @@ def make_point_mass(
     automaton state. Reward: the progress-aware task reward (finishing always out-earns
     dawdling) plus the room's collision penalty. Terminated when the task is done; truncated at
     the horizon. ``info`` adds ``fsa_state``, ``success``, ``trap``, ``tl_reward`` and, with a
-    shield, ``shield``. Any :class:`PointMassConfig` field is a keyword override.
+    shield, ``shield``. Any :class:`PointMassParams` field is a keyword override.
     """
     if config not in CONFIGS:
         raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
-    known = {f.name for f in fields(PointMassConfig)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        raise TypeError(f"unknown PointMass-v0 parameter(s) {unknown}; known: {sorted(known)}")
-    cfg = replace(PointMassConfig(), **overrides)
-    cfg.check()
+    cfg = build(PointMassParams, overrides, "PointMass-v0")
     spec = point_mass_spec(cfg)
     env: gym.Env = FsaAugmented(
         PointMassRoom(cfg),
@@ -270,3 +266,8 @@ def make_point_mass(
     if shield is not None:
         env = Shielded(env, shield)
     return env
+
+
+def __getattr__(name: str) -> Any:
+    """The 0.1 names of this module's classes, with a DeprecationWarning."""
+    return renamed_class(globals(), __name__, name)

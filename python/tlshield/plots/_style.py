@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tlshield.envs.channel import ChannelConfig
+from tlshield.envs.channel import ChannelParams
 from tlshield.runs import Run
 
 #: The colour of each configuration, the same in every figure.
@@ -79,5 +79,5 @@ def _no_data(ax: Any, text: str) -> None:
     )
 
 
-def _env_of(groups: dict[str, list[Run]]) -> ChannelConfig:
+def _env_of(groups: dict[str, list[Run]]) -> ChannelParams:
     return next(iter(groups.values()))[0].env

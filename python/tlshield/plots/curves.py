@@ -47,7 +47,7 @@ def _curve(
 
 
 def _training_of(groups: dict[str, list[Run]]) -> tuple[int, float]:
-    """Environment steps per update and the discount of the runs (their config.json)."""
+    """Environment steps per update and the discount of the runs (their run.json)."""
     record = next(iter(groups.values()))[0].record
     ppo = record.get("ppo", {})
     steps = int(record.get("n_envs", 5)) * int(ppo.get("n_steps", 200))
@@ -209,7 +209,8 @@ def _plot_min_constraints(groups: dict[str, list[Run]], path: Path) -> Path:
 
 
 def _plot_min_obstacle_distance(groups: dict[str, list[Run]], path: Path) -> Path:
-    env = _env_of(groups)
+    obstacles = _env_of(groups).obstacles
+    radius, safe = obstacles.obstacle_radius, obstacles.safe_distance
     return _curves_figure(
         groups,
         [("min_obstacle_distance", "")],
@@ -217,10 +218,10 @@ def _plot_min_obstacle_distance(groups: dict[str, list[Run]], path: Path) -> Pat
         "Smallest obstacle distance per update (mean ± std over seeds)",
         path,
         hlines=[
-            (env.obstacle_radius, "-", f"collision distance ({env.obstacle_radius:g} m)"),
-            (env.safe_distance, ":", f"reward safe distance ({env.safe_distance:g} m)"),
+            (radius, "-", f"collision distance ({radius:g} m)"),
+            (safe, ":", f"reward safe distance ({safe:g} m)"),
         ],
-        shade_below=env.obstacle_radius,
+        shade_below=radius,
         ymin=0.0,
     )
 

@@ -62,12 +62,12 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
             continue
         start, trial = run.trajectories[0][0], run.trajectories[1][0]
         goals = np.array([start[list(d)] for d in GOAL_DIMS])
-        points += [trial, goals - env.goal_radius, goals + env.goal_radius]
+        points += [trial, goals - env.task.goal_radius, goals + env.task.goal_radius]
     cloud = np.vstack(points)
     lo_xy, hi_xy = cloud.min(axis=0) - 0.8, cloud.max(axis=0) + 0.8
     side = float(max(hi_xy - lo_xy))
     centre = (lo_xy + hi_xy) / 2
-    a_lo, a_hi = env.arena
+    a_lo, a_hi = env.agent.arena
     lo = max(float(min(centre - side / 2)), a_lo - 0.5)
     hi = min(float(max(centre + side / 2)), a_hi + 0.5)
     lo, hi = min(lo, hi - 2.0), max(hi, lo + 2.0)
@@ -84,7 +84,7 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
         run = chosen[config]
         color = _color(config, configs)
         cenv = run.env if run is not None else env
-        draw_channel(ax, cenv.half_width, lo - 5, hi + 5, alpha=0.1, label="channel")
+        draw_channel(ax, cenv.task.half_width, lo - 5, hi + 5, alpha=0.1, label="channel")
         ax.set_xlim(lo, hi)
         ax.set_ylim(lo, hi)
         ax.set_aspect("equal", adjustable="box")
@@ -100,7 +100,7 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
             ax.add_patch(
                 Circle(
                     centre_k,
-                    cenv.goal_radius,
+                    cenv.task.goal_radius,
                     facecolor=_GOAL_COLOR,
                     alpha=0.35,
                     edgecolor=_GOAL_COLOR,
@@ -118,7 +118,7 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
             ax.add_patch(
                 Circle(
                     where,
-                    cenv.obstacle_radius,
+                    cenv.obstacles.obstacle_radius,
                     facecolor="none",
                     edgecolor=_OBSTACLE_COLOR,
                     hatch="////",
@@ -142,7 +142,7 @@ def _plot_trajectories(groups: dict[str, list[Run]], path: Path) -> Path:
         Patch(
             facecolor=_CHANNEL_COLOR,
             alpha=0.25,
-            label=f"channel |x {_MINUS} y| < {env.half_width:g}",
+            label=f"channel |x {_MINUS} y| < {env.task.half_width:g}",
         ),
         Patch(facecolor=_GOAL_COLOR, alpha=0.45, label="goals g1, g2, g3"),
         Patch(

@@ -45,8 +45,10 @@ pub use monitor::{Monitor, MonitorBatch, TaskReward, TaskStep};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
+#[allow(deprecated)]
+pub use shield::ShieldConfig;
 pub use shield::{
-    Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldConfig,
+    Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldParams,
     SolvedBy, SolverChoice, Status,
 };
 pub use spec::Spec;

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 use std::sync::Arc;
 
 use tlshield_core::{
-    Automaton, Barrier, Bounds, Center, Dynamics, Predicate, Shield, ShieldConfig, Spec, Status,
+    Automaton, Barrier, Bounds, Center, Dynamics, Predicate, Shield, ShieldParams, Spec, Status,
 };
 
 /// Adversarial steps per model (the README quotes this run).
@@ -38,29 +38,29 @@ fn shield(model: Dynamics, accel: f64, in_formula: bool) -> Shield {
     let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
     let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![50.0, 50.0])).unwrap();
     let m = model.inputs();
-    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
+    let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
         .with_alpha2(Some(2.0))
         // Kept 1 cm clear in continuous time, so the Euler plant's O(dt^2) error per step
         // cannot carry the state inside.
         .with_margin(1e-2)
         .with_parts(true, false)
         .with_action_bounds(Some(bounds(accel, m)));
-    let (spec, config) = if in_formula {
+    let (spec, params) = if in_formula {
         (
             Spec::new("!o U g", [("o", obstacle), ("g", goal)]).unwrap(),
-            config,
+            params,
         )
     } else {
         let barrier = Barrier::outside("o", obstacle);
         (
             Spec::new("F g", [("g", goal)]).unwrap(),
-            config.with_barriers(vec![barrier]),
+            params.with_barriers(vec![barrier]),
         )
     };
     Shield::new(
         Arc::new(Automaton::build(&spec).unwrap()),
         Some(model),
-        config,
+        params,
     )
     .unwrap()
 }
@@ -177,16 +177,16 @@ fn a_second_order_barrier_needs_alpha2() {
     let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
     let spec = Spec::new("F o", [("o", obstacle.clone())]).unwrap();
     let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
-    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
+    let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
         .with_barriers(vec![Barrier::outside("o", obstacle)]);
     let aut = Arc::new(Automaton::build(&spec).unwrap());
-    let err = Shield::new(aut.clone(), Some(model.clone()), config.clone()).unwrap_err();
+    let err = Shield::new(aut.clone(), Some(model.clone()), params.clone()).unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("relative degree 2") && text.contains("alpha2"),
         "{text}"
     );
-    assert!(Shield::new(aut, Some(model), config.with_alpha2(Some(1.0))).is_ok());
+    assert!(Shield::new(aut, Some(model), params.with_alpha2(Some(1.0))).is_ok());
 }
 
 #[test]
@@ -197,11 +197,11 @@ fn a_barrier_no_input_can_reach_is_an_error() {
     let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![5.0, 5.0])).unwrap();
     let spec = Spec::new("F g", [("g", goal)]).unwrap();
     let model = Dynamics::double_integrator(vec![0, 1], vec![2, 3]).unwrap();
-    let config = ShieldConfig::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
+    let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(5.0, 2), bounds(0.5, 2))
         .with_alpha2(Some(1.0))
         .with_barriers(vec![Barrier::outside("far", other)]);
     let aut = Arc::new(Automaton::build(&spec).unwrap());
-    let text = Shield::new(aut, Some(model), config)
+    let text = Shield::new(aut, Some(model), params)
         .unwrap_err()
         .to_string();
     assert!(

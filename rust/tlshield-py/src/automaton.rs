@@ -9,7 +9,8 @@ use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
 
-use crate::convert::{state, vector, FloatArray};
+use crate::convert::{batch_order_hint, order_hint, state, vector, FloatArray};
+use crate::errors::deprecated;
 use crate::errors::map;
 use crate::literals::LiteralNames;
 use crate::progress::PyProgressReward;
@@ -53,6 +54,17 @@ impl PyAutomaton {
 
     fn state(&self, q: &Bound<'_, PyAny>) -> PyResult<usize> {
         state(q, "q", &self.inner)
+    }
+
+    /// The FSA state ``q`` of a ``(s, q)`` call, after checking the order (see [`order_hint`]).
+    fn state_after(
+        &self,
+        s: &Bound<'_, PyAny>,
+        q: &Bound<'_, PyAny>,
+        s_name: &str,
+    ) -> PyResult<usize> {
+        order_hint(s, q, s_name)?;
+        self.state(q)
     }
 }
 
@@ -123,19 +135,20 @@ impl PyAutomaton {
     }
 
     /// The state after reading state vector ``s`` from state ``q``.
-    fn step(&self, q: &Bound<'_, PyAny>, s: &Bound<'_, PyAny>) -> PyResult<usize> {
-        let q = self.state(q)?;
+    fn step(&self, s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>) -> PyResult<usize> {
+        let q = self.state_after(s, q, "s")?;
         map(self.inner.step(q, &vector(s, "s")?))
     }
 
-    /// Steps many automata at once: ``qs`` (B,) ints, ``states`` (B, n) -> (B,) next states.
+    /// Steps many automata at once: ``states`` (B, n), ``qs`` (B,) ints -> (B,) next states.
     /// Parallel, with the GIL released.
     fn step_batch<'py>(
         &self,
         py: Python<'py>,
-        qs: &Bound<'py, PyAny>,
         states: &Bound<'py, PyAny>,
+        qs: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        batch_order_hint(states, qs)?;
         let qs = crate::convert::states(qs, "qs", &self.inner)?;
         let arr = FloatArray::extract(states, "states", 2, "(B, n)")?;
         if arr.shape()[0] != qs.len() {
@@ -177,15 +190,15 @@ impl PyAutomaton {
     /// Eq. 5A1: ``min(rho(s', D_q), c_r * rho(s', !psi_{q,trap}))`` for leaving ``q`` into
     /// ``s_next``; ``rho(s', D_q)`` without a trap edge; 0 in the accepting state;
     /// ``trap_penalty`` in the trap (required there).
-    #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
+    #[pyo3(signature = (s_next, q, c_r, trap_penalty=None))]
     fn reward(
         &self,
-        q: &Bound<'_, PyAny>,
         s_next: &Bound<'_, PyAny>,
+        q: &Bound<'_, PyAny>,
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> PyResult<f64> {
-        let q = self.state(q)?;
+        let q = self.state_after(s_next, q, "s_next")?;
         map(self
             .inner
             .reward(q, &vector(s_next, "s_next")?, c_r, trap_penalty))
@@ -231,15 +244,15 @@ impl PyAutomaton {
     /// as ``(literal, robustness)`` pairs (``("!g3", 2.4)``; empty when ``q`` has no trap
     /// edge), each literal once. ``preserve_progress=True`` reads ``avoid_cnf(q)`` instead
     /// (the shield's default).
-    #[pyo3(signature = (q, s, preserve_progress=false))]
+    #[pyo3(signature = (s, q, preserve_progress=false))]
     fn safe_set<'py>(
         &self,
         py: Python<'py>,
-        q: &Bound<'_, PyAny>,
         s: &Bound<'py, PyAny>,
+        q: &Bound<'_, PyAny>,
         preserve_progress: bool,
     ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
-        let q = self.state(q)?;
+        let q = self.state_after(s, q, "s")?;
         let kept = map(self.inner.safe_set(q, &vector(s, "s")?, preserve_progress))?;
         Ok(self.kept(py, &kept))
     }
@@ -248,6 +261,8 @@ impl PyAutomaton {
     /// ``(q_next, reward, safe_set)`` with ``q_next = step(q, s_next)``,
     /// ``reward = reward(q, s_next, c_r, trap_penalty)`` and
     /// ``safe_set = safe_set(q_next, s_next)`` (the constraints for the next action).
+    ///
+    /// Deprecated (a ``DeprecationWarning``): ``Monitor.advance`` does this and keeps ``q``.
     #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
     #[allow(clippy::type_complexity)]
     fn advance<'py>(
@@ -258,6 +273,10 @@ impl PyAutomaton {
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, f64)>)> {
+        deprecated(
+            py,
+            "Automaton.advance is deprecated: use tlshield.Monitor (reset, advance)",
+        )?;
         let q = self.state(q)?;
         let mut kept = Vec::new();
         let (next, reward) =
@@ -274,10 +293,10 @@ impl PyAutomaton {
     fn goal<'py>(
         &self,
         py: Python<'py>,
-        q: &Bound<'_, PyAny>,
         s: &Bound<'py, PyAny>,
+        q: &Bound<'_, PyAny>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        let q = self.state(q)?;
+        let q = self.state_after(s, q, "s")?;
         Ok(map(self.inner.goal(q, &vector(s, "s")?))?.map(|g| g.into_pyarray(py)))
     }
 

@@ -6,7 +6,8 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use tlshield_core::{Automaton, ProgressParams, ProgressReward};
 
-use crate::convert::{state, vector};
+use crate::convert::{order_hint, state, vector};
+use crate::errors::deprecated;
 use crate::errors::map;
 
 /// The progress-aware task reward of an automaton (beyond the paper's Eq. 5A1): a potential
@@ -93,20 +94,29 @@ impl PyProgressReward {
     }
 
     /// ``Phi(s, q)``.
-    fn potential(&self, q: &Bound<'_, PyAny>, s: &Bound<'_, PyAny>) -> PyResult<f64> {
+    fn potential(&self, s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>) -> PyResult<f64> {
+        order_hint(s, q, "s")?;
         let q = state(q, "q", &self.automaton)?;
         let s = vector(s, "s")?;
         Ok(self.inner.potential(&map(self.automaton.read(&s))?, q))
     }
 
     /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
-    /// episode with ``q = automaton.step(automaton.initial, s_0)`` and ``phi = 0``.
+    /// episode with ``q = automaton.step(s_0, automaton.initial)`` and ``phi = 0``.
+    ///
+    /// Deprecated (a ``DeprecationWarning``): a ``Monitor`` with this reward does this and
+    /// keeps ``q`` and ``phi``.
     fn advance(
         &self,
+        py: Python<'_>,
         q: &Bound<'_, PyAny>,
         phi: f64,
         s_next: &Bound<'_, PyAny>,
     ) -> PyResult<(usize, f64, f64)> {
+        deprecated(
+            py,
+            "ProgressReward.advance is deprecated: use tlshield.Monitor(automaton, progress)",
+        )?;
         let q = state(q, "q", &self.automaton)?;
         map(self
             .inner

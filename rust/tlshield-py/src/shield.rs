@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::{
     Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
-    ShieldConfig, SolvedBy, SolverChoice, Status,
+    ShieldParams, SolvedBy, SolverChoice, Status,
 };
 
 use crate::automaton::PyAutomaton;
@@ -293,18 +293,18 @@ fn automaton_of(obj: &Bound<'_, PyAny>) -> PyResult<Arc<Automaton>> {
 impl PyShield {
     #[new]
     #[pyo3(signature = (
-        spec, dynamics, *, alpha, c3, K, cbf_bounds, clf_bounds, action_bounds=None,
+        spec, dynamics, *, alpha, c3, k, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
     ))]
-    #[allow(non_snake_case, clippy::too_many_arguments)]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         spec: &Bound<'_, PyAny>,
         dynamics: &Bound<'_, PyAny>,
         alpha: f64,
         c3: f64,
-        K: f64,
+        k: f64,
         cbf_bounds: &Bound<'_, PyAny>,
         clf_bounds: &Bound<'_, PyAny>,
         action_bounds: Option<&Bound<'_, PyAny>>,
@@ -333,12 +333,12 @@ impl PyShield {
         };
         let pos = match pos {
             Some(p) => crate::convert::indices(p, "pos")?,
-            None => ShieldConfig::DEFAULT_POS.to_vec(),
+            None => ShieldParams::DEFAULT_POS.to_vec(),
         };
-        let config = ShieldConfig::new(
+        let params = ShieldParams::new(
             alpha,
             c3,
-            K,
+            k,
             bounds(cbf_bounds, "cbf_bounds", m)?,
             bounds(clf_bounds, "clf_bounds", m)?,
         )
@@ -357,20 +357,20 @@ impl PyShield {
         .with_pos(pos)
         .with_parts(use_cbf, use_clf)
         .with_solver(map(SolverChoice::parse(solver))?)
-        // None keeps the core's defaults (ShieldConfig::DEFAULT_SLACK_PENALTY, DEFAULT_MARGIN).
-        .with_slack_penalty(slack_penalty.unwrap_or(ShieldConfig::DEFAULT_SLACK_PENALTY))
-        .with_margin(margin.unwrap_or(ShieldConfig::DEFAULT_MARGIN))
+        // None keeps the core's defaults (ShieldParams::DEFAULT_SLACK_PENALTY, DEFAULT_MARGIN).
+        .with_slack_penalty(slack_penalty.unwrap_or(ShieldParams::DEFAULT_SLACK_PENALTY))
+        .with_margin(margin.unwrap_or(ShieldParams::DEFAULT_MARGIN))
         .with_alpha2(alpha2)
-        .with_clf_gain(clf_gain.unwrap_or(ShieldConfig::DEFAULT_CLF_GAIN))
+        .with_clf_gain(clf_gain.unwrap_or(ShieldParams::DEFAULT_CLF_GAIN))
         .with_preserve_progress(preserve_progress);
-        let barrier_names = config
+        let barrier_names = params
             .barriers
             .iter()
             .map(|b| PyString::new(py, &b.name).unbind())
             .collect();
         let literals = LiteralNames::new(py, automaton.spec().atoms());
         Ok(PyShield {
-            inner: map(Shield::new(automaton, dynamics, config))?,
+            inner: map(Shield::new(automaton, dynamics, params))?,
             barrier_names,
             literals,
         })
@@ -520,9 +520,9 @@ impl PyShield {
     }
 
     fn __repr__(&self) -> String {
-        let c = self.inner.config();
+        let c = self.inner.params();
         format!(
-            "Shield(alpha={}, c3={}, K={}, use_cbf={}, use_clf={}, barriers={}, pos={:?}, inputs={})",
+            "Shield(alpha={}, c3={}, k={}, use_cbf={}, use_clf={}, barriers={}, pos={:?}, inputs={})",
             c.alpha,
             c.c3,
             c.k,

@@ -231,9 +231,14 @@ impl Bounds {
     }
 }
 
+/// The 0.1 name of [`ShieldParams`] ("config" now means only a configuration of the case
+/// study: rl, rl_cbf, rl_clf, rl_cbf_clf).
+#[deprecated(since = "0.2.0", note = "renamed `ShieldParams`")]
+pub type ShieldConfig = ShieldParams;
+
 /// The shield's parameters (names as in the paper).
 #[derive(Debug, Clone, PartialEq)]
-pub struct ShieldConfig {
+pub struct ShieldParams {
     /// CBF class-K gain: `dh/dt + alpha h >= 0` (> 0). For a second-order (HOCBF) row it is
     /// the first gain: `psi_1 = dh/dt + alpha h`.
     pub alpha: f64,
@@ -273,7 +278,7 @@ pub struct ShieldConfig {
     pub slack_penalty: f64,
     /// Barrier rows enforce `h - margin` (>= 0): the CBF alone keeps `h >= 0`, but an atom
     /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
-    /// to `h = 0` exactly and count as a violation. Small ([`ShieldConfig::DEFAULT_MARGIN`]).
+    /// to `h = 0` exactly and count as a violation. Small ([`ShieldParams::DEFAULT_MARGIN`]).
     pub margin: f64,
     /// Whether the safe set also keeps the state out of guards that set the task back (the
     /// progress-preserving safe set, [`crate::Reading::progress_safe_set`]; beyond the paper).
@@ -281,7 +286,7 @@ pub struct ShieldConfig {
     pub preserve_progress: bool,
 }
 
-impl ShieldConfig {
+impl ShieldParams {
     /// Default cost per unit of barrier slack in the relaxed problem.
     pub const DEFAULT_SLACK_PENALTY: f64 = 1e6;
     /// Default barrier margin: `h` is kept above this, so atoms (`rho > 0`) stay true.
@@ -292,11 +297,11 @@ impl ShieldConfig {
     pub const DEFAULT_CLF_GAIN: f64 = 1.0;
 
     /// The gains and boxes every shield needs; everything else at its default: no actuator
-    /// limits, no user barriers, the CLF on [`ShieldConfig::DEFAULT_POS`], both CBF and CLF on,
-    /// [`SolverChoice::Auto`], [`ShieldConfig::DEFAULT_SLACK_PENALTY`] and
-    /// [`ShieldConfig::DEFAULT_MARGIN`]. Validated by [`Shield::new`].
+    /// limits, no user barriers, the CLF on [`ShieldParams::DEFAULT_POS`], both CBF and CLF on,
+    /// [`SolverChoice::Auto`], [`ShieldParams::DEFAULT_SLACK_PENALTY`] and
+    /// [`ShieldParams::DEFAULT_MARGIN`]. Validated by [`Shield::new`].
     pub fn new(alpha: f64, c3: f64, k: f64, cbf_bounds: Bounds, clf_bounds: Bounds) -> Self {
-        ShieldConfig {
+        ShieldParams {
             alpha,
             alpha2: None,
             c3,
@@ -323,7 +328,7 @@ impl ShieldConfig {
         self
     }
 
-    /// The range of the RL action (see [`ShieldConfig::rl_bounds`]).
+    /// The range of the RL action (see [`ShieldParams::rl_bounds`]).
     pub fn with_rl_bounds(mut self, bounds: Option<Bounds>) -> Self {
         self.rl_bounds = bounds;
         self
@@ -366,7 +371,7 @@ impl ShieldConfig {
         self
     }
 
-    /// Whether the safe set preserves progress (see [`ShieldConfig::preserve_progress`]).
+    /// Whether the safe set preserves progress (see [`ShieldParams::preserve_progress`]).
     pub fn with_preserve_progress(mut self, on: bool) -> Self {
         self.preserve_progress = on;
         self
@@ -388,7 +393,7 @@ impl ShieldConfig {
 /// Where an enforced barrier comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BarrierSource {
-    /// The user's barrier with this index in [`ShieldConfig::barriers`].
+    /// The user's barrier with this index in [`ShieldParams::barriers`].
     User(usize),
     /// The literal kept from a clause of the FSA state's safe set.
     SafeSet(Literal),
@@ -592,7 +597,7 @@ impl OutRows<'_> {
 pub struct Shield {
     automaton: Arc<Automaton>,
     dynamics: Option<Dynamics>,
-    config: ShieldConfig,
+    params: ShieldParams,
     /// Which rows are second order (HOCBF) under the model.
     orders: Orders,
     m: usize,
@@ -606,7 +611,7 @@ impl std::fmt::Debug for Shield {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Shield")
             .field("dynamics", &self.dynamics)
-            .field("config", &self.config)
+            .field("params", &self.params)
             .field("inputs", &self.m)
             .finish()
     }
@@ -628,8 +633,8 @@ fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
 /// limits must allow 0. Without that authority the barrier rows can become infeasible, and the
 /// relaxed answer breaks them. (For the driftless models, unicycle and single integrator,
 /// applying nothing keeps every barrier where it is; the CBF row then holds for any h >= margin.)
-fn check_cover(config: &ShieldConfig, rl: &Bounds) -> Result<(), ShieldError> {
-    let (cbf, clf) = (&config.cbf_bounds, &config.clf_bounds);
+fn check_cover(params: &ShieldParams, rl: &Bounds) -> Result<(), ShieldError> {
+    let (cbf, clf) = (&params.cbf_bounds, &params.clf_bounds);
     for j in 0..rl.lo.len() {
         let (need_lo, need_hi) = (-rl.hi[j], -rl.lo[j]);
         if cbf.lo[j] > need_lo || cbf.hi[j] < need_hi {
@@ -641,7 +646,7 @@ fn check_cover(config: &ShieldConfig, rl: &Bounds) -> Result<(), ShieldError> {
             )));
         }
         let (sum_lo, sum_hi) = (cbf.lo[j] + clf.lo[j], cbf.hi[j] + clf.hi[j]);
-        if config.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
+        if params.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
             return Err(ShieldError::Config(format!(
                 "cbf_bounds[{j}] = ({}, {}) plus clf_bounds[{j}] = ({}, {}) reach ({sum_lo}, \
                  {sum_hi}), which cannot cancel every RL action in rl_bounds[{j}] = ({}, {}): \
@@ -649,7 +654,7 @@ fn check_cover(config: &ShieldConfig, rl: &Bounds) -> Result<(), ShieldError> {
                 cbf.lo[j], cbf.hi[j], clf.lo[j], clf.hi[j], rl.lo[j], rl.hi[j]
             )));
         }
-        if let Some(act) = &config.action_bounds {
+        if let Some(act) = &params.action_bounds {
             if act.lo[j] > 0.0 || act.hi[j] < 0.0 {
                 return Err(ShieldError::Config(format!(
                     "action_bounds[{j}] = ({}, {}) exclude 0: the shield needs to be able to \
@@ -707,26 +712,26 @@ impl Shield {
     pub fn new(
         automaton: Arc<Automaton>,
         dynamics: Option<Dynamics>,
-        config: ShieldConfig,
+        params: ShieldParams,
     ) -> Result<Self, ShieldError> {
-        positive("alpha", config.alpha)?;
-        if let Some(a2) = config.alpha2 {
+        positive("alpha", params.alpha)?;
+        if let Some(a2) = params.alpha2 {
             positive("alpha2", a2)?;
         }
-        positive("clf_gain", config.clf_gain)?;
-        positive("c3", config.c3)?;
-        positive("K", config.k)?;
-        positive("slack_penalty", config.slack_penalty)?;
-        if !(config.margin.is_finite() && config.margin > 0.0) {
+        positive("clf_gain", params.clf_gain)?;
+        positive("c3", params.c3)?;
+        positive("k", params.k)?;
+        positive("slack_penalty", params.slack_penalty)?;
+        if !(params.margin.is_finite() && params.margin > 0.0) {
             return Err(ShieldError::Config(format!(
                 "margin = {}: expected a finite number > 0 (an atom holds only while its \
                  robustness is > 0, so barriers held at h >= 0 would let a state settle at \
                  h = 0, or just below it after a discrete step, where the task counts it \
                  violated)",
-                config.margin
+                params.margin
             )));
         }
-        for b in &config.barriers {
+        for b in &params.barriers {
             positive(
                 &format!("slack weight of barrier {:?}", b.name),
                 b.slack_weight,
@@ -734,30 +739,30 @@ impl Shield {
         }
         let m = match &dynamics {
             Some(d) => d.inputs(),
-            None => config.cbf_bounds.lo.len(),
+            None => params.cbf_bounds.lo.len(),
         };
         if m == 0 {
             return Err(ShieldError::Config(
                 "the system has no inputs (bounds are empty)".into(),
             ));
         }
-        config.cbf_bounds.check("cbf_bounds", m)?;
-        config.clf_bounds.check("clf_bounds", m)?;
-        if let Some(b) = &config.action_bounds {
+        params.cbf_bounds.check("cbf_bounds", m)?;
+        params.clf_bounds.check("clf_bounds", m)?;
+        if let Some(b) = &params.action_bounds {
             b.check("action_bounds", m)?;
         }
-        if let Some(rl) = &config.rl_bounds {
+        if let Some(rl) = &params.rl_bounds {
             rl.check("rl_bounds", m)?;
-            if config.use_cbf {
-                check_cover(&config, rl)?;
+            if params.use_cbf {
+                check_cover(&params, rl)?;
             }
         }
-        if config.pos.is_empty()
-            || (1..config.pos.len()).any(|i| config.pos[..i].contains(&config.pos[i]))
+        if params.pos.is_empty()
+            || (1..params.pos.len()).any(|i| params.pos[..i].contains(&params.pos[i]))
         {
             return Err(ShieldError::Config(format!(
                 "pos = {:?}: expected at least one distinct state dimension",
-                config.pos
+                params.pos
             )));
         }
         let spec = automaton.spec();
@@ -768,7 +773,7 @@ impl Shield {
                     .into(),
             ));
         }
-        if config.use_clf {
+        if params.use_clf {
             for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
                 for leaf in crate::region::alternatives(p)
                     .into_iter()
@@ -776,11 +781,11 @@ impl Shield {
                     .flatten()
                 {
                     if let Predicate::Ball(ball) = leaf {
-                        if ball.pos().len() != config.pos.len() {
+                        if ball.pos().len() != params.pos.len() {
                             return Err(ShieldError::Config(format!(
                                 "pos has {} dimensions but the goal ball {name:?} has {}; the \
                                  CLF drives s[pos] to points inside balls, so they must match",
-                                config.pos.len(),
+                                params.pos.len(),
                                 ball.pos().len()
                             )));
                         }
@@ -791,11 +796,11 @@ impl Shield {
         let mut min_dim = spec
             .predicates()
             .iter()
-            .chain(config.barriers.iter().map(|b| &b.predicate))
+            .chain(params.barriers.iter().map(|b| &b.predicate))
             .map(Predicate::min_dim)
             .max()
             .unwrap_or(0)
-            .max(config.pos.iter().max().map_or(0, |p| p + 1));
+            .max(params.pos.iter().max().map_or(0, |p| p + 1));
         if let Some(d) = &dynamics {
             min_dim = min_dim.max(d.min_dim());
         }
@@ -803,13 +808,13 @@ impl Shield {
         // here rather than at the first filter call.
         let fixed = spec
             .state_dim()
-            .or_else(|| config.barriers.iter().find_map(|b| b.predicate.exact_dim()));
+            .or_else(|| params.barriers.iter().find_map(|b| b.predicate.exact_dim()));
         if let Some(n) = fixed {
-            if let Some(&p) = config.pos.iter().find(|&&p| p >= n) {
+            if let Some(&p) = params.pos.iter().find(|&&p| p >= n) {
                 return Err(ShieldError::Config(format!(
                     "pos = {:?}: dimension {p} is past the state length {n} that the \
                      predicates fix",
-                    config.pos
+                    params.pos
                 )));
             }
             if min_dim > n {
@@ -819,11 +824,11 @@ impl Shield {
                 )));
             }
         }
-        let orders = Orders::new(&automaton, &config, dynamics.as_ref(), min_dim)?;
+        let orders = Orders::new(&automaton, &params, dynamics.as_ref(), min_dim)?;
         Ok(Shield {
             automaton,
             dynamics,
-            config,
+            params,
             orders,
             m,
             min_dim,
@@ -837,8 +842,14 @@ impl Shield {
     }
 
     /// The parameters.
-    pub fn config(&self) -> &ShieldConfig {
-        &self.config
+    pub fn params(&self) -> &ShieldParams {
+        &self.params
+    }
+
+    /// The parameters (the 0.1 name of [`Shield::params`]).
+    #[deprecated(since = "0.2.0", note = "renamed `params`")]
+    pub fn config(&self) -> &ShieldParams {
+        self.params()
     }
 
     /// Number of inputs m.
@@ -873,7 +884,7 @@ impl Shield {
             }
             .into());
         }
-        for b in &self.config.barriers {
+        for b in &self.params.barriers {
             b.predicate.check_dim(n)?;
         }
         Ok(())
@@ -891,7 +902,7 @@ impl Shield {
             .into());
         }
         check_finite("a_rl", a_rl, m)?;
-        if let Some(rl) = &self.config.rl_bounds {
+        if let Some(rl) = &self.params.rl_bounds {
             check_within("a_rl", a_rl, rl)?;
         }
         Ok(())
@@ -907,7 +918,7 @@ impl Shield {
             .into());
         }
         check_finite(what, a, a.len())?;
-        if let Some(rl) = &self.config.rl_bounds {
+        if let Some(rl) = &self.params.rl_bounds {
             check_within(what, a, rl)?;
         }
         Ok(())
@@ -1196,7 +1207,7 @@ impl Shield {
         want: Want,
     ) {
         let record = want == Want::Recorded;
-        let cfg = &self.config;
+        let cfg = &self.params;
         ws.out.barriers.clear();
         ws.program.rows(
             cfg,

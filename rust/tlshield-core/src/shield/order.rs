@@ -4,7 +4,7 @@
 //! first-order row would be empty and enforce nothing. Decided once, from the structure of the
 //! model and the predicates, when the shield is built.
 
-use super::{ShieldConfig, ShieldError};
+use super::{ShieldError, ShieldParams};
 use crate::automaton::Automaton;
 use crate::dynamics::Dynamics;
 use crate::predicate::Predicate;
@@ -36,12 +36,12 @@ fn degree(predicate: &Predicate, model: &Dynamics, n: usize) -> Option<u8> {
 }
 
 impl Orders {
-    /// The orders for `spec`'s atoms and `config`'s barriers under `model` (`None`: `f`, `g`
+    /// The orders for `spec`'s atoms and `params`'s barriers under `model` (`None`: `f`, `g`
     /// come with every call and every row is first order). Errors when a second-order row is
     /// needed and `alpha2` is missing.
     pub(super) fn new(
         automaton: &Automaton,
-        config: &ShieldConfig,
+        params: &ShieldParams,
         model: Option<&Dynamics>,
         n: usize,
     ) -> Result<Self, ShieldError> {
@@ -49,14 +49,14 @@ impl Orders {
         let Some(model) = model else {
             return Ok(Orders {
                 atoms: vec![false; spec.atoms().len()],
-                barriers: vec![false; config.barriers.len()],
+                barriers: vec![false; params.barriers.len()],
                 clf: false,
             });
         };
         let order = |what: String, p: &Predicate| -> Result<bool, ShieldError> {
             match degree(p, model, n) {
-                Some(d) => Ok(config.use_cbf && d == 2),
-                None if !config.use_cbf => Ok(false),
+                Some(d) => Ok(params.use_cbf && d == 2),
+                None if !params.use_cbf => Ok(false),
                 None => Err(ShieldError::Config(format!(
                     "{what} reads no state dimension that {model} can move within two \
                      integrations (relative degree > 2, or not controlled): the shield cannot \
@@ -67,7 +67,7 @@ impl Orders {
         // Only atoms that some state's safe set can keep are ever enforced.
         let enforced = |atom: usize| {
             (0..automaton.num_states()).any(|q| {
-                let cnf = if config.preserve_progress {
+                let cnf = if params.preserve_progress {
                     automaton.avoid_cnf(q)
                 } else {
                     automaton.trap_cnf(q)
@@ -85,13 +85,13 @@ impl Orders {
                 false => Ok(false),
             })
             .collect::<Result<_, _>>()?;
-        let barriers: Vec<bool> = config
+        let barriers: Vec<bool> = params
             .barriers
             .iter()
             .map(|b| order(format!("barrier {:?}", b.name), &b.predicate))
             .collect::<Result<_, _>>()?;
-        let clf = config.use_clf && !config.pos.iter().any(|&d| model.actuates(d));
-        if config.alpha2.is_none() {
+        let clf = params.use_clf && !params.pos.iter().any(|&d| model.actuates(d));
+        if params.alpha2.is_none() {
             let first = atoms
                 .iter()
                 .position(|&o| o)
@@ -100,7 +100,7 @@ impl Orders {
                     barriers
                         .iter()
                         .position(|&o| o)
-                        .map(|i| format!("barrier {:?}", config.barriers[i].name))
+                        .map(|i| format!("barrier {:?}", params.barriers[i].name))
                 });
             if let Some(what) = first {
                 return Err(ShieldError::Config(format!(

@@ -14,7 +14,7 @@
 //! once they have grown to the problem's size.
 
 use super::order::Orders;
-use super::{BarrierSource, ControlAffine, ShieldConfig};
+use super::{BarrierSource, ControlAffine, ShieldParams};
 use crate::automaton::Automaton;
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
@@ -121,7 +121,7 @@ impl Program {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn rows(
         &mut self,
-        cfg: &ShieldConfig,
+        cfg: &ShieldParams,
         orders: &Orders,
         automaton: &Automaton,
         model: Option<&Dynamics>,
@@ -288,7 +288,7 @@ impl Program {
     /// `sigma_i >= 0` (cost `slack_penalty * weight_i`) to every barrier row.
     pub(super) fn assemble(
         &self,
-        cfg: &ShieldConfig,
+        cfg: &ShieldParams,
         a_rl: &[f64],
         qp: &mut DenseQp,
         relaxed: bool,

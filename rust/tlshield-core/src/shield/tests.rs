@@ -18,18 +18,18 @@ fn bounds(lo: f64, hi: f64) -> Bounds {
     }
 }
 
-fn config(solver: SolverChoice) -> ShieldConfig {
-    ShieldConfig::new(2.0, 1.0, 1e4, bounds(-6.0, 6.0), bounds(-0.5, 0.5))
+fn params(solver: SolverChoice) -> ShieldParams {
+    ShieldParams::new(2.0, 1.0, 1e4, bounds(-6.0, 6.0), bounds(-0.5, 0.5))
         .with_solver(solver)
         .with_slack_penalty(1e6)
-        .with_margin(ShieldConfig::DEFAULT_MARGIN)
+        .with_margin(ShieldParams::DEFAULT_MARGIN)
 }
 
-fn shield(config: ShieldConfig) -> Shield {
+fn shield(params: ShieldParams) -> Shield {
     Shield::new(
         task(),
         Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap()),
-        config,
+        params,
     )
     .unwrap()
 }
@@ -57,7 +57,7 @@ fn channel_margins(s: &[f64], a: &[f64], alpha: f64) -> [f64; 2] {
 
 #[test]
 fn pushes_back_at_the_channel_border() {
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     // Near c1's border (x - y = -1.4), heading straight out (+y), full speed.
     let s = state(1.0, -1.4, std::f64::consts::FRAC_PI_2);
     let q = sh.automaton().read(&s).unwrap().step(0);
@@ -85,7 +85,7 @@ fn pushes_back_at_the_channel_border() {
         sh.automaton().edges()
     );
     // Clarabel agrees.
-    let by_clarabel = shield(config(SolverChoice::Clarabel))
+    let by_clarabel = shield(params(SolverChoice::Clarabel))
         .filter(&s, q, &a_rl, None, None)
         .unwrap();
     assert_eq!(by_clarabel.solver, SolvedBy::Clarabel);
@@ -104,7 +104,7 @@ fn configurations_drop_what_is_off() {
     let s = state(1.0, 0.0, 0.3);
     let q = 0;
     let a_rl = [0.7, -0.2];
-    let mut cfg = config(SolverChoice::Auto);
+    let mut cfg = params(SolverChoice::Auto);
     cfg.use_cbf = false;
     cfg.use_clf = false;
     let out = shield(cfg.clone())
@@ -130,7 +130,7 @@ fn configurations_drop_what_is_off() {
 
 #[test]
 fn infeasible_barriers_are_relaxed_never_nan() {
-    let mut cfg = config(SolverChoice::Auto);
+    let mut cfg = params(SolverChoice::Auto);
     cfg.cbf_bounds = bounds(-0.01, 0.01);
     cfg.clf_bounds = bounds(-0.01, 0.01);
     let sh = shield(cfg);
@@ -154,7 +154,7 @@ fn a_light_barrier_gives_way_first_when_relaxed() {
     out_w[1] = 1.0;
     let away = Predicate::halfspace(out_w, -(HALF_WIDTH + 2.0)).unwrap();
     let run = |weight: f64| {
-        let mut cfg = config(SolverChoice::Auto);
+        let mut cfg = params(SolverChoice::Auto);
         cfg.use_clf = false;
         cfg.barriers = vec![Barrier::inside("away", away.clone()).with_slack_weight(weight)];
         let sh = shield(cfg);
@@ -164,7 +164,7 @@ fn a_light_barrier_gives_way_first_when_relaxed() {
     let light = run(1e-3);
     assert_eq!(light.status, Status::Relaxed);
     // The channel row holds: its rate keeps h_c1 above the margin's decay.
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
     let grad = [1.0, -1.0];
@@ -179,7 +179,7 @@ fn a_light_barrier_gives_way_first_when_relaxed() {
         "{light:?} {}",
         rate(&light.action)
     );
-    let mut bad = config(SolverChoice::Auto);
+    let mut bad = params(SolverChoice::Auto);
     bad.barriers = vec![Barrier::inside("away", away).with_slack_weight(0.0)];
     assert!(Shield::new(task(), None, bad).is_err());
 }
@@ -187,21 +187,21 @@ fn a_light_barrier_gives_way_first_when_relaxed() {
 #[test]
 fn indices_past_the_fixed_state_length_are_rejected_at_construction() {
     // The channel halfspaces fix n = 13: pos 99 or a model reading past it cannot work.
-    let mut far = config(SolverChoice::Auto);
+    let mut far = params(SolverChoice::Auto);
     far.pos = vec![0, 99];
     let err = Shield::new(task(), None, far).unwrap_err().to_string();
     assert!(err.contains("99") && err.contains("13"), "{err}");
     let model = Dynamics::unicycle(0.1, 0, 1, 20).unwrap();
-    let err = Shield::new(task(), Some(model), config(SolverChoice::Auto))
+    let err = Shield::new(task(), Some(model), params(SolverChoice::Auto))
         .unwrap_err()
         .to_string();
     assert!(err.contains("21") && err.contains("13"), "{err}");
-    assert!(Shield::new(task(), None, config(SolverChoice::Auto)).is_ok());
+    assert!(Shield::new(task(), None, params(SolverChoice::Auto)).is_ok());
 }
 
 #[test]
 fn drift_adds_to_the_model_and_batches_agree() {
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let s = state(2.0, 1.3, -0.4);
     let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
@@ -252,7 +252,7 @@ fn drift_adds_to_the_model_and_batches_agree() {
 
 #[test]
 fn per_call_dynamics_match_the_model() {
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let s = state(2.0, 1.3, -0.4);
     let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
@@ -265,7 +265,7 @@ fn per_call_dynamics_match_the_model() {
 #[test]
 fn a_zero_margin_is_refused_naming_it() {
     for margin in [0.0, -1e-3, f64::NAN] {
-        let err = Shield::new(task(), None, config(SolverChoice::Auto).with_margin(margin))
+        let err = Shield::new(task(), None, params(SolverChoice::Auto).with_margin(margin))
             .unwrap_err()
             .to_string();
         assert!(err.starts_with("margin = ") && err.contains("> 0"), "{err}");
@@ -276,10 +276,10 @@ fn a_zero_margin_is_refused_naming_it() {
 fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
     let unicycle = || Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap());
     // CBF [-6, 6] cancels RL [-6, 6] (CLF [-0.5, 0.5] holds 0) ...
-    let fits = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.0, 6.0)));
+    let fits = params(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.0, 6.0)));
     assert!(Shield::new(task(), unicycle(), fits).is_ok());
     // ... but not RL [-6.1, 6.1]: steps without a goal have no a_clf to help.
-    let wide = config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.1, 6.1)));
+    let wide = params(SolverChoice::Auto).with_rl_bounds(Some(bounds(-6.1, 6.1)));
     let err = Shield::new(task(), unicycle(), wide)
         .unwrap_err()
         .to_string();
@@ -288,7 +288,7 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
         "{err}"
     );
     // An asymmetric RL box needs the mirrored CBF box.
-    let mut lopsided = config(SolverChoice::Auto).with_rl_bounds(Some(Bounds {
+    let mut lopsided = params(SolverChoice::Auto).with_rl_bounds(Some(Bounds {
         lo: vec![0.0, -1.0],
         hi: vec![5.0, 1.0],
     }));
@@ -327,7 +327,7 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
 
 #[test]
 fn an_rl_action_outside_rl_bounds_is_refused() {
-    let sh = shield(config(SolverChoice::Auto).with_rl_bounds(Some(bounds(-1.0, 1.0))));
+    let sh = shield(params(SolverChoice::Auto).with_rl_bounds(Some(bounds(-1.0, 1.0))));
     let s = state(1.0, 0.0, 0.0);
     let q = sh.automaton().read(&s).unwrap().step(0);
     assert!(sh.filter(&s, q, &[1.0, -1.0], None, None).is_ok());
@@ -378,7 +378,7 @@ proptest! {
         clarabel in any::<bool>(),
     ) {
         let solver = if clarabel { SolverChoice::Clarabel } else { SolverChoice::Auto };
-        let mut cfg = config(solver);
+        let mut cfg = params(solver);
         cfg.k = 10f64.powi(k_exp);
         let sh = shield(cfg);
         let s = state(1.0, offset, theta);
@@ -389,7 +389,7 @@ proptest! {
         // The CBF box covers the RL and CLF boxes here, so no answer may be missing ...
         prop_assert!(out.status != Status::Failed);
         // ... and whatever the solver reported, the applied action keeps both channel rows.
-        let (alpha, margin) = (sh.config().alpha, sh.config().margin);
+        let (alpha, margin) = (sh.params().alpha, sh.params().margin);
         for m in channel_margins(&s, &out.action, alpha) {
             prop_assert!(m >= alpha * margin - 1e-6, "row {m} (status {:?})", out.status);
         }
@@ -398,7 +398,7 @@ proptest! {
 
 #[test]
 fn bad_input_is_an_error() {
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let s = state(1.0, 0.0, 0.0);
     assert!(sh.filter(&s[..5], 0, &[0.0, 0.0], None, None).is_err());
     assert!(sh.filter(&s, 9, &[0.0, 0.0], None, None).is_err());
@@ -418,36 +418,36 @@ fn bad_input_is_an_error() {
             None
         )
         .is_err());
-    let no_model = Shield::new(task(), None, config(SolverChoice::Auto)).unwrap();
+    let no_model = Shield::new(task(), None, params(SolverChoice::Auto)).unwrap();
     let err = no_model.filter(&s, 0, &[0.0, 0.0], None, None).unwrap_err();
     assert!(err.to_string().contains("pass f and g"), "{err}");
     for broken in [
-        ShieldConfig {
+        ShieldParams {
             alpha: 0.0,
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
-        ShieldConfig {
+        ShieldParams {
             k: f64::NAN,
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
-        ShieldConfig {
+        ShieldParams {
             cbf_bounds: bounds(1.0, -1.0),
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
-        ShieldConfig {
+        ShieldParams {
             clf_bounds: Bounds {
                 lo: vec![0.0],
                 hi: vec![1.0],
             },
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
-        ShieldConfig {
+        ShieldParams {
             pos: vec![0, 0],
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
-        ShieldConfig {
+        ShieldParams {
             pos: vec![0, 1, 2],
-            ..config(SolverChoice::Auto)
+            ..params(SolverChoice::Auto)
         },
     ] {
         assert!(Shield::new(
@@ -462,7 +462,7 @@ fn bad_input_is_an_error() {
 
 #[test]
 fn batch_equals_single_calls() {
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let mut rng = Rng(7);
     let rows = 37;
     let mut states = Vec::new();
@@ -510,7 +510,7 @@ fn batch_equals_single_calls() {
 #[test]
 fn the_monitor_path_equals_state_and_q_calls() {
     use crate::monitor::{Monitor, TaskReward};
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let paper = TaskReward::Paper {
         c_r: 1.0,
         trap_penalty: -10.0,
@@ -551,7 +551,7 @@ fn the_monitor_path_equals_state_and_q_calls() {
 #[test]
 fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
     use crate::monitor::{Monitor, MonitorBatch, TaskReward};
-    let sh = shield(config(SolverChoice::Auto));
+    let sh = shield(params(SolverChoice::Auto));
     let paper = TaskReward::Paper {
         c_r: 1.0,
         trap_penalty: -10.0,
@@ -647,7 +647,7 @@ impl Rng {
 /// the channel as user barriers (so it is kept in every FSA state, the trap included).
 #[test]
 fn channel_is_forward_invariant_over_100k_steps() {
-    let mut cfg = config(SolverChoice::Auto);
+    let mut cfg = params(SolverChoice::Auto);
     cfg.barriers = vec![
         Barrier::inside("c1", channel(1.0)),
         Barrier::inside("c2", channel(-1.0)),
@@ -716,13 +716,13 @@ proptest! {
         w in -8.0..8.0f64,
         obstacle in -2.0..6.0f64,
     ) {
-        let mut cfg = config(SolverChoice::Auto);
+        let mut cfg = params(SolverChoice::Auto);
         cfg.barriers = vec![Barrier::inside(
             "near",
             Predicate::ball(vec![0, 1], 0.6, Center::Fixed(vec![obstacle, obstacle + 0.3])).unwrap(),
         )];
         let auto = shield(cfg.clone());
-        let clarabel = shield(ShieldConfig { solver: SolverChoice::Clarabel, ..cfg });
+        let clarabel = shield(ShieldParams { solver: SolverChoice::Clarabel, ..cfg });
         let s = state(x, offset, theta);
         let q = auto.automaton().read(&s).unwrap().step(0);
         let a_rl = [v, w];

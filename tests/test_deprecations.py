@@ -1,0 +1,60 @@
+"""The spellings of tlshield 0.1 (CHANGELOG.md, 0.2.0): renamed parameters and classes still
+work with a DeprecationWarning; a swapped argument order fails with a hint
+(``test_automaton``); a record written by 0.1 still loads (``test_cli_errors``)."""
+
+from __future__ import annotations
+
+import importlib
+
+import gymnasium as gym
+import pytest
+
+import tlshield.envs
+from tlshield import settings
+from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
+from tlshield.envs.params import as_flat
+from tlshield.runs import Run
+
+
+@pytest.mark.parametrize("env_id", [ENV_ID, POINT_MASS_ID, FLATWORLD_ID])
+def test_renamed_parameters_warn_and_still_apply(env_id: str) -> None:
+    with pytest.warns(DeprecationWarning, match="'K' is now called 'k'"):
+        env = gym.make(env_id, K=123.0)
+    assert as_flat(env.unwrapped.cfg)["k"] == 123.0
+    with pytest.warns(DeprecationWarning, match="'cbf_margin' is now called 'margin'"):
+        env = gym.make(env_id, cbf_margin=0.05)
+    assert as_flat(env.unwrapped.cfg)["margin"] == 0.05
+    with pytest.raises(TypeError, match="'K' and 'k' given"):
+        gym.make(env_id, K=1.0, k=2.0)
+
+
+@pytest.mark.parametrize(
+    ("module", "old", "new"),
+    [
+        ("tlshield.envs", "ChannelConfig", "ChannelParams"),
+        ("tlshield.envs.channel", "ChannelConfig", "ChannelParams"),
+        ("tlshield.envs.point_mass", "PointMassConfig", "PointMassParams"),
+        ("tlshield.envs.flatworld", "FlatWorldConfig", "FlatWorldParams"),
+    ],
+)
+def test_renamed_classes_warn_and_are_the_new_ones(module: str, old: str, new: str) -> None:
+    mod = importlib.import_module(module)
+    with pytest.warns(DeprecationWarning, match=f"{old} is now called {new}"):
+        cls = getattr(mod, old)
+    assert cls is getattr(mod, new)
+    with pytest.raises(AttributeError, match="NoSuchConfig"):
+        tlshield.envs.NoSuchConfig  # noqa: B018
+
+
+def test_settings_accept_the_old_names_with_a_warning() -> None:
+    with pytest.warns(DeprecationWarning, match="--set: 'K' is now called 'k'"):
+        assert settings.parse_assignments(["K=100"]) == {"k": 100}
+    with pytest.warns(DeprecationWarning):
+        assert settings.split({"cbf_margin": 0.01})["margin"] == 0.01
+
+
+def test_a_0_1_record_reads_its_old_names_silently(recwarn: pytest.WarningsRecorder) -> None:
+    run = Run.__new__(Run)
+    object.__setattr__(run, "record", {"env": {"K": 55.0, "cbf_margin": 0.002}})
+    assert (run.env.shield.k, run.env.shield.margin) == (55.0, 0.002)
+    assert not [w for w in recwarn if issubclass(w.category, DeprecationWarning)]
