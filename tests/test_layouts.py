@@ -24,6 +24,7 @@ import pytest
 import tlshield
 from tlshield import _core
 from tlshield.envs.channel import ChannelEnv, channel_task_spec
+from tlshield.envs.point_mass import PointMassEnv
 
 #: The deprecated ``advance`` calls keep their layout checks while they exist.
 pytestmark = pytest.mark.filterwarnings("ignore:.*advance is deprecated:DeprecationWarning")
@@ -146,6 +147,24 @@ def _world_step() -> Any:
     return lambda action: env._world.step(action, env.tracker.monitor, env.shield)
 
 
+def _point_mass_reset() -> Any:
+    """``reset(s0)`` of a PointMass-v0 world, returning the state it then holds."""
+    world = PointMassEnv()._world
+
+    def reset(s0: Any) -> Any:
+        world.reset(s0)
+        return world.state
+
+    return reset
+
+
+def _point_mass_step() -> Any:
+    """A shielded PointMass-v0 world one reset into an episode, as ``step(a_rl)``."""
+    env = PointMassEnv()
+    env.reset(seed=3)
+    return lambda a_rl: env._world.step(a_rl, env.tracker.monitor, env.shield)
+
+
 def _started_batch() -> Any:
     """A batch of four monitors one step into their episodes."""
     batch = _core.MonitorBatch(AUT, 4, AUT.progress_reward())
@@ -228,6 +247,10 @@ CASES: dict[str, Case] = {
         {"s0": S, "obstacles": np.array([[4.0, 1.0, 0.3, 0.5], [6.0, 0.9, 0.2, 2.0]])},
     ),
     "ChannelWorld.step": Case(_world_step, "__call__", {"action": A_RL[5] / 4}),
+    "PointMassWorld.reset": Case(
+        _point_mass_reset, "__call__", {"s0": np.array([1.5, 1.0, 0.25, -0.5])}
+    ),
+    "PointMassWorld.step": Case(_point_mass_step, "__call__", {"a_rl": A_RL[5] / 4}),
 }
 
 
@@ -294,6 +317,7 @@ def canon(value: Any) -> Any:
         _core.TaskStep,
         _core.TaskBatch,
         _core.ChannelStep,
+        _core.PointMassStep,
     )
     if isinstance(value, results):
         names = [n for n in dir(value) if not n.startswith("_")]

@@ -125,3 +125,34 @@ def test_the_reward_pays_finishing_and_never_pays_barging() -> None:
         finish = discounted_return(waypoints, seed)
         assert finish > discounted_return(park_before_b, seed), seed
         assert finish > discounted_return(straight, seed), seed
+
+
+def test_every_core_step_is_the_shields_model_and_the_walls() -> None:
+    """The core steps PointMass-v0: each step equals ``s + dt (f + g a)`` of the public
+    ``DoubleIntegrator`` for the applied action (the shield's answer clipped to the box), held
+    at the walls with the velocity into a wall zeroed, and pays the task reward minus the
+    collision penalty (a reference written here, independent of the core's step)."""
+    env = make_point_mass("rl_cbf_clf")
+    model = tlshield.DoubleIntegrator([0, 1], [2, 3])
+    rng = np.random.default_rng(4)
+    lo, hi = CFG.room
+    walls = 0
+    for episode in range(3):
+        obs, _ = env.reset(seed=episode)
+        for _ in range(CFG.horizon):
+            s = obs[:4].copy()
+            a_rl = rng.uniform(-1, 1, size=2) if episode else np.array([-1.0, -1.0])
+            obs, reward, terminated, truncated, info = env.step(a_rl)
+            applied = info["action"]
+            wanted = a_rl + info["shield"]["a_cbf"] + info["shield"]["a_clf"]
+            np.testing.assert_allclose(applied, np.clip(wanted, -1.0, 1.0), atol=1e-12)
+            want = np.asarray(model.step(s, applied, CFG.dt))
+            for p, v in ((0, 2), (1, 3)):
+                if not lo <= want[p] <= hi:
+                    want[p], want[v] = min(max(want[p], lo), hi), 0.0
+                    walls += 1
+            np.testing.assert_array_equal(obs[:4], want)
+            assert reward == info["tl_reward"] - CFG.collision_penalty * info["collision"]
+            if terminated or truncated:
+                break
+    assert walls > 0  # the first episode drives into the corner

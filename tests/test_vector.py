@@ -1,6 +1,6 @@
-"""Channel-v0 stepped N at a time in one core call: the SB3 VecEnv gives exactly what SB3's
-DummyVecEnv over the single envs gives, and the Gymnasium VectorEnv follows the single envs
-with next-step autoreset."""
+"""Channel-v0 and PointMass-v0 stepped N at a time in one core call: the SB3 VecEnv gives
+exactly what SB3's DummyVecEnv over the single envs gives, and the Gymnasium VectorEnv follows
+the single envs with next-step autoreset."""
 
 from __future__ import annotations
 
@@ -10,7 +10,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import tlshield.vector
 from tlshield.envs.channel import ChannelEnv
-from tlshield.sb3 import ChannelVecEnv
+from tlshield.envs.point_mass import PointMassEnv
+from tlshield.sb3 import ChannelVecEnv, PointMassVecEnv
+
+#: env id -> (SB3 vec env, single env) of each world the core steps.
+WORLDS = {
+    "tlshield/Channel-v0": (ChannelVecEnv, lambda config: ChannelEnv(config=config)),
+    "tlshield/PointMass-v0": (PointMassVecEnv, lambda config: PointMassEnv(config)),
+}
 
 
 def _actions(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -21,16 +28,18 @@ def _actions(rng: np.random.Generator, n: int) -> np.ndarray:
     return a
 
 
+@pytest.mark.parametrize("env_id", sorted(WORLDS))
 @pytest.mark.parametrize(("config", "n"), [("rl_cbf_clf", 5), ("rl", 3), ("rl_cbf_clf", 40)])
-def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(config: str, n: int) -> None:
-    ours = ChannelVecEnv(n, config)
-    theirs = DummyVecEnv([lambda: ChannelEnv(config=config)] * n)
+def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(env_id: str, config: str, n: int) -> None:
+    vec, single = WORLDS[env_id]
+    ours = vec(n, config)
+    theirs = DummyVecEnv([lambda: single(config)] * n)
     ours.seed(7)
     theirs.seed(7)
     np.testing.assert_array_equal(ours.reset(), theirs.reset())
     rng = np.random.default_rng(0)
     dones_seen = 0
-    for _ in range(250):
+    for _ in range(320):  # past PointMass-v0's horizon (300): every env ends at least once
         a = _actions(rng, n)
         ours.step_async(a)
         theirs.step_async(a)
@@ -54,8 +63,10 @@ def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(config: str, n: int) -
             ):
                 assert mine[key] == want[key], (i, key)
             np.testing.assert_array_equal(mine["action"], want["action"])
+            assert ("shield" in mine) == ("shield" in want)
             for key in ("a_rl", "a_cbf", "a_clf", "delta", "status", "slack", "solver"):
-                np.testing.assert_array_equal(mine["shield"][key], want["shield"][key])
+                if "shield" in want:
+                    np.testing.assert_array_equal(mine["shield"][key], want["shield"][key])
             if done[i]:
                 np.testing.assert_array_equal(
                     mine["terminal_observation"], want["terminal_observation"]
@@ -64,10 +75,11 @@ def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(config: str, n: int) -
     assert dones_seen > 0  # episodes ended and were reset along the way
 
 
-def test_the_gymnasium_vector_env_follows_the_single_envs() -> None:
+@pytest.mark.parametrize("env_id", sorted(WORLDS))
+def test_the_gymnasium_vector_env_follows_the_single_envs(env_id: str) -> None:
     n = 4
-    venv = tlshield.vector.make("tlshield/Channel-v0", n, config="rl_cbf_clf")
-    singles = [ChannelEnv(config="rl_cbf_clf") for _ in range(n)]
+    venv = tlshield.vector.make(env_id, n, config="rl_cbf_clf")
+    singles = [WORLDS[env_id][1]("rl_cbf_clf") for _ in range(n)]
     obs, _ = venv.reset(seed=3)
     assert obs.shape == (n, *singles[0].observation_space.shape)
     want = np.stack([env.reset(seed=3 + i)[0] for i, env in enumerate(singles)])
@@ -95,7 +107,7 @@ def test_the_gymnasium_vector_env_follows_the_single_envs() -> None:
 
 def test_bad_vector_input_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match="SyncVectorEnv"):
-        tlshield.vector.make("tlshield/PointMass-v0", 2)
+        tlshield.vector.make("tlshield/FlatWorld-v0", 2)
     with pytest.raises(ValueError, match="num_envs"):
         tlshield.vector.make("tlshield/Channel-v0", 0)
     venv = tlshield.vector.make("tlshield/Channel-v0", 2)
@@ -106,3 +118,18 @@ def test_bad_vector_input_is_a_clear_error() -> None:
         venv.step(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="seeds"):
         venv.reset(seed=[1, 2, 3])
+
+
+def test_step_worlds_takes_one_kind_of_world() -> None:
+    from tlshield._core import step_worlds
+
+    channel, point = ChannelEnv(), PointMassEnv()
+    channel.reset(seed=0)
+    point.reset(seed=0)
+    with pytest.raises(TypeError, match="one kind"):
+        step_worlds(
+            [channel._world, point._world],  # type: ignore[list-item]
+            [channel.tracker.monitor, point.tracker.monitor],
+            np.zeros((2, 2)),
+            np.zeros((2, 24)),
+        )

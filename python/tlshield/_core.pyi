@@ -386,7 +386,7 @@ class WorldsStep:
     def active(self) -> NDArray[np.bool_]: ...
 
 def step_worlds(
-    worlds: Sequence[ChannelWorld],
+    worlds: Sequence[ChannelWorld] | Sequence[PointMassWorld],
     monitors: Sequence[Monitor],
     actions: ArrayLike,
     obs: ArrayLike,
@@ -395,6 +395,63 @@ def step_worlds(
     scale: bool = True,
 ) -> WorldsStep:
     """Steps the worlds in one call (parallel past 32 rows, GIL released)."""
+
+@final
+class PointMassStep:
+    """What one ``PointMassWorld.step`` gives."""
+
+    @property
+    def observation(self) -> NDArray[np.float64]: ...
+    @property
+    def action(self) -> NDArray[np.float64]: ...
+    @property
+    def shield(self) -> FilterResult | None: ...
+    @property
+    def q(self) -> int: ...
+    @property
+    def tl_reward(self) -> float: ...
+    @property
+    def accepted(self) -> bool: ...
+    @property
+    def trapped(self) -> bool: ...
+    @property
+    def reward(self) -> float: ...
+    @property
+    def terminated(self) -> bool: ...
+    @property
+    def truncated(self) -> bool: ...
+    @property
+    def h(self) -> tuple[float, float]: ...
+    @property
+    def min_obstacle_distance(self) -> float: ...
+    @property
+    def collision(self) -> bool: ...
+
+@final
+class PointMassWorld:
+    """``tlshield/PointMass-v0`` stepped in the core: shield call, acceleration box, double
+    integrator, walls, task monitor, reward and observation in one call."""
+
+    def __new__(
+        cls,
+        *,
+        dt: float,
+        horizon: int,
+        room: tuple[float, float],
+        max_accel: float,
+        obstacles: tuple[tuple[float, float], tuple[float, float]],
+        obstacle_radius: float,
+        collision_penalty: float,
+    ) -> Self: ...
+    def reset(self, s0: ArrayLike) -> None: ...
+    def step(
+        self, a_rl: ArrayLike, monitor: Monitor, shield: Shield | None = None
+    ) -> PointMassStep: ...
+    def measure(self) -> tuple[float, float, float, bool]: ...
+    @property
+    def state(self) -> NDArray[np.float64]: ...
+    @property
+    def steps(self) -> int: ...
 
 @final
 class Unicycle:
@@ -493,7 +550,7 @@ class Shield:
         *,
         alpha: float,
         c3: float,
-        K: float,
+        k: float,
         cbf_bounds: Bounds,
         clf_bounds: Bounds,
         action_bounds: Bounds | None = None,

@@ -49,18 +49,16 @@ class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc]
         return obs, rewards, dones, infos
 
 
-class ChannelVecEnv(VecEnv):  # type: ignore[misc]
-    """Stable-Baselines3 ``VecEnv`` of ``num_envs`` Channel-v0 envs stepped in one core call
-    (:class:`tlshield.vector.ChannelBatch`). It gives what SB3's ``DummyVecEnv`` over the same
-    :class:`tlshield.envs.ChannelEnv` envs gives, bit for bit (observations, float32 rewards,
-    dones, ``terminal_observation``, the reset seeds ``seed + i``), and every env's ``info`` as
-    the single env builds it (no CLF goal or barrier list in ``info["shield"]``)."""
+class WorldVecEnv(VecEnv):  # type: ignore[misc]
+    """Stable-Baselines3 ``VecEnv`` of a :class:`tlshield.vector.WorldBatch` (N bundled envs
+    stepped in one core call). It gives what SB3's ``DummyVecEnv`` over the same single envs
+    gives, bit for bit (observations, float32 rewards, dones, ``terminal_observation``, the
+    reset seeds ``seed + i``), and every env's ``info`` as the single env builds it (no CLF
+    goal or barrier list in ``info["shield"]``)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
-        from tlshield.vector import ChannelBatch
-
-        self.batch = ChannelBatch(num_envs, config, **kwargs)
-        super().__init__(num_envs, self.batch.observation_space, self.batch.action_space)
+    def __init__(self, batch: Any) -> None:
+        self.batch = batch
+        super().__init__(len(batch.envs), batch.observation_space, batch.action_space)
         self._actions: NDArray[np.float64] | None = None
 
     @property
@@ -120,3 +118,30 @@ class ChannelVecEnv(VecEnv):  # type: ignore[misc]
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
         return [False for _ in self._indices(indices)]
+
+
+class ChannelVecEnv(WorldVecEnv):  # type: ignore[misc]
+    """``num_envs`` Channel-v0 envs as one SB3 ``VecEnv`` (see :class:`WorldVecEnv`)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.vector import ChannelBatch
+
+        super().__init__(ChannelBatch(num_envs, config, **kwargs))
+
+
+class PointMassVecEnv(WorldVecEnv):  # type: ignore[misc]
+    """``num_envs`` PointMass-v0 envs as one SB3 ``VecEnv`` (see :class:`WorldVecEnv`)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.vector import PointMassBatch
+
+        super().__init__(PointMassBatch(num_envs, config, **kwargs))
+
+
+def make_vec_env(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
+    """An SB3 ``VecEnv`` of ``num_envs`` copies of a bundled ``env_id`` stepped in one core
+    call (Channel-v0, PointMass-v0); None for any other env (use SB3's ``DummyVecEnv``)."""
+    from tlshield.envs import ENV_ID, POINT_MASS_ID
+
+    kinds = {ENV_ID: ChannelVecEnv, POINT_MASS_ID: PointMassVecEnv}
+    return kinds[env_id](num_envs, config, **kwargs) if env_id in kinds else None

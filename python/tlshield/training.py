@@ -75,16 +75,15 @@ def make_vec_env(
     config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
 ) -> Any:
     """The training VecEnv: ``n_envs`` copies of ``env_id``, seeded ``seed * 1000 + i``.
-    Channel-v0 steps all its envs in one core call (:class:`tlshield.sb3.ChannelVecEnv`, the
-    same numbers as SB3's ``DummyVecEnv`` over the single envs, bit for bit); other envs run in
-    a ``DummyVecEnv``."""
+    Channel-v0 and PointMass-v0 step all their envs in one core call
+    (:func:`tlshield.sb3.make_vec_env`, the same numbers as SB3's ``DummyVecEnv`` over the
+    single envs, bit for bit); other envs run in a ``DummyVecEnv``."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from tlshield.sb3 import ChannelVecEnv
+    from tlshield.sb3 import make_vec_env as core_vec_env
 
-    if env_id == ENV_ID:
-        venv = ChannelVecEnv(n_envs, config, **overrides)
-    else:
+    venv = core_vec_env(env_id, n_envs, config, **overrides)
+    if venv is None:
         venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
     venv.seed(train_seed(seed))
     return venv

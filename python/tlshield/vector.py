@@ -1,10 +1,11 @@
-"""N environments in one call. :func:`make` and :class:`ChannelVectorEnv`: Channel-v0 as a
-Gymnasium ``VectorEnv`` whose N envs step in one core call (:class:`ChannelBatch`, as EnvPool
-does for Atari and MuJoCo). :class:`ShieldedVectorEnv`: any FSA-augmented vector env shielded in
-one ``filter_batch`` call, with the per-env ``info["shield"]`` of a batch and the layout of
-FSA-augmented observations. The Stable-Baselines3 twins, :class:`tlshield.sb3.ChannelVecEnv`
-and :class:`tlshield.sb3.ShieldedVecEnv`, live apart so that SB3 and torch load only when they
-are used."""
+"""N environments in one call. :func:`make`, :class:`ChannelVectorEnv` and
+:class:`PointMassVectorEnv`: the bundled worlds as Gymnasium ``VectorEnv`` s whose N envs step
+in one core call (:class:`WorldBatch`, as EnvPool does for Atari and MuJoCo).
+:class:`ShieldedVectorEnv`: any FSA-augmented vector env shielded in one ``filter_batch``
+call, with the per-env ``info["shield"]`` of a batch and the layout of FSA-augmented
+observations. The Stable-Baselines3 twins, :class:`tlshield.sb3.WorldVecEnv` and
+:class:`tlshield.sb3.ShieldedVecEnv`, live apart so that SB3 and torch load only when they are
+used."""
 
 from __future__ import annotations
 
@@ -96,24 +97,26 @@ class ShieldedVectorEnv(gym.vector.VectorWrapper):
         return obs, rewards, terminated, truncated, infos
 
 
-class ChannelBatch:
-    """``num_envs`` Channel-v0 environments whose steps run in one core call
-    (``tlshield._core.step_worlds``: plant, obstacles, shield, monitor, reward and observation
-    of every env, in parallel past 32 envs, GIL released). Each env is a real
-    :class:`tlshield.envs.ChannelEnv`: it draws its own episodes (its resets run in Python, one
-    env at a time), so a batch row follows exactly the trajectory the single env follows for
-    the same seed and actions. All envs share one configuration, and so one shield."""
+#: Each result enum's members by value.
+_MEMBERS: dict[type, dict[int, Any]] = {e: {m.value: m for m in e} for e in (Status, Solver)}
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
-        from tlshield.envs.channel import ChannelEnv
 
-        if not (isinstance(num_envs, int) and num_envs > 0):
-            raise ValueError(f"num_envs = {num_envs!r}: expected a positive integer")
-        self.envs = [ChannelEnv(config=config, **kwargs) for _ in range(num_envs)]
-        first = self.envs[0]
+class WorldBatch:
+    """N bundled environments of one kind (``tlshield/Channel-v0`` or ``tlshield/PointMass-v0``)
+    whose steps run in one core call (``tlshield._core.step_worlds``: plant, shield, monitor,
+    reward and observation of every env, in parallel past 32 envs, GIL released). Each env is a
+    real single environment: it draws its own episodes (its resets run in Python, one env at a
+    time), so a batch row follows exactly the trajectory the single env follows for the same
+    seed and actions. All envs share one configuration, and so one shield."""
+
+    def __init__(self, envs: list[Any]) -> None:
+        if not envs:
+            raise ValueError("a batch needs at least one environment")
+        self.envs = envs
+        first = envs[0]
         self.observation_space = first.observation_space
         self.action_space = first.action_space
-        self.obs = np.zeros((num_envs, *first.observation_space.shape))
+        self.obs = np.zeros((len(envs), *first.observation_space.shape))
 
     def reset_env(self, i: int, **kwargs: Any) -> tuple[NDArray[np.float64], dict[str, Any]]:
         """Resets env ``i`` (its own draws); its observation becomes row ``i``."""
@@ -124,15 +127,15 @@ class ChannelBatch:
     def step(self, actions: Any, active: NDArray[np.bool_] | None = None) -> WorldsStep:
         """Steps every env (or the ``active`` ones) on its row of ``actions`` in one call."""
         first = self.envs[0]
-        shield = first.shield if first.shield_in_env else None
+        in_env = getattr(first, "shield_in_env", True)
         out = step_worlds(
             [e._world for e in self.envs],
             [e.tracker.monitor for e in self.envs],
             np.asarray(actions, dtype=np.float64),
             self.obs,
             None if active is None else [bool(a) for a in active],
-            shield,
-            first.shield_in_env,
+            first.shield if in_env else None,
+            in_env,
         )
         self.obs = out.observation
         for env, slack in zip(self.envs, out.slack.tolist(), strict=True):
@@ -140,9 +143,15 @@ class ChannelBatch:
         return out
 
     def infos(self, out: WorldsStep) -> list[dict[str, Any]]:
-        """Each env's ``info`` as :meth:`ChannelEnv.step` gives it (a batch does not return the
-        CLF goal and the barrier list: None and empty)."""
-        shielded = self.envs[0].shield is not None and self.envs[0].shield_in_env
+        """Each env's ``info`` as its own ``step`` gives it (a batch does not return the CLF
+        goal and the barrier list: None and empty)."""
+        first = self.envs[0]
+        shielded = first.shield is not None and getattr(first, "shield_in_env", True)
+        # The enum members by value (a dict lookup: calling the enum per row cost a third of
+        # this function).
+        status_of, solver_of = (_MEMBERS[Status], _MEMBERS[Solver]) if shielded else ({}, {})
+        with_shield = shielded or first.SHIELD_INFO_ALWAYS
+        name_1, name_2 = first.CONSTRAINTS
         columns = zip(
             out.q.tolist(),
             out.action,
@@ -163,46 +172,74 @@ class ChannelBatch:
             strict=True,
         )
         infos = []
-        for q, action, ok, trap, r_tl, (c1, c2), d, hit, out_of, a_rl, cbf, clf, *qp in columns:
-            delta, status, slack, solver = qp
-            infos.append(
-                {
-                    "fsa_state": q,
-                    "action": action,
-                    "success": ok,
-                    "trap": trap,
-                    "tl_reward": r_tl,
-                    "constraints": {"c1": c1, "c2": c2},
-                    "min_obstacle_distance": d,
-                    "collision": hit,
-                    "violation": out_of,
-                    "shield": {
-                        "a_rl": a_rl,
-                        "a_cbf": cbf,
-                        "a_clf": clf,
-                        "delta": delta,
-                        "status": Status(status) if shielded else None,
-                        "slack": slack,
-                        "solver": Solver(solver) if shielded else None,
-                        "goal": None,
-                        "barriers": {},
-                    },
+        for q, action, ok, trap, r_tl, (h1, h2), d, hit, out_of, a_rl, cbf, clf, *qp in columns:
+            info = {
+                "fsa_state": q,
+                "action": action,
+                "success": ok,
+                "trap": trap,
+                "tl_reward": r_tl,
+                "constraints": {name_1: h1, name_2: h2},
+                "min_obstacle_distance": d,
+                "collision": hit,
+                "violation": out_of,
+            }
+            if with_shield:
+                delta, status, slack, solver = qp
+                info["shield"] = {
+                    "a_rl": a_rl,
+                    "a_cbf": cbf,
+                    "a_clf": clf,
+                    "delta": delta,
+                    "status": status_of.get(status),
+                    "slack": slack,
+                    "solver": solver_of.get(solver),
+                    "goal": None,
+                    "barriers": {},
                 }
-            )
+            infos.append(info)
         return infos
 
 
-class ChannelVectorEnv(gym.vector.VectorEnv):
-    """``tlshield/Channel-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
-    :class:`ChannelBatch`); an env whose episode ended is reset on the next step
-    (``AutoresetMode.NEXT_STEP``, Gymnasium's default). ``infos`` holds arrays: ``fsa_state``,
-    ``success``, ``trap``, ``tl_reward``, ``constraints`` (N, 2), ``min_obstacle_distance``,
-    ``collision``, ``violation``, and the shield's ``a_cbf``, ``a_clf``, ``status``."""
+class ChannelBatch(WorldBatch):
+    """``num_envs`` :class:`tlshield.envs.ChannelEnv` stepped in one core call (see
+    :class:`WorldBatch`)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.envs.channel import ChannelEnv
+
+        _check_count(num_envs)
+        super().__init__([ChannelEnv(config=config, **kwargs) for _ in range(num_envs)])
+
+
+class PointMassBatch(WorldBatch):
+    """``num_envs`` :class:`tlshield.envs.point_mass.PointMassEnv` stepped in one core call
+    (see :class:`WorldBatch`)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        from tlshield.envs.point_mass import PointMassEnv
+
+        _check_count(num_envs)
+        super().__init__([PointMassEnv(config, **kwargs) for _ in range(num_envs)])
+
+
+def _check_count(num_envs: Any) -> None:
+    if not (isinstance(num_envs, int) and num_envs > 0):
+        raise ValueError(f"num_envs = {num_envs!r}: expected a positive integer")
+
+
+class WorldVectorEnv(gym.vector.VectorEnv):
+    """A :class:`WorldBatch` as a Gymnasium ``VectorEnv``, stepped in one core call; an env
+    whose episode ended is reset on the next step (``AutoresetMode.NEXT_STEP``, Gymnasium's
+    default). ``infos`` holds arrays: ``fsa_state``, ``success``, ``trap``, ``tl_reward``,
+    ``constraints`` (N, 2), ``min_obstacle_distance``, ``collision``, ``violation``, and the
+    shield's ``a_cbf``, ``a_clf``, ``status``."""
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
-        self.batch = ChannelBatch(num_envs, config, **kwargs)
+    def __init__(self, batch: WorldBatch) -> None:
+        self.batch = batch
+        num_envs = len(batch.envs)
         self.num_envs = num_envs
         self.single_observation_space = self.batch.observation_space
         self.single_action_space = self.batch.action_space
@@ -257,16 +294,33 @@ class ChannelVectorEnv(gym.vector.VectorEnv):
         return self.batch.obs.copy(), rewards, terminated, truncated, infos
 
 
-def make(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
-    """A vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
-    ``tlshield/Channel-v0`` only so far (PointMass-v0 and FlatWorld-v0 still step in Python:
-    use Gymnasium's ``SyncVectorEnv``). For Stable-Baselines3 use
-    :class:`tlshield.sb3.ChannelVecEnv`."""
-    from tlshield.envs import ENV_ID
+class ChannelVectorEnv(WorldVectorEnv):
+    """``tlshield/Channel-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
+    :class:`WorldVectorEnv`)."""
 
-    if env_id != ENV_ID:
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        super().__init__(ChannelBatch(num_envs, config, **kwargs))
+
+
+class PointMassVectorEnv(WorldVectorEnv):
+    """``tlshield/PointMass-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
+    :class:`WorldVectorEnv`)."""
+
+    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+        super().__init__(PointMassBatch(num_envs, config, **kwargs))
+
+
+def make(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
+    """A Gymnasium vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
+    ``tlshield/Channel-v0`` or ``tlshield/PointMass-v0`` (FlatWorld-v0, written in Python as a
+    user's env would be, has no core world: use Gymnasium's ``SyncVectorEnv``). For
+    Stable-Baselines3 use :func:`tlshield.sb3.make_vec_env`."""
+    from tlshield.envs import ENV_ID, POINT_MASS_ID
+
+    kinds = {ENV_ID: ChannelVectorEnv, POINT_MASS_ID: PointMassVectorEnv}
+    if env_id not in kinds:
         raise ValueError(
-            f"env {env_id!r}: tlshield.vector.make steps {ENV_ID} in the core; for other envs "
-            "use gymnasium.vector.SyncVectorEnv"
+            f"env {env_id!r}: tlshield.vector.make steps {ENV_ID} and {POINT_MASS_ID} in the "
+            "core; for other envs use gymnasium.vector.SyncVectorEnv"
         )
-    return ChannelVectorEnv(num_envs, config, **kwargs)
+    return kinds[env_id](num_envs, config, **kwargs)

@@ -114,6 +114,10 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     ``status``); after a reset ``goal_outside_channel`` and ``clf_goal_outside``.
     """
 
+    #: The names of ``info["constraints"]`` (a batch builds ``info`` from these).
+    CONSTRAINTS: ClassVar[tuple[str, str]] = ("c1", "c2")
+    #: ``info["shield"]`` is there in every configuration (zeros and None without a shield).
+    SHIELD_INFO_ALWAYS: ClassVar[bool] = True
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 
     def __init__(

@@ -28,6 +28,7 @@ import numpy as np
 
 from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
 from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
+from tlshield.envs.params import CONFIGS
 
 #: Observation layouts (see :mod:`tlshield.envs.channel`).
 OBSERVATIONS = ("relative", "paper")
@@ -301,14 +302,6 @@ def _positive(name: str, value: Any) -> None:
 #: The task: visit g1 or g2, then g3, staying inside the channel until g3 (paper Eq. 6C1).
 TASK = "(F g1 | F g2) & F g3 & (!g3 U (g1 | g2)) & ((c1 & c2) U g3)"
 
-
-#: The four configurations of the paper: which parts of the shield are on.
-CONFIGS = {
-    "rl": (False, False),
-    "rl_cbf": (True, False),
-    "rl_clf": (False, True),
-    "rl_cbf_clf": (True, True),
-}
 
 #: The task with the obstacles in the formula (an option beyond the paper): the obstacles
 #: must be avoided until g3, so the CBF safe set keeps the agent out of them too.

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
-from tlshield.envs.params import build, renamed_class
+from tlshield.envs.params import CONFIGS, build, renamed_class
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -57,13 +57,6 @@ FORMULAS: tuple[str, ...] = (
     "(blue => F magenta) U (yellow | ((green & blue) & F orange))",
 )
 
-#: Which parts of the shield are on, per configuration (as for the other environments).
-CONFIGS = {
-    "rl": (False, False),
-    "rl_cbf": (True, False),
-    "rl_clf": (False, True),
-    "rl_cbf_clf": (True, True),
-}
 
 #: The state is the position ``x, y``.
 POS = (0, 1)

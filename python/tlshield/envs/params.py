@@ -8,6 +8,14 @@ from collections.abc import Mapping
 from dataclasses import asdict, fields, replace
 from typing import Any, TypeVar
 
+#: The configurations of the shield (the paper's four), the same for every environment: which
+#: parts are on, ``(cbf, clf)``.
+CONFIGS = {
+    "rl": (False, False),
+    "rl_cbf": (True, False),
+    "rl_clf": (False, True),
+    "rl_cbf_clf": (True, True),
+}
 #: Parameters renamed in 0.2 (old -> new): one lower-case name per concept, ``margin`` as the
 #: shield calls it.
 RENAMED = {"K": "k", "cbf_margin": "margin"}

@@ -1,16 +1,18 @@
 """``tlshield/PointMass-v0``: a double-integrator robot in a room with two round obstacles and
 two goal regions; the task is to visit ``a``, then ``b``, without touching an obstacle before
-``b`` (:data:`TASK`). Built as a user would build their own: a plain Gymnasium environment
-of the physics (:class:`PointMassRoom`), wrapped by the public :class:`tlshield.FsaAugmented`
-(task reward, automaton state) and :class:`tlshield.Shielded` (the shield), with the core's
-:class:`tlshield.DoubleIntegrator` as both the plant and the shield's model. Under an
-acceleration-level model a position constraint has relative degree 2, so the shield enforces
-the obstacles with higher-order barriers (``alpha2``) and drives to the goals with the
-second-order CLF (see the README's Semantics).
+``b`` (:data:`TASK`). The plant, the walls, the shield call, the task monitor, the reward and
+the observation step in the core (:class:`tlshield._core.PointMassWorld`), through the core's
+double integrator, which is also the shield's model; :class:`PointMassEnv` is the Gymnasium
+shell (it draws the start and builds ``info``). Under an acceleration-level model a position
+constraint has relative degree 2, so the shield enforces the obstacles with higher-order
+barriers (``alpha2``) and drives to the goals with the second-order CLF (see the README's
+Semantics). (FlatWorld-v0 is the worked example of an environment written in Python and
+shielded with the public wrappers.)
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
@@ -19,20 +21,13 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Ball, DoubleIntegrator, Shield, Spec
-from tlshield.envs.params import build, renamed_class
-from tlshield.wrappers import FsaAugmented, Shielded
+from tlshield._core import Automaton, Ball, DoubleIntegrator, PointMassWorld, Shield, Spec
+from tlshield.envs.params import CONFIGS, build, renamed_class
+from tlshield.tracking import FsaTracker, shield_info
 
 #: Visit a, then b; stay out of both obstacles until b.
 TASK = "F a & F b & (!b U a) & ((!o1 & !o2) U b)"
 
-#: Which parts of the shield are on, per configuration (as for Channel-v0).
-CONFIGS = {
-    "rl": (False, False),
-    "rl_cbf": (True, False),
-    "rl_clf": (False, True),
-    "rl_cbf_clf": (True, True),
-}
 
 #: The state: position ``x, y`` and velocity ``vx, vy``.
 STATE_DIM = 4
@@ -119,8 +114,11 @@ class PointMassParams:
                     )
 
 
+@functools.lru_cache(maxsize=64)
 def point_mass_spec(cfg: PointMassParams | None = None) -> Spec:
-    """The task spec over the state ``[x, y, vx, vy]``."""
+    """The task spec over the state ``[x, y, vx, vy]``, one per parameters (cached, so that
+    every environment, shield and monitor of the task shares one automaton: a batch's shield
+    reads every env's monitor)."""
     cfg = cfg or PointMassParams()
 
     def disc(centre: tuple[float, float], radius: float) -> Ball:
@@ -137,7 +135,7 @@ def point_mass_spec(cfg: PointMassParams | None = None) -> Spec:
     )
 
 
-def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec) -> Shield | None:
+def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec | Automaton) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``): HOCBF rows for the obstacles and the
     goals' literals, the second-order CLF, the applied action kept in the acceleration box."""
     use_cbf, use_clf = CONFIGS[config]
@@ -162,43 +160,79 @@ def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec) -> Shield |
     )
 
 
-class PointMassRoom(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
-    """The physics alone: a 2-D double integrator in a room with two obstacles, no task.
+class PointMassEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+    """``tlshield/PointMass-v0`` (see the module docs and :func:`make_point_mass`).
 
-    Observation: the state ``[x, y, vx, vy]``. Action: the acceleration ``(ax, ay)`` in
-    m/s^2, clipped to ``[-max_accel, max_accel]``. Reward: ``-collision_penalty`` per step
-    inside an obstacle, else 0 (the task reward comes from :class:`FsaAugmented`). Truncated at
-    ``horizon`` steps; never terminated here (the task ends the episode on success). ``info``:
-    ``collision``, ``violation`` (the same: inside an obstacle), ``min_obstacle_distance``
-    (from the robot to the nearer obstacle's edge, negative inside) and ``constraints``
-    (``{"o1": h, "o2": h}``, distance minus radius).
+    Observation: ``[x, y, vx, vy]`` then the one-hot automaton state. Action: the acceleration
+    ``(ax, ay)`` in m/s^2; the shield's answer is clipped to ``[-max_accel, max_accel]``.
+    Reward: the progress-aware task reward minus ``collision_penalty`` per step inside an
+    obstacle. Terminated when the task is done, truncated at ``horizon`` steps. ``info``:
+    ``constraints`` (``{"o1": h, "o2": h}``, distance minus radius), ``min_obstacle_distance``,
+    ``collision`` and ``violation`` (the same: inside an obstacle), ``action`` (as applied),
+    ``fsa_state``, ``success``, ``trap``, ``tl_reward`` and, with a shield, ``shield``.
     """
 
+    #: The names of ``info["constraints"]`` (a batch builds ``info`` from these).
+    CONSTRAINTS: ClassVar[tuple[str, str]] = ("o1", "o2")
+    #: ``info["shield"]`` is there only with a shield.
+    SHIELD_INFO_ALWAYS: ClassVar[bool] = False
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
-    def __init__(self, cfg: PointMassParams) -> None:
+    def __init__(
+        self, config: str = "rl_cbf_clf", evaluation: bool = False, **overrides: Any
+    ) -> None:
+        if config not in CONFIGS:
+            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        cfg = build(PointMassParams, overrides, "PointMass-v0")
         self.cfg = cfg
-        self.model = DoubleIntegrator(pos=list(POS), vel=list(VEL))
+        self.config = config
+        spec = point_mass_spec(cfg)
+        automaton = spec.automaton()
+        progress = automaton.progress_reward(
+            gamma=cfg.gamma,
+            horizon=cfg.horizon,
+            scale=cfg.progress_scale,
+            exclusive=[["a", "b", "o1", "o2"]],
+        )
+        self.tracker = FsaTracker(automaton, 1.0, -100.0, progress)
+        shield_config = config
+        if evaluation and not CONFIGS[config][0]:
+            shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+        self.shield = point_mass_shield(cfg, shield_config, automaton)
+        self._world = PointMassWorld(
+            dt=cfg.dt,
+            horizon=cfg.horizon,
+            room=cfg.room,
+            max_accel=cfg.max_accel,
+            obstacles=(cfg.obstacle_1, cfg.obstacle_2),
+            obstacle_radius=cfg.obstacle_radius,
+            collision_penalty=cfg.collision_penalty,
+        )
         lo, hi = cfg.room
         span = hi - lo
+        k = automaton.num_states
         self.observation_space = gym.spaces.Box(
-            np.array([lo, lo, -span, -span]), np.array([hi, hi, span, span]), dtype=np.float64
+            np.concatenate([[lo, lo, -span, -span], np.zeros(k)]),
+            np.concatenate([[hi, hi, span, span], np.ones(k)]),
+            dtype=np.float64,
         )
         a = cfg.max_accel
         self.action_space = gym.spaces.Box(-a, a, shape=(2,), dtype=np.float64)
-        self.state = np.zeros(STATE_DIM)
-        self._t = 0
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """The current state ``[x, y, vx, vy]`` (a copy)."""
+        return self._world.state
+
+    @property
+    def fsa_state(self) -> int:
+        return self.tracker.q
 
     def _measure(self) -> dict[str, Any]:
-        cfg, p = self.cfg, self.state[list(POS)]
-        h = {
-            name: math.dist(p, centre) - cfg.obstacle_radius
-            for name, centre in (("o1", cfg.obstacle_1), ("o2", cfg.obstacle_2))
-        }
-        inside = min(h.values()) < 0.0
+        h1, h2, nearest, inside = self._world.measure()
         return {
-            "constraints": h,
-            "min_obstacle_distance": min(h.values()),
+            "constraints": {"o1": h1, "o2": h2},
+            "min_obstacle_distance": nearest,
             "collision": inside,
             "violation": inside,
         }
@@ -209,29 +243,33 @@ class PointMassRoom(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         super().reset(seed=seed)
         spread = self.cfg.start_spread
         p = np.asarray(self.cfg.start) + self.np_random.uniform(-spread, spread, size=2)
-        self.state = np.array([p[0], p[1], 0.0, 0.0])
-        self._t = 0
-        return self.state.copy(), self._measure()
+        s = np.array([p[0], p[1], 0.0, 0.0])
+        self._world.reset(s)
+        q = self.tracker.reset(s)
+        info = {**self._measure(), "fsa_state": q, "success": self.tracker.success}
+        info["trap"] = self.tracker.trapped
+        return np.concatenate([s, self.tracker.one_hot()]), info
 
     def step(
         self, action: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
-        cfg = self.cfg
-        a = np.asarray(action, dtype=np.float64).reshape(2)
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action {a} is not finite")
-        a = np.clip(a, -cfg.max_accel, cfg.max_accel)
-        nxt = np.asarray(self.model.step(self.state, a, cfg.dt))
-        lo, hi = cfg.room
-        for p, v in zip(POS, VEL, strict=True):
-            if not lo <= nxt[p] <= hi:
-                nxt[p] = min(max(nxt[p], lo), hi)
-                nxt[v] = 0.0
-        self.state = nxt
-        self._t += 1
-        info = {**self._measure(), "action": a}
-        reward = -cfg.collision_penalty * float(info["collision"])
-        return self.state.copy(), reward, False, self._t >= cfg.horizon, info
+        a_rl = np.asarray(action, dtype=np.float64)
+        out = self._world.step(a_rl, self.tracker.monitor, self.shield)
+        h1, h2 = out.h
+        info: dict[str, Any] = {
+            "constraints": {"o1": h1, "o2": h2},
+            "min_obstacle_distance": out.min_obstacle_distance,
+            "collision": out.collision,
+            "violation": out.collision,
+            "action": out.action,
+            "fsa_state": out.q,
+            "success": out.accepted,
+            "trap": out.trapped,
+            "tl_reward": out.tl_reward,
+        }
+        if self.shield is not None:
+            info["shield"] = shield_info(out.shield, a_rl)
+        return out.observation, out.reward, out.terminated, out.truncated, info
 
 
 def make_point_mass(
@@ -240,32 +278,10 @@ def make_point_mass(
     """``gymnasium.make("tlshield/PointMass-v0", config=..., evaluation=..., **overrides)``.
 
     ``config`` picks the shield ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf"); ``evaluation=True``
-    turns the CBF on in every configuration. Observation: ``[x, y, vx, vy]`` then the one-hot
-    automaton state. Reward: the progress-aware task reward (finishing always out-earns
-    dawdling) plus the room's collision penalty. Terminated when the task is done; truncated at
-    the horizon. ``info`` adds ``fsa_state``, ``success``, ``trap``, ``tl_reward`` and, with a
-    shield, ``shield``. Any :class:`PointMassParams` field is a keyword override.
+    turns the CBF on in every configuration. Any :class:`PointMassParams` field is a keyword
+    override. See :class:`PointMassEnv` for the observation, reward and ``info``.
     """
-    if config not in CONFIGS:
-        raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
-    cfg = build(PointMassParams, overrides, "PointMass-v0")
-    spec = point_mass_spec(cfg)
-    env: gym.Env = FsaAugmented(
-        PointMassRoom(cfg),
-        spec,
-        w=1.0,
-        gamma=cfg.gamma,
-        horizon=cfg.horizon,
-        scale=cfg.progress_scale,
-        exclusive=[["a", "b", "o1", "o2"]],
-    )
-    shield_config = config
-    if evaluation and not CONFIGS[config][0]:
-        shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
-    shield = point_mass_shield(cfg, shield_config, spec)
-    if shield is not None:
-        env = Shielded(env, shield)
-    return env
+    return PointMassEnv(config, evaluation, **overrides)
 
 
 def __getattr__(name: str) -> Any:

@@ -10,12 +10,11 @@
 
 use std::f64::consts::SQRT_2;
 
-use rayon::prelude::*;
-
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
 use crate::shield::{Filtered, Shield};
+use crate::world::{World, WorldRow};
 
 /// State length: x, y, theta, three goal centres, two obstacle centres.
 pub const STATE_DIM: usize = 13;
@@ -27,7 +26,7 @@ const THETA: usize = 2;
 const GOALS: usize = 3;
 const OBSTACLES: usize = 9;
 
-/// The constants a step reads (the Python `ChannelConfig` holds and checks them all).
+/// The constants a step reads (the Python `ChannelParams` holds and checks them all).
 #[derive(Debug, Clone)]
 pub struct ChannelParams {
     /// Euler step (s).
@@ -337,72 +336,31 @@ impl ChannelWorld {
     }
 }
 
-/// Steps many worlds in one call, in parallel past [`crate::parallel::MIN_ROWS`] rows: row `i`
-/// steps `worlds[i]` with `actions[2i..2i + 2]` and `monitors[i]`, shielded by `shield`, and
-/// writes its observation into row `i` of `obs` (`width` values: the observation, then the
-/// one-hot FSA state). Rows with `active[i]` false are left alone (`None`, observation row
-/// untouched). The actions are checked first; an error steps no world.
-#[allow(clippy::too_many_arguments)]
-pub fn step_many(
-    worlds: &mut [&mut ChannelWorld],
-    monitors: &mut [&mut Monitor],
-    actions: &[f64],
-    active: &[bool],
-    scale: bool,
-    shield: Option<&Shield>,
-    obs: &mut [f64],
-    width: usize,
-) -> Result<Vec<Option<ChannelStep>>, ShieldError> {
-    let rows = worlds.len();
-    if monitors.len() != rows || active.len() != rows || actions.len() != 2 * rows {
-        return Err(InputError::Shape {
-            what: "step_many".into(),
-            expected: format!("{rows} monitors, {rows} active flags and ({rows}, 2) actions"),
-            got: format!(
-                "{} monitors, {} flags, {} action values",
-                monitors.len(),
-                active.len(),
-                actions.len()
-            ),
-        }
-        .into());
-    }
-    if obs.len() != rows * width {
-        return Err(InputError::Shape {
-            what: "observations".into(),
-            expected: format!("({rows}, {width})"),
-            got: format!("{} values", obs.len()),
-        }
-        .into());
-    }
-    crate::validate::check_finite("actions", actions, 2)?;
-    let states = monitors.first().map_or(0, |m| m.automaton().num_states());
-    let step = |world: &mut ChannelWorld, monitor: &mut Monitor, a: &[f64], row: &mut [f64]| {
-        let out = world.step([a[0], a[1]], scale, monitor, shield)?;
-        world.observe(monitor, states, row);
-        Ok(Some(out))
-    };
-    let results: Vec<Result<Option<ChannelStep>, ShieldError>> = if rows < crate::parallel::MIN_ROWS
-    {
-        worlds
-            .iter_mut()
-            .zip(monitors.iter_mut())
-            .zip(actions.chunks(2).zip(obs.chunks_mut(width).zip(active)))
-            .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
-            .collect()
-    } else {
-        crate::parallel::install(|| {
-            worlds
-                .par_iter_mut()
-                .zip(monitors.par_iter_mut())
-                .zip(
-                    actions
-                        .par_chunks(2)
-                        .zip(obs.par_chunks_mut(width).zip(active)),
-                )
-                .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
-                .collect()
+impl World for ChannelWorld {
+    fn step_row(
+        &mut self,
+        action: [f64; 2],
+        scale: bool,
+        monitor: &mut Monitor,
+        shield: Option<&Shield>,
+    ) -> Result<WorldRow, ShieldError> {
+        let step = self.step(action, scale, monitor, shield)?;
+        Ok(WorldRow {
+            a_rl: step.a_rl,
+            applied: step.applied,
+            shield: step.shield,
+            task: step.task,
+            reward: step.reward,
+            terminated: step.terminated,
+            truncated: step.truncated,
+            constraints: step.measure.h,
+            min_obstacle_distance: step.measure.min_obstacle_distance,
+            collision: step.measure.collision,
+            violation: step.measure.violation,
         })
-    };
-    results.into_iter().collect()
+    }
+
+    fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {
+        self.observe(monitor, num_states, out);
+    }
 }

@@ -28,6 +28,7 @@ pub mod formula;
 pub mod linalg;
 pub mod monitor;
 pub mod parallel;
+pub mod point_mass;
 pub mod predicate;
 pub mod progress;
 pub mod qp;
@@ -36,6 +37,7 @@ pub mod robustness;
 pub mod shield;
 pub mod spec;
 pub mod validate;
+pub mod world;
 
 pub use automaton::{Automaton, Edge, Reading};
 pub use dynamics::Dynamics;

@@ -1,10 +1,10 @@
 //! `ChannelWorld`: the case study's world stepped in the core (core `channel`), and
-//! `ChannelStep`, what one step gives.
+//! `ChannelStep`, what one step gives (`step_worlds`, in `world`, steps many).
 
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use tlshield_core::channel::{ChannelParams, ChannelStep, ChannelWorld, Obstacle, STATE_DIM};
+use tlshield_core::channel::{ChannelParams, ChannelWorld, Obstacle, STATE_DIM};
 
 use crate::convert::FloatArray;
 use crate::dynamics::PyUnicycle;
@@ -18,7 +18,7 @@ use crate::shield::{PyFilterResult, PyShield};
 /// (it draws the episodes and builds ``info``).
 #[pyclass(name = "ChannelWorld", module = "tlshield._core")]
 pub struct PyChannelWorld {
-    inner: ChannelWorld,
+    pub(crate) inner: ChannelWorld,
 }
 
 fn pair(values: Vec<f64>, name: &str) -> PyResult<[f64; 2]> {
@@ -231,165 +231,4 @@ pub struct PyChannelStep {
     collision: bool,
     /// Outside the channel.
     violation: bool,
-}
-
-/// What one ``step_worlds`` call gives, one row per world (inactive rows: zeros and False).
-#[pyclass(name = "WorldsStep", module = "tlshield._core", frozen, get_all)]
-pub struct PyWorldsStep {
-    /// The observations (N, D), one-hot FSA states included (inactive rows: as given).
-    observation: Py<PyArray2<f64>>,
-    /// The environments' rewards (N,).
-    reward: Py<PyArray1<f64>>,
-    /// Episode ended (N,).
-    terminated: Py<PyArray1<bool>>,
-    /// Horizon reached (N,).
-    truncated: Py<PyArray1<bool>>,
-    /// FSA states (N,).
-    q: Py<PyArray1<i64>>,
-    /// Task rewards (N,).
-    tl_reward: Py<PyArray1<f64>>,
-    /// Task done (N,).
-    accepted: Py<PyArray1<bool>>,
-    /// In the trap (N,).
-    trapped: Py<PyArray1<bool>>,
-    /// Channel constraints (N, 2): c1, c2.
-    constraints: Py<PyArray2<f64>>,
-    /// Distance to the nearer obstacle (N,).
-    min_obstacle_distance: Py<PyArray1<f64>>,
-    /// In collision (N,).
-    collision: Py<PyArray1<bool>>,
-    /// Outside the channel (N,).
-    violation: Py<PyArray1<bool>>,
-    /// RL actions in physical units (N, 2).
-    a_rl: Py<PyArray2<f64>>,
-    /// Applied actions (N, 2).
-    action: Py<PyArray2<f64>>,
-    /// Safety corrections (N, 2).
-    a_cbf: Py<PyArray2<f64>>,
-    /// Task corrections (N, 2).
-    a_clf: Py<PyArray2<f64>>,
-    /// CLF relaxations (N,).
-    delta: Py<PyArray1<f64>>,
-    /// Largest barrier slacks (N,).
-    slack: Py<PyArray1<f64>>,
-    /// ``tlshield.Status`` values (N,) (rows without a shield: 0).
-    status: Py<PyArray1<u8>>,
-    /// ``tlshield.Solver`` values (N,).
-    solver: Py<PyArray1<u8>>,
-    /// Whether the row was stepped (N,).
-    active: Py<PyArray1<bool>>,
-}
-
-/// Steps the worlds in one call (parallel past 32 rows, GIL released): row ``i`` steps
-/// ``worlds[i]`` with ``actions[i]`` (scaled from ``[-1, 1]`` unless ``scale`` is false) and
-/// ``monitors[i]``, shielded by ``shield``; rows whose ``active`` flag is False are left alone
-/// (their ``observation`` row is ``obs[i]`` as given). ``obs`` is ``(N, D)``, the previous
-/// observations.
-#[pyfunction]
-#[pyo3(signature = (worlds, monitors, actions, obs, active=None, shield=None, scale=true))]
-#[allow(clippy::too_many_arguments)]
-pub fn step_worlds(
-    py: Python<'_>,
-    worlds: Vec<Bound<'_, PyChannelWorld>>,
-    monitors: Vec<Bound<'_, PyMonitor>>,
-    actions: &Bound<'_, PyAny>,
-    obs: &Bound<'_, PyAny>,
-    active: Option<Vec<bool>>,
-    shield: Option<PyRef<'_, PyShield>>,
-    scale: bool,
-) -> PyResult<PyWorldsStep> {
-    let rows = worlds.len();
-    let borrow_error =
-        |what: &str| PyValueError::new_err(format!("{what}: each must appear once (one per row)"));
-    let mut world_guards = worlds
-        .iter()
-        .map(|w| w.try_borrow_mut().map_err(|_| borrow_error("worlds")))
-        .collect::<PyResult<Vec<_>>>()?;
-    let mut monitor_guards = monitors
-        .iter()
-        .map(|m| m.try_borrow_mut().map_err(|_| borrow_error("monitors")))
-        .collect::<PyResult<Vec<_>>>()?;
-    let actions = FloatArray::extract(actions, "actions", 2, "(N, 2)")?;
-    let previous = FloatArray::extract(obs, "obs", 2, "(N, D)")?;
-    let width = previous.shape()[1];
-    let mut observation = previous.values().into_owned();
-    let active = active.unwrap_or_else(|| vec![true; rows]);
-    let actions = actions.values();
-    let mut world_refs: Vec<&mut ChannelWorld> =
-        world_guards.iter_mut().map(|g| &mut g.inner).collect();
-    let mut monitor_refs: Vec<&mut tlshield_core::Monitor> =
-        monitor_guards.iter_mut().map(|g| &mut g.inner).collect();
-    let core_shield = shield.as_deref().map(PyShield::core);
-    let steps = map(py.detach(|| {
-        tlshield_core::channel::step_many(
-            &mut world_refs,
-            &mut monitor_refs,
-            &actions,
-            &active,
-            scale,
-            core_shield,
-            &mut observation,
-            width,
-        )
-    }))?;
-    let matrix = |v: Vec<f64>, cols: usize| -> PyResult<Py<PyArray2<f64>>> {
-        numpy::ndarray::Array2::from_shape_vec((rows, cols), v)
-            .map(|a| a.into_pyarray(py).unbind())
-            .map_err(|e| PyValueError::new_err(e.to_string()))
-    };
-    let col = |f: &dyn Fn(&ChannelStep) -> f64| -> Vec<f64> {
-        steps.iter().map(|s| s.as_ref().map_or(0.0, f)).collect()
-    };
-    let flag = |f: &dyn Fn(&ChannelStep) -> bool| -> Vec<bool> {
-        steps.iter().map(|s| s.as_ref().is_some_and(f)).collect()
-    };
-    let pairs = |f: &dyn Fn(&ChannelStep) -> [f64; 2]| -> Vec<f64> {
-        steps
-            .iter()
-            .flat_map(|s| s.as_ref().map_or([0.0, 0.0], f))
-            .collect()
-    };
-    let shield_pair = |f: &dyn Fn(&tlshield_core::Filtered) -> [f64; 2]| -> Vec<f64> {
-        pairs(&|s: &ChannelStep| s.shield.as_ref().map_or([0.0, 0.0], f))
-    };
-    let shield_code = |f: &dyn Fn(&tlshield_core::Filtered) -> u8| -> Vec<u8> {
-        steps
-            .iter()
-            .map(|s| s.as_ref().and_then(|s| s.shield.as_ref()).map_or(0, f))
-            .collect()
-    };
-    Ok(PyWorldsStep {
-        observation: matrix(observation, width)?,
-        reward: col(&|s| s.reward).into_pyarray(py).unbind(),
-        terminated: flag(&|s| s.terminated).into_pyarray(py).unbind(),
-        truncated: flag(&|s| s.truncated).into_pyarray(py).unbind(),
-        q: steps
-            .iter()
-            .map(|s| s.as_ref().map_or(0, |s| s.task.q as i64))
-            .collect::<Vec<_>>()
-            .into_pyarray(py)
-            .unbind(),
-        tl_reward: col(&|s| s.task.reward).into_pyarray(py).unbind(),
-        accepted: flag(&|s| s.task.accepted).into_pyarray(py).unbind(),
-        trapped: flag(&|s| s.task.trapped).into_pyarray(py).unbind(),
-        constraints: matrix(pairs(&|s| s.measure.h), 2)?,
-        min_obstacle_distance: col(&|s| s.measure.min_obstacle_distance)
-            .into_pyarray(py)
-            .unbind(),
-        collision: flag(&|s| s.measure.collision).into_pyarray(py).unbind(),
-        violation: flag(&|s| s.measure.violation).into_pyarray(py).unbind(),
-        a_rl: matrix(pairs(&|s| s.a_rl), 2)?,
-        action: matrix(pairs(&|s| s.applied), 2)?,
-        a_cbf: matrix(shield_pair(&|f| [f.a_cbf[0], f.a_cbf[1]]), 2)?,
-        a_clf: matrix(shield_pair(&|f| [f.a_clf[0], f.a_clf[1]]), 2)?,
-        delta: col(&|s| s.shield.as_ref().map_or(0.0, |f| f.delta))
-            .into_pyarray(py)
-            .unbind(),
-        slack: col(&|s| s.shield.as_ref().map_or(0.0, |f| f.slack))
-            .into_pyarray(py)
-            .unbind(),
-        status: shield_code(&|f| f.status as u8).into_pyarray(py).unbind(),
-        solver: shield_code(&|f| f.solver as u8).into_pyarray(py).unbind(),
-        active: active.into_pyarray(py).unbind(),
-    })
 }

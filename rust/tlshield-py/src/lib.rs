@@ -11,10 +11,12 @@ mod dynamics;
 mod errors;
 mod literals;
 mod monitor;
+mod point_mass;
 mod predicate;
 mod progress;
 mod shield;
 mod spec;
+mod world;
 
 use pyo3::prelude::*;
 
@@ -56,8 +58,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<shield::PyFilterBatch>()?;
     m.add_class::<channel::PyChannelWorld>()?;
     m.add_class::<channel::PyChannelStep>()?;
-    m.add_class::<channel::PyWorldsStep>()?;
-    m.add_function(wrap_pyfunction!(channel::step_worlds, m)?)?;
+    m.add_class::<world::PyWorldsStep>()?;
+    m.add_function(wrap_pyfunction!(world::step_worlds, m)?)?;
+    m.add_class::<point_mass::PyPointMassWorld>()?;
+    m.add_class::<point_mass::PyPointMassStep>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

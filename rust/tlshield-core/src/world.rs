@@ -1,0 +1,123 @@
+//! What the bundled worlds (`ChannelWorld` of Channel-v0, `PointMassWorld` of PointMass-v0)
+//! share: one step's outcome in the form a batch reports
+//! ([`WorldRow`]), and [`step_many`], which steps N worlds of one kind in one call.
+
+use rayon::prelude::*;
+
+use crate::error::{InputError, ShieldError};
+use crate::monitor::{Monitor, TaskStep};
+use crate::shield::{Filtered, Shield};
+
+/// One step of a bundled world, as a batch reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldRow {
+    /// The RL action in physical units.
+    pub a_rl: [f64; 2],
+    /// The action applied to the plant.
+    pub applied: [f64; 2],
+    /// The shield's answer, when it ran.
+    pub shield: Option<Filtered>,
+    /// The task's step (FSA state, task reward, acceptance, trap).
+    pub task: TaskStep,
+    /// The environment's reward.
+    pub reward: f64,
+    /// The episode ended.
+    pub terminated: bool,
+    /// The horizon was reached.
+    pub truncated: bool,
+    /// The world's two constraints at the new state (the channel's c1, c2; the obstacles'
+    /// clearances).
+    pub constraints: [f64; 2],
+    /// Distance to the nearer obstacle (its centre, or its edge: see the world).
+    pub min_obstacle_distance: f64,
+    /// In collision.
+    pub collision: bool,
+    /// A task constraint is violated.
+    pub violation: bool,
+}
+
+/// A world the core steps: one action (2 inputs) per step, shielded with its monitor's reading.
+pub trait World: Send {
+    /// One step for `action` (scaled from `[-1, 1]` to the RL box when `scale` is true and the
+    /// world has such a box), shielded by `shield` when given.
+    fn step_row(
+        &mut self,
+        action: [f64; 2],
+        scale: bool,
+        monitor: &mut Monitor,
+        shield: Option<&Shield>,
+    ) -> Result<WorldRow, ShieldError>;
+
+    /// The observation at the current state into `out`, then the one-hot FSA state of
+    /// `monitor` (`num_states` values).
+    fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]);
+}
+
+/// Steps many worlds in one call, in parallel past [`crate::parallel::MIN_ROWS`] rows: row `i`
+/// steps `worlds[i]` with `actions[2i..2i + 2]` and `monitors[i]`, shielded by `shield`, and
+/// writes its observation into row `i` of `obs` (`width` values: the observation, then the
+/// one-hot FSA state). Rows with `active[i]` false are left alone (`None`, observation row
+/// untouched). The actions are checked first; an error steps no world.
+#[allow(clippy::too_many_arguments)]
+pub fn step_many<W: World>(
+    worlds: &mut [&mut W],
+    monitors: &mut [&mut Monitor],
+    actions: &[f64],
+    active: &[bool],
+    scale: bool,
+    shield: Option<&Shield>,
+    obs: &mut [f64],
+    width: usize,
+) -> Result<Vec<Option<WorldRow>>, ShieldError> {
+    let rows = worlds.len();
+    if monitors.len() != rows || active.len() != rows || actions.len() != 2 * rows {
+        return Err(InputError::Shape {
+            what: "step_many".into(),
+            expected: format!("{rows} monitors, {rows} active flags and ({rows}, 2) actions"),
+            got: format!(
+                "{} monitors, {} flags, {} action values",
+                monitors.len(),
+                active.len(),
+                actions.len()
+            ),
+        }
+        .into());
+    }
+    if obs.len() != rows * width {
+        return Err(InputError::Shape {
+            what: "observations".into(),
+            expected: format!("({rows}, {width})"),
+            got: format!("{} values", obs.len()),
+        }
+        .into());
+    }
+    crate::validate::check_finite("actions", actions, 2)?;
+    let states = monitors.first().map_or(0, |m| m.automaton().num_states());
+    let step = |world: &mut W, monitor: &mut Monitor, a: &[f64], row: &mut [f64]| {
+        let out = world.step_row([a[0], a[1]], scale, monitor, shield)?;
+        world.observe_row(monitor, states, row);
+        Ok(Some(out))
+    };
+    let results: Vec<Result<Option<WorldRow>, ShieldError>> = if rows < crate::parallel::MIN_ROWS {
+        worlds
+            .iter_mut()
+            .zip(monitors.iter_mut())
+            .zip(actions.chunks(2).zip(obs.chunks_mut(width).zip(active)))
+            .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
+            .collect()
+    } else {
+        crate::parallel::install(|| {
+            worlds
+                .par_iter_mut()
+                .zip(monitors.par_iter_mut())
+                .zip(
+                    actions
+                        .par_chunks(2)
+                        .zip(obs.par_chunks_mut(width).zip(active)),
+                )
+                .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
+                .collect()
+        })
+    };
+    results.into_iter().collect()
+}

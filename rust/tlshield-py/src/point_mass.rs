@@ -1,0 +1,153 @@
+//! `PointMassWorld`: PointMass-v0's world stepped in the core (core `point_mass`), and
+//! `PointMassStep`, what one step gives.
+
+use numpy::{IntoPyArray, PyArray1};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use tlshield_core::point_mass::{PointMassParams, PointMassWorld, STATE_DIM};
+
+use crate::convert::FloatArray;
+use crate::errors::map;
+use crate::monitor::PyMonitor;
+use crate::shield::{PyFilterResult, PyShield};
+
+/// ``tlshield/PointMass-v0`` stepped in the core: the shield call, the acceleration box, the
+/// double integrator (the shield's model), the walls, the task monitor, the reward and the
+/// observation, in one call per step. The Gymnasium class is a shell around it (it draws the
+/// start and builds ``info``).
+#[pyclass(name = "PointMassWorld", module = "tlshield._core")]
+pub struct PyPointMassWorld {
+    pub(crate) inner: PointMassWorld,
+}
+
+fn values<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
+    let arr = FloatArray::extract(obj, name, 1, "(n,)")?;
+    arr.values()
+        .as_ref()
+        .try_into()
+        .map_err(|_| PyValueError::new_err(format!("{name}: expected {N} values")))
+}
+
+#[pymethods]
+impl PyPointMassWorld {
+    #[new]
+    #[pyo3(signature = (
+        *, dt, horizon, room, max_accel, obstacles, obstacle_radius, collision_penalty
+    ))]
+    fn new(
+        dt: f64,
+        horizon: u32,
+        room: (f64, f64),
+        max_accel: f64,
+        obstacles: ((f64, f64), (f64, f64)),
+        obstacle_radius: f64,
+        collision_penalty: f64,
+    ) -> Self {
+        let ((x1, y1), (x2, y2)) = obstacles;
+        PyPointMassWorld {
+            inner: PointMassWorld::new(PointMassParams {
+                dt,
+                horizon,
+                room,
+                max_accel,
+                obstacles: [[x1, y1], [x2, y2]],
+                obstacle_radius,
+                collision_penalty,
+            }),
+        }
+    }
+
+    /// Starts an episode at ``s0`` (4,): ``x, y, vx, vy``.
+    fn reset(&mut self, s0: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.inner.reset(values::<STATE_DIM>(s0, "s0")?);
+        Ok(())
+    }
+
+    /// One step for the RL action ``a_rl`` (2,), shielded by ``shield`` when given;
+    /// ``monitor`` must have read the current state (its reset or last advance) and moves on.
+    #[pyo3(signature = (a_rl, monitor, shield=None))]
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        a_rl: &Bound<'_, PyAny>,
+        monitor: &Bound<'_, PyMonitor>,
+        shield: Option<PyRef<'_, PyShield>>,
+    ) -> PyResult<PyPointMassStep> {
+        let a = values::<2>(a_rl, "a_rl")?;
+        let mut monitor = monitor.borrow_mut();
+        let step =
+            map(self
+                .inner
+                .step(a, &mut monitor.inner, shield.as_deref().map(PyShield::core)))?;
+        let n = monitor.inner.automaton().num_states();
+        let mut obs = vec![0.0; STATE_DIM + n];
+        self.inner.observe(&monitor.inner, n, &mut obs);
+        Ok(PyPointMassStep {
+            observation: obs.into_pyarray(py).unbind(),
+            action: step.applied.to_vec().into_pyarray(py).unbind(),
+            shield: match (shield, step.shield) {
+                (Some(sh), Some(f)) => Some(Py::new(py, sh.result(py, f))?),
+                _ => None,
+            },
+            q: step.task.q,
+            tl_reward: step.task.reward,
+            accepted: step.task.accepted,
+            trapped: step.task.trapped,
+            reward: step.reward,
+            terminated: step.terminated,
+            truncated: step.truncated,
+            h: step.measure.h,
+            min_obstacle_distance: step.measure.min_obstacle_distance,
+            collision: step.measure.collision,
+        })
+    }
+
+    /// ``(h_o1, h_o2, min_obstacle_distance, collision)`` at the current state.
+    fn measure(&self) -> (f64, f64, f64, bool) {
+        let m = self.inner.measure();
+        (m.h[0], m.h[1], m.min_obstacle_distance, m.collision)
+    }
+
+    /// The current state (4,), a copy.
+    #[getter]
+    fn state<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.state().to_vec().into_pyarray(py)
+    }
+
+    /// Steps taken in this episode.
+    #[getter]
+    fn steps(&self) -> u32 {
+        self.inner.steps()
+    }
+}
+
+/// What one ``PointMassWorld.step`` gives.
+#[pyclass(name = "PointMassStep", module = "tlshield._core", frozen, get_all)]
+pub struct PyPointMassStep {
+    /// The observation at the new state, one-hot FSA state included.
+    observation: Py<PyArray1<f64>>,
+    /// The action applied to the plant (2,): the shield's, clipped to the acceleration box.
+    action: Py<PyArray1<f64>>,
+    /// The shield's answer, or None without a shield.
+    shield: Option<Py<PyFilterResult>>,
+    /// The FSA state after the step.
+    q: usize,
+    /// The task reward of the step.
+    tl_reward: f64,
+    /// The task is done.
+    accepted: bool,
+    /// The task can no longer be done.
+    trapped: bool,
+    /// The environment's reward: the task reward minus the collision penalty.
+    reward: f64,
+    /// The task is done (the episode ends).
+    terminated: bool,
+    /// The horizon was reached.
+    truncated: bool,
+    /// Distance to each obstacle's edge (negative inside): ``(h_o1, h_o2)``.
+    h: [f64; 2],
+    /// The smaller of the two.
+    min_obstacle_distance: f64,
+    /// Inside an obstacle.
+    collision: bool,
+}

@@ -1,0 +1,229 @@
+//! `step_worlds`: N bundled worlds of one kind (`ChannelWorld` or `PointMassWorld`) stepped in
+//! one call (core `world::step_many`), and `WorldsStep`, what it gives.
+
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use tlshield_core::channel::ChannelWorld;
+use tlshield_core::point_mass::PointMassWorld;
+use tlshield_core::world::{step_many, World, WorldRow};
+
+use crate::channel::PyChannelWorld;
+use crate::convert::FloatArray;
+use crate::errors::map;
+use crate::monitor::PyMonitor;
+use crate::point_mass::PyPointMassWorld;
+use crate::shield::PyShield;
+
+/// Mutable borrows of every object of `list`, each once (a repeated one is an error: one per
+/// row).
+fn borrow_all<'py, T: pyo3::PyClass<Frozen = pyo3::pyclass::boolean_struct::False>>(
+    list: &[Bound<'py, T>],
+    what: &str,
+) -> PyResult<Vec<PyRefMut<'py, T>>> {
+    list.iter()
+        .map(|o| {
+            o.try_borrow_mut().map_err(|_| {
+                PyValueError::new_err(format!("{what}: each must appear once (one per row)"))
+            })
+        })
+        .collect()
+}
+
+/// Steps `worlds` with their monitors (GIL released).
+#[allow(clippy::too_many_arguments)]
+fn step_rows<W: World>(
+    py: Python<'_>,
+    worlds: &mut [&mut W],
+    monitors: &[Bound<'_, PyMonitor>],
+    actions: &[f64],
+    active: &[bool],
+    scale: bool,
+    shield: Option<&tlshield_core::Shield>,
+    observation: &mut [f64],
+    width: usize,
+) -> PyResult<Vec<Option<WorldRow>>> {
+    let mut guards = borrow_all(monitors, "monitors")?;
+    let mut refs: Vec<&mut tlshield_core::Monitor> =
+        guards.iter_mut().map(|g| &mut g.inner).collect();
+    map(py.detach(|| {
+        step_many(
+            worlds,
+            &mut refs,
+            actions,
+            active,
+            scale,
+            shield,
+            observation,
+            width,
+        )
+    }))
+}
+
+/// What one ``step_worlds`` call gives, one row per world (inactive rows: zeros and False).
+#[pyclass(name = "WorldsStep", module = "tlshield._core", frozen, get_all)]
+pub struct PyWorldsStep {
+    /// The observations (N, D), one-hot FSA states included (inactive rows: as given).
+    observation: Py<PyArray2<f64>>,
+    /// The environments' rewards (N,).
+    reward: Py<PyArray1<f64>>,
+    /// Episode ended (N,).
+    terminated: Py<PyArray1<bool>>,
+    /// Horizon reached (N,).
+    truncated: Py<PyArray1<bool>>,
+    /// FSA states (N,).
+    q: Py<PyArray1<i64>>,
+    /// Task rewards (N,).
+    tl_reward: Py<PyArray1<f64>>,
+    /// Task done (N,).
+    accepted: Py<PyArray1<bool>>,
+    /// In the trap (N,).
+    trapped: Py<PyArray1<bool>>,
+    /// Channel constraints (N, 2): c1, c2.
+    constraints: Py<PyArray2<f64>>,
+    /// Distance to the nearer obstacle (N,).
+    min_obstacle_distance: Py<PyArray1<f64>>,
+    /// In collision (N,).
+    collision: Py<PyArray1<bool>>,
+    /// Outside the channel (N,).
+    violation: Py<PyArray1<bool>>,
+    /// RL actions in physical units (N, 2).
+    a_rl: Py<PyArray2<f64>>,
+    /// Applied actions (N, 2).
+    action: Py<PyArray2<f64>>,
+    /// Safety corrections (N, 2).
+    a_cbf: Py<PyArray2<f64>>,
+    /// Task corrections (N, 2).
+    a_clf: Py<PyArray2<f64>>,
+    /// CLF relaxations (N,).
+    delta: Py<PyArray1<f64>>,
+    /// Largest barrier slacks (N,).
+    slack: Py<PyArray1<f64>>,
+    /// ``tlshield.Status`` values (N,) (rows without a shield: 0).
+    status: Py<PyArray1<u8>>,
+    /// ``tlshield.Solver`` values (N,).
+    solver: Py<PyArray1<u8>>,
+    /// Whether the row was stepped (N,).
+    active: Py<PyArray1<bool>>,
+}
+
+/// Steps the worlds (all ``ChannelWorld`` or all ``PointMassWorld``) in one call (parallel
+/// past 32 rows, GIL released): row ``i`` steps ``worlds[i]`` with ``actions[i]`` (a
+/// ChannelWorld scales it from ``[-1, 1]`` unless ``scale`` is false) and
+/// ``monitors[i]``, shielded by ``shield``; rows whose ``active`` flag is False are left alone
+/// (their ``observation`` row is ``obs[i]`` as given). ``obs`` is ``(N, D)``, the previous
+/// observations.
+#[pyfunction]
+#[pyo3(signature = (worlds, monitors, actions, obs, active=None, shield=None, scale=true))]
+#[allow(clippy::too_many_arguments)]
+pub fn step_worlds(
+    py: Python<'_>,
+    worlds: &Bound<'_, PyAny>,
+    monitors: Vec<Bound<'_, PyMonitor>>,
+    actions: &Bound<'_, PyAny>,
+    obs: &Bound<'_, PyAny>,
+    active: Option<Vec<bool>>,
+    shield: Option<PyRef<'_, PyShield>>,
+    scale: bool,
+) -> PyResult<PyWorldsStep> {
+    let actions = FloatArray::extract(actions, "actions", 2, "(N, 2)")?;
+    let previous = FloatArray::extract(obs, "obs", 2, "(N, D)")?;
+    let width = previous.shape()[1];
+    let mut observation = previous.values().into_owned();
+    let actions = actions.values();
+    let rows = actions.len() / 2;
+    let active = active.unwrap_or_else(|| vec![true; rows]);
+    let core_shield = shield.as_deref().map(PyShield::core);
+    let steps = if let Ok(list) = worlds.extract::<Vec<Bound<'_, PyChannelWorld>>>() {
+        let mut guards = borrow_all(&list, "worlds")?;
+        let mut refs: Vec<&mut ChannelWorld> = guards.iter_mut().map(|g| &mut g.inner).collect();
+        step_rows(
+            py,
+            &mut refs,
+            &monitors,
+            &actions,
+            &active,
+            scale,
+            core_shield,
+            &mut observation,
+            width,
+        )?
+    } else if let Ok(list) = worlds.extract::<Vec<Bound<'_, PyPointMassWorld>>>() {
+        let mut guards = borrow_all(&list, "worlds")?;
+        let mut refs: Vec<&mut PointMassWorld> = guards.iter_mut().map(|g| &mut g.inner).collect();
+        step_rows(
+            py,
+            &mut refs,
+            &monitors,
+            &actions,
+            &active,
+            scale,
+            core_shield,
+            &mut observation,
+            width,
+        )?
+    } else {
+        return Err(PyTypeError::new_err(
+            "worlds: expected a list of ChannelWorld or a list of PointMassWorld (one kind)",
+        ));
+    };
+    let rows = steps.len();
+    let matrix = |v: Vec<f64>, cols: usize| -> PyResult<Py<PyArray2<f64>>> {
+        numpy::ndarray::Array2::from_shape_vec((rows, cols), v)
+            .map(|a| a.into_pyarray(py).unbind())
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    };
+    let col = |f: &dyn Fn(&WorldRow) -> f64| -> Vec<f64> {
+        steps.iter().map(|s| s.as_ref().map_or(0.0, f)).collect()
+    };
+    let flag = |f: &dyn Fn(&WorldRow) -> bool| -> Vec<bool> {
+        steps.iter().map(|s| s.as_ref().is_some_and(f)).collect()
+    };
+    let pairs = |f: &dyn Fn(&WorldRow) -> [f64; 2]| -> Vec<f64> {
+        steps
+            .iter()
+            .flat_map(|s| s.as_ref().map_or([0.0, 0.0], f))
+            .collect()
+    };
+    let shield_pair = |f: &dyn Fn(&tlshield_core::Filtered) -> [f64; 2]| -> Vec<f64> {
+        pairs(&|s: &WorldRow| s.shield.as_ref().map_or([0.0, 0.0], f))
+    };
+    let shield_code = |f: &dyn Fn(&tlshield_core::Filtered) -> u8| -> Vec<u8> {
+        steps
+            .iter()
+            .map(|s| s.as_ref().and_then(|s| s.shield.as_ref()).map_or(0, f))
+            .collect()
+    };
+    Ok(PyWorldsStep {
+        observation: matrix(observation, width)?,
+        reward: col(&|s| s.reward).into_pyarray(py).unbind(),
+        terminated: flag(&|s| s.terminated).into_pyarray(py).unbind(),
+        truncated: flag(&|s| s.truncated).into_pyarray(py).unbind(),
+        q: steps
+            .iter()
+            .map(|s| s.as_ref().map_or(0, |s| s.task.q as i64))
+            .collect::<Vec<_>>()
+            .into_pyarray(py)
+            .unbind(),
+        tl_reward: col(&|s| s.task.reward).into_pyarray(py).unbind(),
+        accepted: flag(&|s| s.task.accepted).into_pyarray(py).unbind(),
+        trapped: flag(&|s| s.task.trapped).into_pyarray(py).unbind(),
+        constraints: matrix(pairs(&|s| s.constraints), 2)?,
+        min_obstacle_distance: col(&|s| s.min_obstacle_distance).into_pyarray(py).unbind(),
+        collision: flag(&|s| s.collision).into_pyarray(py).unbind(),
+        violation: flag(&|s| s.violation).into_pyarray(py).unbind(),
+        a_rl: matrix(pairs(&|s| s.a_rl), 2)?,
+        action: matrix(pairs(&|s| s.applied), 2)?,
+        a_cbf: matrix(shield_pair(&|f| [f.a_cbf[0], f.a_cbf[1]]), 2)?,
+        a_clf: matrix(shield_pair(&|f| [f.a_clf[0], f.a_clf[1]]), 2)?,
+        delta: col(&|s| s.shield.as_ref().map_or(0.0, |f| f.delta))
+            .into_pyarray(py)
+            .unbind(),
+        slack: col(&|s| s.shield.as_ref().map_or(0.0, |f| f.slack))
+            .into_pyarray(py)
+            .unbind(),
+        status: shield_code(&|f| f.status as u8).into_pyarray(py).unbind(),
+        solver: shield_code(&|f| f.solver as u8).into_pyarray(py).unbind(),
+        active: active.into_pyarray(py).unbind(),
+    })
+}
