@@ -129,15 +129,25 @@ pub fn minimise(minterms: &[u32], n_atoms: usize) -> Vec<Cube> {
 /// valuations restricted to `care` (bits outside are ignored). Gives the same cubes as
 /// [`minimise`] on the full cylinder set, with `2^(n - |care|)` times less work.
 pub fn minimise_within(minterms: &[u32], care: u32) -> Vec<Cube> {
+    minimise_within_until(minterms, care, &|| false).expect("never stopped")
+}
+
+/// [`minimise_within`] that asks `stop` between merge levels and cover steps and gives up
+/// (`None`) as soon as it says so (a long build the user interrupts).
+pub fn minimise_within_until(
+    minterms: &[u32],
+    care: u32,
+    stop: &dyn Fn() -> bool,
+) -> Option<Vec<Cube>> {
     let full = care;
     let mut on: Vec<u32> = minterms.iter().map(|v| v & care).collect();
     on.sort_unstable();
     on.dedup();
     if on.is_empty() {
-        return Vec::new();
+        return Some(Vec::new());
     }
     if on.len() as u64 == 1u64 << care.count_ones() {
-        return vec![Cube { care: 0, value: 0 }];
+        return Some(vec![Cube { care: 0, value: 0 }]);
     }
     // Quine-McCluskey: merge cubes that differ in one cared-for bit until nothing merges.
     // Each level is a sorted, deduplicated vector (partners found by binary search).
@@ -152,6 +162,9 @@ pub fn minimise_within(minterms: &[u32], care: u32) -> Vec<Cube> {
     let mut merged: Vec<bool> = Vec::new();
     let mut next: Vec<Cube> = Vec::new();
     while !level.is_empty() {
+        if stop() {
+            return None;
+        }
         merged.clear();
         merged.resize(level.len(), false);
         next.clear();
@@ -203,6 +216,9 @@ pub fn minimise_within(minterms: &[u32], care: u32) -> Vec<Cube> {
     uncovered.retain(|&m| !chosen.iter().any(|c| c.contains(m)));
     // Greedy: the prime covering most of what is left (ties: the earlier prime).
     while !uncovered.is_empty() {
+        if stop() {
+            return None;
+        }
         let best = primes
             .iter()
             .filter(|p| !chosen.contains(p))
@@ -219,7 +235,7 @@ pub fn minimise_within(minterms: &[u32], care: u32) -> Vec<Cube> {
         uncovered.retain(|&m| !best.contains(m));
     }
     chosen.sort_unstable_by_key(|c| (c.care.count_ones(), c.care, c.value));
-    chosen
+    Some(chosen)
 }
 
 /// The CNF of the complement of a DNF (De Morgan): one clause per cube, each the disjunction

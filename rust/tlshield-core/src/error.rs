@@ -117,6 +117,9 @@ pub enum AutomatonError {
         /// The supported maximum of transitions.
         max: usize,
     },
+    /// The build was stopped by its caller (a user's interrupt).
+    #[error("the automaton build was interrupted")]
+    Interrupted,
     /// The formula has more distinct temporal subformulas than the construction supports.
     #[error("the formula has more than {0} distinct temporal subformulas")]
     TooManyObligations(usize),

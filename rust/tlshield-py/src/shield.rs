@@ -276,7 +276,7 @@ impl PyShield {
 
 fn automaton_of(obj: &Bound<'_, PyAny>) -> PyResult<Arc<Automaton>> {
     if let Ok(spec) = obj.cast::<PySpec>() {
-        return spec.get().shared_automaton();
+        return spec.get().shared_automaton(spec.py());
     }
     if let Ok(aut) = obj.cast::<PyAutomaton>() {
         return Ok(aut.get().inner.clone());

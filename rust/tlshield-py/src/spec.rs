@@ -31,11 +31,11 @@ impl PySpec {
 
 impl PySpec {
     /// The spec's automaton, built on first use and shared afterwards.
-    pub fn shared_automaton(&self) -> PyResult<Arc<Automaton>> {
+    pub fn shared_automaton(&self, py: Python<'_>) -> PyResult<Arc<Automaton>> {
         if let Some(aut) = self.automaton.get() {
             return Ok(aut.clone());
         }
-        let built = Arc::new(map(Automaton::build(&self.inner))?);
+        let built = Arc::new(crate::automaton::build_responsive(py, &self.inner)?);
         Ok(self.automaton.get_or_init(|| built).clone())
     }
 }

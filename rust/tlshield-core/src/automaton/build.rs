@@ -294,9 +294,31 @@ impl<'f> Obligations<'f> {
     }
 }
 
+/// How often (in letters or states handled) a build asks its `stop` callback.
+const STOP_EVERY: usize = 1024;
+
 impl Automaton {
     /// Builds the minimal automaton of `spec`'s formula.
     pub fn build(spec: &Spec) -> Result<Self, AutomatonError> {
+        Self::build_until(spec, &|| false)
+    }
+
+    /// [`Automaton::build`] that asks `stop` every [`STOP_EVERY`] letters or states (and
+    /// between the merge steps of each guard's minimisation) and returns
+    /// [`AutomatonError::Interrupted`] as soon as it says so: a caller can keep a long build
+    /// responsive (the Python bindings check for Ctrl-C there).
+    pub fn build_until(spec: &Spec, stop: &dyn Fn() -> bool) -> Result<Self, AutomatonError> {
+        let mut ticks = 0usize;
+        let mut tick = |cost: usize| -> Result<(), AutomatonError> {
+            ticks += cost;
+            if ticks >= STOP_EVERY {
+                ticks = 0;
+                if stop() {
+                    return Err(AutomatonError::Interrupted);
+                }
+            }
+            Ok(())
+        };
         let n = spec.atoms().len();
         if n > MAX_ATOMS {
             return Err(AutomatonError::TooManyAtoms {
@@ -326,6 +348,7 @@ impl Automaton {
             raw_masks.push(mask);
             by_projection.fill(u32::MAX);
             for v in 0..letters as u32 {
+                tick(1)?;
                 let projected = (v & mask) as usize;
                 if by_projection[projected] != u32::MAX {
                     raw.push(by_projection[projected]);
@@ -355,7 +378,7 @@ impl Automaton {
         let accepting_raw: Vec<bool> = residuals.iter().map(|r| r.contains(&TRUE)).collect();
 
         // 2. Minimise (Moore refinement), then number states breadth-first from the start.
-        let block = minimise(&raw, &accepting_raw, letters);
+        let block = minimise(&raw, &accepting_raw, letters, &mut tick)?;
         let blocks = block.iter().max().map_or(0, |m| m + 1);
         let mut representative = vec![usize::MAX; blocks];
         for (q, &b) in block.iter().enumerate().rev() {
@@ -368,6 +391,7 @@ impl Automaton {
         let mut table = vec![0u32; blocks * letters];
         let mut visit = Vec::with_capacity(blocks);
         while let Some(b) = queue.pop_front() {
+            tick(letters)?;
             visit.push(b);
             let q = representative[b];
             for v in 0..letters {
@@ -423,6 +447,7 @@ impl Automaton {
         let mut edges = Vec::new();
         let mut by_dst: Vec<Vec<u32>> = vec![Vec::new(); num_states];
         for src in 0..num_states {
+            tick(letters)?;
             let mask = mask_of[src];
             by_dst.iter_mut().for_each(Vec::clear);
             for v in (0..letters as u32).filter(|v| v & !mask == 0) {
@@ -433,7 +458,8 @@ impl Automaton {
                     edges.push(Edge {
                         src,
                         dst,
-                        guard: cnf::minimise_within(minterms, mask),
+                        guard: cnf::minimise_within_until(minterms, mask, stop)
+                            .ok_or(AutomatonError::Interrupted)?,
                     });
                 }
             }
@@ -493,7 +519,12 @@ impl Automaton {
 
 /// Moore partition refinement: returns the block of every state, blocks numbered by first
 /// occurrence.
-fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
+fn minimise(
+    table: &[u32],
+    accepting: &[bool],
+    letters: usize,
+    tick: &mut dyn FnMut(usize) -> Result<(), AutomatonError>,
+) -> Result<Vec<usize>, AutomatonError> {
     let n = accepting.len();
     let mut block: Vec<usize> = accepting.iter().map(|&a| usize::from(a)).collect();
     let mut count = 0;
@@ -503,6 +534,7 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
     let mut refined = vec![0; n];
     loop {
         for q in 0..n {
+            tick(letters)?;
             let sig = &mut signatures[q * width..(q + 1) * width];
             sig[0] = block[q] as u32;
             for (slot, &d) in sig[1..]
@@ -521,7 +553,7 @@ fn minimise(table: &[u32], accepting: &[bool], letters: usize) -> Vec<usize> {
         let new_count = ids.len();
         std::mem::swap(&mut block, &mut refined);
         if new_count == count {
-            return block;
+            return Ok(block);
         }
         count = new_count;
     }

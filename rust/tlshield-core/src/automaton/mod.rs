@@ -710,4 +710,26 @@ mod tests {
             prop_assert!(seen.iter().all(|s| *s));
         }
     }
+
+    #[test]
+    fn a_build_asked_to_stop_stops() {
+        // 12 atoms: 4096 letters per state, so the build asks more than once.
+        let formula =
+            (1..12).fold("F(a0".to_string(), |f, i| f + &format!(" & F(a{i}")) + &")".repeat(12);
+        let spec = Spec::from_formula(&formula).unwrap();
+        let asked = std::cell::Cell::new(0);
+        let err = Automaton::build_until(&spec, &|| {
+            asked.set(asked.get() + 1);
+            asked.get() > 3
+        })
+        .unwrap_err();
+        assert_eq!(err, AutomatonError::Interrupted);
+        assert_eq!(asked.get(), 4);
+        assert_eq!(
+            Automaton::build_until(&spec, &|| false)
+                .unwrap()
+                .num_states(),
+            13
+        );
+    }
 }
