@@ -316,8 +316,7 @@ def canon(value: Any) -> Any:
         _core.FilterBatch,
         _core.TaskStep,
         _core.TaskBatch,
-        _core.ChannelStep,
-        _core.PointMassStep,
+        _core.WorldStep,
     )
     if isinstance(value, results):
         names = [n for n in dir(value) if not n.startswith("_")]

@@ -336,7 +336,7 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             "success": out.accepted,
             "trap": out.trapped,
             "tl_reward": out.tl_reward,
-            "constraints": {"c1": out.c1, "c2": out.c2},
+            "constraints": dict(zip(self.CONSTRAINTS, out.constraints, strict=True)),
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
             "violation": out.violation,

@@ -255,12 +255,11 @@ class PointMassEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
         a_rl = np.asarray(action, dtype=np.float64)
         out = self._world.step(a_rl, self.tracker.monitor, self.shield)
-        h1, h2 = out.h
         info: dict[str, Any] = {
-            "constraints": {"o1": h1, "o2": h2},
+            "constraints": dict(zip(self.CONSTRAINTS, out.constraints, strict=True)),
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
-            "violation": out.collision,
+            "violation": out.violation,
             "action": out.action,
             "fsa_state": out.q,
             "success": out.accepted,

@@ -12,9 +12,9 @@ use std::f64::consts::SQRT_2;
 
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
-use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{Filtered, Shield};
-use crate::world::{World, WorldRow};
+use crate::monitor::Monitor;
+use crate::shield::Shield;
+use crate::world::{Measure, World, WorldStep};
 
 /// State length: x, y, theta, three goal centres, two obstacle centres.
 pub const STATE_DIM: usize = 13;
@@ -87,41 +87,6 @@ pub fn xy(u: f64, v: f64) -> [f64; 2] {
     [(u - v) / SQRT_2, (u + v) / SQRT_2]
 }
 
-/// What the world measures at a state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Measure {
-    /// The channel constraints c1, c2 as the task's predicates evaluate them.
-    pub h: [f64; 2],
-    /// Distance from the reference point to the nearer obstacle centre.
-    pub min_obstacle_distance: f64,
-    /// Closer than the collision distance.
-    pub collision: bool,
-    /// Outside the channel.
-    pub violation: bool,
-}
-
-/// What one step gives.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ChannelStep {
-    /// The RL action in physical units.
-    pub a_rl: [f64; 2],
-    /// The action applied to the plant.
-    pub applied: [f64; 2],
-    /// The shield's answer, when it ran.
-    pub shield: Option<Filtered>,
-    /// The task's step (FSA state, task reward, acceptance, trap).
-    pub task: TaskStep,
-    /// The environment's reward: task reward plus the obstacle, collision and intervention
-    /// terms.
-    pub reward: f64,
-    /// The episode ended (success, or a collision under the evaluation rules).
-    pub terminated: bool,
-    /// The horizon was reached.
-    pub truncated: bool,
-    /// Measurements at the new state.
-    pub measure: Measure,
-}
-
 /// The case study's world (see the module docs).
 #[derive(Debug, Clone)]
 pub struct ChannelWorld {
@@ -192,7 +157,7 @@ impl ChannelWorld {
         scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-    ) -> Result<ChannelStep, ShieldError> {
+    ) -> Result<WorldStep, ShieldError> {
         let p = &self.params;
         if let Some(i) = action.iter().position(|a| !a.is_finite()) {
             return Err(InputError::NonFinite {
@@ -254,7 +219,7 @@ impl ChannelWorld {
             reward -= p.intervention_penalty * push;
         }
         let terminated = task.accepted || (p.evaluation && measure.collision);
-        Ok(ChannelStep {
+        Ok(WorldStep {
             a_rl,
             applied,
             shield: filtered,
@@ -343,21 +308,8 @@ impl World for ChannelWorld {
         scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-    ) -> Result<WorldRow, ShieldError> {
-        let step = self.step(action, scale, monitor, shield)?;
-        Ok(WorldRow {
-            a_rl: step.a_rl,
-            applied: step.applied,
-            shield: step.shield,
-            task: step.task,
-            reward: step.reward,
-            terminated: step.terminated,
-            truncated: step.truncated,
-            constraints: step.measure.h,
-            min_obstacle_distance: step.measure.min_obstacle_distance,
-            collision: step.measure.collision,
-            violation: step.measure.violation,
-        })
+    ) -> Result<WorldStep, ShieldError> {
+        self.step(action, scale, monitor, shield)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {

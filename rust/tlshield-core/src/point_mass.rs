@@ -8,9 +8,9 @@
 
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
-use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{Filtered, Shield};
-use crate::world::{World, WorldRow};
+use crate::monitor::Monitor;
+use crate::shield::Shield;
+use crate::world::{Measure, World, WorldStep};
 
 /// State length: position `x, y`, velocity `vx, vy`.
 pub const STATE_DIM: usize = 4;
@@ -34,38 +34,6 @@ pub struct PointMassParams {
     pub obstacle_radius: f64,
     /// Paid per step inside an obstacle.
     pub collision_penalty: f64,
-}
-
-/// What the world measures at a state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointMassMeasure {
-    /// Distance to each obstacle's edge (negative inside).
-    pub h: [f64; 2],
-    /// The smaller of the two.
-    pub min_obstacle_distance: f64,
-    /// Inside an obstacle (the task's violation too).
-    pub collision: bool,
-}
-
-/// What one step gives.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PointMassStep {
-    /// The RL action.
-    pub a_rl: [f64; 2],
-    /// The action applied to the plant: the shield's, clipped to the acceleration box.
-    pub applied: [f64; 2],
-    /// The shield's answer, when it ran.
-    pub shield: Option<Filtered>,
-    /// The task's step (FSA state, task reward, acceptance, trap).
-    pub task: TaskStep,
-    /// The environment's reward: the task reward minus the collision penalty.
-    pub reward: f64,
-    /// The task is done.
-    pub terminated: bool,
-    /// The horizon was reached.
-    pub truncated: bool,
-    /// Measurements at the new state.
-    pub measure: PointMassMeasure,
 }
 
 /// The PointMass-v0 world (see the module docs).
@@ -114,7 +82,7 @@ impl PointMassWorld {
         a_rl: [f64; 2],
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-    ) -> Result<PointMassStep, ShieldError> {
+    ) -> Result<WorldStep, ShieldError> {
         if let Some(i) = a_rl.iter().position(|a| !a.is_finite()) {
             return Err(InputError::NonFinite {
                 what: format!("action[{i}]"),
@@ -145,7 +113,7 @@ impl PointMassWorld {
         let task = monitor.advance(&self.s)?;
         let measure = self.measure();
         let reward = task.reward + -p.collision_penalty * f64::from(u8::from(measure.collision));
-        Ok(PointMassStep {
+        Ok(WorldStep {
             a_rl,
             applied,
             shield: filtered,
@@ -158,16 +126,17 @@ impl PointMassWorld {
     }
 
     /// The measurements at the current state.
-    pub fn measure(&self) -> PointMassMeasure {
+    pub fn measure(&self) -> Measure {
         let p = &self.params;
         let h = p
             .obstacles
             .map(|c| (self.s[POS[0]] - c[0]).hypot(self.s[POS[1]] - c[1]) - p.obstacle_radius);
         let min = h[0].min(h[1]);
-        PointMassMeasure {
+        Measure {
             h,
             min_obstacle_distance: min,
             collision: min < 0.0,
+            violation: min < 0.0,
         }
     }
 
@@ -189,21 +158,8 @@ impl World for PointMassWorld {
         _scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-    ) -> Result<WorldRow, ShieldError> {
-        let step = self.step(action, monitor, shield)?;
-        Ok(WorldRow {
-            a_rl: step.a_rl,
-            applied: step.applied,
-            shield: step.shield,
-            task: step.task,
-            reward: step.reward,
-            terminated: step.terminated,
-            truncated: step.truncated,
-            constraints: step.measure.h,
-            min_obstacle_distance: step.measure.min_obstacle_distance,
-            collision: step.measure.collision,
-            violation: step.measure.collision,
-        })
+    ) -> Result<WorldStep, ShieldError> {
+        self.step(action, monitor, shield)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {

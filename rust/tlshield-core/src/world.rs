@@ -1,6 +1,6 @@
 //! What the bundled worlds (`ChannelWorld` of Channel-v0, `PointMassWorld` of PointMass-v0)
-//! share: one step's outcome in the form a batch reports
-//! ([`WorldRow`]), and [`step_many`], which steps N worlds of one kind in one call.
+//! share: what one step gives ([`WorldStep`], with its [`Measure`]), and [`step_many`], which
+//! steps N worlds of one kind in one call.
 
 use rayon::prelude::*;
 
@@ -8,9 +8,23 @@ use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
 use crate::shield::{Filtered, Shield};
 
-/// One step of a bundled world, as a batch reports it.
+/// What a world measures at a state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measure {
+    /// The world's two constraints (Channel-v0: the channel's c1, c2 as the task's predicates
+    /// evaluate them; PointMass-v0: each obstacle's clearance, distance minus radius).
+    pub h: [f64; 2],
+    /// Distance to the nearer obstacle (Channel-v0: to its centre; PointMass-v0: to its edge).
+    pub min_obstacle_distance: f64,
+    /// In collision.
+    pub collision: bool,
+    /// A constraint of the task is violated.
+    pub violation: bool,
+}
+
+/// What one step of a bundled world gives.
 #[derive(Debug, Clone, PartialEq)]
-pub struct WorldRow {
+pub struct WorldStep {
     /// The RL action in physical units.
     pub a_rl: [f64; 2],
     /// The action applied to the plant.
@@ -25,15 +39,8 @@ pub struct WorldRow {
     pub terminated: bool,
     /// The horizon was reached.
     pub truncated: bool,
-    /// The world's two constraints at the new state (the channel's c1, c2; the obstacles'
-    /// clearances).
-    pub constraints: [f64; 2],
-    /// Distance to the nearer obstacle (its centre, or its edge: see the world).
-    pub min_obstacle_distance: f64,
-    /// In collision.
-    pub collision: bool,
-    /// A task constraint is violated.
-    pub violation: bool,
+    /// Measurements at the new state.
+    pub measure: Measure,
 }
 
 /// A world the core steps: one action (2 inputs) per step, shielded with its monitor's reading.
@@ -46,7 +53,7 @@ pub trait World: Send {
         scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-    ) -> Result<WorldRow, ShieldError>;
+    ) -> Result<WorldStep, ShieldError>;
 
     /// The observation at the current state into `out`, then the one-hot FSA state of
     /// `monitor` (`num_states` values).
@@ -68,7 +75,7 @@ pub fn step_many<W: World>(
     shield: Option<&Shield>,
     obs: &mut [f64],
     width: usize,
-) -> Result<Vec<Option<WorldRow>>, ShieldError> {
+) -> Result<Vec<Option<WorldStep>>, ShieldError> {
     let rows = worlds.len();
     if monitors.len() != rows || active.len() != rows || actions.len() != 2 * rows {
         return Err(InputError::Shape {
@@ -98,7 +105,7 @@ pub fn step_many<W: World>(
         world.observe_row(monitor, states, row);
         Ok(Some(out))
     };
-    let results: Vec<Result<Option<WorldRow>, ShieldError>> = if rows < crate::parallel::MIN_ROWS {
+    let results: Vec<Result<Option<WorldStep>, ShieldError>> = if rows < crate::parallel::MIN_ROWS {
         worlds
             .iter_mut()
             .zip(monitors.iter_mut())

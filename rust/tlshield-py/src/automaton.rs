@@ -1,14 +1,13 @@
 //! `Automaton`: the FSA of a spec, its stepper, reward and safe sets.
 
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::Arc;
 
 use numpy::{IntoPyArray, PyArray1};
-use pyo3::exceptions::{PyKeyboardInterrupt, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyString;
 use tlshield_core::cnf::{dnf_text, Literal};
-use tlshield_core::{Automaton, AutomatonError, ProgressParams, Spec, Trajectory};
+use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
 
 use crate::convert::{batch_order_hint, order_hint, state, vector, FloatArray};
 use crate::errors::deprecated;
@@ -19,37 +18,6 @@ use crate::spec::PySpec;
 
 /// `Spec.automaton()` lives here, next to the type it returns, so that the spec module does not
 /// depend on the automaton module (a second `#[pymethods]` block of `PySpec`).
-/// Builds `spec`'s automaton with the GIL released, checking for signals (Ctrl-C) about every
-/// 50 ms: an interrupt stops the build and raises ``KeyboardInterrupt`` (or whatever the
-/// signal handler raised).
-pub fn build_responsive(py: Python<'_>, spec: &Spec) -> PyResult<Automaton> {
-    let raised: Mutex<Option<PyErr>> = Mutex::new(None);
-    let last_check = Mutex::new(Instant::now());
-    let stop = || {
-        let mut last = last_check.lock().unwrap_or_else(|e| e.into_inner());
-        if last.elapsed() < Duration::from_millis(50) {
-            return false;
-        }
-        *last = Instant::now();
-        Python::attach(|py| match py.check_signals() {
-            Ok(()) => false,
-            Err(err) => {
-                *raised.lock().unwrap_or_else(|e| e.into_inner()) = Some(err);
-                true
-            }
-        })
-    };
-    match py.detach(|| Automaton::build_until(spec, &stop)) {
-        Err(AutomatonError::Interrupted) => Err(raised
-            .into_inner()
-            .unwrap_or_else(|e| e.into_inner())
-            .unwrap_or_else(|| {
-                PyKeyboardInterrupt::new_err("the automaton build was interrupted")
-            })),
-        other => map(other),
-    }
-}
-
 #[pymethods]
 impl PySpec {
     /// The finite state automaton of the formula (built once per spec, then shared).
@@ -109,7 +77,10 @@ impl PyAutomaton {
     #[staticmethod]
     fn from_formula(py: Python<'_>, formula: &str) -> PyResult<Self> {
         let spec = map(Spec::from_formula(formula))?;
-        Ok(PyAutomaton::new(py, Arc::new(build_responsive(py, &spec)?)))
+        Ok(PyAutomaton::new(
+            py,
+            Arc::new(crate::spec::build_responsive(py, &spec)?),
+        ))
     }
 
     /// Number of states.

@@ -1,5 +1,5 @@
-//! `ChannelWorld`: the case study's world stepped in the core (core `channel`), and
-//! `ChannelStep`, what one step gives (`step_worlds`, in `world`, steps many).
+//! `ChannelWorld`: the case study's world stepped in the core (core `channel`; one step gives a
+//! `WorldStep`, and `step_worlds` steps many: both in `world`).
 
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
@@ -10,7 +10,8 @@ use crate::convert::FloatArray;
 use crate::dynamics::PyUnicycle;
 use crate::errors::map;
 use crate::monitor::PyMonitor;
-use crate::shield::{PyFilterResult, PyShield};
+use crate::shield::PyShield;
+use crate::world_step::PyWorldStep;
 
 /// The paper's case study (Sec. VI) stepped in the core: the plant (through ``model``, the
 /// shield's model), the obstacles, the shield call, the task monitor, the reward terms and the
@@ -121,7 +122,7 @@ impl PyChannelWorld {
         monitor: &Bound<'_, PyMonitor>,
         shield: Option<PyRef<'_, PyShield>>,
         scale: bool,
-    ) -> PyResult<PyChannelStep> {
+    ) -> PyResult<PyWorldStep> {
         let a = FloatArray::extract(action, "action", 1, "(2,)")?;
         let a = pair(a.values().into_owned(), "action")?;
         let mut monitor = monitor.borrow_mut();
@@ -132,27 +133,7 @@ impl PyChannelWorld {
             shield.as_deref().map(PyShield::core),
         ))?;
         let obs = self.observation(&monitor.inner);
-        Ok(PyChannelStep {
-            observation: obs.into_pyarray(py).unbind(),
-            a_rl: step.a_rl.to_vec().into_pyarray(py).unbind(),
-            action: step.applied.to_vec().into_pyarray(py).unbind(),
-            shield: match (shield, step.shield) {
-                (Some(sh), Some(f)) => Some(Py::new(py, sh.result(py, f))?),
-                _ => None,
-            },
-            q: step.task.q,
-            tl_reward: step.task.reward,
-            accepted: step.task.accepted,
-            trapped: step.task.trapped,
-            reward: step.reward,
-            terminated: step.terminated,
-            truncated: step.truncated,
-            c1: step.measure.h[0],
-            c2: step.measure.h[1],
-            min_obstacle_distance: step.measure.min_obstacle_distance,
-            collision: step.measure.collision,
-            violation: step.measure.violation,
-        })
+        PyWorldStep::new(py, step, obs, shield)
     }
 
     /// The observation at the current state (then the one-hot FSA state of ``monitor``).
@@ -194,41 +175,4 @@ impl PyChannelWorld {
     fn steps(&self) -> u32 {
         self.inner.steps()
     }
-}
-
-/// What one ``ChannelWorld.step`` gives.
-#[pyclass(name = "ChannelStep", module = "tlshield._core", frozen, get_all)]
-pub struct PyChannelStep {
-    /// The observation at the new state, one-hot FSA state included.
-    observation: Py<PyArray1<f64>>,
-    /// The RL action in physical units (2,).
-    a_rl: Py<PyArray1<f64>>,
-    /// The action applied to the plant (2,).
-    action: Py<PyArray1<f64>>,
-    /// The shield's answer, or None without a shield.
-    shield: Option<Py<PyFilterResult>>,
-    /// The FSA state after the step.
-    q: usize,
-    /// The task reward of the step.
-    tl_reward: f64,
-    /// The task is done.
-    accepted: bool,
-    /// The task can no longer be done.
-    trapped: bool,
-    /// The environment's reward.
-    reward: f64,
-    /// The episode ended.
-    terminated: bool,
-    /// The horizon was reached.
-    truncated: bool,
-    /// Channel constraint c1 at the new state.
-    c1: f64,
-    /// Channel constraint c2 at the new state.
-    c2: f64,
-    /// Distance to the nearer obstacle centre.
-    min_obstacle_distance: f64,
-    /// Closer than the collision distance.
-    collision: bool,
-    /// Outside the channel.
-    violation: bool,
 }

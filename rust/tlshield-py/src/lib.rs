@@ -17,6 +17,7 @@ mod progress;
 mod shield;
 mod spec;
 mod world;
+mod world_step;
 
 use pyo3::prelude::*;
 
@@ -57,11 +58,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<shield::PyFilterResult>()?;
     m.add_class::<shield::PyFilterBatch>()?;
     m.add_class::<channel::PyChannelWorld>()?;
-    m.add_class::<channel::PyChannelStep>()?;
+    m.add_class::<world_step::PyWorldStep>()?;
     m.add_class::<world::PyWorldsStep>()?;
     m.add_function(wrap_pyfunction!(world::step_worlds, m)?)?;
     m.add_class::<point_mass::PyPointMassWorld>()?;
-    m.add_class::<point_mass::PyPointMassStep>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
     Ok(())
 }

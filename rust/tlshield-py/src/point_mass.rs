@@ -1,5 +1,5 @@
-//! `PointMassWorld`: PointMass-v0's world stepped in the core (core `point_mass`), and
-//! `PointMassStep`, what one step gives.
+//! `PointMassWorld`: PointMass-v0's world stepped in the core (core `point_mass`; one step
+//! gives a `WorldStep`, in `world`).
 
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
@@ -9,7 +9,8 @@ use tlshield_core::point_mass::{PointMassParams, PointMassWorld, STATE_DIM};
 use crate::convert::FloatArray;
 use crate::errors::map;
 use crate::monitor::PyMonitor;
-use crate::shield::{PyFilterResult, PyShield};
+use crate::shield::PyShield;
+use crate::world_step::PyWorldStep;
 
 /// ``tlshield/PointMass-v0`` stepped in the core: the shield call, the acceleration box, the
 /// double integrator (the shield's model), the walls, the task monitor, the reward and the
@@ -72,7 +73,7 @@ impl PyPointMassWorld {
         a_rl: &Bound<'_, PyAny>,
         monitor: &Bound<'_, PyMonitor>,
         shield: Option<PyRef<'_, PyShield>>,
-    ) -> PyResult<PyPointMassStep> {
+    ) -> PyResult<PyWorldStep> {
         let a = values::<2>(a_rl, "a_rl")?;
         let mut monitor = monitor.borrow_mut();
         let step =
@@ -82,27 +83,11 @@ impl PyPointMassWorld {
         let n = monitor.inner.automaton().num_states();
         let mut obs = vec![0.0; STATE_DIM + n];
         self.inner.observe(&monitor.inner, n, &mut obs);
-        Ok(PyPointMassStep {
-            observation: obs.into_pyarray(py).unbind(),
-            action: step.applied.to_vec().into_pyarray(py).unbind(),
-            shield: match (shield, step.shield) {
-                (Some(sh), Some(f)) => Some(Py::new(py, sh.result(py, f))?),
-                _ => None,
-            },
-            q: step.task.q,
-            tl_reward: step.task.reward,
-            accepted: step.task.accepted,
-            trapped: step.task.trapped,
-            reward: step.reward,
-            terminated: step.terminated,
-            truncated: step.truncated,
-            h: step.measure.h,
-            min_obstacle_distance: step.measure.min_obstacle_distance,
-            collision: step.measure.collision,
-        })
+        PyWorldStep::new(py, step, obs, shield)
     }
 
-    /// ``(h_o1, h_o2, min_obstacle_distance, collision)`` at the current state.
+    /// ``(h_o1, h_o2, min_obstacle_distance, collision)`` at the current state (the
+    /// obstacles' clearances, distance minus radius; the smaller; inside an obstacle).
     fn measure(&self) -> (f64, f64, f64, bool) {
         let m = self.inner.measure();
         (m.h[0], m.h[1], m.min_obstacle_distance, m.collision)
@@ -119,35 +104,4 @@ impl PyPointMassWorld {
     fn steps(&self) -> u32 {
         self.inner.steps()
     }
-}
-
-/// What one ``PointMassWorld.step`` gives.
-#[pyclass(name = "PointMassStep", module = "tlshield._core", frozen, get_all)]
-pub struct PyPointMassStep {
-    /// The observation at the new state, one-hot FSA state included.
-    observation: Py<PyArray1<f64>>,
-    /// The action applied to the plant (2,): the shield's, clipped to the acceleration box.
-    action: Py<PyArray1<f64>>,
-    /// The shield's answer, or None without a shield.
-    shield: Option<Py<PyFilterResult>>,
-    /// The FSA state after the step.
-    q: usize,
-    /// The task reward of the step.
-    tl_reward: f64,
-    /// The task is done.
-    accepted: bool,
-    /// The task can no longer be done.
-    trapped: bool,
-    /// The environment's reward: the task reward minus the collision penalty.
-    reward: f64,
-    /// The task is done (the episode ends).
-    terminated: bool,
-    /// The horizon was reached.
-    truncated: bool,
-    /// Distance to each obstacle's edge (negative inside): ``(h_o1, h_o2)``.
-    h: [f64; 2],
-    /// The smaller of the two.
-    min_obstacle_distance: f64,
-    /// Inside an obstacle.
-    collision: bool,
 }

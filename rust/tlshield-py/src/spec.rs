@@ -1,12 +1,13 @@
 //! `Spec`: a formula with its predicates; robustness of trajectories, single and batched.
 
 use numpy::{IntoPyArray, PyArray1};
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyKeyboardInterrupt, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
 
-use tlshield_core::{Automaton, Spec, Trajectory, TrajectoryBatch};
+use tlshield_core::{Automaton, AutomatonError, Spec, Trajectory, TrajectoryBatch};
 
 use crate::convert::FloatArray;
 use crate::errors::map;
@@ -35,8 +36,39 @@ impl PySpec {
         if let Some(aut) = self.automaton.get() {
             return Ok(aut.clone());
         }
-        let built = Arc::new(crate::automaton::build_responsive(py, &self.inner)?);
+        let built = Arc::new(build_responsive(py, &self.inner)?);
         Ok(self.automaton.get_or_init(|| built).clone())
+    }
+}
+
+/// Builds `spec`'s automaton with the GIL released, checking for signals (Ctrl-C) about every
+/// 50 ms: an interrupt stops the build and raises ``KeyboardInterrupt`` (or whatever the
+/// signal handler raised).
+pub fn build_responsive(py: Python<'_>, spec: &Spec) -> PyResult<Automaton> {
+    let raised: Mutex<Option<PyErr>> = Mutex::new(None);
+    let last_check = Mutex::new(Instant::now());
+    let stop = || {
+        let mut last = last_check.lock().unwrap_or_else(|e| e.into_inner());
+        if last.elapsed() < Duration::from_millis(50) {
+            return false;
+        }
+        *last = Instant::now();
+        Python::attach(|py| match py.check_signals() {
+            Ok(()) => false,
+            Err(err) => {
+                *raised.lock().unwrap_or_else(|e| e.into_inner()) = Some(err);
+                true
+            }
+        })
+    };
+    match py.detach(|| Automaton::build_until(spec, &stop)) {
+        Err(AutomatonError::Interrupted) => Err(raised
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .unwrap_or_else(|| {
+                PyKeyboardInterrupt::new_err("the automaton build was interrupted")
+            })),
+        other => map(other),
     }
 }
 

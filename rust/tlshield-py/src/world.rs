@@ -6,7 +6,7 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use tlshield_core::channel::ChannelWorld;
 use tlshield_core::point_mass::PointMassWorld;
-use tlshield_core::world::{step_many, World, WorldRow};
+use tlshield_core::world::{step_many, World, WorldStep};
 
 use crate::channel::PyChannelWorld;
 use crate::convert::FloatArray;
@@ -42,7 +42,7 @@ fn step_rows<W: World>(
     shield: Option<&tlshield_core::Shield>,
     observation: &mut [f64],
     width: usize,
-) -> PyResult<Vec<Option<WorldRow>>> {
+) -> PyResult<Vec<Option<WorldStep>>> {
     let mut guards = borrow_all(monitors, "monitors")?;
     let mut refs: Vec<&mut tlshield_core::Monitor> =
         guards.iter_mut().map(|g| &mut g.inner).collect();
@@ -173,20 +173,20 @@ pub fn step_worlds(
             .map(|a| a.into_pyarray(py).unbind())
             .map_err(|e| PyValueError::new_err(e.to_string()))
     };
-    let col = |f: &dyn Fn(&WorldRow) -> f64| -> Vec<f64> {
+    let col = |f: &dyn Fn(&WorldStep) -> f64| -> Vec<f64> {
         steps.iter().map(|s| s.as_ref().map_or(0.0, f)).collect()
     };
-    let flag = |f: &dyn Fn(&WorldRow) -> bool| -> Vec<bool> {
+    let flag = |f: &dyn Fn(&WorldStep) -> bool| -> Vec<bool> {
         steps.iter().map(|s| s.as_ref().is_some_and(f)).collect()
     };
-    let pairs = |f: &dyn Fn(&WorldRow) -> [f64; 2]| -> Vec<f64> {
+    let pairs = |f: &dyn Fn(&WorldStep) -> [f64; 2]| -> Vec<f64> {
         steps
             .iter()
             .flat_map(|s| s.as_ref().map_or([0.0, 0.0], f))
             .collect()
     };
     let shield_pair = |f: &dyn Fn(&tlshield_core::Filtered) -> [f64; 2]| -> Vec<f64> {
-        pairs(&|s: &WorldRow| s.shield.as_ref().map_or([0.0, 0.0], f))
+        pairs(&|s: &WorldStep| s.shield.as_ref().map_or([0.0, 0.0], f))
     };
     let shield_code = |f: &dyn Fn(&tlshield_core::Filtered) -> u8| -> Vec<u8> {
         steps
@@ -208,10 +208,12 @@ pub fn step_worlds(
         tl_reward: col(&|s| s.task.reward).into_pyarray(py).unbind(),
         accepted: flag(&|s| s.task.accepted).into_pyarray(py).unbind(),
         trapped: flag(&|s| s.task.trapped).into_pyarray(py).unbind(),
-        constraints: matrix(pairs(&|s| s.constraints), 2)?,
-        min_obstacle_distance: col(&|s| s.min_obstacle_distance).into_pyarray(py).unbind(),
-        collision: flag(&|s| s.collision).into_pyarray(py).unbind(),
-        violation: flag(&|s| s.violation).into_pyarray(py).unbind(),
+        constraints: matrix(pairs(&|s| s.measure.h), 2)?,
+        min_obstacle_distance: col(&|s| s.measure.min_obstacle_distance)
+            .into_pyarray(py)
+            .unbind(),
+        collision: flag(&|s| s.measure.collision).into_pyarray(py).unbind(),
+        violation: flag(&|s| s.measure.violation).into_pyarray(py).unbind(),
         a_rl: matrix(pairs(&|s| s.a_rl), 2)?,
         action: matrix(pairs(&|s| s.applied), 2)?,
         a_cbf: matrix(shield_pair(&|f| [f.a_cbf[0], f.a_cbf[1]]), 2)?,
