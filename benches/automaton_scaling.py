@@ -9,7 +9,8 @@ Shapes, for n atoms ``a0 .. a(n-1)``:
 
 * ``sequence``: ``F(a0 & F(a1 & ... & F a(n-1)))`` (n + 1 states);
 * ``until chain``: ``a0 U (a1 U (... U a(n-1)))`` (a handful of states);
-* ``two sequences``: the sequence over the first half of the atoms, or over the second half.
+* ``two sequences``: the sequence over the first half of the atoms, or over the second half;
+* and FlatWorld's five published formulas (DeepLTL's benchmark, 4-7 colours each).
 
 Each build runs in its own child process (a fresh interpreter: no cache is shared) with a time
 limit, and reports its time (imports excluded) and its peak RSS. tlshield:
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -118,6 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 12, 16, 20, 24])
     parser.add_argument("--timeout", type=float, default=60.0, help="per build, seconds")
     parser.add_argument("--shapes", nargs="+", choices=sorted(SHAPES), default=list(SHAPES))
+    parser.add_argument("--no-flatworld", action="store_true", help="leave FlatWorld's out")
     args = parser.parse_args(argv)
     tools = ["tlshield"]
     try:
@@ -136,6 +139,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             formula = SHAPES[shape]([f"a{i}" for i in range(n)])
             cells = [cell(run(tool, formula, args.timeout)) for tool in tools]
             print(f"| {shape} | {n} | " + " | ".join(cells) + " |", flush=True)
+    if not args.no_flatworld:
+        from tlshield.envs.flatworld import FORMULAS
+
+        for k, formula in enumerate(FORMULAS, start=1):
+            atoms = len(set(re.findall(r"[a-z_][a-z0-9_]*", formula)))
+            cells = [cell(run(tool, formula, args.timeout)) for tool in tools]
+            print(f"| FlatWorld F{k} | {atoms} | " + " | ".join(cells) + " |", flush=True)
     return 0
 
 

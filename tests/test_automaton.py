@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import pickle
+import warnings
 
 import numpy as np
 import pytest
@@ -246,24 +247,44 @@ def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
 @given(co_safe, arrays(np.float64, (3,), elements=values))
 def test_advance_equals_the_separate_calls(formula: tuple, s: np.ndarray) -> None:
     aut = tlshield.Spec(to_text(formula), RUST_PREDICATES).automaton()
+    with pytest.warns(DeprecationWarning, match="use tlshield.Monitor"):
+        aut.advance(0, s, 2.0, trap_penalty=-100.0 if aut.trap == 0 else None)
     for q in range(aut.num_states):
         penalty = -100.0 if q == aut.trap else None
-        with pytest.warns(DeprecationWarning, match="use tlshield.Monitor"):
-            nxt, reward, safe = aut.advance(q, s, 2.0, trap_penalty=penalty)
+        nxt, reward, safe = aut.advance(q, s, 2.0, trap_penalty=penalty)
         assert nxt == aut.step(s, q)
         assert reward == aut.reward(s, q, 2.0, trap_penalty=penalty)
         assert safe == aut.safe_set(s, nxt)
 
 
+@pytest.mark.filterwarnings("ignore:Automaton.advance is deprecated:DeprecationWarning")
 def test_advance_bad_input(task: tlshield.Automaton) -> None:
-    with pytest.raises(ValueError, match="does not exist"), pytest.warns(DeprecationWarning):
+    with pytest.raises(ValueError, match="does not exist"):
         task.advance(7, np.zeros(STATE_DIM), 1.0)
-    with pytest.raises(ValueError, match="expected 13, got 2"), pytest.warns(DeprecationWarning):
+    with pytest.raises(ValueError, match="expected 13, got 2"):
         task.advance(0, [0.0, 0.0], 1.0)
-    with pytest.raises(ValueError, match="c_r"), pytest.warns(DeprecationWarning):
+    with pytest.raises(ValueError, match="c_r"):
         task.advance(0, np.zeros(STATE_DIM), -1.0)
-    with pytest.raises(ValueError, match="trap state"), pytest.warns(DeprecationWarning):
+    with pytest.raises(ValueError, match="trap state"):
         task.advance(task.trap, np.zeros(STATE_DIM), 1.0)
+
+
+def test_the_deprecated_advance_warns_once_per_object() -> None:
+    """A warning costs more than the call, so each automaton (and progress reward) object warns
+    on its first call only."""
+    aut = channel_task_spec().automaton()
+    progress = aut.progress_reward()
+    s = np.zeros(STATE_DIM)
+    with pytest.warns(DeprecationWarning, match="Automaton.advance is deprecated"):
+        aut.advance(0, s, 1.0)
+    with pytest.warns(DeprecationWarning, match="ProgressReward.advance is deprecated"):
+        progress.advance(0, 0.0, s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        aut.advance(0, s, 1.0)
+        progress.advance(0, 0.0, s)
+    with pytest.warns(DeprecationWarning):  # another object warns again
+        channel_task_spec().automaton().advance(0, s, 1.0)
 
 
 def test_an_automaton_from_a_formula_alone() -> None:

@@ -20,7 +20,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
     [
         ("compare_robustness.py", ["--quick"], "tlshield speedup"),
         ("compare_automaton.py", ["--quick"], "tlshield speedup"),
-        ("automaton_scaling.py", ["--sizes", "4", "6", "--timeout", "120"], "| sequence | 6 |"),
+        ("automaton_scaling.py", ["--sizes", "4", "6", "--timeout", "120"], "| FlatWorld F5 |"),
         ("compare_shield.py", ["--quick", "--memory-calls", "2000"], "tlshield speedup"),
         ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
         ("step_crossings.py", ["--steps", "1000"], "| rl_cbf_clf | 1.00 |"),

@@ -1,5 +1,6 @@
 //! `Automaton`: the FSA of a spec, its stepper, reward and safe sets.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use numpy::{IntoPyArray, PyArray1};
@@ -32,13 +33,20 @@ pub struct PyAutomaton {
     pub(crate) inner: Arc<Automaton>,
     /// The literals' text, made once (results reuse it).
     literals: LiteralNames,
+    /// Whether the deprecated ``advance`` has warned (once per object: a warning costs more
+    /// than the call).
+    warned: AtomicBool,
 }
 
 impl PyAutomaton {
     /// Wraps a built automaton.
     pub fn new(py: Python<'_>, inner: Arc<Automaton>) -> Self {
         let literals = LiteralNames::new(py, inner.spec().atoms());
-        PyAutomaton { inner, literals }
+        PyAutomaton {
+            inner,
+            literals,
+            warned: AtomicBool::new(false),
+        }
     }
 
     /// A safe set as ``(literal, robustness)`` pairs.
@@ -262,7 +270,8 @@ impl PyAutomaton {
     /// ``reward = reward(q, s_next, c_r, trap_penalty)`` and
     /// ``safe_set = safe_set(q_next, s_next)`` (the constraints for the next action).
     ///
-    /// Deprecated (a ``DeprecationWarning``): ``Monitor.advance`` does this and keeps ``q``.
+    /// Deprecated (a ``DeprecationWarning`` on the first call of each automaton object):
+    /// ``Monitor.advance`` does this and keeps ``q``.
     #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
     #[allow(clippy::type_complexity)]
     fn advance<'py>(
@@ -273,10 +282,12 @@ impl PyAutomaton {
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, f64)>)> {
-        deprecated(
-            py,
-            "Automaton.advance is deprecated: use tlshield.Monitor (reset, advance)",
-        )?;
+        if !self.warned.swap(true, Ordering::Relaxed) {
+            deprecated(
+                py,
+                "Automaton.advance is deprecated: use tlshield.Monitor (reset, advance)",
+            )?;
+        }
         let q = self.state(q)?;
         let mut kept = Vec::new();
         let (next, reward) =

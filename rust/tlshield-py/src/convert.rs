@@ -12,7 +12,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyFloat};
+use pyo3::types::{PyBool, PyFloat, PyInt};
 use tlshield_core::Automaton;
 
 use crate::errors::{map, AutomatonError};
@@ -118,9 +118,9 @@ pub fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
 /// goes, an array where the FSA state goes) with a `TypeError` that says so, rather than a
 /// conversion error about the wrong argument. `s_name` names the vector argument.
 pub fn order_hint(s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>, s_name: &str) -> PyResult<()> {
-    let int_like =
-        |o: &Bound<'_, PyAny>| o.extract::<i64>().is_ok() && !o.is_instance_of::<PyBool>();
-    if int_like(s) && !int_like(q) {
+    // Cheap type checks only: this runs on every per-step call.
+    let int = |o: &Bound<'_, PyAny>| o.is_instance_of::<PyInt>() && !o.is_instance_of::<PyBool>();
+    if int(s) && !int(q) {
         return Err(PyTypeError::new_err(format!(
             "{s_name}: expected a state vector, got an integer: the arguments are ({s_name}, q), \
              the state first (the order was (q, {s_name}) in tlshield 0.1)"

@@ -1,5 +1,6 @@
 //! `ProgressReward`: the progress-aware task reward of an automaton (core `progress`).
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use pyo3::exceptions::PyValueError;
@@ -23,6 +24,8 @@ use crate::errors::map;
 pub struct PyProgressReward {
     pub(crate) automaton: Arc<Automaton>,
     pub(crate) inner: ProgressReward,
+    /// Whether the deprecated ``advance`` has warned (once per object).
+    warned: AtomicBool,
 }
 
 impl PyProgressReward {
@@ -51,7 +54,11 @@ impl PyProgressReward {
             ..params
         };
         let inner = map(ProgressReward::new(&automaton, &params))?;
-        Ok(PyProgressReward { automaton, inner })
+        Ok(PyProgressReward {
+            automaton,
+            inner,
+            warned: AtomicBool::new(false),
+        })
     }
 }
 
@@ -104,8 +111,8 @@ impl PyProgressReward {
     /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
     /// episode with ``q = automaton.step(s_0, automaton.initial)`` and ``phi = 0``.
     ///
-    /// Deprecated (a ``DeprecationWarning``): a ``Monitor`` with this reward does this and
-    /// keeps ``q`` and ``phi``.
+    /// Deprecated (a ``DeprecationWarning`` on the first call of each object): a ``Monitor``
+    /// with this reward does this and keeps ``q`` and ``phi``.
     fn advance(
         &self,
         py: Python<'_>,
@@ -113,10 +120,12 @@ impl PyProgressReward {
         phi: f64,
         s_next: &Bound<'_, PyAny>,
     ) -> PyResult<(usize, f64, f64)> {
-        deprecated(
-            py,
-            "ProgressReward.advance is deprecated: use tlshield.Monitor(automaton, progress)",
-        )?;
+        if !self.warned.swap(true, Ordering::Relaxed) {
+            deprecated(
+                py,
+                "ProgressReward.advance is deprecated: use tlshield.Monitor(automaton, progress)",
+            )?;
+        }
         let q = state(q, "q", &self.automaton)?;
         map(self
             .inner
