@@ -38,7 +38,7 @@ class TrainingRun:
     inner: Any
     env_id: str
     config: str
-    cfg: Any  # the environment's config dataclass (None for a user's env)
+    cfg: Any  # the environment's parameters (None for a user's env)
     seed: int
     updates: int
     overrides: dict[str, Any]

@@ -140,7 +140,7 @@ class Run:
 
 
 def json_tuples(value: Any) -> Any:
-    """JSON lists back into the (nested) tuples the config dataclasses hold."""
+    """JSON lists back into the (nested) tuples the parameters dataclasses hold."""
     return tuple(json_tuples(v) for v in value) if isinstance(value, list) else value
 
 

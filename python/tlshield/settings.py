@@ -46,16 +46,16 @@ PPO_NAMES = (
     "policy",
     "norm_reward",
 )
-#: Keywords of a bundled environment's factory besides its config's fields (the task).
+#: Keywords of a bundled environment's factory besides its parameters (the task).
 TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}
 #: Settings of :func:`tlshield.training.train` itself.
 SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
 
 
 def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
-    """The environment constants of ``env_id`` (its config dataclass's fields; empty for a
+    """The environment constants of ``env_id`` (its parameters' flat names; empty for a
     user's environment, whose keywords its own factory checks)."""
-    cls = _config_class(env_id)
+    cls = _params_class(env_id)
     if cls is None:
         return ()
     return (*flat_names(cls), *TASK_KEYWORDS.get(env_id, ()))
@@ -68,7 +68,7 @@ def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
 
 def check_names(names: Any, env_id: str = ENV_ID, where: str = "settings") -> None:
     """Raises ValueError naming the unknown settings in ``names`` and listing the known ones."""
-    if _config_class(env_id) is None:  # a user's env: its factory checks its own keywords
+    if _params_class(env_id) is None:  # a user's env: its factory checks its own keywords
         return
     known = known_names(env_id)
     unknown = sorted(str(n) for n in names if n not in known)
@@ -90,7 +90,7 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     if ppo:
         out["ppo"] = ppo
     env = {k: json_tuples(v) for k, v in settings.items() if k not in PPO_NAMES + SCHEDULE_NAMES}
-    cls = _config_class(env_id)
+    cls = _params_class(env_id)
     if cls is not None:
         # FlatWorld's task is a keyword of its factory, not a constant of its config.
         task = TASK_KEYWORDS.get(env_id, ())
@@ -135,8 +135,8 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
     return out
 
 
-def _config_class(env_id: str) -> Any:
-    """The config dataclass of a bundled environment; None for a user's registered one (an
+def _params_class(env_id: str) -> Any:
+    """The parameters class of a bundled environment; None for a user's registered one (an
     unregistered id is an error)."""
     from tlshield.envs import ChannelParams, check_env_id
     from tlshield.envs.flatworld import FlatWorldParams

@@ -106,8 +106,9 @@ def train(
 ) -> Path:
     """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
     ``"tlshield/PointMass-v0"``); returns the run folder. ``overrides`` are the environment's
-    config fields (``ChannelParams``, ``PointMassParams``). Ctrl-C stops cleanly: the metrics
-    so far and the model are kept (``run.json`` then says ``"interrupted": true``).
+    parameters by flat name (``ChannelParams``, ``PointMassParams``). Ctrl-C stops cleanly:
+    the metrics so far and the model are kept (``run.json`` then says ``"interrupted":
+    true``).
     ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
     once it is written."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)

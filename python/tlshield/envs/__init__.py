@@ -41,7 +41,7 @@ def check_env_id(env_id: str) -> None:
 
 
 def env_horizon(env: Any) -> int | None:
-    """The episode length of an environment: its config's ``horizon``, else its registered
+    """The episode length of an environment: its parameters' ``horizon``, else its registered
     ``max_episode_steps`` (None when it says neither)."""
     try:
         return int(env.get_wrapper_attr("cfg").horizon)
