@@ -330,13 +330,14 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             self.last_slack = out.shield.slack
         if self.render_mode is not None:
             self._trajectory.append(self.state[X : Y + 1])
+        h = out.constraints
         info = {
             "fsa_state": out.q,
             "action": out.action,
             "success": out.accepted,
             "trap": out.trapped,
             "tl_reward": out.tl_reward,
-            "constraints": dict(zip(self.CONSTRAINTS, out.constraints, strict=True)),
+            "constraints": {"c1": h[0], "c2": h[1]},
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
             "violation": out.violation,

@@ -255,8 +255,9 @@ class PointMassEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
         a_rl = np.asarray(action, dtype=np.float64)
         out = self._world.step(a_rl, self.tracker.monitor, self.shield)
+        h = out.constraints
         info: dict[str, Any] = {
-            "constraints": dict(zip(self.CONSTRAINTS, out.constraints, strict=True)),
+            "constraints": {"o1": h[0], "o2": h[1]},
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
             "violation": out.violation,

@@ -4,8 +4,6 @@
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use tlshield_core::channel::ChannelWorld;
-use tlshield_core::point_mass::PointMassWorld;
 use tlshield_core::world::{step_many, World, WorldStep};
 
 use crate::channel::PyChannelWorld;
@@ -30,26 +28,46 @@ fn borrow_all<'py, T: pyo3::PyClass<Frozen = pyo3::pyclass::boolean_struct::Fals
         .collect()
 }
 
-/// Steps `worlds` with their monitors (GIL released).
-#[allow(clippy::too_many_arguments)]
-fn step_rows<W: World>(
-    py: Python<'_>,
-    worlds: &mut [&mut W],
-    monitors: &[Bound<'_, PyMonitor>],
-    actions: &[f64],
-    active: &[bool],
+/// Everything a batch step needs besides the worlds.
+struct Rows<'a, 'py> {
+    monitors: &'a [Bound<'py, PyMonitor>],
+    actions: &'a [f64],
+    active: &'a [bool],
     scale: bool,
-    shield: Option<&tlshield_core::Shield>,
-    observation: &mut [f64],
+    shield: Option<&'a tlshield_core::Shield>,
+    observation: &'a mut [f64],
     width: usize,
-) -> PyResult<Vec<Option<WorldStep>>> {
-    let mut guards = borrow_all(monitors, "monitors")?;
-    let mut refs: Vec<&mut tlshield_core::Monitor> =
-        guards.iter_mut().map(|g| &mut g.inner).collect();
+}
+
+/// Steps the worlds of `list` (each `world(object)`) with their monitors, GIL released.
+fn step_rows<T, W>(
+    py: Python<'_>,
+    list: &[Bound<'_, T>],
+    world: fn(&mut T) -> &mut W,
+    rows: Rows<'_, '_>,
+) -> PyResult<Vec<Option<WorldStep>>>
+where
+    T: pyo3::PyClass<Frozen = pyo3::pyclass::boolean_struct::False>,
+    W: World,
+{
+    let mut world_guards = borrow_all(list, "worlds")?;
+    let mut worlds: Vec<&mut W> = world_guards.iter_mut().map(|g| world(g)).collect();
+    let mut monitor_guards = borrow_all(rows.monitors, "monitors")?;
+    let mut monitors: Vec<&mut tlshield_core::Monitor> =
+        monitor_guards.iter_mut().map(|g| &mut g.inner).collect();
+    let Rows {
+        actions,
+        active,
+        scale,
+        shield,
+        observation,
+        width,
+        ..
+    } = rows;
     map(py.detach(|| {
         step_many(
-            worlds,
-            &mut refs,
+            &mut worlds,
+            &mut monitors,
             actions,
             active,
             scale,
@@ -133,35 +151,19 @@ pub fn step_worlds(
     let actions = actions.values();
     let rows = actions.len() / 2;
     let active = active.unwrap_or_else(|| vec![true; rows]);
-    let core_shield = shield.as_deref().map(PyShield::core);
+    let rows = Rows {
+        monitors: &monitors,
+        actions: &actions,
+        active: &active,
+        scale,
+        shield: shield.as_deref().map(PyShield::core),
+        observation: &mut observation,
+        width,
+    };
     let steps = if let Ok(list) = worlds.extract::<Vec<Bound<'_, PyChannelWorld>>>() {
-        let mut guards = borrow_all(&list, "worlds")?;
-        let mut refs: Vec<&mut ChannelWorld> = guards.iter_mut().map(|g| &mut g.inner).collect();
-        step_rows(
-            py,
-            &mut refs,
-            &monitors,
-            &actions,
-            &active,
-            scale,
-            core_shield,
-            &mut observation,
-            width,
-        )?
+        step_rows(py, &list, |w: &mut PyChannelWorld| &mut w.inner, rows)?
     } else if let Ok(list) = worlds.extract::<Vec<Bound<'_, PyPointMassWorld>>>() {
-        let mut guards = borrow_all(&list, "worlds")?;
-        let mut refs: Vec<&mut PointMassWorld> = guards.iter_mut().map(|g| &mut g.inner).collect();
-        step_rows(
-            py,
-            &mut refs,
-            &monitors,
-            &actions,
-            &active,
-            scale,
-            core_shield,
-            &mut observation,
-            width,
-        )?
+        step_rows(py, &list, |w: &mut PyPointMassWorld| &mut w.inner, rows)?
     } else {
         return Err(PyTypeError::new_err(
             "worlds: expected a list of ChannelWorld or a list of PointMassWorld (one kind)",
