@@ -55,25 +55,16 @@ where
     let mut monitor_guards = borrow_all(rows.monitors, "monitors")?;
     let mut monitors: Vec<&mut tlshield_core::Monitor> =
         monitor_guards.iter_mut().map(|g| &mut g.inner).collect();
-    let Rows {
-        actions,
-        active,
-        scale,
-        shield,
-        observation,
-        width,
-        ..
-    } = rows;
     map(py.detach(|| {
         step_many(
             &mut worlds,
             &mut monitors,
-            actions,
-            active,
-            scale,
-            shield,
-            observation,
-            width,
+            rows.actions,
+            rows.active,
+            rows.scale,
+            rows.shield,
+            rows.observation,
+            rows.width,
         )
     }))
 }
