@@ -104,17 +104,18 @@ pub enum AutomatonError {
         /// The supported maximum.
         max: usize,
     },
-    /// The automaton grew past the supported size.
+    /// The automaton grew past the supported size: too many states, or too many decision-diagram
+    /// nodes for its transitions.
     #[error(
-        "the automaton is too large: {states} states x {letters} letters exceeds {max} transitions \
-         (use fewer atoms)"
+        "the automaton is too large: {size} {what}, more than the {max} supported (split the \
+         task, or use fewer independent subformulas)"
     )]
     TooLarge {
-        /// States reached so far.
-        states: usize,
-        /// Letters (2^atoms).
-        letters: usize,
-        /// The supported maximum of transitions.
+        /// What grew too large ("states", "decision-diagram nodes").
+        what: &'static str,
+        /// How many were reached.
+        size: usize,
+        /// The supported maximum.
         max: usize,
     },
     /// The build was stopped by its caller (a user's interrupt).

@@ -79,9 +79,9 @@ mod random {
         ]
     }
 
-    fn propositional() -> impl Strategy<Value = Formula> {
+    fn propositional(atoms: usize) -> impl Strategy<Value = Formula> {
         let leaf = prop_oneof![
-            8 => (0..NAMES.len()).prop_map(Formula::Atom),
+            8 => (0..atoms).prop_map(Formula::Atom),
             1 => Just(Formula::True),
             1 => Just(Formula::False),
         ];
@@ -96,14 +96,19 @@ mod random {
         })
     }
 
-    /// Random syntactically co-safe formulas.
+    /// Random syntactically co-safe formulas over [`NAMES`].
     pub fn co_safe() -> impl Strategy<Value = Formula> {
-        propositional().prop_recursive(4, 24, 3, |inner| {
+        co_safe_over(NAMES.len())
+    }
+
+    /// Random syntactically co-safe formulas over atoms `0..atoms`.
+    pub fn co_safe_over(atoms: usize) -> impl Strategy<Value = Formula> {
+        propositional(atoms).prop_recursive(4, 24, 3, move |inner| {
             prop_oneof![
-                propositional().prop_map(|a| Formula::Not(Box::new(a))),
+                propositional(atoms).prop_map(|a| Formula::Not(Box::new(a))),
                 (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::and(vec![a, b])),
                 (inner.clone(), inner.clone()).prop_map(|(a, b)| Formula::or(vec![a, b])),
-                (propositional(), inner.clone())
+                (propositional(atoms), inner.clone())
                     .prop_map(|(a, b)| Formula::Implies(Box::new(a), Box::new(b))),
                 (inner.clone(), inner.clone())
                     .prop_map(|(a, b)| Formula::Until(Box::new(a), Box::new(b))),

@@ -100,12 +100,13 @@ fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
 pub fn ranks(automaton: &Automaton, exclusive: &[u32]) -> Vec<Option<u32>> {
     crate::automaton::ranks(
         automaton.num_states(),
-        1usize << automaton.spec().atoms().len(),
         &(0..automaton.num_states())
             .map(|q| automaton.is_accepting(q))
             .collect::<Vec<_>>(),
-        |q, v| automaton.step_valuation(q, v),
-        |v| automaton.admissible(v) && exclusive.iter().all(|&g| (v as u32 & g).count_ones() <= 1),
+        automaton.edges(),
+        |v| {
+            automaton.admissible(v as usize) && exclusive.iter().all(|&g| (v & g).count_ones() <= 1)
+        },
     )
 }
 

@@ -1,17 +1,30 @@
-//! Construction (Eq. 4 of the paper's FSA, built natively): formula progression over the
-//! valuations of the atoms with canonical simplification, acceptance by end-of-trace
-//! evaluation, then Moore minimisation.
+//! Construction (Eq. 4 of the paper's FSA, built natively and symbolically): formula
+//! progression with canonical simplification, as decision diagrams over the atoms (each
+//! residual's successor as a function of the letter, never an enumeration of the 2^atoms
+//! letters), acceptance by end-of-trace evaluation, Moore minimisation on the diagrams, and
+//! guards read off their paths.
 
-use std::collections::{HashMap, VecDeque};
-use std::hash::{BuildHasherDefault, Hasher};
+use std::collections::VecDeque;
 
 use smallvec::{smallvec, SmallVec};
 
-use super::{regions, Automaton, Edge, MAX_ATOMS, MAX_TRANSITIONS};
-use crate::cnf;
+use super::diagram::{leaf, Builder, Diagram, FastMap, NodeId};
+use super::{regions, Automaton, Edge, MAX_ATOMS};
+use crate::cnf::{self, Cube};
 use crate::error::AutomatonError;
 use crate::formula::Formula;
 use crate::spec::Spec;
+
+/// Most states (distinct residual formulas, before minimisation) a build may reach.
+pub const MAX_STATES: usize = 1 << 11;
+
+/// Guards over at most this many atoms are minimised exactly (Quine-McCluskey over their
+/// minterms); larger ones are the diagram's path cubes, each expanded to a prime implicant.
+const EXACT_GUARD_ATOMS: u32 = 10;
+
+/// A transition table `states x 2^atoms` is kept for stepping when it has at most this many
+/// entries (256 KiB): one lookup per step. Larger automata step through their diagrams.
+const DENSE_MAX: usize = 1 << 16;
 
 /// Most distinct temporal obligations (subformulas under `F`, `U`, `X`) a formula may have.
 pub const MAX_OBLIGATIONS: usize = 128;
@@ -77,6 +90,7 @@ fn constant(b: bool) -> Dnf {
 }
 
 /// Truth of a propositional formula under valuation `v`.
+#[cfg(test)]
 fn holds(f: &Formula, v: u32) -> bool {
     match f {
         Formula::True => true,
@@ -103,38 +117,6 @@ fn atom_mask(f: &Formula) -> u32 {
     }
 }
 
-/// A small, fast hasher for the build's maps (keys are addresses and short bit vectors; no
-/// untrusted input reaches them).
-#[derive(Default)]
-struct FxHasher(u64);
-
-impl Hasher for FxHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-
-    fn write_u128(&mut self, i: u128) {
-        self.write_u64(i as u64);
-        self.write_u64((i >> 64) as u64);
-    }
-
-    fn write_usize(&mut self, i: usize) {
-        self.write_u64(i as u64);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
-
-type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
-
 /// The obligations of a formula: the subformulas that can be left to hold "from the next
 /// state on" (the formula itself, every `F` and `U` node, every `X` operand). Structurally
 /// equal subformulas share an id; ids are assigned once, before exploring.
@@ -144,9 +126,6 @@ struct Obligations<'f> {
     masks: Vec<u32>,
     /// Node address -> obligation id.
     by_node: FastMap<*const Formula, usize>,
-    /// `progress(formulas[k], v & masks[k])` by `(k, v & masks[k])`, computed on first use
-    /// (a map: only the projections actually reached are stored).
-    memo: FastMap<(usize, u32), Dnf>,
 }
 
 impl<'f> Obligations<'f> {
@@ -155,7 +134,6 @@ impl<'f> Obligations<'f> {
             formulas: Vec::new(),
             masks: Vec::new(),
             by_node: FastMap::default(),
-            memo: FastMap::default(),
         };
         let mut structural: FastMap<&'f Formula, usize> = FastMap::default();
         this.register(root, &mut structural)?;
@@ -219,7 +197,9 @@ impl<'f> Obligations<'f> {
         1u128 << self.by_node[&(f as *const Formula)]
     }
 
-    /// What remains of "`f` holds from here" after reading a state with valuation `v`.
+    /// What remains of "`f` holds from here" after reading a state with valuation `v` (the
+    /// letter-by-letter progression the diagrams compute symbolically; the tests' oracle).
+    #[cfg(test)]
     fn progress(&self, f: &Formula, v: u32) -> Dnf {
         match f {
             Formula::True | Formula::False | Formula::Atom(_) | Formula::Not(_) => {
@@ -267,34 +247,190 @@ impl<'f> Obligations<'f> {
             .filter(|k| used >> k & 1 == 1)
             .fold(0, |m, k| m | self.masks[k])
     }
+}
 
-    /// Progression of a whole residual.
-    fn step(&mut self, residual: &[u128], v: u32) -> Dnf {
-        let mut out = Dnf::new();
-        for &cube in residual {
-            let mut acc: Dnf = smallvec![TRUE];
-            let mut bits = cube;
-            while bits != 0 && !acc.is_empty() {
-                let k = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let key = (k, v & self.masks[k]);
-                acc = match self.memo.get(&key) {
-                    Some(progressed) => dnf_and(&acc, progressed),
-                    None => {
-                        let progressed = self.progress(self.formulas[k], key.1);
-                        let product = dnf_and(&acc, &progressed);
-                        self.memo.insert(key, progressed);
-                        product
-                    }
-                };
-            }
-            out.extend(acc);
+/// The interned residuals that label the progression diagrams' leaves.
+struct Leaves {
+    dnfs: Vec<Dnf>,
+    ids: FastMap<Dnf, u32>,
+}
+
+/// Leaf value of `false` (the empty DNF) and of `true` (the empty cube).
+const FALSE_LEAF: u32 = 0;
+const TRUE_LEAF: u32 = 1;
+
+impl Leaves {
+    fn new() -> Self {
+        let mut this = Leaves {
+            dnfs: Vec::new(),
+            ids: FastMap::default(),
+        };
+        this.intern(constant(false));
+        this.intern(constant(true));
+        this
+    }
+
+    fn intern(&mut self, dnf: Dnf) -> u32 {
+        if let Some(&id) = self.ids.get(&dnf) {
+            return id;
         }
-        absorb(out)
+        let id = self.dnfs.len() as u32;
+        self.ids.insert(dnf.clone(), id);
+        self.dnfs.push(dnf);
+        id
     }
 }
 
-/// How often (in letters or states handled) a build asks its `stop` callback.
+/// Formula progression as diagrams: `progress(f)` is the function from the letter read to
+/// the residual left, a diagram over the atoms `f` reads with interned residuals at its
+/// leaves. Each obligation is progressed once; a residual's successor combines them.
+struct Symbolic<'o, 'f, 's> {
+    obligations: &'o Obligations<'f>,
+    diagrams: Builder<'s>,
+    leaves: Leaves,
+    /// Per obligation: its progression, once computed.
+    progressed: Vec<Option<NodeId>>,
+    and_memo: FastMap<(NodeId, NodeId), NodeId>,
+    or_memo: FastMap<(NodeId, NodeId), NodeId>,
+    not_memo: FastMap<NodeId, NodeId>,
+}
+
+impl<'o, 'f, 's> Symbolic<'o, 'f, 's> {
+    fn new(obligations: &'o Obligations<'f>, stop: &'s dyn Fn() -> bool) -> Self {
+        Symbolic {
+            obligations,
+            diagrams: Builder::new(stop),
+            leaves: Leaves::new(),
+            progressed: vec![None; obligations.formulas.len()],
+            and_memo: FastMap::default(),
+            or_memo: FastMap::default(),
+            not_memo: FastMap::default(),
+        }
+    }
+
+    fn constant(&mut self, dnf: Dnf) -> NodeId {
+        leaf(self.leaves.intern(dnf))
+    }
+
+    fn and(&mut self, a: NodeId, b: NodeId) -> Result<NodeId, AutomatonError> {
+        let leaves = &mut self.leaves;
+        self.diagrams.apply(
+            a,
+            b,
+            &mut |x, y| {
+                let product = dnf_and(&leaves.dnfs[x as usize], &leaves.dnfs[y as usize]);
+                leaves.intern(product)
+            },
+            leaf(FALSE_LEAF),
+            leaf(TRUE_LEAF),
+            &mut self.and_memo,
+        )
+    }
+
+    fn or(&mut self, a: NodeId, b: NodeId) -> Result<NodeId, AutomatonError> {
+        let leaves = &mut self.leaves;
+        self.diagrams.apply(
+            a,
+            b,
+            &mut |x, y| {
+                let sum = dnf_or(leaves.dnfs[x as usize].clone(), &leaves.dnfs[y as usize]);
+                leaves.intern(sum)
+            },
+            leaf(TRUE_LEAF),
+            leaf(FALSE_LEAF),
+            &mut self.or_memo,
+        )
+    }
+
+    /// The negation of a propositional diagram (leaves `false` and `true` only).
+    fn not(&mut self, a: NodeId) -> Result<NodeId, AutomatonError> {
+        let swap = |x: u32| {
+            if x == TRUE_LEAF {
+                FALSE_LEAF
+            } else {
+                TRUE_LEAF
+            }
+        };
+        self.diagrams.map_leaves(a, &swap, &mut self.not_memo)
+    }
+
+    /// What remains of "`f` holds from here" after reading a letter, for every letter.
+    fn progress(&mut self, f: &Formula) -> Result<NodeId, AutomatonError> {
+        let obligation = self
+            .obligations
+            .by_node
+            .get(&(f as *const Formula))
+            .copied();
+        if let Some(done) = obligation.and_then(|k| self.progressed[k]) {
+            return Ok(done);
+        }
+        let out = match f {
+            Formula::True => leaf(TRUE_LEAF),
+            Formula::False => leaf(FALSE_LEAF),
+            Formula::Atom(i) => self
+                .diagrams
+                .node(*i as u32, leaf(FALSE_LEAF), leaf(TRUE_LEAF))?,
+            Formula::Not(a) => {
+                let a = self.progress(a)?;
+                self.not(a)?
+            }
+            Formula::And(parts) => parts.iter().try_fold(leaf(TRUE_LEAF), |acc, p| {
+                let p = self.progress(p)?;
+                self.and(acc, p)
+            })?,
+            Formula::Or(parts) => parts.iter().try_fold(leaf(FALSE_LEAF), |acc, p| {
+                let p = self.progress(p)?;
+                self.or(acc, p)
+            })?,
+            Formula::Implies(a, b) => {
+                let a = self.progress(a)?;
+                let not_a = self.not(a)?;
+                let b = self.progress(b)?;
+                self.or(not_a, b)?
+            }
+            Formula::Eventually(a) => {
+                let now = self.progress(a)?;
+                let later = self.constant(smallvec![self.obligations.id(f)]);
+                self.or(now, later)?
+            }
+            Formula::Until(a, b) => {
+                let now = self.progress(b)?;
+                let hold = self.progress(a)?;
+                let later = self.constant(smallvec![self.obligations.id(f)]);
+                let keep = self.and(hold, later)?;
+                self.or(now, keep)?
+            }
+            // `X a`: `a` must hold from the next state on (which must exist).
+            Formula::Next(a) => self.constant(smallvec![self.obligations.id(a)]),
+        };
+        // Only `F`/`U` nodes are cached here (an `X` operand's id names its operand, whose
+        // progression is a different function).
+        if let (Some(k), Formula::Eventually(_) | Formula::Until(..)) = (obligation, f) {
+            self.progressed[k] = Some(out);
+        }
+        Ok(out)
+    }
+
+    /// The successor of a whole residual, for every letter.
+    fn successor(&mut self, residual: &[u128]) -> Result<NodeId, AutomatonError> {
+        let mut out = leaf(FALSE_LEAF);
+        for &cube in residual {
+            let mut acc = leaf(TRUE_LEAF);
+            let mut bits = cube;
+            while bits != 0 && acc != leaf(FALSE_LEAF) {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let p = self.progress(self.obligations.formulas[k])?;
+                acc = self.and(acc, p)?;
+            }
+            out = self.or(out, acc)?;
+        }
+        Ok(out)
+    }
+}
+
+/// How often (in states or cubes handled) a build asks its `stop` callback, besides every
+/// 1024 diagram nodes.
 const STOP_EVERY: usize = 1024;
 
 impl Automaton {
@@ -303,7 +439,7 @@ impl Automaton {
         Self::build_until(spec, &|| false)
     }
 
-    /// [`Automaton::build`] that asks `stop` every [`STOP_EVERY`] letters or states (and
+    /// [`Automaton::build`] that asks `stop` every 1024 diagram nodes, states or cubes (and
     /// between the merge steps of each guard's minimisation) and returns
     /// [`AutomatonError::Interrupted`] as soon as it says so: a caller can keep a long build
     /// responsive (the Python bindings check for Ctrl-C there).
@@ -326,59 +462,64 @@ impl Automaton {
                 max: MAX_ATOMS,
             });
         }
-        let letters = 1usize << n;
 
-        // 1. Explore the residuals reachable by progression. A residual holds on the empty
-        //    rest of a trace iff it is `true` (every obligation needs a state).
-        let mut obligations = Obligations::new(spec.formula())?;
+        // 1. Explore the residuals reachable by progression, each state's successors as one
+        //    diagram (leaves: residual ids). A residual holds on the empty rest of a trace iff
+        //    it is `true` (every obligation needs a state). Successors are numbered in the
+        //    order ascending letters first reach them.
+        let obligations = Obligations::new(spec.formula())?;
         let start: Dnf = obligations
             .unfold(spec.formula())
             .unwrap_or_else(|| smallvec![obligations.id(spec.formula())]);
-        let mut ids: FastMap<Dnf, usize> = FastMap::default();
+        let mut symbolic = Symbolic::new(&obligations, stop);
+        let mut raw = Builder::new(stop);
+        let mut ids: FastMap<Dnf, u32> = FastMap::default();
         ids.insert(start.clone(), 0);
         let mut residuals = vec![start];
-        let mut raw: Vec<u32> = Vec::new();
         let mut raw_masks: Vec<u32> = Vec::new();
+        let mut raw_roots: Vec<NodeId> = Vec::new();
         let mut next = 0;
-        // Successor per projected valuation `v & mask` of the current residual.
-        let mut by_projection = vec![u32::MAX; letters];
         while next < residuals.len() {
+            tick(1)?;
             let current = residuals[next].clone();
-            let mask = obligations.residual_mask(&current);
-            raw_masks.push(mask);
-            by_projection.fill(u32::MAX);
-            for v in 0..letters as u32 {
-                tick(1)?;
-                let projected = (v & mask) as usize;
-                if by_projection[projected] != u32::MAX {
-                    raw.push(by_projection[projected]);
-                    continue;
-                }
-                let succ = obligations.step(&current, v & mask);
-                let id = match ids.get(&succ) {
+            raw_masks.push(obligations.residual_mask(&current));
+            let root = symbolic.successor(&current)?;
+            let mut state_of: FastMap<u32, u32> = FastMap::default();
+            for (x, _) in symbolic.diagrams.diagram().first_letters(root) {
+                let succ = &symbolic.leaves.dnfs[x as usize];
+                let id = match ids.get(succ) {
                     Some(&id) => id,
                     None => {
-                        if (residuals.len() + 1) * letters > MAX_TRANSITIONS {
+                        if residuals.len() == MAX_STATES {
                             return Err(AutomatonError::TooLarge {
-                                states: residuals.len() + 1,
-                                letters,
-                                max: MAX_TRANSITIONS,
+                                what: "states",
+                                size: residuals.len() + 1,
+                                max: MAX_STATES,
                             });
                         }
-                        ids.insert(succ.clone(), residuals.len());
-                        residuals.push(succ);
-                        residuals.len() - 1
+                        ids.insert(succ.clone(), residuals.len() as u32);
+                        residuals.push(succ.clone());
+                        residuals.len() as u32 - 1
                     }
                 };
-                by_projection[projected] = id as u32;
-                raw.push(id as u32);
+                state_of.insert(x, id);
             }
+            let root = symbolic.diagrams.diagram().transplant(
+                root,
+                &mut raw,
+                &|x| state_of[&x],
+                &mut FastMap::default(),
+            )?;
+            raw_roots.push(root);
             next += 1;
         }
+        drop(symbolic);
         let accepting_raw: Vec<bool> = residuals.iter().map(|r| r.contains(&TRUE)).collect();
 
-        // 2. Minimise (Moore refinement), then number states breadth-first from the start.
-        let block = minimise(&raw, &accepting_raw, letters, &mut tick)?;
+        // 2. Minimise (Moore refinement on the diagrams), then number states breadth-first
+        //    from the start, successors in the order ascending letters first reach them.
+        let block = minimise(&raw, &raw_roots, &accepting_raw, &mut tick)?;
+        let raw = raw.freeze();
         let blocks = block.iter().max().map_or(0, |m| m + 1);
         let mut representative = vec![usize::MAX; blocks];
         for (q, &b) in block.iter().enumerate().rev() {
@@ -388,14 +529,12 @@ impl Automaton {
         let mut queue = VecDeque::from([block[0]]);
         order[block[0]] = 0;
         let mut count = 1;
-        let mut table = vec![0u32; blocks * letters];
         let mut visit = Vec::with_capacity(blocks);
         while let Some(b) = queue.pop_front() {
-            tick(letters)?;
+            tick(1)?;
             visit.push(b);
-            let q = representative[b];
-            for v in 0..letters {
-                let nb = block[raw[q * letters + v] as usize];
+            for (r, _) in raw.first_letters(raw_roots[representative[b]]) {
+                let nb = block[r as usize];
                 if order[nb] == usize::MAX {
                     order[nb] = count;
                     count += 1;
@@ -403,18 +542,33 @@ impl Automaton {
                 }
             }
         }
+        let num_states = count;
+        let mut built = Builder::new(stop);
+        let mut memo = FastMap::default();
+        let relabel = |r: u32| order[block[r as usize]] as u32;
+        let mut roots = Vec::with_capacity(num_states);
+        let mut accepting = vec![false; num_states];
+        let mut mask_of = vec![0u32; num_states];
         for &b in &visit {
             let q = representative[b];
-            for v in 0..letters {
-                table[order[b] * letters + v] = order[block[raw[q * letters + v] as usize]] as u32;
-            }
+            roots.push(raw.transplant(raw_roots[q], &mut built, &relabel, &mut memo)?);
+            accepting[order[b]] = accepting_raw[q];
+            mask_of[order[b]] = raw_masks[q];
         }
-        let num_states = count;
-        table.truncate(num_states * letters);
-        let mut accepting = vec![false; num_states];
-        for &b in &visit {
-            accepting[order[b]] = accepting_raw[representative[b]];
-        }
+        drop(raw);
+        let diagram = built.freeze();
+        let successors: Vec<Vec<usize>> = roots
+            .iter()
+            .map(|&root| {
+                let mut out: Vec<usize> = diagram
+                    .first_letters(root)
+                    .into_iter()
+                    .map(|(d, _)| d as usize)
+                    .collect();
+                out.sort_unstable();
+                out
+            })
+            .collect();
 
         // 3. The trap: the state from which no accepting state is reachable (at most one
         //    after minimisation).
@@ -422,11 +576,7 @@ impl Automaton {
         loop {
             let mut changed = false;
             for q in 0..num_states {
-                if !reaches[q]
-                    && table[q * letters..(q + 1) * letters]
-                        .iter()
-                        .any(|&d| reaches[d as usize])
-                {
+                if !reaches[q] && successors[q].iter().any(|&d| reaches[d]) {
                     reaches[q] = true;
                     changed = true;
                 }
@@ -437,31 +587,25 @@ impl Automaton {
         }
         let trap = reaches.iter().position(|r| !r);
 
-        // 4. Guards.
-        //    A state's row depends only on the atoms its residual reads (`mask`), so each
-        //    guard is minimised over those atoms alone.
-        let mut mask_of = vec![0u32; num_states];
-        for &b in &visit {
-            mask_of[order[b]] = raw_masks[representative[b]];
-        }
+        // 4. Guards, read off each state's diagram: its paths to a target are disjoint cubes
+        //    over the atoms the state's residual reads (`mask`).
         let mut edges = Vec::new();
-        let mut by_dst: Vec<Vec<u32>> = vec![Vec::new(); num_states];
+        let mut by_dst: Vec<Vec<Cube>> = vec![Vec::new(); num_states];
         for src in 0..num_states {
-            tick(letters)?;
-            let mask = mask_of[src];
             by_dst.iter_mut().for_each(Vec::clear);
-            for v in (0..letters as u32).filter(|v| v & !mask == 0) {
-                by_dst[table[src * letters + v as usize] as usize].push(v);
-            }
-            for (dst, minterms) in by_dst.iter().enumerate() {
-                if !minterms.is_empty() {
-                    edges.push(Edge {
-                        src,
-                        dst,
-                        guard: cnf::minimise_within_until(minterms, mask, stop)
-                            .ok_or(AutomatonError::Interrupted)?,
-                    });
+            diagram.paths(roots[src], &mut |cube, d| by_dst[d as usize].push(cube));
+            for (dst, cubes) in by_dst.iter().enumerate() {
+                if cubes.is_empty() {
+                    continue;
                 }
+                tick(cubes.len())?;
+                let guard = if mask_of[src].count_ones() <= EXACT_GUARD_ATOMS {
+                    cnf::minimise_within_until(&minterms(cubes, mask_of[src]), mask_of[src], stop)
+                        .ok_or(AutomatonError::Interrupted)?
+                } else {
+                    primes(&diagram, roots[src], cubes, dst as u32)
+                };
+                edges.push(Edge { src, dst, guard });
             }
         }
         let mut progress_cubes = vec![Vec::new(); num_states];
@@ -478,15 +622,22 @@ impl Automaton {
             .map(|g| regions::dedup_cnf(cnf::complement_cnf(g)))
             .collect();
 
-        // 5. The map's part (regions.rs): admissible letters, ranks, goals, the avoid CNF.
-        let (admissible, pairs) = regions::admissible_letters(spec, letters);
-        let ranks = regions::ranks(
-            num_states,
-            letters,
-            &accepting,
-            |q, v| table[q * letters + v] as usize,
-            |v| admissible[v],
-        );
+        // 5. A table for one-lookup steps, when small.
+        let letters = 1usize << n;
+        let table = if num_states.saturating_mul(letters) <= DENSE_MAX {
+            (0..num_states)
+                .flat_map(|q| (0..letters).map(move |v| (q, v)))
+                .map(|(q, v)| diagram.eval(roots[q], v))
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        // 6. The map's part (regions.rs): ranks over admissible letters, goals, the avoid CNF.
+        let pairs = regions::pairs(spec);
+        let ranks = regions::ranks(num_states, &accepting, &edges, |v| {
+            regions::admissible_letter(spec, &pairs, v)
+        });
         let goal_alternatives = edges
             .iter()
             .map(|e| {
@@ -504,11 +655,12 @@ impl Automaton {
             accepting,
             trap,
             table,
+            diagram,
+            roots,
             edges,
             progress: progress_cubes,
             trap_guard,
             trap_cnf,
-            admissible,
             pairs,
             ranks,
             goal_alternatives,
@@ -517,38 +669,86 @@ impl Automaton {
     }
 }
 
-/// Moore partition refinement: returns the block of every state, blocks numbered by first
-/// occurrence.
+/// Every valuation of the atoms in `mask` that lies in one of `cubes`, ascending.
+fn minterms(cubes: &[Cube], mask: u32) -> Vec<u32> {
+    let mut out = Vec::new();
+    for c in cubes {
+        let free = mask & !c.care;
+        let mut sub = free;
+        loop {
+            out.push(c.value | sub);
+            if sub == 0 {
+                break;
+            }
+            sub = (sub - 1) & free;
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// A DNF of the edge from `root` to `dst` for a guard too wide to minimise exactly: each of
+/// its path `cubes` loses every literal it can while still leading only to `dst` (a prime
+/// implicant), then cubes another contains are dropped. Sorted as the exact minimiser sorts.
+fn primes(diagram: &Diagram, root: NodeId, cubes: &[Cube], dst: u32) -> Vec<Cube> {
+    let mut out: Vec<Cube> = cubes
+        .iter()
+        .map(|&c| {
+            let mut c = c;
+            let mut care = c.care;
+            while care != 0 {
+                let bit = care & care.wrapping_neg();
+                care &= care - 1;
+                let wider = Cube {
+                    care: c.care & !bit,
+                    value: c.value & !bit,
+                };
+                if diagram.within(root, wider, dst) {
+                    c = wider;
+                }
+            }
+            c
+        })
+        .collect();
+    out.sort_unstable_by_key(|c| (c.care.count_ones(), c.care, c.value));
+    out.dedup();
+    let contains = |d: &Cube, c: &Cube| d.care & !c.care == 0 && c.value & d.care == d.value;
+    let mut kept: Vec<Cube> = Vec::with_capacity(out.len());
+    for c in out {
+        if !kept.iter().any(|d| contains(d, &c)) {
+            kept.push(c);
+        }
+    }
+    kept
+}
+
+/// Moore partition refinement on the states' diagrams: two states stay together while they
+/// agree on acceptance and their diagrams, leaves replaced by blocks, are the same node.
+/// Returns the block of every state, blocks numbered by first occurrence.
 fn minimise(
-    table: &[u32],
+    raw: &Builder<'_>,
+    roots: &[NodeId],
     accepting: &[bool],
-    letters: usize,
     tick: &mut dyn FnMut(usize) -> Result<(), AutomatonError>,
 ) -> Result<Vec<usize>, AutomatonError> {
     let n = accepting.len();
     let mut block: Vec<usize> = accepting.iter().map(|&a| usize::from(a)).collect();
     let mut count = 0;
-    // Signatures (own block, then the successors' blocks) live in one flat buffer.
-    let width = letters + 1;
-    let mut signatures = vec![0u32; n * width];
     let mut refined = vec![0; n];
+    let never = || false;
     loop {
+        let mut signatures = Builder::new(&never);
+        let mut memo = FastMap::default();
+        let mut ids: FastMap<(usize, NodeId), usize> =
+            FastMap::with_capacity_and_hasher(n, Default::default());
         for q in 0..n {
-            tick(letters)?;
-            let sig = &mut signatures[q * width..(q + 1) * width];
-            sig[0] = block[q] as u32;
-            for (slot, &d) in sig[1..]
-                .iter_mut()
-                .zip(&table[q * letters..(q + 1) * letters])
-            {
-                *slot = block[d as usize] as u32;
-            }
-        }
-        let mut ids: FastMap<&[u32], usize> =
-            FastMap::with_capacity_and_hasher(n, BuildHasherDefault::default());
-        for (q, sig) in signatures.chunks_exact(width).enumerate() {
+            tick(1)?;
+            let relabel = |r: u32| block[r as usize] as u32;
+            let sig = raw
+                .diagram()
+                .transplant(roots[q], &mut signatures, &relabel, &mut memo)?;
             let next_id = ids.len();
-            refined[q] = *ids.entry(sig).or_insert(next_id);
+            refined[q] = *ids.entry((block[q], sig)).or_insert(next_id);
         }
         let new_count = ids.len();
         std::mem::swap(&mut block, &mut refined);
@@ -556,5 +756,115 @@ fn minimise(
             return Ok(block);
         }
         count = new_count;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::co_safe_over;
+    use proptest::prelude::*;
+
+    /// The construction before diagrams, kept as the oracle: progression letter by letter
+    /// over every valuation, from the same start. Checks that `aut` accepts exactly the words
+    /// the residuals accept, by a breadth-first walk of the pairs (residual, automaton state).
+    fn same_language_as_letter_progression(spec: &Spec, aut: &Automaton) -> Result<(), String> {
+        let obligations = Obligations::new(spec.formula()).map_err(|e| e.to_string())?;
+        let start: Dnf = obligations
+            .unfold(spec.formula())
+            .unwrap_or_else(|| smallvec![obligations.id(spec.formula())]);
+        let letters = 1u32 << spec.atoms().len();
+        let step = |residual: &Dnf, v: u32| -> Dnf {
+            let mut out = Dnf::new();
+            for &cube in residual {
+                let mut acc: Dnf = smallvec![TRUE];
+                let mut bits = cube;
+                while bits != 0 {
+                    let k = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    acc = dnf_and(&acc, &obligations.progress(obligations.formulas[k], v));
+                }
+                out.extend(acc);
+            }
+            absorb(out)
+        };
+        let mut seen: FastMap<(Dnf, usize), ()> = FastMap::default();
+        let mut queue = VecDeque::from([(start, aut.initial())]);
+        while let Some((r, q)) = queue.pop_front() {
+            if seen.insert((r.clone(), q), ()).is_some() {
+                continue;
+            }
+            if r.contains(&TRUE) != aut.is_accepting(q) {
+                return Err(format!(
+                    "residual {r:?} and state {q} disagree on acceptance"
+                ));
+            }
+            for v in 0..letters {
+                queue.push_back((step(&r, v), aut.step_valuation(q, v as usize)));
+            }
+            if seen.len() > 20_000 {
+                return Err("too many pairs".into());
+            }
+        }
+        Ok(())
+    }
+
+    fn sequence(n: usize) -> String {
+        let mut text = String::from("F(a0");
+        for i in 1..n {
+            text.push_str(&format!(" & F(a{i}"));
+        }
+        text + &")".repeat(n)
+    }
+
+    #[test]
+    fn a_sequence_of_24_atoms_builds_its_25_states() {
+        let spec = Spec::from_formula(&sequence(24)).unwrap();
+        let aut = Automaton::build(&spec).unwrap();
+        assert_eq!(aut.num_states(), 25);
+        assert!(aut.table.is_empty(), "stepped through the diagrams");
+        // The word a0, a1, ..., a23 (one atom a letter) is accepted, and not one letter early.
+        let mut q = aut.initial();
+        for i in 0..24 {
+            assert!(!aut.is_accepting(q));
+            q = aut.step_valuation(q, 1 << i);
+        }
+        assert!(aut.is_accepting(q));
+        // Every guard is one cube, as short as it can be: `a0 & ... & a(k-1) & !ak`.
+        assert!(aut.edges().iter().all(|e| e.guard.len() == 1));
+        assert_eq!(aut.edges().len(), 2 * 24 + 1 + 24 * 23 / 2);
+    }
+
+    #[test]
+    fn the_paper_task_and_flatworld_formulas_match_letter_progression() {
+        let task = crate::fixtures::task_automaton();
+        same_language_as_letter_progression(task.spec(), &task).unwrap();
+        for text in [
+            "(!red U green) & F (blue & F yellow)",
+            "!(green | blue) U (yellow & F magenta)",
+            "F (a & X (b U c)) | (d -> X F e)",
+        ] {
+            let spec = Spec::from_formula(text).unwrap();
+            let aut = Automaton::build(&spec).unwrap();
+            same_language_as_letter_progression(&spec, &aut).unwrap();
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Random co-safe formulas over up to 10 atoms: the diagrams give exactly the language
+        /// of letter-by-letter progression.
+        #[test]
+        fn diagrams_accept_what_letter_progression_accepts(f in co_safe_over(10)) {
+            let names: Vec<String> = (0..10).map(|i| format!("a{i}")).collect();
+            let Ok(spec) = Spec::from_formula(&f.display(&names).to_string()) else {
+                return Ok(());
+            };
+            let Ok(aut) = Automaton::build(&spec) else {
+                return Ok(());
+            };
+            prop_assert_eq!(same_language_as_letter_progression(&spec, &aut), Ok(()));
+        }
     }
 }

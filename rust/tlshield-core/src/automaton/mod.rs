@@ -19,16 +19,17 @@ use crate::spec::Spec;
 use crate::validate::check_finite;
 
 mod build;
+mod diagram;
 mod guidance;
 mod regions;
 
+pub use build::MAX_STATES;
+pub use diagram::MAX_NODES;
 pub use regions::ranks;
 
-/// Most atoms an automaton supports (its alphabet has `2^atoms` letters).
-pub const MAX_ATOMS: usize = 16;
-
-/// Most transitions (states x 2^atoms) an automaton may have: its table stays under 16 MiB.
-pub const MAX_TRANSITIONS: usize = 1 << 22;
+/// Most atoms an automaton supports. The construction never enumerates the `2^atoms` letters
+/// (transitions are decision diagrams over the atoms), so the bound is the letter's width.
+pub const MAX_ATOMS: usize = 30;
 
 /// One edge of the automaton with its guard.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,8 +50,12 @@ pub struct Automaton {
     initial: usize,
     accepting: Vec<bool>,
     trap: Option<usize>,
-    /// `table[q * letters + v]`: the successor of `q` on valuation `v`.
+    /// `table[q * letters + v]`: the successor of `q` on valuation `v`, when small enough to
+    /// keep (empty otherwise: steps walk `diagram`).
     table: Vec<u32>,
+    /// The transition function: per state, the root of its diagram (leaves: successors).
+    diagram: diagram::Diagram,
+    roots: Vec<diagram::NodeId>,
     edges: Vec<Edge>,
     /// Per state: the cubes of D_q, the OR of the guards to states other than q and the trap.
     progress: Vec<Vec<Cube>>,
@@ -58,8 +63,6 @@ pub struct Automaton {
     trap_guard: Vec<Vec<Cube>>,
     /// Per state: the CNF of the negated trap guard (empty: no trap edge).
     trap_cnf: Vec<Vec<Vec<Literal>>>,
-    /// Per letter: whether the regions' geometry lets it occur (see `regions`).
-    admissible: Vec<bool>,
     /// Per atom pair (row-major, atoms x atoms): whether the two can hold together.
     pairs: Vec<Option<bool>>,
     /// Per state: transitions to acceptance over admissible letters.
@@ -178,8 +181,11 @@ impl Automaton {
 
     /// Whether the geometry admits valuation `v` (no two disjoint regions, no empty
     /// intersection, among the atoms that hold). The caller guarantees `v < 2^atoms`.
+    /// Computed per call (the letters are never tabulated): admissibility is anti-monotone
+    /// (more atoms holding can only add a clash), so a cube admits some letter iff its
+    /// positive literals alone are admissible.
     pub fn admissible(&self, v: usize) -> bool {
-        self.admissible[v]
+        regions::admissible_letter(&self.spec, &self.pairs, v as u32)
     }
 
     /// Whether atoms `i` and `j` can hold at one state: `Some(false)` for disjoint regions,
@@ -248,8 +254,20 @@ impl Automaton {
 
     /// The successor of `q` on the atom valuation `v` (bit `i` set: atom `i` holds). The caller
     /// guarantees `q < num_states()` and `v < 2^atoms`.
+    #[inline]
     pub fn step_valuation(&self, q: usize, v: usize) -> usize {
-        self.table[q * self.letters + v] as usize
+        if self.table.is_empty() {
+            self.diagram.eval(self.roots[q], v) as usize
+        } else {
+            self.table[q * self.letters + v] as usize
+        }
+    }
+
+    /// Nodes of the decision diagrams that hold the transition function: what the automaton
+    /// stores, with its states and guards, instead of a `states x 2^atoms` table (a table is
+    /// added only while it has at most 65,536 entries).
+    pub fn diagram_nodes(&self) -> usize {
+        self.diagram.len()
     }
 
     /// Steps a batch in parallel: row `i` of `states` (row-major, `dim` values) from `qs[i]`.
@@ -578,24 +596,24 @@ mod tests {
 
     #[test]
     fn too_many_atoms_is_an_error() {
-        let names: Vec<String> = (0..17).map(|i| format!("p{i}")).collect();
+        let names: Vec<String> = (0..31).map(|i| format!("p{i}")).collect();
         let text = names
             .iter()
             .map(|n| format!("F {n}"))
             .collect::<Vec<_>>()
-            .join(" & ");
+            .join(" | ");
         let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
         let spec = Spec::new(&text, names.iter().map(|n| (n.as_str(), p.clone()))).unwrap();
         let err = Automaton::build(&spec).unwrap_err();
         assert_eq!(
             err.to_string(),
-            "the formula has 17 atoms; automata support at most 16"
+            "the formula has 31 atoms; automata support at most 30"
         );
     }
 
     #[test]
     fn oversized_automata_are_an_error() {
-        // 16 independent goals: 2^16 residuals over 2^16 letters.
+        // 16 independent goals: 2^16 states by nature, refused at MAX_STATES.
         let names: Vec<String> = (0..16).map(|i| format!("p{i}")).collect();
         let text = names
             .iter()
@@ -713,9 +731,8 @@ mod tests {
 
     #[test]
     fn a_build_asked_to_stop_stops() {
-        // 12 atoms: 4096 letters per state, so the build asks more than once.
-        let formula =
-            (1..12).fold("F(a0".to_string(), |f, i| f + &format!(" & F(a{i}")) + &")".repeat(12);
+        // Ten independent goals: 1024 states, so the build asks more than once.
+        let formula = (1..10).fold("F a0".to_string(), |f, i| f + &format!(" & F a{i}"));
         let spec = Spec::from_formula(&formula).unwrap();
         let asked = std::cell::Cell::new(0);
         let err = Automaton::build_until(&spec, &|| {
@@ -729,7 +746,7 @@ mod tests {
             Automaton::build_until(&spec, &|| false)
                 .unwrap()
                 .num_states(),
-            13
+            1 << 10
         );
     }
 }

@@ -36,22 +36,15 @@ pub(crate) struct GoalAlternative {
     pub fixed: Option<Vec<f64>>,
 }
 
-/// Which letters the geometry admits (`true` for all when it says nothing), and per atom pair
-/// whether the two can hold together (`None`: the geometry does not say).
-pub(super) fn admissible_letters(spec: &Spec, letters: usize) -> (Vec<bool>, Vec<Option<bool>>) {
+/// Per atom pair (row-major, atoms x atoms) whether the two can hold together (`None`: the
+/// geometry does not say, as for a formula alone).
+pub(super) fn pairs(spec: &Spec) -> Vec<Option<bool>> {
     let n = spec.atoms().len();
+    let mut pairs = vec![None; n * n];
     if !spec.is_bound() {
-        let admissible = (0..letters)
-            .map(|v| {
-                spec.exclusive()
-                    .iter()
-                    .all(|&g| (v as u32 & g).count_ones() <= 1)
-            })
-            .collect();
-        return (admissible, vec![None; n * n]);
+        return pairs;
     }
     let predicates = spec.predicates();
-    let mut pairs = vec![None; n * n];
     for i in 0..n {
         for j in i + 1..n {
             let c = region::can_hold_together(&predicates[i], &predicates[j]);
@@ -59,81 +52,74 @@ pub(super) fn admissible_letters(spec: &Spec, letters: usize) -> (Vec<bool>, Vec
             pairs[j * n + i] = c;
         }
     }
-    let alternatives: Vec<Option<Vec<Vec<&Predicate>>>> =
-        predicates.iter().map(region::alternatives).collect();
-    let mut admissible = vec![true; letters];
-    for (v, ok) in admissible.iter_mut().enumerate() {
-        if spec
-            .exclusive()
-            .iter()
-            .any(|&g| (v as u32 & g).count_ones() > 1)
-        {
-            *ok = false;
-            continue;
-        }
-        let atoms: Vec<usize> = (0..n).filter(|i| v >> i & 1 == 1).collect();
-        let clash = atoms.iter().enumerate().any(|(k, &i)| {
-            atoms[k + 1..]
-                .iter()
-                .any(|&j| pairs[i * n + j] == Some(false))
-        });
-        if clash {
-            *ok = false;
-            continue;
-        }
-        // Three or more regions can overlap pairwise with no common point.
-        let known: Vec<usize> = atoms
-            .iter()
-            .copied()
-            .filter(|&i| {
-                atoms
-                    .iter()
-                    .any(|&j| j != i && pairs[i * n + j] == Some(true))
-            })
-            .collect();
-        if known.len() >= 3 {
-            let mut joint: Option<Vec<Vec<&Predicate>>> = Some(vec![Vec::new()]);
-            for &i in &known {
-                joint = match (joint, &alternatives[i]) {
-                    (Some(acc), Some(alts)) => region::product(&acc, alts),
-                    _ => None,
-                };
-            }
-            if let Some(joint) = joint {
-                if region::region_nonempty(&joint) == Some(false) {
-                    *ok = false;
-                }
-            }
-        }
-    }
-    (admissible, pairs)
+    pairs
 }
 
-/// Fewest transitions from each state to acceptance reading only letters with
-/// `admissible(v)` (`None`: unreachable). `step(q, v)` is the transition table.
+/// Whether the geometry and the spec's exclusive groups admit the letter `v` (see the module
+/// docs); `pairs` from [`pairs`].
+pub(super) fn admissible_letter(spec: &Spec, pairs: &[Option<bool>], v: u32) -> bool {
+    if spec.exclusive().iter().any(|&g| (v & g).count_ones() > 1) {
+        return false;
+    }
+    if !spec.is_bound() {
+        return true;
+    }
+    let n = spec.atoms().len();
+    let atoms: Vec<usize> = (0..n).filter(|i| v >> i & 1 == 1).collect();
+    let clash = atoms.iter().enumerate().any(|(k, &i)| {
+        atoms[k + 1..]
+            .iter()
+            .any(|&j| pairs[i * n + j] == Some(false))
+    });
+    if clash {
+        return false;
+    }
+    // Three or more regions can overlap pairwise with no common point.
+    let known: Vec<usize> = atoms
+        .iter()
+        .copied()
+        .filter(|&i| {
+            atoms
+                .iter()
+                .any(|&j| j != i && pairs[i * n + j] == Some(true))
+        })
+        .collect();
+    if known.len() < 3 {
+        return true;
+    }
+    let predicates = spec.predicates();
+    let mut joint: Option<Vec<Vec<&Predicate>>> = Some(vec![Vec::new()]);
+    for &i in &known {
+        joint = match (joint, region::alternatives(&predicates[i])) {
+            (Some(acc), Some(alts)) => region::product(&acc, &alts),
+            _ => None,
+        };
+    }
+    !matches!(joint, Some(joint) if region::region_nonempty(&joint) == Some(false))
+}
+
+/// Fewest transitions from each state to acceptance (`None`: unreachable) along `edges`
+/// whose guard has a cube with an admissible letter: `admits(v)` for the cube's positive
+/// literals (admissibility is anti-monotone, so that letter is the cube's best witness).
 pub fn ranks(
     num_states: usize,
-    letters: usize,
     accepting: &[bool],
-    step: impl Fn(usize, usize) -> usize,
-    admissible: impl Fn(usize) -> bool,
+    edges: &[Edge],
+    admits: impl Fn(u32) -> bool,
 ) -> Vec<Option<u32>> {
-    let allowed: Vec<usize> = (0..letters).filter(|&v| admissible(v)).collect();
+    let usable: Vec<(usize, usize)> = edges
+        .iter()
+        .filter(|e| e.src != e.dst && e.guard.iter().any(|c| admits(c.value)))
+        .map(|e| (e.src, e.dst))
+        .collect();
     let mut rank: Vec<Option<u32>> = accepting.iter().map(|&a| a.then_some(0)).collect();
-    // Bellman-Ford over at most n rounds: the graph is small (states x admissible letters).
+    // Bellman-Ford over at most n rounds: the graph is small (states x edges).
     for _ in 0..num_states {
         let mut changed = false;
-        for q in 0..num_states {
-            let best = allowed
-                .iter()
-                .filter_map(|&v| {
-                    let d = step(q, v);
-                    (d != q).then(|| rank[d].map(|r| r + 1)).flatten()
-                })
-                .min();
-            if let Some(b) = best {
-                if rank[q].is_none_or(|r| b < r) {
-                    rank[q] = Some(b);
+        for &(src, dst) in &usable {
+            if let Some(r) = rank[dst] {
+                if rank[src].is_none_or(|x| r + 1 < x) {
+                    rank[src] = Some(r + 1);
                     changed = true;
                 }
             }
