@@ -8,12 +8,13 @@ Run from the repository root (ltlf2dfa needs Debian's ``mona``)::
 Shapes, for n atoms ``a0 .. a(n-1)``:
 
 * ``sequence``: ``F(a0 & F(a1 & ... & F a(n-1)))`` (n + 1 states);
-* ``until chain``: ``a0 U (a1 U (... U a(n-1)))`` (a handful of states);
+* ``until chain``: ``a0 U (a1 U (... U a(n-1)))`` (n + 1 states);
 * ``two sequences``: the sequence over the first half of the atoms, or over the second half;
-* and FlatWorld's five published formulas (DeepLTL's benchmark, 4-7 colours each).
+* and FlatWorld's five published formulas (DeepLTL's benchmark, 3-6 colours each).
 
 Each build runs in its own child process (a fresh interpreter: no cache is shared) with a time
-limit, and reports its time (imports excluded) and its peak RSS. tlshield:
+limit, and reports its time (imports excluded), its peak RSS and, for tlshield, the nodes of the
+decision diagrams that hold its transitions. tlshield:
 ``Automaton.from_formula``; MONA: ltlf2dfa's ``to_dfa(mona_dfa_out=True)`` (MONA's raw DFA, no
 sympy; MONA's count includes the extra state of its WS1S encoding). A build that runs out of
 time, or that a tool refuses, is reported as such. No target
@@ -62,7 +63,8 @@ import tlshield
 start = time.perf_counter()
 try:
     aut = tlshield.Automaton.from_formula(sys.argv[1])
-    out = {"seconds": time.perf_counter() - start, "states": aut.num_states}
+    out = {"seconds": time.perf_counter() - start, "states": aut.num_states,
+           "nodes": aut.diagram_nodes}
 except tlshield.AutomatonError as err:
     out = {"refused": str(err)}
 out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -112,7 +114,15 @@ def cell(result: dict) -> str:
         text = result["refused"]
         return "refused: " + (text if len(text) < 90 else text[:87] + "...")
     states = f", {result['states']} states" if "states" in result else ""
-    return f"{result['seconds']:.3g} s{states}, {result['rss_mb']:.0f} MB"
+    nodes = f", {result['nodes']} nodes" if "nodes" in result else ""
+    return f"{result['seconds']:.3g} s{states}{nodes}, {result['rss_mb']:.0f} MB"
+
+
+def speedup(results: Sequence[dict]) -> str:
+    """tlshield's build time over MONA's, when both built."""
+    if len(results) < 2 or not all("seconds" in r for r in results):
+        return "-"
+    return f"{results[1]['seconds'] / results[0]['seconds']:,.0f}x"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -132,20 +142,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("mona is not on PATH (Debian package `mona`): its column is left out\n")
     except ImportError:
         print("ltlf2dfa is not installed (the `bench` extra): its column is left out\n")
-    print("| shape | atoms | " + " | ".join(tools) + " |")
-    print("|---|---:|" + "---|" * len(tools))
-    for shape in args.shapes:
-        for n in args.sizes:
-            formula = SHAPES[shape]([f"a{i}" for i in range(n)])
-            cells = [cell(run(tool, formula, args.timeout)) for tool in tools]
-            print(f"| {shape} | {n} | " + " | ".join(cells) + " |", flush=True)
+    print("| shape | atoms | " + " | ".join(tools) + " | MONA / tlshield |")
+    print("|---|---:|" + "---|" * len(tools) + "---:|")
+    rows: list[tuple[str, int, str]] = [
+        (shape, n, SHAPES[shape]([f"a{i}" for i in range(n)]))
+        for shape in args.shapes
+        for n in args.sizes
+    ]
     if not args.no_flatworld:
         from tlshield.envs.flatworld import FORMULAS
 
         for k, formula in enumerate(FORMULAS, start=1):
             atoms = len(set(re.findall(r"[a-z_][a-z0-9_]*", formula)))
-            cells = [cell(run(tool, formula, args.timeout)) for tool in tools]
-            print(f"| FlatWorld F{k} | {atoms} | " + " | ".join(cells) + " |", flush=True)
+            rows.append((f"FlatWorld F{k}", atoms, formula))
+    for shape, n, formula in rows:
+        results = [run(tool, formula, args.timeout) for tool in tools]
+        cells = [cell(r) for r in results]
+        print(f"| {shape} | {n} | " + " | ".join(cells) + f" | {speedup(results)} |", flush=True)
     return 0
 
 

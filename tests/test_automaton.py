@@ -212,10 +212,26 @@ def test_bad_vectors(task: tlshield.Automaton) -> None:
 
 
 def test_too_many_atoms() -> None:
-    names = [f"p{i}" for i in range(17)]
-    spec = tlshield.Spec(" & ".join(f"F {n}" for n in names), dict.fromkeys(names, region(0)))
-    with pytest.raises(ValueError, match="17 atoms; automata support at most 16"):
+    names = [f"p{i}" for i in range(31)]
+    spec = tlshield.Spec(" | ".join(f"F {n}" for n in names), dict.fromkeys(names, region(0)))
+    with pytest.raises(ValueError, match="31 atoms; automata support at most 30"):
         spec.automaton()
+
+
+def test_many_atoms_build_what_the_formula_needs() -> None:
+    """24 atoms in a sequence: 25 states and a diagram of a few dozen nodes, never 2^24 of
+    anything (issue 24); steps walk the diagram and accept the sequence, one atom a step."""
+    names = [f"p{i}" for i in range(24)]
+    text = "F(" + " & F(".join(names) + ")" * len(names)
+    centres = {n: region(3.0 * i) for i, n in enumerate(names)}
+    aut = tlshield.Spec(text, centres).automaton()
+    assert aut.num_states == 25
+    assert aut.diagram_nodes < 25 * 24
+    q = aut.initial
+    for i in range(24):
+        assert q not in aut.accepting
+        q = aut.step(np.array([3.0 * i, 0.0]), q)
+    assert q in aut.accepting
 
 
 # --- command line -------------------------------------------------------------------------

@@ -1,4 +1,6 @@
-//! The task automaton: construction, and the per-step FSA work (step + reward + safe set).
+//! The task automaton: construction, and the per-step FSA work (step + reward + safe set); and
+//! a 24-atom sequence `F(a0 & F(a1 & ...))`, built symbolically and stepped through its
+//! decision diagrams (issue 24), beside the task's table step.
 
 use std::hint::black_box;
 
@@ -40,6 +42,33 @@ fn automaton(c: &mut Criterion) {
             let reward = aut.reward(q, s, 1.0, None).unwrap();
             let kept = aut.safe_set(q, s, false).unwrap();
             (next, reward, kept.len())
+        })
+    });
+    // One transition on a precomputed valuation: the task's table lookup, and a walk of the
+    // 24-atom sequence's diagrams (no table: 25 states x 2^24 letters).
+    let valuations: Vec<usize> = (0..1024usize)
+        .map(|i| i.wrapping_mul(2654435761) >> 7)
+        .collect();
+    let mut i = 0;
+    group.bench_function("step_valuation_task_table", |b| {
+        b.iter(|| {
+            i += 1;
+            let v = valuations[i % valuations.len()] & 31;
+            aut.step_valuation(black_box(i & 3), v)
+        })
+    });
+    let sequence =
+        (1..24).fold("F(a0".to_string(), |f, k| f + &format!(" & F(a{k}")) + &")".repeat(24);
+    let sequence = tlshield_core::Spec::from_formula(&sequence).unwrap();
+    group.bench_function("build_sequence_24", |b| {
+        b.iter(|| Automaton::build(black_box(&sequence)).unwrap())
+    });
+    let long = Automaton::build(&sequence).unwrap();
+    group.bench_function("step_valuation_sequence_24_diagram", |b| {
+        b.iter(|| {
+            i += 1;
+            let v = valuations[i % valuations.len()] & ((1 << 24) - 1);
+            long.step_valuation(black_box(i % 25), v)
         })
     });
     group.finish();

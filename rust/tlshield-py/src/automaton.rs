@@ -97,6 +97,14 @@ impl PyAutomaton {
         self.inner.num_states()
     }
 
+    /// Nodes of the decision diagrams that hold the transition function: what the automaton
+    /// stores besides its states and guards (never a ``states x 2**atoms`` table beyond
+    /// 65,536 entries).
+    #[getter]
+    fn diagram_nodes(&self) -> usize {
+        self.inner.diagram_nodes()
+    }
+
     /// The state before anything is read; ``q_0 = step(initial, s_0)``.
     #[getter]
     fn initial(&self) -> usize {

@@ -313,7 +313,9 @@ impl Diagram {
         walk(&self.branches, id, Cube { care: 0, value: 0 }, visit);
     }
 
-    /// Whether every valuation in `cube` leads from `id` to the leaf value `x`.
+    /// Whether every valuation in `cube` leads from `id` to the leaf value `x`. Its cost is
+    /// bounded by the paths from `id` (which the guards enumerate anyway); it stops at the
+    /// first other leaf.
     pub fn within(&self, id: NodeId, cube: Cube, x: u32) -> bool {
         match leaf_value(id) {
             Some(y) => y == x,

@@ -23,7 +23,7 @@ mod diagram;
 mod guidance;
 mod regions;
 
-pub use build::MAX_STATES;
+pub use build::{MAX_GUARD_CUBES, MAX_STATES};
 pub use diagram::MAX_NODES;
 pub use regions::ranks;
 
