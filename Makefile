@@ -3,7 +3,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test bench lint setup
+.PHONY: run test bench lint setup wheel docs
 
 setup:
 	@bash scripts/setup.sh
@@ -13,12 +13,27 @@ setup:
 run: setup
 	$(BIN)/python -m tlshield reproduce --out results
 
-## Every test: Rust (cargo test) and Python (pytest; the benchmark scripts and the examples run on
-## tiny budgets, so their comparison tools and third-party environments are installed too).
+## Every test: Rust (cargo test), Python (pytest; the benchmark scripts and the examples run on
+## tiny budgets, so their comparison tools and third-party environments are installed too), the
+## docs' strict build, and the wheel installed and run in fresh venvs without Rust.
 test:
-	@EXTRAS=train,test,bench,examples bash scripts/setup.sh
+	@EXTRAS=train,test,bench,examples,build,docs bash scripts/setup.sh
 	cargo test --workspace
 	$(BIN)/python -m pytest
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	bash scripts/check-wheel.sh
+
+## A manylinux wheel and an sdist in dist/ (maturin with zig; auditwheel names the tag).
+wheel:
+	@EXTRAS=build bash scripts/setup.sh
+	CARGO_TARGET_DIR=target/wheel PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/maturin build --release --zig --compatibility manylinux2014 --out dist
+	$(BIN)/maturin sdist --out dist
+	$(BIN)/auditwheel show dist/tlshield-*manylinux*.whl
+
+## The documentation site, built and served at http://127.0.0.1:8000.
+docs:
+	@EXTRAS=docs bash scripts/setup.sh
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
 
 ## Benchmarks: criterion, then the Python comparisons (rtamt, argus; ltlf2dfa + mona; cvxpy,
 ## clarabel).

@@ -18,8 +18,8 @@ decision diagrams that hold its transitions. tlshield:
 ``Automaton.from_formula``; MONA: ltlf2dfa's ``to_dfa(mona_dfa_out=True)`` (MONA's raw DFA, no
 sympy; MONA's count includes the extra state of its WS1S encoding). A build that runs out of
 time, or that a tool refuses, is reported as such. No target
-is asserted here: the numbers go to the README (issue 24's targets: <= 1 s at every n and >= 10x
-MONA wherever MONA finishes).
+is asserted here: the numbers go to docs/benchmarks.md (issue 24's targets: <= 1 s at every n
+and >= 10x MONA wherever MONA finishes).
 """
 
 from __future__ import annotations

@@ -133,14 +133,15 @@ def test_the_monitor_form_reads_any_layout_of_a_rl():
 
 
 def test_the_readme_loop_runs():
-    """The README's two-call loop, as printed, on Channel-v0's plant (the env's own shield off,
-    its observation the 13 state values): it runs and the monitor ends in a task state."""
+    """The docs' two-call loop (guides/own-loop.md), as printed, on Channel-v0's plant (the env's
+    own shield off, its observation the 13 state values): it runs and the monitor ends in a
+    task state."""
     import gymnasium as gym
 
     from tlshield.envs.channel import ChannelEnv
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    page = Path(__file__).resolve().parent.parent / "docs" / "guides" / "own-loop.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
     (loop,) = [b for b in blocks if "shield.filter(monitor" in b]
 
     class StateOnly(gym.ObservationWrapper):
@@ -161,21 +162,21 @@ def test_the_readme_loop_runs():
         "obstacle_motion": lambda s: np.zeros(13),
         "buffer": Buffer(),
     }
-    exec(compile(loop, "README.md", "exec"), scope)
+    exec(compile(loop, "own-loop.md", "exec"), scope)
     assert len(added) >= 1
     assert all(isinstance(r, float) for _, r, _ in added)
     assert scope["t"] >= 0 and scope["task"].q == scope["monitor"].q
 
 
 def test_the_readme_automaton_loops_run_and_agree():
-    """The README's spec and automaton blocks, as printed: the per-query loop (state first) and
-    the monitor's one call per step end in the same FSA state."""
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    """The docs' spec and automaton blocks (guides/your-task.md), as printed: the per-query loop
+    (state first) and the monitor's one call per step end in the same FSA state."""
+    page = Path(__file__).resolve().parent.parent / "docs" / "guides" / "your-task.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
     (spec_block,) = [b for b in blocks if "tlshield.Spec(" in b and "robustness_batch" in b]
     (aut_block,) = [b for b in blocks if "aut.step(traj[0], aut.initial)" in b]
     scope: dict = {}
-    exec(compile(spec_block + aut_block, "README.md", "exec"), scope)
+    exec(compile(spec_block + aut_block, "your-task.md", "exec"), scope)
     assert scope["task"].q == scope["q"] == scope["monitor"].q
 
 

@@ -264,8 +264,8 @@ def _add_preset(parser: argparse.ArgumentParser) -> None:
         "--preset",
         choices=("default", "paper"),
         default="default",
-        help="default: tlshield's settings (README ablation); paper: the paper's PPO, reward, "
-        "observation and obstacles",
+        help="default: tlshield's settings (docs/reproduction.md, the ablation); paper: the "
+        "paper's PPO, reward, observation and obstacles",
     )
 
 

@@ -1,5 +1,5 @@
 """PPO on tlshield/Channel-v0 (Stable-Baselines3) with per-update metrics; the reproduction
-and the ablation of the README (training, then :func:`tlshield.evaluation.evaluate`).
+and the ablation of docs/reproduction.md (training, then :func:`tlshield.evaluation.evaluate`).
 
 A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``run.json`` (what it ran
 with, and which checkpoint was kept), ``metrics.csv`` (one row per update, written as it goes,
@@ -13,7 +13,7 @@ policy). Nothing in a run folder is a pickle that loading would run (:mod:`tlshi
 PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
 and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
 per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, clip 0.2); ``"default"`` is
-what the ablation in the README and the learning experiments (docs/learning.md) chose (8
+what the ablation (docs/reproduction.md) and the learning experiments (docs/learning.md) chose (8
 environments x 128 steps, minibatches of 512, gamma 0.999, clip 0.1, a learning rate of 1e-3
 decaying linearly, 64-64 networks, a Gaussian policy with a tanh-bounded mean, raw rewards, the
 best validated checkpoint kept and the last one beside it). Both: GAE lambda 0.95, CPU, one
@@ -399,7 +399,7 @@ def ablation(
     address: str | None = None,
     progress: bool = True,
 ) -> Path:
-    """The README's ablation: each row adds one change to the one before (see
+    """The ablation of docs/reproduction.md: each row adds one change to the one before (see
     :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
     Finished rows are kept, so an interrupted ablation resumes."""
     _check_run_args(config, updates, "fixed", 0.2)

@@ -142,8 +142,8 @@ class ChannelShield:
     obstacles_in_task: bool = False
     #: Paid per step as ``intervention_penalty * |a_cbf|^2`` (physical units) when the shield
     #: runs inside the environment, to teach an agent not to lean on the shield. Off by
-    #: default: the README's ablation measured it costing success (0.93 -> 0.87 with the
-    #: paper's PPO; 0.87 -> 0.84 with the default preset, 2 seeds each).
+    #: default: the ablation (docs/reproduction.md) measured it costing success (0.93 -> 0.87
+    #: with the paper's PPO; 0.87 -> 0.84 with the default preset, 2 seeds each).
     intervention_penalty: float = 0.0
 
 

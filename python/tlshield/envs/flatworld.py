@@ -84,7 +84,7 @@ class FlatWorldParams:
     #: exact for the Euler plant.
     alpha: float = 5.0
     c3: float = 1.0
-    #: CLF relaxation cost (the paper's K; see the README's note on it and the CLF box).
+    #: CLF relaxation cost (the paper's K; see docs/concepts/shield.md on it and the CLF box).
     k: float = 1.0
     #: Box on a_clf, per axis.
     clf_bound: float = 0.5

@@ -5,8 +5,8 @@ the observation step in the core (:class:`tlshield._core.PointMassWorld`), throu
 double integrator, which is also the shield's model; :class:`PointMassEnv` is the Gymnasium
 shell (it draws the start and builds ``info``). Under an acceleration-level model a position
 constraint has relative degree 2, so the shield enforces the obstacles with higher-order
-barriers (``alpha2``) and drives to the goals with the second-order CLF (see the README's
-Semantics). (FlatWorld-v0 is the worked example of an environment written in Python and
+barriers (``alpha2``) and drives to the goals with the second-order CLF (see
+docs/concepts/hocbf.md). (FlatWorld-v0 is the worked example of an environment written in Python and
 shielded with the public wrappers.)
 """
 
