@@ -45,11 +45,12 @@ bench:
 	$(BIN)/python benches/compare_shield.py
 	$(BIN)/python benches/compare_cbfpy.py
 
-## Formatting and lints (rustfmt, clippy, ruff, stubtest).
+## Formatting and lints (rustfmt, clippy, rustdoc, ruff, stubtest).
 lint:
 	@EXTRAS=train,test,lint bash scripts/setup.sh
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
+	RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
 	$(BIN)/ruff check python tests benches examples
 	$(BIN)/ruff format --check python tests benches examples
 	$(BIN)/python -m mypy.stubtest tlshield._core --allowlist stubtest_allow.txt

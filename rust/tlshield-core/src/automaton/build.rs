@@ -414,7 +414,7 @@ struct Symbolic<'o, 'f, 's> {
     progressed: Vec<Option<NodeId>>,
     and_memo: FastMap<(NodeId, NodeId), NodeId>,
     or_memo: FastMap<(NodeId, NodeId), NodeId>,
-    not_memo: FastMap<NodeId, NodeId>,
+    not_memo: FastMap<(NodeId, NodeId), NodeId>,
 }
 
 impl<'o, 'f, 's> Symbolic<'o, 'f, 's> {
@@ -443,8 +443,8 @@ impl<'o, 'f, 's> Symbolic<'o, 'f, 's> {
                 let product = dnf_and(&leaves.dnfs[x as usize], &leaves.dnfs[y as usize]);
                 leaves.intern(obligations.simplify(product))
             },
-            leaf(FALSE_LEAF),
-            leaf(TRUE_LEAF),
+            Some(leaf(FALSE_LEAF)),
+            Some(leaf(TRUE_LEAF)),
             &mut self.and_memo,
         )
     }
@@ -458,22 +458,25 @@ impl<'o, 'f, 's> Symbolic<'o, 'f, 's> {
                 let sum = dnf_or(leaves.dnfs[x as usize].clone(), &leaves.dnfs[y as usize]);
                 leaves.intern(obligations.simplify(sum))
             },
-            leaf(TRUE_LEAF),
-            leaf(FALSE_LEAF),
+            Some(leaf(TRUE_LEAF)),
+            Some(leaf(FALSE_LEAF)),
             &mut self.or_memo,
         )
     }
 
-    /// The negation of a propositional diagram (leaves `false` and `true` only).
+    /// The negation of a propositional diagram (leaves `false` and `true` only): its leaves
+    /// swapped, by [`Builder::apply`] against the constant `true`.
     fn not(&mut self, a: NodeId) -> Result<NodeId, AutomatonError> {
-        let swap = |x: u32| {
+        let mut swap = |x: u32, _| {
             if x == TRUE_LEAF {
                 FALSE_LEAF
             } else {
                 TRUE_LEAF
             }
         };
-        self.diagrams.map_leaves(a, &swap, &mut self.not_memo)
+        let t = leaf(TRUE_LEAF);
+        self.diagrams
+            .apply(a, t, &mut swap, None, None, &mut self.not_memo)
     }
 
     /// What remains of "`f` holds from here" after reading a letter, for every letter.

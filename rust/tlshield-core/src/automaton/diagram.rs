@@ -167,23 +167,24 @@ impl<'s> Builder<'s> {
 
     /// The pointwise combination of `a` and `b` by `op` on leaf values. `absorbing` (a node
     /// that makes the result whatever the other operand) and `identity` (a node that makes it
-    /// the other operand) spare descending. `memo` caches `(a, b)` pairs for this `op` alone.
+    /// the other operand), when `op` has them, spare descending. `memo` caches `(a, b)` pairs
+    /// for this `op` alone.
     pub fn apply(
         &mut self,
         a: NodeId,
         b: NodeId,
         op: &mut dyn FnMut(u32, u32) -> u32,
-        absorbing: NodeId,
-        identity: NodeId,
+        absorbing: Option<NodeId>,
+        identity: Option<NodeId>,
         memo: &mut FastMap<(NodeId, NodeId), NodeId>,
     ) -> Result<NodeId, AutomatonError> {
-        if a == absorbing || b == absorbing {
-            return Ok(absorbing);
+        if let Some(z) = absorbing.filter(|&z| a == z || b == z) {
+            return Ok(z);
         }
-        if a == identity {
+        if identity == Some(a) {
             return Ok(b);
         }
-        if b == identity {
+        if identity == Some(b) {
             return Ok(a);
         }
         if let (Some(x), Some(y)) = (leaf_value(a), leaf_value(b)) {
@@ -199,27 +200,6 @@ impl<'s> Builder<'s> {
         let hi = self.apply(a1, b1, op, absorbing, identity, memo)?;
         let out = self.node(var, lo, hi)?;
         memo.insert((a, b), out);
-        Ok(out)
-    }
-
-    /// `id` with every leaf value `x` replaced by `relabel(x)`, in this store.
-    pub fn map_leaves(
-        &mut self,
-        id: NodeId,
-        relabel: &dyn Fn(u32) -> u32,
-        memo: &mut FastMap<NodeId, NodeId>,
-    ) -> Result<NodeId, AutomatonError> {
-        if let Some(x) = leaf_value(id) {
-            return Ok(leaf(relabel(x)));
-        }
-        if let Some(&done) = memo.get(&id) {
-            return Ok(done);
-        }
-        let b = self.diagram.branches[id as usize];
-        let lo = self.map_leaves(b.lo, relabel, memo)?;
-        let hi = self.map_leaves(b.hi, relabel, memo)?;
-        let out = self.node(b.var, lo, hi)?;
-        memo.insert(id, out);
         Ok(out)
     }
 
@@ -360,7 +340,14 @@ mod tests {
         let a1 = b.node(1, leaf(0), leaf(1)).unwrap();
         let mut memo = FastMap::default();
         let or = b
-            .apply(xor, a1, &mut |x, y| x.max(y), leaf(1), leaf(0), &mut memo)
+            .apply(
+                xor,
+                a1,
+                &mut |x, y| x.max(y),
+                Some(leaf(1)),
+                Some(leaf(0)),
+                &mut memo,
+            )
             .unwrap();
         let mut cubes = Vec::new();
         b.diagram().paths(or, &mut |c, x| cubes.push((c, x)));
