@@ -1,12 +1,13 @@
-//! The FSA of an scTLTL formula, built natively: formula progression over the valuations of
-//! the atoms with canonical simplification, acceptance by end-of-trace evaluation, then
-//! minimisation. The result is unique for the formula's language: one absorbing accepting
-//! state, and at most one trap state (no path to acceptance). Guards are minimised DNFs.
+//! The FSA of an scTLTL formula, built natively and symbolically: formula progression as
+//! decision diagrams over the atoms (`diagram`) with canonical simplification, acceptance by
+//! end-of-trace evaluation, then minimisation. The result is unique for the formula's
+//! language: one absorbing accepting state, and at most one trap state (no path to
+//! acceptance). Guards are DNFs read off the diagrams (minimised exactly up to 8 atoms).
 //!
 //! The FSA reads every state of a trajectory: `q_0 = delta(initial, s_0)`,
 //! `q_{t+1} = delta(q_t, s_{t+1})`; an atom holds iff its robustness is > 0.
 //!
-//! Construction is in `build`; the reward, goal and safe set that guide the learner and the
+//! Construction is in `build` (diagrams in `diagram`); the reward, goal and safe set that guide the learner and the
 //! shield (Eq. 5A1, 5B1, 5C1) are in `guidance`. Here: the automaton, its stepper and
 //! [`Reading`], the atoms of one validated state read once.
 
