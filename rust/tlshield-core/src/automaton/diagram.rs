@@ -362,16 +362,21 @@ mod tests {
     }
 
     #[test]
-    fn a_node_budget_and_a_stop_are_errors() {
+    fn a_stop_is_asked_every_stop_every_nodes() {
         let stop = || true;
         let mut b = Builder::new(&stop);
         let mut last = leaf(0);
+        let mut made = 0;
         let err = (0..STOP_EVERY as u32 + 1)
             .try_for_each(|i| {
                 last = b.node(i % 31, last, leaf(i + 1))?;
+                made += 1;
                 Ok::<_, AutomatonError>(())
             })
             .unwrap_err();
         assert_eq!(err, AutomatonError::Interrupted);
+        // The callback is first asked when the STOP_EVERY-th node is about to be stored.
+        assert_eq!(made, STOP_EVERY - 1);
+        assert_eq!(b.len(), STOP_EVERY - 1);
     }
 }
