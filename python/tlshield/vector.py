@@ -9,6 +9,7 @@ used."""
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -223,9 +224,22 @@ class PointMassBatch(WorldBatch):
         super().__init__([PointMassEnv(config, **kwargs) for _ in range(num_envs)])
 
 
+#: The most environments one batch holds. Each is a Python env with its own shield (about
+#: 0.1 MB), so a count past memory would not raise: the operating system would kill the
+#: process. Checked before any env is built.
+MAX_ENVS = 65_536
+
+
 def _check_count(num_envs: Any) -> None:
-    if not (isinstance(num_envs, int) and num_envs > 0):
-        raise ValueError(f"num_envs = {num_envs!r}: expected a positive integer")
+    if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral):
+        raise TypeError(f"num_envs = {num_envs!r}: expected an integer")
+    if num_envs < 1:
+        raise ValueError(f"num_envs = {num_envs}: a vector env needs at least one environment")
+    if num_envs > MAX_ENVS:
+        raise ValueError(
+            f"num_envs = {num_envs}: at most {MAX_ENVS} environments per vector env "
+            "(tlshield.vector.MAX_ENVS); run several vector envs, or several processes"
+        )
 
 
 class WorldVectorEnv(gym.vector.VectorEnv):

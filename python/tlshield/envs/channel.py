@@ -370,6 +370,13 @@ class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             return None
         return frame
 
+    def __getstate__(self) -> dict[str, Any]:
+        # Copies and pickles hold the world, the monitor, the shield and the random stream as
+        # data; the renderer's matplotlib figure is a view, rebuilt by the copy's next render.
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state
+
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()

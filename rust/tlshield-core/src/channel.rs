@@ -87,6 +87,20 @@ pub fn xy(u: f64, v: f64) -> [f64; 2] {
     [(u - v) / SQRT_2, (u + v) / SQRT_2]
 }
 
+/// What a channel world holds between steps, as data ([`ChannelWorld::snapshot`],
+/// [`ChannelWorld::restore`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelState {
+    /// The state.
+    pub s: [f64; STATE_DIM],
+    /// The obstacles' motion measured over the last step.
+    pub drift: [f64; STATE_DIM],
+    /// The obstacles' paths.
+    pub obstacles: [Obstacle; 2],
+    /// Steps taken in this episode.
+    pub t: u32,
+}
+
 /// The case study's world (see the module docs).
 #[derive(Debug, Clone)]
 pub struct ChannelWorld {
@@ -126,6 +140,38 @@ impl ChannelWorld {
                 self.drift[OBSTACLES + 2 * k + d] = (now[d] - before[d]) / self.params.dt;
             }
         }
+    }
+
+    /// The model the plant steps through (the shield's).
+    pub fn model(&self) -> &Dynamics {
+        &self.model
+    }
+
+    /// The world between steps, as data.
+    pub fn snapshot(&self) -> ChannelState {
+        ChannelState {
+            s: self.s,
+            drift: self.drift,
+            obstacles: self.obstacles,
+            t: self.t,
+        }
+    }
+
+    /// Puts the world where [`ChannelWorld::snapshot`] found it: the next step is the one the
+    /// snapshotted world would have taken. Values must be finite and `t` within the horizon.
+    pub fn restore(&mut self, state: &ChannelState) -> Result<(), InputError> {
+        crate::validate::check_finite("s", &state.s, STATE_DIM)?;
+        crate::validate::check_finite("drift", &state.drift, STATE_DIM)?;
+        for (k, o) in state.obstacles.iter().enumerate() {
+            let path = [o.u, o.amplitude, o.frequency, o.phase];
+            crate::validate::check_finite(&format!("obstacles[{k}]"), &path, 4)?;
+        }
+        crate::validate::check_steps(state.t, self.params.horizon)?;
+        self.s = state.s;
+        self.drift = state.drift;
+        self.obstacles = state.obstacles;
+        self.t = state.t;
+        Ok(())
     }
 
     /// The current state.

@@ -83,6 +83,17 @@ pub enum InputError {
         /// The value that was given.
         got: String,
     },
+    /// A size from the caller (rows, a count, an array to copy) that cannot be allocated: more
+    /// than memory can hold or than `usize` can count.
+    #[error("{what}: {count} items do not fit in memory{}", .bytes.map_or_else(|| " (their size overflows)".to_string(), |b| format!(" ({} requested)", crate::alloc::human_bytes(b))))]
+    TooLarge {
+        /// Which argument.
+        what: String,
+        /// How many items were asked for (a product is written `a x b`).
+        count: String,
+        /// The bytes asked for, when that number fits in `usize`.
+        bytes: Option<usize>,
+    },
     /// An input value is NaN or infinite.
     #[error("{what} is {value} (all values must be finite)")]
     NonFinite {

@@ -17,6 +17,7 @@
 //! ```
 
 pub mod active_set;
+pub mod alloc;
 pub mod automaton;
 pub mod channel;
 pub mod cnf;
@@ -43,7 +44,7 @@ pub use automaton::{Automaton, Edge, Reading};
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use formula::Formula;
-pub use monitor::{Monitor, MonitorBatch, TaskReward, TaskStep};
+pub use monitor::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
 pub use predicate::{Ball, Center, Halfspace, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};

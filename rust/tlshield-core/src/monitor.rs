@@ -41,6 +41,20 @@ pub struct TaskStep {
     pub trapped: bool,
 }
 
+/// What a monitor holds between steps, as data ([`Monitor::snapshot`], [`Monitor::restore`]):
+/// the atoms' reading and the CLF goal follow from the state read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorState {
+    /// The FSA state.
+    pub q: usize,
+    /// The progress reward's potential at the last state.
+    pub phi: f64,
+    /// Whether an episode has started.
+    pub started: bool,
+    /// The last state read (empty before the first reset).
+    pub s: Vec<f64>,
+}
+
 /// The automaton along one episode (see the module docs). Allocation-free per step once the
 /// first state has been read.
 #[derive(Debug, Clone)]
@@ -181,6 +195,63 @@ impl Monitor {
         }
     }
 
+    /// The monitor's state, as data.
+    pub fn snapshot(&self) -> MonitorState {
+        MonitorState {
+            q: self.q,
+            phi: self.phi,
+            started: self.started,
+            s: self.s.clone(),
+        }
+    }
+
+    /// Puts the monitor where [`Monitor::snapshot`] found it (of a monitor of the same
+    /// automaton): it reads the state again, so the atoms and the goal are as they were, bit
+    /// for bit. Checked first: an error changes nothing.
+    pub fn restore(&mut self, state: &MonitorState) -> Result<(), AutomatonError> {
+        self.check_snapshot(state)?;
+        self.restore_checked(state);
+        Ok(())
+    }
+
+    fn check_snapshot(&self, state: &MonitorState) -> Result<(), AutomatonError> {
+        self.automaton.check_state("q", state.q)?;
+        if !state.phi.is_finite() {
+            return Err(InputError::NonFinite {
+                what: "phi".into(),
+                value: state.phi,
+            }
+            .into());
+        }
+        if state.started {
+            self.check("s", &state.s)?;
+        } else if !state.s.is_empty() {
+            return Err(InputError::Value {
+                what: "s".into(),
+                expected: "no state before the first reset".into(),
+                got: format!("{} values", state.s.len()),
+            }
+            .into());
+        }
+        Ok(())
+    }
+
+    fn restore_checked(&mut self, state: &MonitorState) {
+        if state.started {
+            self.read(&state.s);
+        } else {
+            self.s.clear();
+        }
+        self.q = state.q;
+        self.phi = state.phi;
+        self.started = state.started;
+        if state.started {
+            self.update_goal();
+        } else {
+            self.has_goal = false;
+        }
+    }
+
     /// The last state read, with its atoms (valid once an episode started).
     pub fn reading(&self) -> Reading<'_> {
         Reading::from_parts(&self.automaton, &self.s, self.rho)
@@ -242,6 +313,8 @@ fn check_len(automaton: &Automaton, what: &str, n: usize) -> Result<(), InputErr
 /// run in parallel.
 #[derive(Debug, Clone)]
 pub struct MonitorBatch {
+    /// The automaton every row watches (an empty batch still has one).
+    automaton: Arc<Automaton>,
     monitors: Vec<Monitor>,
 }
 
@@ -252,17 +325,10 @@ impl MonitorBatch {
         reward: TaskReward,
         count: usize,
     ) -> Result<Self, AutomatonError> {
-        if count == 0 {
-            return Err(InputError::Value {
-                what: "count".into(),
-                expected: "at least one monitor".into(),
-                got: "0".into(),
-            }
-            .into());
-        }
-        let monitor = Monitor::new(automaton, reward)?;
+        let monitor = Monitor::new(automaton.clone(), reward)?;
         Ok(MonitorBatch {
-            monitors: vec![monitor; count],
+            automaton,
+            monitors: crate::alloc::try_vec("num", count, monitor)?,
         })
     }
 
@@ -276,7 +342,37 @@ impl MonitorBatch {
         self.monitors.len()
     }
 
-    /// Always false: a batch has at least one row.
+    /// Every row's state, as data (see [`Monitor::snapshot`]).
+    pub fn snapshot(&self) -> Vec<MonitorState> {
+        self.monitors.iter().map(Monitor::snapshot).collect()
+    }
+
+    /// Puts every row where [`MonitorBatch::snapshot`] found it (one state per row). Checked
+    /// first: an error changes no row.
+    pub fn restore(&mut self, states: &[MonitorState]) -> Result<(), AutomatonError> {
+        if states.len() != self.monitors.len() {
+            return Err(InputError::Shape {
+                what: "states".into(),
+                expected: format!("{} monitor states, one per row", self.monitors.len()),
+                got: states.len().to_string(),
+            }
+            .into());
+        }
+        for (monitor, state) in self.monitors.iter().zip(states) {
+            monitor.check_snapshot(state)?;
+        }
+        for (monitor, state) in self.monitors.iter_mut().zip(states) {
+            monitor.restore_checked(state);
+        }
+        Ok(())
+    }
+
+    /// The automaton every row watches.
+    pub fn automaton(&self) -> &Arc<Automaton> {
+        &self.automaton
+    }
+
+    /// Whether the batch has no rows.
     pub fn is_empty(&self) -> bool {
         self.monitors.is_empty()
     }
@@ -346,7 +442,7 @@ impl MonitorBatch {
 
     /// Checks `(rows, dim)` states for the automaton: shape, length and finiteness.
     fn check_states(&self, states: &[f64], dim: usize, rows: usize) -> Result<(), AutomatonError> {
-        if dim == 0 || states.len() != rows * dim {
+        if dim == 0 || rows.checked_mul(dim) != Some(states.len()) {
             return Err(InputError::Shape {
                 what: "states".into(),
                 expected: format!("({rows}, n): one row per monitor"),
@@ -354,7 +450,7 @@ impl MonitorBatch {
             }
             .into());
         }
-        check_len(&self.monitors[0].automaton, "states row", dim)?;
+        check_len(&self.automaton, "states row", dim)?;
         Ok(check_finite("states", states, dim)?)
     }
 }

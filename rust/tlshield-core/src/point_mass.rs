@@ -70,6 +70,21 @@ impl PointMassWorld {
         &self.s
     }
 
+    /// The constants of a step.
+    pub fn params(&self) -> &PointMassParams {
+        &self.params
+    }
+
+    /// Puts the world at state `s` after `t` steps of an episode (what [`PointMassWorld::state`]
+    /// and [`PointMassWorld::steps`] read): values finite, `t` within the horizon.
+    pub fn restore(&mut self, s: [f64; STATE_DIM], t: u32) -> Result<(), InputError> {
+        crate::validate::check_finite("s", &s, STATE_DIM)?;
+        crate::validate::check_steps(t, self.params.horizon)?;
+        self.s = s;
+        self.t = t;
+        Ok(())
+    }
+
     /// Steps taken in this episode.
     pub fn steps(&self) -> u32 {
         self.t

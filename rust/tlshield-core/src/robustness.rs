@@ -259,7 +259,7 @@ impl<'a> TrajectoryBatch<'a> {
                 got: format!("({batch}, {steps}, {dim})"),
             });
         }
-        if data.len() != batch * steps * dim {
+        if crate::alloc::checked_len("trajs", &[batch, steps, dim])? != data.len() {
             return Err(InputError::Shape {
                 what: "trajs".into(),
                 expected: format!(
@@ -298,7 +298,7 @@ impl<'a> TrajectoryBatch<'a> {
         F: Fn(Trajectory<'_>, &mut Scratch) -> V + Sync,
     {
         let stride = self.steps * self.dim;
-        let mut out = vec![fill; self.len()];
+        let mut out = crate::alloc::try_vec("trajs", self.len(), fill)?;
         if stride == 0 || out.is_empty() {
             return Ok(out);
         }

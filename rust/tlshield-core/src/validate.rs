@@ -32,3 +32,15 @@ pub fn check_finite(name: &str, data: &[f64], dim: usize) -> Result<(), InputErr
         }),
     }
 }
+
+/// Checks a restored step count against the horizon.
+pub fn check_steps(t: u32, horizon: u32) -> Result<(), InputError> {
+    if t > horizon {
+        return Err(InputError::Value {
+            what: "t".into(),
+            expected: format!("a step count within the horizon (0..={horizon})"),
+            got: t.to_string(),
+        });
+    }
+    Ok(())
+}

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
 
@@ -14,6 +14,7 @@ use crate::convert::{batch_order_hint, order_hint, state, vector, FloatArray};
 use crate::errors::deprecated;
 use crate::errors::map;
 use crate::literals::LiteralNames;
+use crate::pickling::reduce;
 use crate::progress::PyProgressReward;
 use crate::spec::PySpec;
 
@@ -24,6 +25,40 @@ impl PySpec {
     /// The finite state automaton of the formula (built once per spec, then shared).
     fn automaton(&self, py: Python<'_>) -> PyResult<PyAutomaton> {
         Ok(PyAutomaton::new(py, self.shared_automaton(py)?))
+    }
+}
+
+/// `ProgressReward`'s pickle lives here, next to the automaton it is rebuilt from, so that the
+/// progress module does not depend on the automaton module.
+#[pymethods]
+impl PyProgressReward {
+    /// Pickled as ``automaton.progress_reward(**its parameters)``, rebuilt on load.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let this = slf.get();
+        let p = &this.params;
+        let atoms = this.automaton.spec().atoms();
+        let exclusive: Vec<Vec<String>> = p
+            .exclusive
+            .iter()
+            .map(|&mask| {
+                (0..atoms.len())
+                    .filter(|i| mask >> i & 1 == 1)
+                    .map(|i| atoms[i].clone())
+                    .collect()
+            })
+            .collect();
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("gamma", p.gamma)?;
+        kwargs.set_item("horizon", p.horizon)?;
+        kwargs.set_item("scale", p.scale)?;
+        kwargs.set_item("step_cost", p.step_cost)?;
+        kwargs.set_item("bonus", p.bonus)?;
+        kwargs.set_item("c_r", p.c_r)?;
+        kwargs.set_item("exclusive", exclusive)?;
+        let automaton = Bound::new(py, PyAutomaton::new(py, this.automaton.clone()))?;
+        let make = automaton.getattr("progress_reward")?;
+        reduce(make, PyTuple::empty(py), Some(kwargs), None)
     }
 }
 
@@ -85,10 +120,7 @@ impl PyAutomaton {
     #[staticmethod]
     fn from_formula(py: Python<'_>, formula: &str) -> PyResult<Self> {
         let spec = map(Spec::from_formula(formula))?;
-        Ok(PyAutomaton::new(
-            py,
-            Arc::new(crate::spec::build_responsive(py, &spec)?),
-        ))
+        Ok(PyAutomaton::new(py, crate::spec::interned(py, &spec)?))
     }
 
     /// Number of states.
@@ -354,6 +386,21 @@ impl PyAutomaton {
         PyProgressReward::build(self.inner.clone(), params, &exclusive)
     }
 
+    /// Pickled as its spec (the formula text and the predicates' numbers) and rebuilt from it
+    /// on load: ``Spec.automaton`` for a spec with predicates, ``Automaton.from_formula`` for
+    /// a formula alone.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let spec = slf.get().inner.spec();
+        if spec.is_bound() {
+            let make = py.get_type::<PySpec>().getattr("automaton")?;
+            let args = PyTuple::new(py, [Bound::new(py, PySpec::from_core(spec.clone()))?])?;
+            return reduce(make, args, None, None);
+        }
+        let make = slf.get_type().getattr("from_formula")?;
+        reduce(make, PyTuple::new(py, [spec.to_string()])?, None, None)
+    }
+
     fn __repr__(&self) -> String {
         let trap = self
             .inner
@@ -373,17 +420,5 @@ impl PyAutomaton {
             self.inner.accepting(),
             atoms.join(", ")
         )
-    }
-
-    fn __reduce__<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>,))> {
-        let spec = Bound::new(py, self.spec())?;
-        let rebuild = py
-            .import("tlshield._core")?
-            .getattr("Spec")?
-            .getattr("automaton")?;
-        Ok((rebuild, (spec.into_any(),)))
     }
 }

@@ -4,12 +4,14 @@
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use tlshield_core::channel::{ChannelParams, ChannelWorld, Obstacle, STATE_DIM};
+use pyo3::types::{PyDict, PyTuple};
+use tlshield_core::channel::{ChannelParams, ChannelState, ChannelWorld, Obstacle, STATE_DIM};
 
 use crate::convert::FloatArray;
 use crate::dynamics::PyUnicycle;
 use crate::errors::map;
 use crate::monitor::PyMonitor;
+use crate::pickling::reduce;
 use crate::shield::PyShield;
 use crate::world_step::PyWorldStep;
 
@@ -85,6 +87,73 @@ impl PyChannelWorld {
         Ok(PyChannelWorld {
             inner: ChannelWorld::new(params, model.inner.clone()),
         })
+    }
+
+    /// Pickled as its constructor's arguments and its state ``(s, drift, obstacles, t)``.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let world = &slf.borrow().inner;
+        let p = world.params();
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("dt", p.dt)?;
+        kwargs.set_item("horizon", p.horizon)?;
+        kwargs.set_item("arena", p.arena)?;
+        kwargs.set_item("half_width", p.half_width)?;
+        kwargs.set_item("obstacle_radius", p.obstacle_radius)?;
+        kwargs.set_item("safe_distance", p.safe_distance)?;
+        kwargs.set_item("w", p.w)?;
+        kwargs.set_item("collision_penalty", p.collision_penalty)?;
+        kwargs.set_item("intervention_penalty", p.intervention_penalty)?;
+        kwargs.set_item("relative", p.relative)?;
+        kwargs.set_item(
+            "rl_bounds",
+            (p.rl_bounds.0.to_vec(), p.rl_bounds.1.to_vec()),
+        )?;
+        kwargs.set_item("obstacle_drift", p.obstacle_drift)?;
+        kwargs.set_item("evaluation", p.evaluation)?;
+        kwargs.set_item("channel_atoms", (p.channel_atoms[0], p.channel_atoms[1]))?;
+        let model = crate::dynamics::to_python(py, world.model())?;
+        let snap = world.snapshot();
+        let paths: Vec<[f64; 4]> = snap
+            .obstacles
+            .iter()
+            .map(|o| [o.u, o.amplitude, o.frequency, o.phase])
+            .collect();
+        let state = (snap.s.to_vec(), snap.drift.to_vec(), paths, snap.t).into_pyobject(py)?;
+        reduce(
+            slf.get_type().into_any(),
+            PyTuple::new(py, [model])?,
+            Some(kwargs),
+            Some(state.into_any()),
+        )
+    }
+
+    /// Restores a pickled state ``(s, drift, obstacles, t)``.
+    fn __setstate__(&mut self, state: &Bound<'_, PyAny>) -> PyResult<()> {
+        type State = (Vec<f64>, Vec<f64>, Vec<[f64; 4]>, u32);
+        let (s, drift, paths, t): State = state.extract()?;
+        let full = |v: Vec<f64>, name: &str| -> PyResult<[f64; STATE_DIM]> {
+            v.try_into()
+                .map_err(|_| PyValueError::new_err(format!("{name}: expected {STATE_DIM} values")))
+        };
+        let path = |k: usize| -> PyResult<Obstacle> {
+            let [u, amplitude, frequency, phase] = *paths
+                .get(k)
+                .ok_or_else(|| PyValueError::new_err("obstacles: expected 2 paths"))?;
+            Ok(Obstacle {
+                u,
+                amplitude,
+                frequency,
+                phase,
+            })
+        };
+        let snap = ChannelState {
+            s: full(s, "s")?,
+            drift: full(drift, "drift")?,
+            obstacles: [path(0)?, path(1)?],
+            t,
+        };
+        map(self.inner.restore(&snap))
     }
 
     /// Starts an episode at ``s0`` (13,) with the obstacle paths ``obstacles`` (2, 4): per

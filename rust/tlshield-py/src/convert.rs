@@ -46,9 +46,11 @@ fn check_real(obj: &Bound<'_, PyAny>, name: &str, layout: &str) -> PyResult<()> 
     )))
 }
 
-/// A float64 array of known dimensionality, borrowed from Python.
+/// A float64 array of known dimensionality, borrowed from Python (with its C-order copy when
+/// it is not C-contiguous: made once, through a checked allocation).
 pub struct FloatArray<'py> {
     array: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
+    copy: Option<Vec<f64>>,
 }
 
 impl<'py> FloatArray<'py> {
@@ -80,7 +82,16 @@ impl<'py> FloatArray<'py> {
                 shape_text(array.shape())
             )));
         }
-        Ok(FloatArray { array })
+        let copy = if array.is_c_contiguous() && array.as_slice().is_ok() {
+            None
+        } else {
+            // A strided or broadcast view (np.broadcast_to) can name far more values than
+            // memory holds: the copy asks the allocator first and names the argument.
+            let mut copy = map(tlshield_core::alloc::try_with_capacity(name, array.len()))?;
+            copy.extend(array.as_array().iter().copied());
+            Some(copy)
+        };
+        Ok(FloatArray { array, copy })
     }
 
     /// The shape.
@@ -88,15 +99,14 @@ impl<'py> FloatArray<'py> {
         self.array.shape()
     }
 
-    /// The values in C order, borrowed when the array is C-contiguous. (`as_slice` alone would
-    /// also hand out a Fortran-contiguous buffer, in Fortran order.)
+    /// The values in C order, borrowed from numpy when the array is C-contiguous, else from
+    /// the copy made at extraction. (`as_slice` alone would also hand out a
+    /// Fortran-contiguous buffer, in Fortran order.)
     pub fn values(&self) -> Cow<'_, [f64]> {
-        if self.array.is_c_contiguous() {
-            if let Ok(slice) = self.array.as_slice() {
-                return Cow::Borrowed(slice);
-            }
+        match &self.copy {
+            Some(copy) => Cow::Borrowed(copy),
+            None => Cow::Borrowed(self.array.as_slice().unwrap_or_default()),
         }
-        Cow::Owned(self.array.as_array().iter().copied().collect())
     }
 }
 
@@ -189,29 +199,30 @@ pub fn states(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyRe
         return Err(states_type_error(obj, name));
     }
     // Only converted here (a negative id is no usize): the core call that takes the ids
-    // checks that each exists, naming it as `{name}[i]`.
-    let check = |i: usize, q: Option<usize>, shown: &dyn std::fmt::Display| {
-        q.ok_or_else(|| no_such_state(&format!("{name}[{i}]"), shown, automaton))
-    };
-    if kind == b'u' {
-        let qs: PyArrayLike1<'_, u64, AllowTypeChange> = obj
-            .extract()
-            .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})")))?;
-        return qs
-            .as_array()
-            .iter()
-            .enumerate()
-            .map(|(i, &q)| check(i, usize::try_from(q).ok(), &q))
-            .collect();
+    // checks that each exists, naming it as `{name}[i]`. The ids go into a checked allocation:
+    // a broadcast view can name more of them than memory holds.
+    fn ids<T: Copy + std::fmt::Display>(
+        values: numpy::ndarray::ArrayView1<'_, T>,
+        name: &str,
+        automaton: &Automaton,
+        to_usize: impl Fn(T) -> Option<usize>,
+    ) -> PyResult<Vec<usize>> {
+        let mut out = map(tlshield_core::alloc::try_with_capacity(name, values.len()))?;
+        for (i, &q) in values.iter().enumerate() {
+            let id =
+                to_usize(q).ok_or_else(|| no_such_state(&format!("{name}[{i}]"), q, automaton))?;
+            out.push(id);
+        }
+        Ok(out)
     }
-    let qs: PyArrayLike1<'_, i64, AllowTypeChange> = obj
-        .extract()
-        .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})")))?;
-    qs.as_array()
-        .iter()
-        .enumerate()
-        .map(|(i, &q)| check(i, usize::try_from(q).ok(), &q))
-        .collect()
+    let shape_error =
+        |e: PyErr| PyValueError::new_err(format!("{name}: expected shape (B,) ({e})"));
+    if kind == b'u' {
+        let qs: PyArrayLike1<'_, u64, AllowTypeChange> = obj.extract().map_err(shape_error)?;
+        return ids(qs.as_array(), name, automaton, |q| usize::try_from(q).ok());
+    }
+    let qs: PyArrayLike1<'_, i64, AllowTypeChange> = obj.extract().map_err(shape_error)?;
+    ids(qs.as_array(), name, automaton, |q| usize::try_from(q).ok())
 }
 
 /// The error of an FSA state id that no usize holds (negative, or past u64), worded as the

@@ -6,10 +6,12 @@
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyTuple;
 use tlshield_core::Dynamics;
 
 use crate::convert::{indices, vector};
 use crate::errors::map;
+use crate::pickling::reduce;
 
 /// `(f, g)` as numpy arrays.
 type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
@@ -42,8 +44,55 @@ macro_rules! model_methods {
             fn __repr__(&self) -> String {
                 self.inner.to_string()
             }
+
+            /// Pickled as its constructor's arguments.
+            fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+                let args = constructor_args(slf.py(), &slf.get().inner)?;
+                reduce(slf.get_type().into_any(), args, None, None)
+            }
         }
     };
+}
+
+/// The positional arguments of the model's constructor.
+fn constructor_args<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'py, PyTuple>> {
+    let items: Vec<Bound<'py, PyAny>> = match model {
+        Dynamics::SingleIntegrator { pos } => vec![pos.clone().into_pyobject(py)?.into_any()],
+        Dynamics::Unicycle { eps, x, y, theta } => vec![
+            eps.into_pyobject(py)?.into_any(),
+            x.into_pyobject(py)?.into_any(),
+            y.into_pyobject(py)?.into_any(),
+            theta.into_pyobject(py)?.into_any(),
+        ],
+        Dynamics::DoubleIntegrator { pos, vel } => vec![
+            pos.clone().into_pyobject(py)?.into_any(),
+            vel.clone().into_pyobject(py)?.into_any(),
+        ],
+        Dynamics::AccelerationUnicycle { x, y, theta, v } => vec![
+            x.into_pyobject(py)?.into_any(),
+            y.into_pyobject(py)?.into_any(),
+            theta.into_pyobject(py)?.into_any(),
+            v.into_pyobject(py)?.into_any(),
+        ],
+    };
+    PyTuple::new(py, items)
+}
+
+/// The Python model object of a core model (a shield's pickle names its model so).
+pub fn to_python<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'py, PyAny>> {
+    let inner = model.clone();
+    Ok(match model {
+        Dynamics::SingleIntegrator { .. } => {
+            Bound::new(py, PySingleIntegrator { inner })?.into_any()
+        }
+        Dynamics::Unicycle { .. } => Bound::new(py, PyUnicycle { inner })?.into_any(),
+        Dynamics::DoubleIntegrator { .. } => {
+            Bound::new(py, PyDoubleIntegrator { inner })?.into_any()
+        }
+        Dynamics::AccelerationUnicycle { .. } => {
+            Bound::new(py, PyAccelerationUnicycle { inner })?.into_any()
+        }
+    })
 }
 
 /// The unicycle's reference point ``eps`` ahead of its centre (paper Eq. 6A2): inputs

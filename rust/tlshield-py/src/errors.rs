@@ -1,9 +1,9 @@
 //! Core errors -> Python exceptions. Every caller error is a `ValueError`: `SpecError`,
 //! `AutomatonError` and `ShieldError` for their concerns, plain `ValueError` for bad numeric
-//! input outside them.
+//! input outside them; a size that cannot be allocated is a `MemoryError`.
 
 use pyo3::create_exception;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyMemoryError, PyValueError};
 use pyo3::PyErr;
 use tlshield_core::{
     AutomatonError as CoreAutomatonError, InputError, ShieldError as CoreShieldError,
@@ -44,7 +44,11 @@ impl From<CoreSpecError> for PyCoreError {
 
 impl From<InputError> for PyCoreError {
     fn from(err: InputError) -> Self {
-        PyCoreError(PyValueError::new_err(err.to_string()))
+        match err {
+            // A size that cannot be allocated is Python's MemoryError, as numpy raises it.
+            InputError::TooLarge { .. } => PyCoreError(PyMemoryError::new_err(err.to_string())),
+            other => PyCoreError(PyValueError::new_err(other.to_string())),
+        }
     }
 }
 

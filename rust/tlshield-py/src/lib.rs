@@ -11,6 +11,7 @@ mod dynamics;
 mod errors;
 mod literals;
 mod monitor;
+mod pickling;
 mod point_mass;
 mod predicate;
 mod progress;
@@ -63,5 +64,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(world::step_worlds, m)?)?;
     m.add_class::<point_mass::PyPointMassWorld>()?;
     m.add_function(wrap_pyfunction!(formula_atoms, m)?)?;
+    m.add_function(wrap_pyfunction!(pickling::_restore, m)?)?;
     Ok(())
 }

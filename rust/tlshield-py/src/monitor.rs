@@ -2,12 +2,15 @@
 //! `MonitorBatch` and `TaskBatch`, their batch twins.
 
 use numpy::{IntoPyArray, PyArray1, PyUntypedArrayMethods};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-use tlshield_core::{Monitor, MonitorBatch, TaskReward, TaskStep};
+use pyo3::types::{PyDict, PyList, PyTuple};
+use tlshield_core::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
 
 use crate::automaton::PyAutomaton;
 use crate::convert::{vector, FloatArray};
 use crate::errors::map;
+use crate::pickling::reduce;
 use crate::progress::PyProgressReward;
 
 /// The task automaton along one episode: it holds the FSA state ``q``, the last reading of the
@@ -20,6 +23,7 @@ use crate::progress::PyProgressReward;
 pub struct PyMonitor {
     pub(crate) inner: Monitor,
     automaton: Py<PyAutomaton>,
+    progress: Option<Py<PyProgressReward>>,
 }
 
 #[pymethods]
@@ -40,7 +44,30 @@ impl PyMonitor {
         Ok(PyMonitor {
             inner,
             automaton: automaton.unbind(),
+            progress: progress.map(|p| p.into()),
         })
+    }
+
+    /// Pickled as its constructor's arguments and its state ``(q, phi, started, s)``: a copy
+    /// goes on from the same step, bit for bit.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let this = slf.borrow();
+        let (args, kwargs) = constructor(
+            py,
+            &this.automaton,
+            this.progress.as_ref(),
+            None,
+            this.inner.task_reward(),
+        )?;
+        let state = snapshot_to_python(py, &this.inner.snapshot())?;
+        reduce(slf.get_type().into_any(), args, Some(kwargs), Some(state))
+    }
+
+    /// Restores a pickled state (see ``__reduce__``).
+    fn __setstate__(&mut self, state: &Bound<'_, PyAny>) -> PyResult<()> {
+        let state = snapshot_of(state)?;
+        map(self.inner.restore(&state))
     }
 
     /// Starts an episode at ``s0``: ``q = automaton.step(automaton.initial, s0)``, reward 0.
@@ -179,6 +206,9 @@ impl PyTaskStep {
 pub struct PyMonitorBatch {
     pub(crate) inner: MonitorBatch,
     automaton: Py<PyAutomaton>,
+    progress: Option<Py<PyProgressReward>>,
+    /// The reward every row pays (kept for the pickle: a batch may have no rows).
+    reward: TaskReward,
     steps: Vec<TaskStep>,
 }
 
@@ -199,14 +229,50 @@ impl PyMonitorBatch {
         let reward = task_reward(progress.as_deref(), c_r, trap_penalty);
         let inner = map(MonitorBatch::new(
             automaton.get().inner.clone(),
-            reward,
+            reward.clone(),
             num,
         ))?;
         Ok(PyMonitorBatch {
             inner,
             automaton: automaton.unbind(),
+            progress: progress.map(|p| p.into()),
+            reward,
             steps: Vec::new(),
         })
+    }
+
+    /// Pickled as its constructor's arguments and every row's state (see ``Monitor``).
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let this = slf.borrow();
+        let (args, kwargs) = constructor(
+            py,
+            &this.automaton,
+            this.progress.as_ref(),
+            Some(this.inner.len()),
+            &this.reward,
+        )?;
+        let rows = this
+            .inner
+            .snapshot()
+            .iter()
+            .map(|row| snapshot_to_python(py, row))
+            .collect::<PyResult<Vec<_>>>()?;
+        reduce(
+            slf.get_type().into_any(),
+            args,
+            Some(kwargs),
+            Some(PyList::new(py, rows)?.into_any()),
+        )
+    }
+
+    /// Restores a pickled state (see ``__reduce__``).
+    fn __setstate__(&mut self, state: &Bound<'_, PyAny>) -> PyResult<()> {
+        let rows = state
+            .try_iter()?
+            .map(|row| snapshot_of(&row?))
+            .collect::<PyResult<Vec<_>>>()?;
+        map(self.inner.restore(&rows))
     }
 
     /// Starts the episodes of ``rows`` (distinct row indices; all rows by default) at the rows
@@ -302,6 +368,48 @@ impl PyTaskBatch {
     fn __repr__(&self, py: Python<'_>) -> String {
         format!("TaskBatch(rows={})", self.reward.bind(py).len())
     }
+}
+
+/// The arguments that rebuild a monitor (``num`` rows for a batch) paying `reward`.
+fn constructor<'py>(
+    py: Python<'py>,
+    automaton: &Py<PyAutomaton>,
+    progress: Option<&Py<PyProgressReward>>,
+    num: Option<usize>,
+    reward: &TaskReward,
+) -> PyResult<(Bound<'py, PyTuple>, Bound<'py, PyDict>)> {
+    let mut args = vec![automaton.clone_ref(py).into_bound(py).into_any()];
+    if let Some(num) = num {
+        args.push(num.into_pyobject(py)?.into_any());
+    }
+    args.push(progress.map_or_else(
+        || py.None().into_bound(py),
+        |p| p.clone_ref(py).into_bound(py).into_any(),
+    ));
+    let kwargs = PyDict::new(py);
+    if let TaskReward::Paper { c_r, trap_penalty } = reward {
+        kwargs.set_item("c_r", c_r)?;
+        kwargs.set_item("trap_penalty", trap_penalty)?;
+    }
+    Ok((PyTuple::new(py, args)?, kwargs))
+}
+
+/// A monitor's state as ``(q, phi, started, s)``.
+fn snapshot_to_python<'py>(py: Python<'py>, state: &MonitorState) -> PyResult<Bound<'py, PyAny>> {
+    Ok((state.q, state.phi, state.started, state.s.clone())
+        .into_pyobject(py)?
+        .into_any())
+}
+
+/// A monitor's state from ``(q, phi, started, s)``.
+fn snapshot_of(state: &Bound<'_, PyAny>) -> PyResult<MonitorState> {
+    let (q, phi, started, s): (usize, f64, bool, Vec<f64>) = state.extract().map_err(|e| {
+        PyTypeError::new_err(format!(
+            "a monitor's state: expected (q, phi, started, s), got {} ({e})",
+            state.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+        ))
+    })?;
+    Ok(MonitorState { q, phi, started, s })
 }
 
 /// The core's task reward from the Python arguments.

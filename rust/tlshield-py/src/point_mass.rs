@@ -4,11 +4,13 @@
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::point_mass::{PointMassParams, PointMassWorld, STATE_DIM};
 
 use crate::convert::FloatArray;
 use crate::errors::map;
 use crate::monitor::PyMonitor;
+use crate::pickling::reduce;
 use crate::shield::PyShield;
 use crate::world_step::PyWorldStep;
 
@@ -56,6 +58,35 @@ impl PyPointMassWorld {
                 collision_penalty,
             }),
         }
+    }
+
+    /// Pickled as its constructor's arguments and its state ``(s, t)``.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let world = &slf.borrow().inner;
+        let p = world.params();
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("dt", p.dt)?;
+        kwargs.set_item("horizon", p.horizon)?;
+        kwargs.set_item("room", p.room)?;
+        kwargs.set_item("max_accel", p.max_accel)?;
+        let [[x1, y1], [x2, y2]] = p.obstacles;
+        kwargs.set_item("obstacles", ((x1, y1), (x2, y2)))?;
+        kwargs.set_item("obstacle_radius", p.obstacle_radius)?;
+        kwargs.set_item("collision_penalty", p.collision_penalty)?;
+        let state = (world.state().to_vec(), world.steps()).into_pyobject(py)?;
+        reduce(
+            slf.get_type().into_any(),
+            PyTuple::empty(py),
+            Some(kwargs),
+            Some(state.into_any()),
+        )
+    }
+
+    /// Restores a pickled state ``(s, t)``.
+    fn __setstate__(&mut self, state: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (s, t): (Bound<'_, PyAny>, u32) = state.extract()?;
+        map(self.inner.restore(values::<STATE_DIM>(&s, "s")?, t))
     }
 
     /// Starts an episode at ``s0`` (4,): ``x, y, vx, vy``.

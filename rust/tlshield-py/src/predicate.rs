@@ -9,6 +9,7 @@ use tlshield_core::{Center, Predicate};
 
 use crate::convert::{indices, FloatArray};
 use crate::errors::map;
+use crate::pickling::reduce;
 
 fn state<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
     FloatArray::extract(obj, "s", 1, "(n,)")
@@ -71,9 +72,7 @@ impl PyHalfspace {
         format!("Halfspace(w={}, b={:?})", fmt_list(h.w()), h.b())
     }
 
-    fn __reduce__<'py>(
-        slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let h = slf.get().halfspace();
         let args = PyTuple::new(
@@ -83,7 +82,7 @@ impl PyHalfspace {
                 h.b().into_pyobject(py)?.into_any(),
             ],
         )?;
-        Ok((slf.get_type().into_any(), args))
+        reduce(slf.get_type().into_any(), args, None, None)
     }
 }
 
@@ -188,9 +187,7 @@ impl PyBall {
         )
     }
 
-    fn __reduce__<'py>(
-        slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let b = slf.get().ball();
         let none = py.None().into_bound(py);
@@ -207,7 +204,7 @@ impl PyBall {
                 dims,
             ],
         )?;
-        Ok((slf.get_type().into_any(), args))
+        reduce(slf.get_type().into_any(), args, None, None)
     }
 }
 
@@ -316,9 +313,7 @@ macro_rules! region_class {
                 Ok(format!("{}([{}])", $py, parts.join(", ")))
             }
 
-            fn __reduce__<'py>(
-                slf: &Bound<'py, Self>,
-            ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+            fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
                 let py = slf.py();
                 let parts = PyList::new(
                     py,
@@ -329,7 +324,12 @@ macro_rules! region_class {
                         .map(|p| to_python(py, p))
                         .collect::<PyResult<Vec<_>>>()?,
                 )?;
-                Ok((slf.get_type().into_any(), PyTuple::new(py, [parts])?))
+                reduce(
+                    slf.get_type().into_any(),
+                    PyTuple::new(py, [parts])?,
+                    None,
+                    None,
+                )
             }
         }
     };

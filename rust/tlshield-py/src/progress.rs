@@ -24,6 +24,8 @@ use crate::errors::map;
 pub struct PyProgressReward {
     pub(crate) automaton: Arc<Automaton>,
     pub(crate) inner: ProgressReward,
+    /// The parameters it was built with (its pickle rebuilds it from them).
+    pub(crate) params: ProgressParams,
     /// Whether the deprecated ``advance`` has warned (once per object).
     warned: AtomicBool,
 }
@@ -57,6 +59,7 @@ impl PyProgressReward {
         Ok(PyProgressReward {
             automaton,
             inner,
+            params,
             warned: AtomicBool::new(false),
         })
     }

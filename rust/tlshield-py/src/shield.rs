@@ -5,7 +5,7 @@ use std::sync::Arc;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::{
     Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
     ShieldParams, SolvedBy, SolverChoice, Status,
@@ -517,6 +517,51 @@ impl PyShield {
     #[getter]
     fn automaton(&self, py: Python<'_>) -> PyAutomaton {
         PyAutomaton::new(py, self.inner.automaton().clone())
+    }
+
+    /// Pickled as its constructor's arguments: the spec (its formula text and predicates),
+    /// the model, and every parameter as numbers, lists and names; rebuilt on load.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let shield = &slf.get().inner;
+        let p = shield.params();
+        let spec = Bound::new(py, PySpec::from_core(shield.automaton().spec().clone()))?;
+        let model = match shield.dynamics() {
+            Some(d) => crate::dynamics::to_python(py, d)?,
+            None => py.None().into_bound(py),
+        };
+        let pair = |b: &Bounds| (b.lo.clone(), b.hi.clone());
+        let barriers = PyDict::new(py);
+        for b in &p.barriers {
+            if b.positive == b.name.starts_with('!') {
+                return Err(PyValueError::new_err(format!(
+                    "barrier {:?}: a name starting with '!' must mean 'outside' to be pickled",
+                    b.name
+                )));
+            }
+            let predicate = crate::predicate::to_python(py, &b.predicate)?;
+            barriers.set_item(&b.name, (predicate, b.slack_weight))?;
+        }
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("alpha", p.alpha)?;
+        kwargs.set_item("c3", p.c3)?;
+        kwargs.set_item("k", p.k)?;
+        kwargs.set_item("cbf_bounds", pair(&p.cbf_bounds))?;
+        kwargs.set_item("clf_bounds", pair(&p.clf_bounds))?;
+        kwargs.set_item("action_bounds", p.action_bounds.as_ref().map(pair))?;
+        kwargs.set_item("rl_bounds", p.rl_bounds.as_ref().map(pair))?;
+        kwargs.set_item("barriers", barriers)?;
+        kwargs.set_item("pos", p.pos.clone())?;
+        kwargs.set_item("use_cbf", p.use_cbf)?;
+        kwargs.set_item("use_clf", p.use_clf)?;
+        kwargs.set_item("solver", p.solver.name())?;
+        kwargs.set_item("slack_penalty", p.slack_penalty)?;
+        kwargs.set_item("margin", p.margin)?;
+        kwargs.set_item("alpha2", p.alpha2)?;
+        kwargs.set_item("clf_gain", p.clf_gain)?;
+        kwargs.set_item("preserve_progress", p.preserve_progress)?;
+        let args = PyTuple::new(py, [spec.into_any(), model])?;
+        crate::pickling::reduce(slf.get_type().into_any(), args, Some(kwargs), None)
     }
 
     fn __repr__(&self) -> String {

@@ -4,7 +4,8 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use tlshield_core::{Automaton, AutomatonError, Spec, Trajectory, TrajectoryBatch};
@@ -31,14 +32,43 @@ impl PySpec {
 }
 
 impl PySpec {
-    /// The spec's automaton, built on first use and shared afterwards.
+    /// The spec's automaton, built on first use and shared afterwards (see [`interned`]).
     pub fn shared_automaton(&self, py: Python<'_>) -> PyResult<Arc<Automaton>> {
         if let Some(aut) = self.automaton.get() {
             return Ok(aut.clone());
         }
-        let built = Arc::new(build_responsive(py, &self.inner)?);
+        let built = interned(py, &self.inner)?;
         Ok(self.automaton.get_or_init(|| built).clone())
     }
+}
+
+/// The live automata by spec (its `Debug` text: the formula, the atoms and the predicates'
+/// exact numbers).
+static AUTOMATA: Mutex<Option<HashMap<String, Weak<Automaton>>>> = Mutex::new(None);
+
+/// The automaton of `spec`: the one already built for an equal spec while it lives, else a
+/// new build. Equal specs share one automaton, so a shield and a monitor unpickled apart (or
+/// copied apart) still watch the same automaton: the core checks that by identity.
+pub fn interned(py: Python<'_>, spec: &Spec) -> PyResult<Arc<Automaton>> {
+    let key = format!("{spec:?}");
+    let lookup = |key: &str| {
+        let table = AUTOMATA.lock().unwrap_or_else(|e| e.into_inner());
+        table.as_ref()?.get(key)?.upgrade()
+    };
+    if let Some(aut) = lookup(&key) {
+        return Ok(aut);
+    }
+    // Built without the lock (with the GIL released): a concurrent build of the same spec
+    // is possible, and the first one stored wins.
+    let built = Arc::new(build_responsive(py, spec)?);
+    let mut table = AUTOMATA.lock().unwrap_or_else(|e| e.into_inner());
+    let table = table.get_or_insert_with(HashMap::new);
+    table.retain(|_, aut| aut.strong_count() > 0);
+    if let Some(aut) = table.get(&key).and_then(Weak::upgrade) {
+        return Ok(aut);
+    }
+    table.insert(key, Arc::downgrade(&built));
+    Ok(built)
 }
 
 /// Builds `spec`'s automaton with the GIL released, checking for signals (Ctrl-C) about every
@@ -203,9 +233,7 @@ impl PySpec {
         )
     }
 
-    fn __reduce__<'py>(
-        slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let this = slf.get();
         let args = PyTuple::new(
@@ -216,6 +244,6 @@ impl PySpec {
                 this.exclusive().into_pyobject(py)?.into_any(),
             ],
         )?;
-        Ok((slf.get_type().into_any(), args))
+        crate::pickling::reduce(slf.get_type().into_any(), args, None, None)
     }
 }

@@ -278,7 +278,7 @@ impl Automaton {
         states: &[f64],
         dim: usize,
     ) -> Result<Vec<usize>, AutomatonError> {
-        if dim == 0 || states.len() != qs.len() * dim {
+        if dim == 0 || qs.len().checked_mul(dim) != Some(states.len()) {
             return Err(InputError::Shape {
                 what: "states".into(),
                 expected: format!("({}, n) to match qs", qs.len()),
@@ -291,12 +291,13 @@ impl Automaton {
         for (i, &q) in qs.iter().enumerate() {
             self.check_state(&format!("qs[{i}]"), q)?;
         }
-        Ok(crate::parallel::install(|| {
-            qs.par_iter()
-                .zip(states.par_chunks(dim))
-                .map(|(&q, s)| self.read_validated(s).step(q))
-                .collect()
-        }))
+        let mut out = crate::alloc::try_vec("qs", qs.len(), 0)?;
+        crate::parallel::install(|| {
+            out.par_iter_mut()
+                .zip(qs.par_iter().zip(states.par_chunks(dim)))
+                .for_each(|(o, (&q, s))| *o = self.read_validated(s).step(q));
+        });
+        Ok(out)
     }
 
     /// The state after reading every state of `traj`, starting from the initial state.

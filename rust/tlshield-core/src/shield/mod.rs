@@ -132,6 +132,15 @@ pub enum SolverChoice {
 }
 
 impl SolverChoice {
+    /// The name [`SolverChoice::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::Auto => "auto",
+            SolverChoice::Clarabel => "clarabel",
+            SolverChoice::ActiveSet => "active_set",
+        }
+    }
+
     /// Parses `"auto"`, `"clarabel"` or `"active_set"`.
     pub fn parse(name: &str) -> Result<Self, ShieldError> {
         match name {
@@ -533,15 +542,17 @@ pub struct BatchOutput {
 }
 
 impl BatchOutput {
-    /// Sizes every column for `rows` rows of `m` inputs (reusing the buffers).
-    fn resize(&mut self, rows: usize, m: usize) {
-        self.action.resize(rows * m, 0.0);
-        self.a_cbf.resize(rows * m, 0.0);
-        self.a_clf.resize(rows * m, 0.0);
-        self.delta.resize(rows, 0.0);
-        self.status.resize(rows, 0);
-        self.slack.resize(rows, 0.0);
-        self.solver.resize(rows, 0);
+    /// Sizes every column for `rows` rows of `m` inputs (reusing the buffers); a size that
+    /// cannot be allocated is [`InputError::TooLarge`].
+    fn resize(&mut self, rows: usize, m: usize) -> Result<(), InputError> {
+        let len = crate::alloc::checked_len("a_rl", &[rows, m])?;
+        for column in [&mut self.action, &mut self.a_cbf, &mut self.a_clf] {
+            crate::alloc::try_resize(column, "a_rl", len, 0.0)?;
+        }
+        crate::alloc::try_resize(&mut self.delta, "rows", rows, 0.0)?;
+        crate::alloc::try_resize(&mut self.slack, "rows", rows, 0.0)?;
+        crate::alloc::try_resize(&mut self.status, "rows", rows, 0)?;
+        crate::alloc::try_resize(&mut self.solver, "rows", rows, 0)
     }
 
     /// Views of consecutive runs of `chunk` rows (the last may be shorter), one per worker.
@@ -874,7 +885,12 @@ impl Shield {
 
     /// Checks the state length, finiteness and the barrier dimensions.
     fn check_state(&self, what: &str, s: &[f64]) -> Result<(), ShieldError> {
-        let n = s.len();
+        self.check_state_len(what, s.len())
+    }
+
+    /// Checks a state length `n` against the spec, the dynamics and the barriers (an empty
+    /// batch still says how long its rows are).
+    fn check_state_len(&self, what: &str, n: usize) -> Result<(), ShieldError> {
         self.automaton.spec().check_state_len(n)?;
         if n < self.min_dim {
             return Err(InputError::Shape {
@@ -1079,7 +1095,7 @@ impl Shield {
     ) -> Result<(), ShieldError> {
         let m = self.m;
         let rows = qs.len();
-        if n == 0 || states.len() != rows * n {
+        if n == 0 || rows.checked_mul(n) != Some(states.len()) {
             return Err(InputError::Shape {
                 what: "states".into(),
                 expected: format!("{rows} rows (one per q) of length n > 0"),
@@ -1089,7 +1105,7 @@ impl Shield {
         }
         self.check_batch_actions(a_rl, rows)?;
         self.check_dynamics(n, None)?;
-        self.check_state("states row", &states[..n.min(states.len())])?;
+        self.check_state_len("states row", n)?;
         check_finite("states", states, n)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
@@ -1097,7 +1113,7 @@ impl Shield {
         for (i, &q) in qs.iter().enumerate() {
             self.automaton.check_state(&format!("qs[{i}]"), q)?;
         }
-        out.resize(rows, m);
+        out.resize(rows, m)?;
         // One contiguous chunk of rows per worker thread, each with its own workspace; small
         // batches stay on the calling thread (waking the pool costs more than they do).
         self.run_batch(BatchRows::States { states, n, qs }, a_rl, drift, out);
@@ -1115,7 +1131,7 @@ impl Shield {
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
         let monitors = batch.monitors();
-        if !Arc::ptr_eq(monitors[0].automaton(), &self.automaton) {
+        if !Arc::ptr_eq(batch.automaton(), &self.automaton) {
             return Err(ShieldError::Config(
                 "monitors: they watch another automaton; build them from this shield's \
                  automaton (shield.automaton)"
@@ -1132,14 +1148,18 @@ impl Shield {
         }
         let (rows, m) = (monitors.len(), self.m);
         self.check_batch_actions(a_rl, rows)?;
+        out.resize(rows, m)?;
+        let Some(first) = monitors.first() else {
+            // An empty batch: nothing to check a state length against, nothing to solve.
+            return Ok(());
+        };
         // Every monitor of the batch read a state of its automaton: one length for all.
-        let n = monitors[0].state().len();
+        let n = first.state().len();
         self.check_dynamics(n, None)?;
-        self.check_state("monitor state", monitors[0].state())?;
+        self.check_state("monitor state", first.state())?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
-        out.resize(rows, m);
         self.run_batch(BatchRows::Monitors(monitors), a_rl, drift, out);
         Ok(())
     }
