@@ -92,9 +92,16 @@ def test_monitor_misuse_is_a_clear_error():
         shield.filter(np.zeros(13), 0)
     with pytest.raises(ValueError, match="a_rl"):
         shield.filter(monitor, np.zeros(3))
-    # Another automaton of the same task (a fresh spec; channel_task_spec shares one).
-    other = channel_task_spec.__wrapped__().automaton()
-    foreign = tlshield.Monitor(other)
+    # An equal spec shares its automaton (copies and pickles rely on it); another task's
+    # automaton is refused.
+    fresh = channel_task_spec.__wrapped__()
+    same = tlshield.Monitor(fresh.automaton())
+    same.reset(np.zeros(13))
+    assert shield.filter(same, np.zeros(2)).action.tolist() == (
+        shield.filter(monitor, np.zeros(2)).action.tolist()
+    )
+    other = tlshield.Spec("F g1 & F g3", {k: fresh.predicates[k] for k in ("g1", "g3")})
+    foreign = tlshield.Monitor(other.automaton())
     foreign.reset(np.zeros(13))
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
         shield.filter(foreign, np.zeros(2))
@@ -102,9 +109,10 @@ def test_monitor_misuse_is_a_clear_error():
         tlshield.Monitor(aut, c_r=0.0)
     with pytest.raises(ValueError, match="trap_penalty"):
         tlshield.Monitor(aut, trap_penalty=float("inf"))
-    # A progress reward of another automaton, even of the same task and size, is refused.
+    # A progress reward of another automaton is refused; one of an equal spec's is the same.
     with pytest.raises(ValueError, match="another automaton"):
-        tlshield.Monitor(aut, other.progress_reward())
+        tlshield.Monitor(aut, other.automaton().progress_reward())
+    assert tlshield.Monitor(aut, fresh.automaton().progress_reward()).q == aut.initial
     with pytest.raises(TypeError):
         tlshield.Monitor("F a")  # type: ignore[arg-type]
 
@@ -243,9 +251,14 @@ def test_monitor_batch_misuse_is_a_clear_error():
         shield.filter_batch(batch, np.zeros((3, 2)), np.zeros((3, 2)))
     with pytest.raises(TypeError, match="missing the RL actions"):
         shield.filter_batch(states, np.zeros(3, dtype=int))
-    other = tlshield.MonitorBatch(channel_task_spec.__wrapped__().automaton(), 3)
+    # An equal spec shares the automaton (so copies and pickles do); a different one is refused.
+    spec = channel_task_spec()
+    equal = tlshield.Spec(str(spec), spec.predicates, spec.exclusive)
+    assert tlshield.MonitorBatch(equal.automaton(), 3).reset(states).q.tolist() == (
+        batch.reset(states).q.tolist()
+    )
+    other_spec = tlshield.Spec("F g1 & F g2", {k: spec.predicates[k] for k in ("g1", "g2")})
+    other = tlshield.MonitorBatch(other_spec.automaton(), 3)
     other.reset(states)
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
         shield.filter_batch(other, np.zeros((3, 2)))
-    with pytest.raises(ValueError, match="count"):
-        tlshield.MonitorBatch(shield.automaton, 0)

@@ -359,3 +359,39 @@ def test_set_on_the_command_line_reaches_the_run(tmp_path: Path) -> None:
     record = json.loads((run / "run.json").read_text())
     assert record["env"]["alpha"] == 3 and record["ppo"]["learning_rate"] == 0.001
     assert record["clf_schedule"] == "linear"
+
+
+def test_a_shield_put_in_ray_filters_like_the_local_one() -> None:
+    """``ray.put(shield)`` and a Ray task that filters with it give the local shield's actions
+    (the shield travels as data: its spec's text and numbers, its model and parameters)."""
+    import numpy as np
+    import ray
+
+    from tests.fixtures import task_shield
+
+    shield = task_shield()
+    rng = np.random.default_rng(0)
+    states = np.zeros((20, 13))
+    states[:, :3] = rng.uniform(-1.0, 1.0, size=(20, 3))
+    states[:, 3:9] = [4.0, 4.0, 4.5, 6.5, 9.0, 9.0]
+    states[:, 9:13] = [20.0, 20.0, 20.0, -20.0]
+    qs = shield.automaton.step_batch(states, np.zeros(20, dtype=int))
+    a_rl = rng.uniform(-1.0, 1.0, size=(20, 2))
+    local = shield.filter_batch(states, qs, a_rl).action
+
+    def remote_filter(shield, states, qs, a_rl):  # type: ignore[no-untyped-def]
+        return np.stack(
+            [shield.filter(s, int(q), a).action for s, q, a in zip(states, qs, a_rl, strict=True)]
+        )
+
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        ref = ray.put(shield)
+        assert ray.get(ref).filter(states[0], int(qs[0]), a_rl[0]).action.tolist() == (
+            local[0].tolist()
+        )
+        task = ray.remote(remote_filter)
+        remote = ray.get(task.remote(ref, states, qs, a_rl), timeout=HANG)
+    finally:
+        ray.shutdown()
+    assert remote.tobytes() == local.tobytes()

@@ -10,10 +10,11 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from tlshield._core import Shield
+from tlshield.copying import IndependentCopies
 from tlshield.vector import ActionFn, batch_infos, rl_actions, split_states
 
 
-class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc]
+class ShieldedVecEnv(IndependentCopies, VecEnvWrapper):  # type: ignore[misc]
     """Stable-Baselines3 ``VecEnv`` wrapper: shields all sub-environments in one
     ``filter_batch`` call per step (see :class:`tlshield.vector.ShieldedVectorEnv` for the
     layout and ``action_fn``). Each sub-env's ``info["shield"]`` carries its correction."""
@@ -49,7 +50,7 @@ class ShieldedVecEnv(VecEnvWrapper):  # type: ignore[misc]
         return obs, rewards, dones, infos
 
 
-class WorldVecEnv(VecEnv):  # type: ignore[misc]
+class WorldVecEnv(IndependentCopies, VecEnv):  # type: ignore[misc]
     """Stable-Baselines3 ``VecEnv`` of a :class:`tlshield.vector.WorldBatch` (N bundled envs
     stepped in one core call). It gives what SB3's ``DummyVecEnv`` over the same single envs
     gives, bit for bit (observations, float32 rewards, dones, ``terminal_observation``, the

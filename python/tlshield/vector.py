@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import FilterBatch, Shield, WorldsStep, step_worlds
 from tlshield.codes import Solver, Status
+from tlshield.copying import IndependentCopies
 
 #: Maps the policy's actions ``(N, m)`` to the RL actions in the shield's units.
 ActionFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -62,7 +63,7 @@ def split_states(obs: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64],
     return np.ascontiguousarray(obs[:, :-k]), np.argmax(obs[:, -k:], axis=1)
 
 
-class ShieldedVectorEnv(gym.vector.VectorWrapper):
+class ShieldedVectorEnv(IndependentCopies, gym.vector.VectorWrapper):
     """Shields every sub-environment of a Gymnasium vector env in one ``filter_batch`` call.
 
     The sub-environments are FSA-augmented envs without their own shield whose observation is
@@ -102,7 +103,7 @@ class ShieldedVectorEnv(gym.vector.VectorWrapper):
 _MEMBERS: dict[type, dict[int, Any]] = {e: {m.value: m for m in e} for e in (Status, Solver)}
 
 
-class WorldBatch:
+class WorldBatch(IndependentCopies):
     """N bundled environments of one kind (``tlshield/Channel-v0`` or ``tlshield/PointMass-v0``)
     whose steps run in one core call (``tlshield._core.step_worlds``: plant, shield, monitor,
     reward and observation of every env, in parallel past 32 envs, GIL released). Each env is a
@@ -242,7 +243,7 @@ def _check_count(num_envs: Any) -> None:
         )
 
 
-class WorldVectorEnv(gym.vector.VectorEnv):
+class WorldVectorEnv(IndependentCopies, gym.vector.VectorEnv):
     """A :class:`WorldBatch` as a Gymnasium ``VectorEnv``, stepped in one core call; an env
     whose episode ended is reset on the next step (``AutoresetMode.NEXT_STEP``, Gymnasium's
     default). ``infos`` holds arrays: ``fsa_state``, ``success``, ``trap``, ``tl_reward``,

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Shield, Spec
+from tlshield.copying import IndependentCopies
 from tlshield.tracking import REWARDS, FsaTracker, shield_info
 from tlshield.vector import ShieldedVectorEnv
 
@@ -35,7 +36,7 @@ def identity_state(obs: Any) -> NDArray[np.float64]:
     return np.asarray(obs, dtype=np.float64)
 
 
-class FsaAugmented(gym.Wrapper):
+class FsaAugmented(IndependentCopies, gym.Wrapper):
     """Appends the one-hot FSA state to the observation and rewards the task.
 
     ``state_fn`` maps the wrapped env's observation to the state vector the spec's predicates
@@ -140,7 +141,18 @@ class FsaAugmented(gym.Wrapper):
         return self._observe(obs), r_tl + self.w * float(reward), terminated, truncated, info
 
 
-class Shielded(gym.Wrapper):
+class WithoutFsaState:
+    """``Shielded``'s default ``state_fn``: the observation without its last ``k`` values (the
+    one-hot FSA state). A class rather than a lambda, so that a shielded env pickles."""
+
+    def __init__(self, k: int) -> None:
+        self.k = k
+
+    def __call__(self, obs: Any) -> NDArray[np.float64]:
+        return np.asarray(obs, dtype=np.float64)[: -self.k]
+
+
+class Shielded(IndependentCopies, gym.Wrapper):
     """Filters every action through ``shield`` before the wrapped env sees it.
 
     Must wrap an :class:`FsaAugmented` env (directly or further down): the shield needs the
@@ -167,7 +179,7 @@ class Shielded(gym.Wrapper):
             raise TypeError("Shielded must wrap an FsaAugmented environment") from err
         self.shield = shield
         k = shield.automaton.num_states
-        self.state_fn = state_fn or (lambda obs: np.asarray(obs, dtype=np.float64)[:-k])
+        self.state_fn = state_fn or WithoutFsaState(k)
         self.dynamics_fn = dynamics_fn
         self.drift_fn = drift_fn
         self._state: NDArray[np.float64] | None = None

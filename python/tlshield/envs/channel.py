@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import ChannelWorld
+from tlshield.copying import IndependentCopies
 from tlshield.envs.channel_task import (
     CONFIGS,
     OBSERVATIONS,
@@ -48,7 +49,7 @@ RELATIVE_DIM = 20
 SQRT2 = math.sqrt(2.0)
 
 
-class ChannelEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """``tlshield/Channel-v0``: the paper's case study (Li & Belta, Sec. VI) as one Gymnasium
     environment.
 

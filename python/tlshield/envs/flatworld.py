@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
+from tlshield.copying import IndependentCopies
 from tlshield.envs.params import CONFIGS, build, renamed_class
 from tlshield.wrappers import FsaAugmented, Shielded
 
@@ -157,7 +158,7 @@ def flatworld_shield(cfg: FlatWorldParams, config: str, spec: Spec) -> Shield | 
     )
 
 
-class FlatWorld(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """The physics alone: a point in a square with coloured discs, no task.
 
     Observation: the position ``[x, y]``. Action: ``u`` in ``[-1, 1]^2`` (clipped); each step

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Automaton, Ball, DoubleIntegrator, PointMassWorld, Shield, Spec
+from tlshield.copying import IndependentCopies
 from tlshield.envs.params import CONFIGS, build, renamed_class
 from tlshield.tracking import FsaTracker, shield_info
 
@@ -160,7 +161,7 @@ def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec | Automaton)
     )
 
 
-class PointMassEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """``tlshield/PointMass-v0`` (see the module docs and :func:`make_point_mass`).
 
     Observation: ``[x, y, vx, vy]`` then the one-hot automaton state. Action: the acceleration

@@ -356,7 +356,7 @@ impl PyAutomaton {
     /// so that finishing within it out-earns not finishing), ``scale`` the Eq. 5A1 value at
     /// which the within-state shaping is halfway down its band, ``exclusive`` groups of atoms
     /// that never hold together.
-    #[pyo3(signature = (*, gamma=0.99, horizon=200, scale=1.0, step_cost=None, bonus=None, c_r=1.0, exclusive=Vec::new()))]
+    #[pyo3(signature = (*, gamma=0.99, horizon=200, scale=1.0, step_cost=None, bonus=None, c_r=1.0, exclusive=None))]
     #[allow(clippy::too_many_arguments)]
     fn progress_reward(
         &self,
@@ -366,8 +366,12 @@ impl PyAutomaton {
         step_cost: Option<f64>,
         bonus: Option<f64>,
         c_r: f64,
-        exclusive: Vec<Vec<String>>,
+        exclusive: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyProgressReward> {
+        let exclusive = exclusive
+            .map(crate::spec::groups_of)
+            .transpose()?
+            .unwrap_or_default();
         let horizon = u32::try_from(horizon)
             .ok()
             .filter(|h| *h > 0)

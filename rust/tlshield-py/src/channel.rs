@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::channel::{ChannelParams, ChannelState, ChannelWorld, Obstacle, STATE_DIM};
 
-use crate::convert::FloatArray;
+use crate::convert::{sequence, FloatArray};
 use crate::dynamics::PyUnicycle;
 use crate::errors::map;
 use crate::monitor::PyMonitor;
@@ -60,7 +60,7 @@ impl PyChannelWorld {
         collision_penalty: f64,
         intervention_penalty: f64,
         relative: bool,
-        rl_bounds: (Vec<f64>, Vec<f64>),
+        rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>),
         obstacle_drift: bool,
         evaluation: bool,
         channel_atoms: (usize, usize),
@@ -77,8 +77,8 @@ impl PyChannelWorld {
             intervention_penalty,
             relative,
             rl_bounds: (
-                pair(rl_bounds.0, "rl_bounds[0]")?,
-                pair(rl_bounds.1, "rl_bounds[1]")?,
+                pair(sequence(&rl_bounds.0, "rl_bounds[0]")?, "rl_bounds[0]")?,
+                pair(sequence(&rl_bounds.1, "rl_bounds[1]")?, "rl_bounds[1]")?,
             ),
             obstacle_drift,
             evaluation,
@@ -130,8 +130,16 @@ impl PyChannelWorld {
 
     /// Restores a pickled state ``(s, drift, obstacles, t)``.
     fn __setstate__(&mut self, state: &Bound<'_, PyAny>) -> PyResult<()> {
-        type State = (Vec<f64>, Vec<f64>, Vec<[f64; 4]>, u32);
-        let (s, drift, paths, t): State = state.extract()?;
+        type State<'py> = (Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>, u32);
+        let (s, drift, paths, t): State<'_> = state.extract()?;
+        let (s, drift) = (sequence(&s, "s")?, sequence(&drift, "drift")?);
+        let paths: Vec<[f64; 4]> = sequence(&paths, "obstacles")?;
+        if paths.len() != 2 {
+            return Err(PyValueError::new_err(format!(
+                "obstacles: expected 2 paths, got {}",
+                paths.len()
+            )));
+        }
         let full = |v: Vec<f64>, name: &str| -> PyResult<[f64; STATE_DIM]> {
             v.try_into()
                 .map_err(|_| PyValueError::new_err(format!("{name}: expected {STATE_DIM} values")))

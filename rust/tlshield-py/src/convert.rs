@@ -110,6 +110,47 @@ impl<'py> FloatArray<'py> {
     }
 }
 
+/// A sequence argument as a vector of `item(element)`, its length checked against memory
+/// first: PyO3's own `Vec` extraction reserves `len()` elements unchecked, so an object that
+/// claims more than memory holds (`range(10**12)`, a broadcast view) would abort the process.
+pub fn sequence_with<'py, T>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    mut item: impl FnMut(usize, Bound<'py, PyAny>) -> PyResult<T>,
+) -> PyResult<Vec<T>> {
+    let not_a_sequence = || {
+        PyTypeError::new_err(format!(
+            "{name}: expected a sequence, got {}",
+            type_name(obj)
+        ))
+    };
+    if obj.is_instance_of::<pyo3::types::PyString>() {
+        return Err(not_a_sequence());
+    }
+    let iter = obj.try_iter().map_err(|_| not_a_sequence())?;
+    let mut out = map(tlshield_core::alloc::try_with_capacity(
+        name,
+        obj.len().unwrap_or(0),
+    ))?;
+    for (i, element) in iter.enumerate() {
+        out.push(item(i, element?)?);
+    }
+    Ok(out)
+}
+
+/// [`sequence_with`] extracting each element as `T`; a wrong element is a `TypeError` naming
+/// `name[i]`.
+pub fn sequence<'py, T>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Vec<T>>
+where
+    T: pyo3::conversion::FromPyObjectOwned<'py>,
+{
+    sequence_with(obj, name, |i, element| {
+        element
+            .extract::<T>()
+            .map_err(|e| PyTypeError::new_err(format!("{name}[{i}]: {}", Into::<PyErr>::into(e))))
+    })
+}
+
 /// A single state-sized vector `(n,)` for the per-step calls. A contiguous float64 numpy
 /// array is copied straight out (a few dozen bytes; cheaper than registering a borrow with
 /// numpy's borrow checker); anything else goes through [`FloatArray::extract`].
@@ -195,6 +236,9 @@ pub fn state(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyRes
 /// `name`.
 pub fn states(obj: &Bound<'_, PyAny>, name: &str, automaton: &Automaton) -> PyResult<Vec<usize>> {
     let kind = dtype_kind(obj).map_err(|_| states_type_error(obj, name))?;
+    if is_empty_list(obj) {
+        return Ok(Vec::new());
+    }
     if kind != b'i' && kind != b'u' {
         return Err(states_type_error(obj, name));
     }
@@ -252,7 +296,10 @@ fn type_name(obj: &Bound<'_, PyAny>) -> String {
 
 /// Extracts a list of non-negative dimension indices, naming the bad entry.
 pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
-    let raw: Vec<i64> = obj.extract().map_err(|_| {
+    let raw: Vec<i64> = sequence(obj, name).map_err(|e| {
+        if e.is_instance_of::<pyo3::exceptions::PyMemoryError>(obj.py()) {
+            return e;
+        }
         PyTypeError::new_err(format!(
             "{name}: expected a sequence of integer dimension indices"
         ))
@@ -273,6 +320,9 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
 /// `ValueError` naming `name[i]` (the core checks the upper bound).
 pub fn row_indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
     let kind = dtype_kind(obj).map_err(|_| states_type_error(obj, name))?;
+    if is_empty_list(obj) {
+        return Ok(Vec::new());
+    }
     if kind != b'i' && kind != b'u' {
         return Err(PyTypeError::new_err(format!(
             "{name}: expected integer row indices, got {}",
@@ -282,15 +332,21 @@ pub fn row_indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<usize>> {
     let rows: PyArrayLike1<'_, i64, AllowTypeChange> = obj
         .extract()
         .map_err(|e| PyValueError::new_err(format!("{name}: expected shape (k,) ({e})")))?;
-    rows.as_array()
-        .iter()
-        .enumerate()
-        .map(|(i, &r)| {
-            usize::try_from(r).map_err(|_| {
-                PyValueError::new_err(format!("{name}[{i}] = {r}: expected a row index >= 0"))
-            })
-        })
-        .collect()
+    let rows = rows.as_array();
+    let mut out = map(tlshield_core::alloc::try_with_capacity(name, rows.len()))?;
+    for (i, &r) in rows.iter().enumerate() {
+        out.push(usize::try_from(r).map_err(|_| {
+            PyValueError::new_err(format!("{name}[{i}] = {r}: expected a row index >= 0"))
+        })?);
+    }
+    Ok(out)
+}
+
+/// Whether `obj` is an empty list or tuple: numpy reads `[]` as float64, but as ids it is
+/// an empty batch's.
+fn is_empty_list(obj: &Bound<'_, PyAny>) -> bool {
+    (obj.is_instance_of::<pyo3::types::PyList>() || obj.is_instance_of::<pyo3::types::PyTuple>())
+        && obj.len().is_ok_and(|n| n == 0)
 }
 
 /// A shape as Python prints it: `(3,)`, `(2, 4)`, `()`.

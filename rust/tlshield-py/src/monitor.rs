@@ -403,12 +403,14 @@ fn snapshot_to_python<'py>(py: Python<'py>, state: &MonitorState) -> PyResult<Bo
 
 /// A monitor's state from ``(q, phi, started, s)``.
 fn snapshot_of(state: &Bound<'_, PyAny>) -> PyResult<MonitorState> {
-    let (q, phi, started, s): (usize, f64, bool, Vec<f64>) = state.extract().map_err(|e| {
-        PyTypeError::new_err(format!(
-            "a monitor's state: expected (q, phi, started, s), got {} ({e})",
-            state.repr().map_or_else(|_| "?".into(), |r| r.to_string())
-        ))
-    })?;
+    let (q, phi, started, s): (usize, f64, bool, Bound<'_, PyAny>) =
+        state.extract().map_err(|e| {
+            PyTypeError::new_err(format!(
+                "a monitor's state: expected (q, phi, started, s), got {} ({e})",
+                state.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+            ))
+        })?;
+    let s = crate::convert::sequence(&s, "s")?;
     Ok(MonitorState { q, phi, started, s })
 }
 

@@ -26,7 +26,11 @@ fn pair<'py>(obj: &Bound<'py, PyAny>) -> Option<[Bound<'py, PyAny>; 2]> {
     if obj.is_instance_of::<PyString>() {
         return None;
     }
-    let items: Vec<Bound<'py, PyAny>> = obj.extract().ok()?;
+    // A pair has two items: anything claiming more is not one (and is never copied).
+    if obj.len().ok()? != 2 {
+        return None;
+    }
+    let items: Vec<Bound<'py, PyAny>> = convert::sequence(obj, "bounds").ok()?;
     items.try_into().ok()
 }
 
@@ -42,7 +46,13 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
         if let Ok(x) = v.extract::<f64>() {
             return Ok(vec![x; m]);
         }
-        v.extract::<Vec<f64>>().map_err(|_| pair_error())
+        convert::sequence::<f64>(v, name).map_err(|e| {
+            if e.is_instance_of::<pyo3::exceptions::PyMemoryError>(v.py()) {
+                e
+            } else {
+                pair_error()
+            }
+        })
     };
     Ok(Bounds {
         lo: side(&lo)?,

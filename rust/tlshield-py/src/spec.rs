@@ -102,6 +102,13 @@ pub fn build_responsive(py: Python<'_>, spec: &Spec) -> PyResult<Automaton> {
     }
 }
 
+/// Groups of atom names (``exclusive``), each a sequence of names.
+pub fn groups_of(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<String>>> {
+    crate::convert::sequence_with(obj, "exclusive", |i, group| {
+        crate::convert::sequence(&group, &format!("exclusive[{i}]"))
+    })
+}
+
 fn trajectory<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
     FloatArray::extract(obj, "traj", 2, "(T+1, n)")
 }
@@ -113,7 +120,7 @@ impl PySpec {
     fn new(
         formula: &str,
         predicates: &Bound<'_, PyAny>,
-        exclusive: Option<Vec<Vec<String>>>,
+        exclusive: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let items = predicates.call_method0("items").map_err(|_| {
             PyTypeError::new_err(format!(
@@ -138,7 +145,7 @@ impl PySpec {
             bound.push((name, predicate));
         }
         let mut spec = map(Spec::new(formula, bound))?;
-        if let Some(groups) = exclusive {
+        if let Some(groups) = exclusive.map(groups_of).transpose()? {
             spec = map(spec.with_exclusive(groups))?;
         }
         Ok(PySpec::from_core(spec))

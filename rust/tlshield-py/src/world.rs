@@ -128,20 +128,28 @@ pub struct PyWorldsStep {
 pub fn step_worlds(
     py: Python<'_>,
     worlds: &Bound<'_, PyAny>,
-    monitors: Vec<Bound<'_, PyMonitor>>,
+    monitors: &Bound<'_, PyAny>,
     actions: &Bound<'_, PyAny>,
     obs: &Bound<'_, PyAny>,
-    active: Option<Vec<bool>>,
+    active: Option<&Bound<'_, PyAny>>,
     shield: Option<PyRef<'_, PyShield>>,
     scale: bool,
 ) -> PyResult<PyWorldsStep> {
     let actions = FloatArray::extract(actions, "actions", 2, "(N, 2)")?;
     let previous = FloatArray::extract(obs, "obs", 2, "(N, D)")?;
     let width = previous.shape()[1];
-    let mut observation = previous.values().into_owned();
+    let monitors: Vec<Bound<'_, PyMonitor>> = crate::convert::sequence(monitors, "monitors")?;
+    let mut observation = map(tlshield_core::alloc::try_with_capacity(
+        "obs",
+        previous.values().len(),
+    ))?;
+    observation.extend_from_slice(&previous.values());
     let actions = actions.values();
     let rows = actions.len() / 2;
-    let active = active.unwrap_or_else(|| vec![true; rows]);
+    let active = match active {
+        Some(a) => crate::convert::sequence(a, "active")?,
+        None => map(tlshield_core::alloc::try_vec("actions", rows, true))?,
+    };
     let rows = Rows {
         monitors: &monitors,
         actions: &actions,
