@@ -18,11 +18,12 @@ Run: ``.venv/bin/python benches/compare_shield.py [--quick]``.
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import platform
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,8 @@ BATCH = 1024
 TARGET_CVXPY = 100.0
 TARGET_CLARABEL = 5.0
 TARGET_BATCH = 1.6
+#: The slowest steps: p99 at most this many times the median step.
+TARGET_TAIL = 3.0
 
 
 def make_steps(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -58,6 +61,31 @@ def make_steps(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.nd
         s[9:] = 20.0, 20.0, 20.0, -20.0
         steps.append((s, rng.uniform([-4.0, -6.0], [4.0, 6.0])))
     return steps
+
+
+def step_percentiles(
+    call: Callable[[object], object], items: Sequence[object], passes: int
+) -> dict[str, float]:
+    """Seconds of each call timed alone: per item the median over ``passes`` passes (machine
+    noise out), then p50, p90, p99 and the max over the items (the distribution over states:
+    the tail is the steps whose CLF goal or QP takes a slower path)."""
+    times = np.empty((passes, len(items)))
+    for item in items[:50]:  # warm-up
+        call(item)
+    gc.collect()
+    gc.disable()
+    try:
+        clock = time.perf_counter_ns
+        for p in range(passes):
+            for i, item in enumerate(items):
+                t0 = clock()
+                call(item)
+                times[p, i] = clock() - t0
+    finally:
+        gc.enable()
+    per_item = np.median(times, axis=0) * 1e-9
+    q = np.percentile(per_item, [50, 90, 99])
+    return {"p50": q[0], "p90": q[1], "p99": q[2], "max": float(per_item.max())}
 
 
 def rss_mib() -> float:
@@ -157,6 +185,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     medians: dict[str, float] = {}
     medians["tlshield"] = measure(tlshield_step, timed, budget, 5)[0]
+    tail = step_percentiles(tlshield_step, timed, 5 if args.quick else 31)
     medians["numpy + cvxpy"] = measure(python_step(cvx), timed, budget, 5)[0]
     medians["numpy + clarabel"] = measure(python_step(clar), timed, budget, 5)[0]
     solver_only = {}
@@ -221,6 +250,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     for name, value in solver_only.items():
         print(f'| tlshield solver="{name}" | {value * 1e6:.2f} | - | info |')
+    tail_ratio = tail["p99"] / tail["p50"]
+    verdicts.append(tail_ratio <= TARGET_TAIL)
+    print(
+        f"\nper step, each call timed alone ({len(timed)} random steps, the median of "
+        f"{5 if args.quick else 31} passes each): p50 {tail['p50'] * 1e6:.2f} us, "
+        f"p90 {tail['p90'] * 1e6:.2f} us, p99 {tail['p99'] * 1e6:.2f} us, "
+        f"max {tail['max'] * 1e6:.2f} us; p99 / p50 = {tail_ratio:.2f} "
+        f"(target <= {TARGET_TAIL:g}, {'ok' if verdicts[-1] else 'ABOVE TARGET'})"
+    )
     per_state = batch / BATCH
     single_per = singles / BATCH
     batch_ratio = single_per / per_state

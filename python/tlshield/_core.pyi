@@ -156,7 +156,7 @@ class Automaton:
         step_cost: float | None = None,
         bonus: float | None = None,
         c_r: float = 1.0,
-        exclusive: Sequence[Sequence[str]] = ...,
+        exclusive: Sequence[Sequence[str]] | None = None,
     ) -> ProgressReward: ...
 
 @final

@@ -258,26 +258,98 @@ pub fn pieces(leaves: &[&Predicate], dims: &[usize], s: Option<&[f64]>) -> Optio
 
 /// The deepest point of the intersection of `pieces` and its depth,
 /// `argmax_x min_i rho_i(x)`; `None` without a ball (the depth may be unbounded) or when the
-/// solver fails. One ball whose centre lies at least its radius inside every half-space is
-/// answered in closed form (its centre, depth = radius).
+/// solver fails. Goals inside walls, straddling one wall or overlapping another goal are
+/// answered in closed form ([`closed_form`]); the rest is the cone program.
 pub fn deepest_point(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
-    let balls = pieces
-        .iter()
-        .filter(|p| matches!(p, Piece::Ball { .. }))
-        .count();
-    if balls == 0 {
+    closed_form(pieces).or_else(|| cone_program(pieces))
+}
+
+/// The deepest point of one or two balls and half-spaces in closed form, or `None` when none
+/// applies (the cone program decides). Dropping pieces can only raise the optimum, so the
+/// optimum of a subset of the pieces at which every other piece is at least as robust is the
+/// optimum of all. The subsets tried, each solved exactly:
+/// - one ball: its centre, depth `r` (nothing is deeper than a ball's own centre);
+/// - a ball and a half-space `w . x + b` (value `a` at the centre): from the centre along
+///   `w`, where the ball's `r - s` meets the half-space's `a + s |w|`,
+///   `s = (r - a) / (1 + |w|)` (moving off that line only lowers the ball's robustness);
+/// - two balls: on the segment between the centres, where `r1 - s` meets `r2 - (d - s)`,
+///   `s = (r1 - r2 + d) / 2`, depth `(r1 + r2 - d) / 2` (no point does better, by the
+///   triangle inequality).
+pub fn closed_form(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
+    let mut balls: SmallVec<[(&[f64], f64); 2]> = SmallVec::new();
+    for p in pieces {
+        if let Piece::Ball { centre, radius } = p {
+            if balls.len() == 2 {
+                return None;
+            }
+            balls.push((centre, *radius));
+        }
+    }
+    let dim = balls.first()?.0.len();
+    if balls.iter().any(|(c, _)| c.len() != dim) {
         return None;
     }
-    // One ball whose centre is at least its radius inside every half-space: the centre (no
-    // point is deeper than the ball's own centre), the common case of a goal inside walls.
-    if balls == 1 {
-        let (centre, radius) = pieces.iter().find_map(|p| match p {
-            Piece::Ball { centre, radius } => Some((centre, *radius)),
-            _ => None,
-        })?;
-        if pieces.iter().all(|p| p.value(centre) >= radius) {
-            return Some((centre.clone(), radius));
+    // A subset's optimum `x` of depth `t` is the optimum of all when no piece is less robust.
+    let optimal = |x: Vec<f64>, t: f64| {
+        let depth = pieces
+            .iter()
+            .map(|p| p.value(&x))
+            .fold(f64::INFINITY, f64::min);
+        (depth >= t - 1e-12 * (1.0 + t.abs())).then_some((x, depth))
+    };
+    for &(centre, radius) in &balls {
+        if let Some(found) = optimal(centre.to_vec(), radius) {
+            return Some(found);
         }
+    }
+    for &(centre, radius) in &balls {
+        for p in pieces {
+            let Piece::Halfspace { w, .. } = p else {
+                continue;
+            };
+            let a = p.value(centre);
+            let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if a >= radius || norm == 0.0 || !norm.is_finite() || w.len() != dim {
+                continue;
+            }
+            let s = (radius - a) / (1.0 + norm);
+            let x = centre
+                .iter()
+                .zip(w)
+                .map(|(c, wi)| c + s * wi / norm)
+                .collect();
+            if let Some(found) = optimal(x, radius - s) {
+                return Some(found);
+            }
+        }
+    }
+    if let [(c1, r1), (c2, r2)] = balls[..] {
+        let d = c1
+            .iter()
+            .zip(c2)
+            .map(|(a, b)| (b - a) * (b - a))
+            .sum::<f64>()
+            .sqrt();
+        if d > 0.0 {
+            // Past the segment's ends one ball holds the other's centre: tried above.
+            let s = ((r1 - r2 + d) / 2.0).clamp(0.0, d);
+            let x = c1
+                .iter()
+                .zip(c2)
+                .map(|(a, b)| a + s * (b - a) / d)
+                .collect();
+            if let Some(found) = optimal(x, (r1 + r2 - d) / 2.0) {
+                return Some(found);
+            }
+        }
+    }
+    None
+}
+
+/// The deepest point by the cone program (Clarabel), for any pieces with a ball.
+pub fn cone_program(pieces: &[Piece]) -> Option<(Vec<f64>, f64)> {
+    if !pieces.iter().any(|p| matches!(p, Piece::Ball { .. })) {
+        return None;
     }
     let d = pieces.iter().find_map(|p| match p {
         Piece::Ball { centre, .. } => Some(centre.len()),
@@ -479,6 +551,77 @@ mod tests {
                 proptest::prop_assert!(depth <= 1e-9, "separated but depth {depth}");
             }
         }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(400))]
+
+        /// Where the closed form answers (one or two balls, up to three half-spaces), it finds
+        /// the cone program's depth, and its point is that deep.
+        #[test]
+        fn the_closed_form_agrees_with_the_cone_program(
+            discs in proptest::collection::vec((-2.0..2.0f64, -2.0..2.0f64, 0.1..1.5f64), 1..3),
+            walls in proptest::collection::vec((-1.5..1.5f64, -1.5..1.5f64, -2.0..2.0f64), 0..4),
+        ) {
+            let mut pieces: Vec<Piece> = discs
+                .iter()
+                .map(|&(x, y, r)| Piece::Ball { centre: vec![x, y], radius: r })
+                .collect();
+            for &(a, b, c) in &walls {
+                proptest::prop_assume!(a.abs() + b.abs() > 0.1);
+                pieces.push(Piece::Halfspace { w: vec![a, b], b: c });
+            }
+            let (x, depth) = cone_program(&pieces).expect("solved");
+            let exact = pieces.iter().map(|p| p.value(&x)).fold(f64::INFINITY, f64::min);
+            proptest::prop_assert!((exact - depth).abs() < 1e-12);
+            if let Some((y, closed)) = closed_form(&pieces) {
+                let at = pieces.iter().map(|p| p.value(&y)).fold(f64::INFINITY, f64::min);
+                proptest::prop_assert!((at - closed).abs() < 1e-12);
+                proptest::prop_assert!((closed - depth).abs() < 1e-6, "{closed} vs {depth}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_goal_straddling_one_wall_of_a_channel_has_a_closed_form() {
+        // The channel |x - y| < 1.5 and a goal disc of radius 0.5 whose centre is 1.3 across
+        // the axis: it sticks out of the wall -x + y + 1.5 > 0.
+        let walls = [
+            Piece::Halfspace {
+                w: vec![1.0, -1.0],
+                b: 1.5,
+            },
+            Piece::Halfspace {
+                w: vec![-1.0, 1.0],
+                b: 1.5,
+            },
+        ];
+        let ball = Piece::Ball {
+            centre: vec![2.0, 3.3],
+            radius: 0.5,
+        };
+        let pieces = [ball, walls[0].clone(), walls[1].clone()];
+        let (x, depth) = closed_form(&pieces).expect("a closed form");
+        let (y, solved) = cone_program(&pieces).expect("solved");
+        assert!((depth - solved).abs() < 1e-7, "{depth} vs {solved}");
+        assert!((x[0] - y[0]).abs() < 1e-6 && (x[1] - y[1]).abs() < 1e-6);
+        // A channel narrower than the ball, with the ball across both walls: no closed form.
+        let narrow = [
+            Piece::Ball {
+                centre: vec![0.0, 0.0],
+                radius: 2.0,
+            },
+            Piece::Halfspace {
+                w: vec![1.0, -1.0],
+                b: 0.2,
+            },
+            Piece::Halfspace {
+                w: vec![-1.0, 1.0],
+                b: 0.2,
+            },
+        ];
+        assert!(closed_form(&narrow).is_none());
+        assert!(cone_program(&narrow).is_some());
     }
 
     #[test]
