@@ -14,7 +14,7 @@ use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
 use crate::shield::Shield;
-use crate::world::{Measure, World, WorldStep};
+use crate::world::{Measure, ShieldStep, World, WorldStep};
 
 /// State length: x, y, theta, three goal centres, two obstacle centres.
 pub const STATE_DIM: usize = 13;
@@ -203,6 +203,7 @@ impl ChannelWorld {
         scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
+        record: bool,
     ) -> Result<WorldStep, ShieldError> {
         let p = &self.params;
         if let Some(i) = action.iter().position(|a| !a.is_finite()) {
@@ -223,14 +224,11 @@ impl ChannelWorld {
         let filtered = match shield {
             Some(shield) => {
                 let drift = p.obstacle_drift.then_some(&self.drift[..]);
-                Some(shield.filter_monitor(monitor, &a_rl, None, drift)?)
+                Some(ShieldStep::filter(shield, monitor, a_rl, drift, record)?)
             }
             None => None,
         };
-        let applied = match &filtered {
-            Some(f) => [f.action[0], f.action[1]],
-            None => a_rl,
-        };
+        let applied = filtered.as_ref().map_or(a_rl, |f| f.action);
         // The plant through the shield's own model, held in the arena, heading wrapped.
         let mut nxt = [0.0; STATE_DIM];
         self.model.euler_step(&self.s, &applied, p.dt, &mut nxt);
@@ -355,7 +353,7 @@ impl World for ChannelWorld {
         monitor: &mut Monitor,
         shield: Option<&Shield>,
     ) -> Result<WorldStep, ShieldError> {
-        self.step(action, scale, monitor, shield)
+        self.step(action, scale, monitor, shield, false)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {

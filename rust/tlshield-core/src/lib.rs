@@ -36,6 +36,7 @@ pub mod qp;
 pub mod region;
 pub mod robustness;
 pub mod shield;
+pub mod slots;
 pub mod spec;
 pub mod validate;
 pub mod world;

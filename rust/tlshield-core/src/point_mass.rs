@@ -10,7 +10,7 @@ use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
 use crate::shield::Shield;
-use crate::world::{Measure, World, WorldStep};
+use crate::world::{Measure, ShieldStep, World, WorldStep};
 
 /// State length: position `x, y`, velocity `vx, vy`.
 pub const STATE_DIM: usize = 4;
@@ -91,12 +91,14 @@ impl PointMassWorld {
     }
 
     /// One step for the RL action `a_rl` (accelerations), shielded by `shield` when given.
-    /// `monitor` must have read the current state (its reset or last advance).
+    /// `monitor` must have read the current state (its reset or last advance). `record` keeps
+    /// the shield's whole answer (goal, barriers) in the step.
     pub fn step(
         &mut self,
         a_rl: [f64; 2],
         monitor: &mut Monitor,
         shield: Option<&Shield>,
+        record: bool,
     ) -> Result<WorldStep, ShieldError> {
         if let Some(i) = a_rl.iter().position(|a| !a.is_finite()) {
             return Err(InputError::NonFinite {
@@ -107,12 +109,10 @@ impl PointMassWorld {
         }
         let p = &self.params;
         let filtered = match shield {
-            Some(shield) => Some(shield.filter_monitor(monitor, &a_rl, None, None)?),
+            Some(shield) => Some(ShieldStep::filter(shield, monitor, a_rl, None, record)?),
             None => None,
         };
-        let wanted = filtered
-            .as_ref()
-            .map_or(a_rl, |f| [f.action[0], f.action[1]]);
+        let wanted = filtered.as_ref().map_or(a_rl, |f| f.action);
         let applied = wanted.map(|a| a.clamp(-p.max_accel, p.max_accel));
         let mut nxt = [0.0; STATE_DIM];
         self.model.euler_step(&self.s, &applied, p.dt, &mut nxt);
@@ -174,7 +174,7 @@ impl World for PointMassWorld {
         monitor: &mut Monitor,
         shield: Option<&Shield>,
     ) -> Result<WorldStep, ShieldError> {
-        self.step(action, monitor, shield)
+        self.step(action, monitor, shield, false)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {
@@ -215,15 +215,17 @@ mod tests {
         let mut world = PointMassWorld::new(params());
         world.reset([0.05, 1.0, -1.0, 0.0]);
         monitor.reset(world.state()).unwrap();
-        let step = world.step([5.0, 0.0], &mut monitor, None).unwrap();
+        let step = world.step([5.0, 0.0], &mut monitor, None, true).unwrap();
         assert_eq!(step.applied, [1.0, 0.0]); // clipped to the box
         assert_eq!(world.state()[0], 0.0); // x = 0.05 - 0.1 left the room: held at the wall
         assert_eq!(world.state()[2], 0.0); // and its velocity into the wall is gone
         assert!(!step.truncated);
         for t in 2..=5 {
-            let step = world.step([0.0, 0.0], &mut monitor, None).unwrap();
+            let step = world.step([0.0, 0.0], &mut monitor, None, true).unwrap();
             assert_eq!(step.truncated, t == 5);
         }
-        assert!(world.step([f64::NAN, 0.0], &mut monitor, None).is_err());
+        assert!(world
+            .step([f64::NAN, 0.0], &mut monitor, None, true)
+            .is_err());
     }
 }

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{Filtered, Shield};
+use crate::shield::{Filtered, Shield, SolvedBy, Status};
 
 /// What a world measures at a state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -30,7 +30,7 @@ pub struct WorldStep {
     /// The action applied to the plant.
     pub applied: [f64; 2],
     /// The shield's answer, when it ran.
-    pub shield: Option<Filtered>,
+    pub shield: Option<ShieldStep>,
     /// The task's step (FSA state, task reward, acceptance, trap).
     pub task: TaskStep,
     /// The environment's reward.
@@ -41,6 +41,55 @@ pub struct WorldStep {
     pub truncated: bool,
     /// Measurements at the new state.
     pub measure: Measure,
+}
+
+/// The shield's answer in a world's step: the corrections and the solve's outcome in fixed-size
+/// fields (a batch's rows allocate nothing), and the whole answer (goal, barriers) when the step
+/// was asked to keep it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShieldStep {
+    /// The corrected action, `a_rl + a_cbf + a_clf`.
+    pub action: [f64; 2],
+    /// The safety correction.
+    pub a_cbf: [f64; 2],
+    /// The task correction.
+    pub a_clf: [f64; 2],
+    /// The CLF relaxation.
+    pub delta: f64,
+    /// The largest barrier slack.
+    pub slack: f64,
+    /// How the solve ended.
+    pub status: Status,
+    /// Which solver answered.
+    pub solver: SolvedBy,
+    /// The whole answer, when recorded.
+    pub record: Option<Filtered>,
+}
+
+impl ShieldStep {
+    /// The shield's answer for `a_rl` at `monitor`'s last state (`drift` as in
+    /// [`Shield::filter`]); `record` keeps the whole answer (one allocation per step).
+    pub fn filter(
+        shield: &Shield,
+        monitor: &Monitor,
+        a_rl: [f64; 2],
+        drift: Option<&[f64]>,
+        record: bool,
+    ) -> Result<ShieldStep, ShieldError> {
+        shield.filter_monitor_with(monitor, &a_rl, None, drift, record, |f| {
+            let pair = |v: &[f64]| [v[0], v[1]];
+            ShieldStep {
+                action: pair(&f.action),
+                a_cbf: pair(&f.a_cbf),
+                a_clf: pair(&f.a_clf),
+                delta: f.delta,
+                slack: f.slack,
+                status: f.status,
+                solver: f.solver,
+                record: record.then(|| f.clone()),
+            }
+        })
+    }
 }
 
 /// A world the core steps: one action (2 inputs) per step, shielded with its monitor's reading.

@@ -208,6 +208,7 @@ impl PyChannelWorld {
             scale,
             &mut monitor.inner,
             shield.as_deref().map(PyShield::core),
+            true,
         ))?;
         let obs = self.observation(&monitor.inner);
         PyWorldStep::new(py, step, obs, shield)

@@ -107,10 +107,12 @@ impl PyPointMassWorld {
     ) -> PyResult<PyWorldStep> {
         let a = values::<2>(a_rl, "a_rl")?;
         let mut monitor = monitor.borrow_mut();
-        let step =
-            map(self
-                .inner
-                .step(a, &mut monitor.inner, shield.as_deref().map(PyShield::core)))?;
+        let step = map(self.inner.step(
+            a,
+            &mut monitor.inner,
+            shield.as_deref().map(PyShield::core),
+            true,
+        ))?;
         let n = monitor.inner.automaton().num_states();
         let mut obs = vec![0.0; STATE_DIM + n];
         self.inner.observe(&monitor.inner, n, &mut obs);

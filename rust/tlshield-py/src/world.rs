@@ -4,7 +4,7 @@
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use tlshield_core::world::{step_many, World, WorldStep};
+use tlshield_core::world::{step_many, ShieldStep, World, WorldStep};
 
 use crate::channel::PyChannelWorld;
 use crate::convert::FloatArray;
@@ -186,10 +186,10 @@ pub fn step_worlds(
             .flat_map(|s| s.as_ref().map_or([0.0, 0.0], f))
             .collect()
     };
-    let shield_pair = |f: &dyn Fn(&tlshield_core::Filtered) -> [f64; 2]| -> Vec<f64> {
+    let shield_pair = |f: &dyn Fn(&ShieldStep) -> [f64; 2]| -> Vec<f64> {
         pairs(&|s: &WorldStep| s.shield.as_ref().map_or([0.0, 0.0], f))
     };
-    let shield_code = |f: &dyn Fn(&tlshield_core::Filtered) -> u8| -> Vec<u8> {
+    let shield_code = |f: &dyn Fn(&ShieldStep) -> u8| -> Vec<u8> {
         steps
             .iter()
             .map(|s| s.as_ref().and_then(|s| s.shield.as_ref()).map_or(0, f))
@@ -217,8 +217,8 @@ pub fn step_worlds(
         violation: flag(&|s| s.measure.violation).into_pyarray(py).unbind(),
         a_rl: matrix(pairs(&|s| s.a_rl), 2)?,
         action: matrix(pairs(&|s| s.applied), 2)?,
-        a_cbf: matrix(shield_pair(&|f| [f.a_cbf[0], f.a_cbf[1]]), 2)?,
-        a_clf: matrix(shield_pair(&|f| [f.a_clf[0], f.a_clf[1]]), 2)?,
+        a_cbf: matrix(shield_pair(&|f| f.a_cbf), 2)?,
+        a_clf: matrix(shield_pair(&|f| f.a_clf), 2)?,
         delta: col(&|s| s.shield.as_ref().map_or(0.0, |f| f.delta))
             .into_pyarray(py)
             .unbind(),

@@ -56,7 +56,7 @@ impl PyWorldStep {
             observation: observation.into_pyarray(py).unbind(),
             a_rl: step.a_rl.to_vec().into_pyarray(py).unbind(),
             action: step.applied.to_vec().into_pyarray(py).unbind(),
-            shield: match (shield, step.shield) {
+            shield: match (shield, step.shield.and_then(|s| s.record)) {
                 (Some(sh), Some(f)) => Some(Py::new(py, sh.result(py, f))?),
                 _ => None,
             },

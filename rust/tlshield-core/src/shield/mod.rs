@@ -26,7 +26,7 @@
 //! ([`crate::active_set`]) serves small problems in microseconds and hands anything it cannot
 //! certify to Clarabel ([`SolverChoice::Auto`]).
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 use smallvec::SmallVec;
@@ -39,6 +39,7 @@ use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
+use crate::slots::Slots;
 use crate::validate::check_finite;
 
 mod order;
@@ -615,7 +616,7 @@ pub struct Shield {
     /// Smallest state length every part can read.
     min_dim: usize,
     /// One workspace per concurrent caller, reused (no allocation in steady state).
-    pool: Mutex<Vec<Workspace>>,
+    pool: Slots<Workspace>,
 }
 
 impl std::fmt::Debug for Shield {
@@ -843,7 +844,7 @@ impl Shield {
             orders,
             m,
             min_dim,
-            pool: Mutex::new(Vec::new()),
+            pool: Slots::default(),
         })
     }
 
@@ -874,13 +875,7 @@ impl Shield {
     }
 
     fn with_workspace<R>(&self, n: usize, run: impl FnOnce(&mut Workspace) -> R) -> R {
-        let taken = self.pool.lock().map(|mut p| p.pop()).unwrap_or(None);
-        let mut ws = taken.unwrap_or_else(|| Workspace::new(n, self.m));
-        let result = run(&mut ws);
-        if let Ok(mut pool) = self.pool.lock() {
-            pool.push(ws);
-        }
-        result
+        self.pool.with(|| Workspace::new(n, self.m), run)
     }
 
     /// Checks the state length, finiteness and the barrier dimensions.
@@ -1024,6 +1019,21 @@ impl Shield {
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
     ) -> Result<Filtered, ShieldError> {
+        self.filter_monitor_with(monitor, a_rl, fg, drift, true, Filtered::clone)
+    }
+
+    /// [`Shield::filter_monitor`] handing the answer to `take` in place: nothing is allocated
+    /// when `take` copies what it needs (a vector environment's rows). With `record` false the
+    /// goal and the barrier list are not filled in (as in a batch).
+    pub fn filter_monitor_with<R>(
+        &self,
+        monitor: &Monitor,
+        a_rl: &[f64],
+        fg: Option<ControlAffine<'_>>,
+        drift: Option<&[f64]>,
+        record: bool,
+        take: impl FnOnce(&Filtered) -> R,
+    ) -> Result<R, ShieldError> {
         if !Arc::ptr_eq(monitor.automaton(), &self.automaton) {
             return Err(ShieldError::Config(
                 "monitor: it watches another automaton; build it from this shield's automaton \
@@ -1042,7 +1052,12 @@ impl Shield {
             drift,
             task: Some(monitor),
         };
-        self.checked_step(call, Want::Recorded, |ws| ws.out.clone())
+        let want = if record {
+            Want::Recorded
+        } else {
+            Want::Solution
+        };
+        self.checked_step(call, want, |ws| take(&ws.out))
     }
 
     /// The QP [`Shield::filter`] would solve at this step (before any relaxation), for
