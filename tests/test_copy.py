@@ -130,7 +130,11 @@ def test_a_monitor_copied_mid_episode_continues_bit_for_bit(how: str, reward: st
     for s in traj[20:]:
         a_rl = rng.normal(0.0, 0.5, size=2)
         # The shield reads a copied monitor as it reads the original (one automaton).
-        assert all(map(_same, _filtered(shield.filter(twin, a_rl)), _filtered(shield.filter(monitor, a_rl))))
+        assert all(
+            map(
+                _same, _filtered(shield.filter(twin, a_rl)), _filtered(shield.filter(monitor, a_rl))
+            )
+        )
         assert all(map(_same, _task_step(twin.advance(s)), _task_step(monitor.advance(s))))
 
 
@@ -149,7 +153,9 @@ def test_a_monitor_batch_copied_mid_episode_continues_bit_for_bit(how: str) -> N
         x, y = shield.filter_batch(twin, a_rl), shield.filter_batch(batch, a_rl)
         assert _same(x.action, y.action) and _same(x.status, y.status)
         u, v = twin.advance(states), batch.advance(states)
-        assert all(_same(getattr(u, k), getattr(v, k)) for k in ("q", "reward", "accepted", "trapped"))
+        assert all(
+            _same(getattr(u, k), getattr(v, k)) for k in ("q", "reward", "accepted", "trapped")
+        )
     empty = COPIES[how](tlshield.MonitorBatch(shield.automaton, 0))
     assert len(empty) == 0 and empty.advance(np.zeros((0, 13))).q.shape == (0,)
 
@@ -157,8 +163,10 @@ def test_a_monitor_batch_copied_mid_episode_continues_bit_for_bit(how: str) -> N
 @pytest.mark.parametrize("how", COPIES)
 def test_a_copied_shield_gives_the_same_actions(how: str) -> None:
     spec = channel_task_spec()
-    barriers = {"wall": tlshield.Halfspace(np.eye(13)[0], 11.0), "!pole": (
-        tlshield.Ball([0, 1], 0.4, center=[5.0, 5.5]), 0.5)}
+    barriers = {
+        "wall": tlshield.Halfspace(np.eye(13)[0], 11.0),
+        "!pole": (tlshield.Ball([0, 1], 0.4, center=[5.0, 5.5]), 0.5),
+    }
     shields = [
         task_shield(barriers=barriers, action_bounds=(-3.0, 3.0), solver="clarabel", alpha2=None),
         task_shield(rl_bounds=([-1.0, -2.0], [1.0, 2.0]), use_clf=False, margin=1e-4),

@@ -248,8 +248,14 @@ def ray_cluster(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[tupl
             time.sleep(1)
         yield address, client
     finally:
+        # `ray start --block` shuts its processes down on SIGTERM but then lingers about 30 s;
+        # past a short grace the whole group (the head's processes) is killed.
         os.killpg(head.pid, signal.SIGTERM)
-        head.wait(timeout=HANG)
+        try:
+            head.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(head.pid, signal.SIGKILL)
+            head.wait(timeout=HANG)
 
 
 def test_reproduce_on_a_cluster_through_its_address(

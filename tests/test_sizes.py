@@ -210,5 +210,5 @@ def test_a_vector_env_of_no_env_is_a_clear_value_error(n: int) -> None:
             make("tlshield/Channel-v0", n)
     with pytest.raises(ValueError, match="at least one environment"):
         tlshield.vector.WorldBatch([])
-    with pytest.raises(TypeError, match="num_envs = 2.5"):
+    with pytest.raises(TypeError, match=r"num_envs = 2\.5"):
         tlshield.vector.make("tlshield/PointMass-v0", 2.5)

@@ -1,7 +1,7 @@
 """Type stubs for the compiled module ``tlshield._core`` (hand-written; keep in sync)."""
 
-from collections.abc import Mapping, Sequence
-from typing import Literal, TypeAlias, final, overload
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal, TypeAlias, final, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -13,6 +13,14 @@ __version__: str
 
 def formula_atoms(formula: str) -> list[str]:
     """Parses an scTLTL formula and returns its atoms in order of first appearance."""
+
+def _restore(
+    version: object,
+    make: Callable[..., Any],
+    args: tuple[Any, ...],
+    kwargs: dict[str, Any] | None = None,
+) -> Any:
+    """Rebuilds a pickled tlshield object (refuses a pickle of another version)."""
 
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""
