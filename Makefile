@@ -13,13 +13,14 @@ setup:
 run: setup
 	$(BIN)/python -m tlshield reproduce --out results
 
-## Every test: Rust (cargo test), Python (pytest; the benchmark scripts and the examples run on
-## tiny budgets, so their comparison tools and third-party environments are installed too), the
-## docs' strict build, and the wheel installed and run in fresh venvs without Rust.
+## Every test: Rust (cargo test), Python (pytest on every core, pytest-xdist; the benchmark
+## scripts and the examples run on tiny budgets, so their comparison tools and third-party
+## environments are installed too), the docs' strict build, and the wheel installed and run in
+## fresh venvs without Rust.
 test:
 	@EXTRAS=train,test,bench,examples,build,docs bash scripts/setup.sh
 	cargo test --workspace
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --durations=10
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	bash scripts/check-wheel.sh
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import pickle
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
@@ -246,11 +247,29 @@ def test_a_shallow_copy_of_a_gym_make_env_still_copies_the_env_below() -> None:
     assert inner.tracker.monitor is not env.unwrapped.tracker.monitor
 
 
+def _shielded(kind: str) -> Any:
+    """A vector env of Channel-v0s without their own shield, shielded by the batch wrapper."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tlshield.envs.channel_task import ChannelParams, channel_shield
+
+    make = partial(ChannelEnv, shield_in_env=False, observation="paper")
+    shield = channel_shield(ChannelParams(), "rl_cbf_clf")
+    action_fn = make().rl_action
+    if kind == "sb3":
+        return tlshield.sb3.ShieldedVecEnv(DummyVecEnv([make] * 3), shield, action_fn)
+    return tlshield.vector.ShieldedVectorEnv(
+        gym.vector.SyncVectorEnv([make] * 3), shield, action_fn
+    )
+
+
 VECTORS: dict[str, Callable[[], Any]] = {
     "vector Channel-v0": lambda: tlshield.vector.make("tlshield/Channel-v0", 3),
     "vector PointMass-v0": lambda: tlshield.vector.make("tlshield/PointMass-v0", 3),
     "sb3 Channel-v0": lambda: tlshield.sb3.make_vec_env("tlshield/Channel-v0", 3),
     "sb3 PointMass-v0": lambda: tlshield.sb3.make_vec_env("tlshield/PointMass-v0", 3),
+    "sb3 ShieldedVecEnv": lambda: _shielded("sb3"),
+    "ShieldedVectorEnv": lambda: _shielded("gym"),
 }
 
 

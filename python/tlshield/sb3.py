@@ -3,6 +3,7 @@ this module loads SB3 (and torch): install the ``train`` extra."""
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -31,6 +32,17 @@ class ShieldedVecEnv(IndependentCopies, VecEnvWrapper):  # type: ignore[misc]
         obs = self.venv.reset()
         self._obs = np.asarray(obs, dtype=np.float64)
         return obs
+
+    def __getstate__(self) -> dict[str, Any]:
+        # SB3's VecEnvWrapper keeps its class's members (a mappingproxy among them, which no
+        # pickle takes); they are the class's, so a copy looks them up again.
+        state = self.__dict__.copy()
+        state.pop("class_attributes", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.class_attributes = dict(inspect.getmembers(self.__class__))
 
     def step_async(self, actions: NDArray[Any]) -> None:
         if self._obs is None:
