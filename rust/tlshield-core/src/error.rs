@@ -85,7 +85,7 @@ pub enum InputError {
     },
     /// A size from the caller (rows, a count, an array to copy) that cannot be allocated: more
     /// than memory can hold or than `usize` can count.
-    #[error("{what}: {count} items do not fit in memory{}", .bytes.map_or_else(|| " (their size overflows)".to_string(), |b| format!(" ({} requested)", crate::alloc::human_bytes(b))))]
+    #[error("{what}: {count} items do not fit in memory{}", .bytes.map_or_else(|| " (their size overflows)".to_string(), |b| format!(" ({} requested)", human_bytes(b))))]
     TooLarge {
         /// Which argument.
         what: String,
@@ -168,4 +168,20 @@ pub enum ShieldError {
     /// A problem with the automaton (e.g. an unknown state id).
     #[error(transparent)]
     Automaton(AutomatonError),
+}
+
+/// `bytes` in the largest binary unit that keeps it >= 1 (`"16.0 TiB"`).
+fn human_bytes(bytes: usize) -> String {
+    const UNITS: [&str; 7] = ["bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
 }
