@@ -52,3 +52,34 @@ def test_the_api_table_is_up_to_date() -> None:
     assert done.returncode == 0, (
         done.stdout + done.stderr + "\nregenerate: python scripts/api_table.py"
     )
+
+
+def test_every_tlshield_name_the_docs_and_the_help_give_resolves() -> None:
+    """A dotted ``tlshield.x.y`` name in the README, the docs, the examples or the package's
+    own text (docstrings, error messages, the command line's help) imports: a user who copies
+    it finds it (issue 32 found ``tlshield.FsaAugmented``, which lives in tlshield.wrappers)."""
+    import importlib
+    import re
+
+    texts = [ROOT / "README.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("examples/*.py")]
+    texts += list((ROOT / "python" / "tlshield").rglob("*.py"))
+    names = set()
+    for path in texts:
+        names.update(re.findall(r"\btlshield(?:\.[A-Za-z_]\w*)+", path.read_text()))
+    assert len(names) > 50, names  # the scan finds the names at all
+    missing = []
+    for name in sorted(names):
+        parts = name.split(".")
+        for k in range(len(parts), 0, -1):
+            try:
+                obj = importlib.import_module(".".join(parts[:k]))
+            except ImportError:
+                continue
+            rest = parts[k:]
+            break
+        for attr in rest:
+            if not hasattr(obj, attr):
+                missing.append(name)
+                break
+            obj = getattr(obj, attr)
+    assert not missing, f"names that do not resolve: {missing}"

@@ -349,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--env",
         default=ENV_ID,
         help="a registered Gymnasium id whose factory takes config= and evaluation= and wraps "
-        "the task (tlshield.FsaAugmented, tlshield.Shielded); default: the paper's case study. "
+        "the task (tlshield.wrappers.FsaAugmented, tlshield.wrappers.Shielded); default: the "
+        "paper's case study. "
         f"Bundled: {ENV_ID}, {POINT_MASS_ID}, {FLATWORLD_ID} (--set formula=...)",
     )
     train.add_argument(

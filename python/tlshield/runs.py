@@ -113,7 +113,7 @@ class Run:
     config: str
     #: Training seed.
     seed: int
-    #: metrics.csv by column (:data:`tlshield.training.METRIC_COLUMNS`), one value per update;
+    #: metrics.csv by column (:data:`tlshield.runs.METRIC_COLUMNS`), one value per update;
     #: every array is empty when the run has no complete row yet.
     metrics: dict[str, NDArray[np.float64]]
     #: evaluation.json, or None when the run was not evaluated.

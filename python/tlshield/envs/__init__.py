@@ -52,17 +52,17 @@ def env_horizon(env: Any) -> int | None:
 
 def check_task_env(env: Any, gamma: float, env_id: str) -> None:
     """Checks that ``env`` exposes a task that training can read, and that its reward's
-    guarantees hold for this training: an :class:`tlshield.FsaAugmented` in the wrapper chain
-    (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's ``gamma``,
-    and a reward horizon no shorter than the episodes (else finishing late may not out-earn
-    not finishing). Raises ValueError naming what is wrong."""
+    guarantees hold for this training: an :class:`tlshield.wrappers.FsaAugmented` in the
+    wrapper chain (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's
+    ``gamma``, and a reward horizon no shorter than the episodes (else finishing late may not
+    out-earn not finishing). Raises ValueError naming what is wrong."""
     try:
         tracker = env.get_wrapper_attr("tracker")
     except AttributeError:
         raise ValueError(
-            f"env {env_id!r} exposes no task: wrap it in tlshield.FsaAugmented (formula and "
-            "predicates) and, for a shield, tlshield.Shielded (model), and accept the keywords "
-            "config= and evaluation="
+            f"env {env_id!r} exposes no task: wrap it in tlshield.wrappers.FsaAugmented (formula "
+            "and predicates) and, for a shield, tlshield.wrappers.Shielded (model), and accept "
+            "the keywords config= and evaluation="
         ) from None
     progress = tracker.progress
     if progress is None:

@@ -11,10 +11,10 @@ square outside every disc; the horizon is 500 steps.
 Built only from the library's generic parts: colours are :class:`tlshield.Ball` predicates (a
 list of balls is their union), the plant and the shield's model are one
 :class:`tlshield.SingleIntegrator`, and the task and shield come from
-:class:`tlshield.FsaAugmented` and :class:`tlshield.Shielded`. Nothing here depends on the
-formula: ``gymnasium.make("tlshield/FlatWorld-v0", formula=...)`` takes any formula over the
-colours. Unlike DeepLTL (one policy for all formulas, no map, no model), a tlshield agent is
-trained per formula and its shield knows the discs and the dynamics.
+:class:`tlshield.wrappers.FsaAugmented` and :class:`tlshield.wrappers.Shielded`. Nothing here
+depends on the formula: ``gymnasium.make("tlshield/FlatWorld-v0", formula=...)`` takes any
+formula over the colours. Unlike DeepLTL (one policy for all formulas, no map, no model), a
+tlshield agent is trained per formula and its shield knows the discs and the dynamics.
 """
 
 from __future__ import annotations
