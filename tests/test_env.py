@@ -301,6 +301,17 @@ def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
             break
     with pytest.raises(TypeError, match="FsaAugmented"):
         Shielded(PointEnv(), shield)
+    # action_fn maps the policy's action to the shield's units, as the vector wrappers' does:
+    # the shield sees (and info reports) the mapped action, the env gets the shielded one.
+    scaled = Shielded(env, shield, action_fn=lambda a: 0.5 * np.asarray(a))
+    obs, _ = scaled.reset(seed=0)
+    q = env.fsa_state
+    _, _, _, _, info = scaled.step(np.array([0.4, -0.2]))
+    ref = shield.filter(obs[:2], q, np.array([0.2, -0.1]))
+    assert info["shield"]["a_rl"].tolist() == [0.2, -0.1]
+    assert info["shield"]["a_cbf"].tolist() == ref.a_cbf.tolist()
+    applied = info["shield"]["a_rl"] + info["shield"]["a_cbf"] + info["shield"]["a_clf"]
+    assert applied.tolist() == ref.action.tolist()
 
 
 def test_fsa_augmented_reset_reports_a_start_in_the_trap() -> None:

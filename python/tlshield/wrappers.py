@@ -160,8 +160,10 @@ class Shielded(IndependentCopies, gym.Wrapper):
     one-hot included) to the state vector; by default the first ``n`` values. ``dynamics_fn(s)``
     returns ``(f, g)`` for systems without a built-in model. ``drift_fn(s)`` returns the
     measured motion of state dimensions the agent does not control (moving obstacles), added
-    to ``f`` (see ``Shield.filter``). ``info["shield"]`` carries ``a_rl``, ``a_cbf``,
-    ``a_clf``, ``delta`` and ``status``.
+    to ``f`` (see ``Shield.filter``). ``action_fn`` maps the policy's action to the RL action
+    in the shield's units (as the vector wrappers' ``action_fn``; default: as it is): the
+    wrapped env then receives the shielded action in those units. ``info["shield"]`` carries
+    ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``.
     """
 
     def __init__(
@@ -171,6 +173,7 @@ class Shielded(IndependentCopies, gym.Wrapper):
         state_fn: StateFn | None = None,
         dynamics_fn: DynamicsFn | None = None,
         drift_fn: StateFn | None = None,
+        action_fn: StateFn | None = None,
     ) -> None:
         super().__init__(env)
         try:
@@ -182,6 +185,7 @@ class Shielded(IndependentCopies, gym.Wrapper):
         self.state_fn = state_fn or WithoutFsaState(k)
         self.dynamics_fn = dynamics_fn
         self.drift_fn = drift_fn
+        self.action_fn = action_fn
         self._state: NDArray[np.float64] | None = None
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
@@ -192,7 +196,7 @@ class Shielded(IndependentCopies, gym.Wrapper):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        a_rl = np.asarray(action, dtype=np.float64)
+        a_rl = np.asarray(action if self.action_fn is None else self.action_fn(action), float)
         q = self.env.get_wrapper_attr("fsa_state")
         drift = None if self.drift_fn is None else self.drift_fn(self._state)
         if self.dynamics_fn is None:
