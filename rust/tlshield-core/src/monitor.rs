@@ -237,17 +237,14 @@ impl Monitor {
     }
 
     fn restore_checked(&mut self, state: &MonitorState) {
-        if state.started {
-            self.read(&state.s);
-        } else {
-            self.s.clear();
-        }
         self.q = state.q;
         self.phi = state.phi;
         self.started = state.started;
         if state.started {
+            self.read(&state.s);
             self.update_goal();
         } else {
+            self.s.clear();
             self.has_goal = false;
         }
     }

@@ -209,7 +209,7 @@ impl PyAutomaton {
         let dim = arr.shape()[1];
         let values = arr.values();
         let aut = &self.inner;
-        let out = py.detach(|| aut.step_batch(&qs, &values, dim));
+        let out = py.detach(|| aut.step_batch(&qs, values, dim));
         Ok(map(out)?
             .into_iter()
             .map(|q| q as i64)
@@ -223,7 +223,7 @@ impl PyAutomaton {
         let values = arr.values();
         map(self
             .inner
-            .run(map(Trajectory::new(&values, arr.shape()[1]))?))
+            .run(map(Trajectory::new(values, arr.shape()[1]))?))
     }
 
     /// Whether the automaton accepts ``traj`` (equals ``Spec.satisfied``).
@@ -232,7 +232,7 @@ impl PyAutomaton {
         let values = arr.values();
         map(self
             .inner
-            .accepts(map(Trajectory::new(&values, arr.shape()[1]))?))
+            .accepts(map(Trajectory::new(values, arr.shape()[1]))?))
     }
 
     /// Eq. 5A1: ``min(rho(s', D_q), c_r * rho(s', !psi_{q,trap}))`` for leaving ``q`` into

@@ -201,7 +201,7 @@ impl PyChannelWorld {
         scale: bool,
     ) -> PyResult<PyWorldStep> {
         let a = FloatArray::extract(action, "action", 1, "(2,)")?;
-        let a = pair(a.values().into_owned(), "action")?;
+        let a = pair(a.values().to_vec(), "action")?;
         let mut monitor = monitor.borrow_mut();
         let step = map(self.inner.step(
             a,

@@ -4,8 +4,6 @@
 //! object and text input is refused with a `TypeError` naming the argument (numpy would drop an
 //! imaginary part or read `True` as 1 without a word).
 
-use std::borrow::Cow;
-
 use numpy::{
     AllowTypeChange, PyArray1, PyArrayDescrMethods, PyArrayLike1, PyArrayLikeDyn, PyArrayMethods,
     PyUntypedArray, PyUntypedArrayMethods,
@@ -102,10 +100,10 @@ impl<'py> FloatArray<'py> {
     /// The values in C order, borrowed from numpy when the array is C-contiguous, else from
     /// the copy made at extraction. (`as_slice` alone would also hand out a
     /// Fortran-contiguous buffer, in Fortran order.)
-    pub fn values(&self) -> Cow<'_, [f64]> {
+    pub fn values(&self) -> &[f64] {
         match &self.copy {
-            Some(copy) => Cow::Borrowed(copy),
-            None => Cow::Borrowed(self.array.as_slice().unwrap_or_default()),
+            Some(copy) => copy,
+            None => self.array.as_slice().unwrap_or_default(),
         }
     }
 }
@@ -160,9 +158,7 @@ pub fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
             return Ok(values);
         }
     }
-    Ok(FloatArray::extract(obj, name, 1, "(n,)")?
-        .values()
-        .into_owned())
+    Ok(FloatArray::extract(obj, name, 1, "(n,)")?.values().to_vec())
 }
 
 /// Refuses a `(s, q)` call made in the old `(q, s)` order (an integer where the state vector

@@ -291,7 +291,7 @@ impl PyMonitorBatch {
         let arr = FloatArray::extract(states, "states", 2, "(len(rows), n)")?;
         let (dim, values) = (arr.shape()[1], arr.values());
         let (inner, steps) = (&mut self.inner, &mut self.steps);
-        map(py.detach(|| inner.reset(&rows, &values, dim, steps)))?;
+        map(py.detach(|| inner.reset(&rows, values, dim, steps)))?;
         Ok(PyTaskBatch::new(py, &self.steps))
     }
 
@@ -301,7 +301,7 @@ impl PyMonitorBatch {
         let arr = FloatArray::extract(states, "states", 2, "(num, n)")?;
         let (dim, values) = (arr.shape()[1], arr.values());
         let (inner, steps) = (&mut self.inner, &mut self.steps);
-        map(py.detach(|| inner.advance(&values, dim, steps)))?;
+        map(py.detach(|| inner.advance(values, dim, steps)))?;
         Ok(PyTaskBatch::new(py, &self.steps))
     }
 

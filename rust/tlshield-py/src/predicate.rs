@@ -16,11 +16,11 @@ fn state<'py>(obj: &Bound<'py, PyAny>) -> PyResult<FloatArray<'py>> {
 }
 
 fn value(p: &Predicate, s: &Bound<'_, PyAny>) -> PyResult<f64> {
-    map(p.robustness(&state(s)?.values()))
+    map(p.robustness(state(s)?.values()))
 }
 
 fn gradient<'py>(p: &Predicate, s: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    Ok(map(p.gradient(&state(s)?.values()))?.into_pyarray(s.py()))
+    Ok(map(p.gradient(state(s)?.values()))?.into_pyarray(s.py()))
 }
 
 fn fmt_list<T: std::fmt::Debug>(v: &[T]) -> String {
@@ -37,9 +37,7 @@ pub struct PyHalfspace {
 impl PyHalfspace {
     #[new]
     fn new(w: &Bound<'_, PyAny>, b: f64) -> PyResult<Self> {
-        let w = FloatArray::extract(w, "w", 1, "(n,)")?
-            .values()
-            .into_owned();
+        let w = FloatArray::extract(w, "w", 1, "(n,)")?.values().to_vec();
         Ok(PyHalfspace {
             inner: map(Predicate::halfspace(w, b))?,
         })
@@ -115,7 +113,7 @@ impl PyBall {
         let pos = indices(pos, "pos")?;
         let center = match (center, center_dims) {
             (Some(c), None) => {
-                Center::Fixed(FloatArray::extract(c, "center", 1, "(len(pos),)")?.values().into_owned())
+                Center::Fixed(FloatArray::extract(c, "center", 1, "(len(pos),)")?.values().to_vec())
             }
             (None, Some(d)) => Center::Dims(indices(d, "center_dims")?),
             (None, None) => {

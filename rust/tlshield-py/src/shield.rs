@@ -224,8 +224,8 @@ impl PyShield {
                     )));
                 }
                 call(Some(ControlAffine {
-                    f: &f.values(),
-                    g: &g.values(),
+                    f: f.values(),
+                    g: g.values(),
                 }))
             }
             _ => Err(PyValueError::new_err(
@@ -408,9 +408,7 @@ impl PyShield {
         let drift = drift.map(|d| vector(d, "drift")).transpose()?;
         let drift = drift.as_deref();
         let action = |a: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
-            Ok(FloatArray::extract(a, "a_rl", 1, "(m,)")?
-                .values()
-                .into_owned())
+            Ok(FloatArray::extract(a, "a_rl", 1, "(m,)")?.values().to_vec())
         };
         let out = if let Ok(monitor) = s.cast::<PyMonitor>() {
             if a_rl.is_some() {
@@ -476,9 +474,7 @@ impl PyShield {
             let shield = &self.inner;
             let mut out = BatchOutput::default();
             let batch = &monitors.inner;
-            map(py.detach(|| {
-                shield.filter_monitors(batch, &actions, drift_values.as_deref(), &mut out)
-            }))?;
+            map(py.detach(|| shield.filter_monitors(batch, actions, drift_values, &mut out)))?;
             return self.batch_result(py, out, rows);
         }
         let a_rl = a_rl.ok_or_else(|| {
@@ -512,8 +508,8 @@ impl PyShield {
         let (values, actions) = (states.values(), a_rl.values());
         let shield = &self.inner;
         let mut out = BatchOutput::default();
-        let drift = drift_values.as_deref();
-        map(py.detach(|| shield.filter_batch(&values, n, &qs_usize, &actions, drift, &mut out)))?;
+        let drift = drift_values;
+        map(py.detach(|| shield.filter_batch(values, n, &qs_usize, actions, drift, &mut out)))?;
         self.batch_result(py, out, rows)
     }
 

@@ -190,7 +190,7 @@ impl PySpec {
         s: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let s = FloatArray::extract(s, "s", 1, "(n,)")?;
-        Ok(map(self.inner.atom_robustness(&s.values()))?.into_pyarray(py))
+        Ok(map(self.inner.atom_robustness(s.values()))?.into_pyarray(py))
     }
 
     /// Robustness of the trajectory `traj` (shape (T+1, n)) at t = 0, closed window.
@@ -199,7 +199,7 @@ impl PySpec {
         let values = arr.values();
         map(self
             .inner
-            .robustness(map(Trajectory::new(&values, arr.shape()[1]))?))
+            .robustness(map(Trajectory::new(values, arr.shape()[1]))?))
     }
 
     /// Whether the trajectory satisfies the formula (Boolean semantics).
@@ -208,7 +208,7 @@ impl PySpec {
         let values = arr.values();
         map(self
             .inner
-            .satisfied(map(Trajectory::new(&values, arr.shape()[1]))?))
+            .satisfied(map(Trajectory::new(values, arr.shape()[1]))?))
     }
 
     /// Robustness of each trajectory of `trajs` (shape (B, T+1, n)) -> (B,), computed in
@@ -222,7 +222,7 @@ impl PySpec {
         let shape = arr.shape();
         let (b, t, n) = (shape[0], shape[1], shape[2]);
         let values = arr.values();
-        let batch = map(TrajectoryBatch::new(&values, b, t, n))?;
+        let batch = map(TrajectoryBatch::new(values, b, t, n))?;
         let spec = &self.inner;
         let out = py.detach(|| spec.robustness_batch(batch));
         Ok(map(out)?.into_pyarray(py))

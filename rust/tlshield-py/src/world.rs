@@ -143,7 +143,7 @@ pub fn step_worlds(
         "obs",
         previous.values().len(),
     ))?;
-    observation.extend_from_slice(&previous.values());
+    observation.extend_from_slice(previous.values());
     let actions = actions.values();
     let rows = actions.len() / 2;
     let active = match active {
@@ -152,7 +152,7 @@ pub fn step_worlds(
     };
     let rows = Rows {
         monitors: &monitors,
-        actions: &actions,
+        actions,
         active: &active,
         scale,
         shield: shield.as_deref().map(PyShield::core),
