@@ -466,10 +466,60 @@ class AccelerationUnicycle:
     def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
         """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
+@final
+class KinematicBicycle:
+    """A kinematic bicycle about its rear axle: state ``x, y, theta, v``, inputs
+    ``(a, tan delta)``; ``dtheta = v tan(delta) / wheelbase``."""
+
+    def __new__(
+        cls, wheelbase: float, x: int = 0, y: int = 1, theta: int = 2, v: int = 3
+    ) -> Self: ...
+    @property
+    def wheelbase(self) -> float: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
+
+@final
+class ControlAffine:
+    """A user's control-affine model ``ds/dt = f(s) + g(s) a`` given as callables; its
+    structure (which dimensions the inputs move) is probed at construction."""
+
+    def __new__(
+        cls,
+        f: Callable[[NDArray[np.float64]], ArrayLike],
+        g: Callable[[NDArray[np.float64]], ArrayLike],
+        *,
+        state_dim: int,
+        inputs: int,
+        jacobian: Callable[[NDArray[np.float64]], ArrayLike] | None = None,
+        probe: ArrayLike | None = None,
+    ) -> Self: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def drift_jacobian(self, s: ArrayLike) -> NDArray[np.float64]:
+        """The drift's Jacobian at ``s`` as the shield uses it (given, or by differences)."""
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def inputs(self) -> int: ...
+    @property
+    def actuated(self) -> list[int]: ...
+    @property
+    def integrated(self) -> list[int]: ...
+
 Bound: TypeAlias = float | Sequence[float]
 #: ``(lo, hi)``; a list ``[lo, hi]`` (as read back from JSON) is accepted too.
 Bounds: TypeAlias = tuple[Bound, Bound] | Sequence[Bound]
-Dynamics: TypeAlias = Unicycle | SingleIntegrator | DoubleIntegrator | AccelerationUnicycle
+Dynamics: TypeAlias = (
+    Unicycle
+    | SingleIntegrator
+    | DoubleIntegrator
+    | AccelerationUnicycle
+    | KinematicBicycle
+    | ControlAffine
+)
 
 @final
 class FilterResult:
@@ -544,8 +594,10 @@ class Shield:
         alpha2: float | None = None,
         clf_gain: float | None = None,
         preserve_progress: bool = True,
+        inputs: int | None = None,
     ) -> Self:
-        """``slack_penalty`` prices barrier slack when the QP must be relaxed (None: 1e6);
+        """``inputs`` is the number of inputs m when ``dynamics`` is None and the bounds are
+        scalars (a model gives m itself); ``slack_penalty`` prices barrier slack when the QP must be relaxed (None: 1e6);
         ``margin`` is what every barrier is kept above (> 0; None: 1e-6); ``rl_bounds`` is
         the range of the RL action: when given, a CBF box that cannot cancel every RL action
         plus every CLF correction is refused here, and an ``a_rl`` outside it is refused per

@@ -1,8 +1,9 @@
 //! Control-affine dynamics `ds/dt = f(s) + g(s) a` for the shield: a single integrator, the
-//! unicycle reference point of the paper (Eq. 6A2), two acceleration-level models (a double
-//! integrator and a unicycle driven by acceleration and turn rate), or `f`, `g` supplied by the
-//! caller. Each built-in model also gives exact products with the Jacobian of `f`, which the
-//! second-order (HOCBF) rows and the second-order CLF need.
+//! unicycle reference point of the paper (Eq. 6A2), three acceleration-level models (a double
+//! integrator, a unicycle driven by acceleration and turn rate, and a kinematic bicycle driven
+//! by acceleration and the tangent of its steering angle), or a user's own model whose values
+//! come with every call (`custom.rs`). Each built-in model also gives exact products with the
+//! Jacobian of `f`, which the second-order (HOCBF) rows and the second-order CLF need.
 
 use crate::error::InputError;
 use crate::validate::check_finite;
@@ -48,6 +49,45 @@ pub enum Dynamics {
         /// State index of the forward speed.
         v: usize,
     },
+    /// A kinematic bicycle about its rear axle, wheelbase `l`: `dx = v cos theta`,
+    /// `dy = v sin theta`, `dtheta = v a[1] / l`, `dv = a[0]`, with inputs (acceleration,
+    /// `tan delta`) for steering angle `delta`. Taking `tan delta` as the input keeps the model
+    /// control-affine and exact, and turns the steering limit into a constant box
+    /// `|a[1]| <= tan(delta_max)`: the turn rate it allows, `|v| tan(delta_max) / l`, shrinks
+    /// with speed by the model itself. A barrier on `x, y` has relative degree 2 under it.
+    KinematicBicycle {
+        /// Wheelbase (distance between the axles, > 0).
+        l: f64,
+        /// State index of the rear axle's x.
+        x: usize,
+        /// State index of the rear axle's y.
+        y: usize,
+        /// State index of the heading.
+        theta: usize,
+        /// State index of the forward speed.
+        v: usize,
+    },
+}
+
+/// What the relative-degree analysis (`shield/order.rs`) reads of a model: which state
+/// dimensions an input moves directly, and which through one integration.
+pub trait Structure: std::fmt::Display {
+    /// Whether an input can move state dimension `d` directly (row `d` of `g` may be
+    /// non-zero).
+    fn actuates(&self, d: usize) -> bool;
+    /// Whether an input moves state dimension `d` through one integration (`f[d]` depends on
+    /// an actuated dimension).
+    fn actuates_twice_removed(&self, d: usize) -> bool;
+}
+
+impl Structure for Dynamics {
+    fn actuates(&self, d: usize) -> bool {
+        Dynamics::actuates(self, d)
+    }
+
+    fn actuates_twice_removed(&self, d: usize) -> bool {
+        Dynamics::actuates_twice_removed(self, d)
+    }
 }
 
 fn distinct(what: &str, dims: &[usize]) -> Result<(), InputError> {
@@ -120,13 +160,34 @@ impl Dynamics {
         Ok(Dynamics::AccelerationUnicycle { x, y, theta, v })
     }
 
+    /// The kinematic bicycle; wheelbase `l` finite and > 0, `x`, `y`, `theta`, `v` distinct.
+    pub fn kinematic_bicycle(
+        l: f64,
+        x: usize,
+        y: usize,
+        theta: usize,
+        v: usize,
+    ) -> Result<Self, InputError> {
+        if !(l.is_finite() && l > 0.0) {
+            return Err(InputError::Value {
+                what: "KinematicBicycle wheelbase".into(),
+                expected: "a finite length > 0".into(),
+                got: l.to_string(),
+            });
+        }
+        distinct("KinematicBicycle x, y, theta, v", &[x, y, theta, v])?;
+        Ok(Dynamics::KinematicBicycle { l, x, y, theta, v })
+    }
+
     /// Number of inputs m.
     pub fn inputs(&self) -> usize {
         match self {
             Dynamics::SingleIntegrator { pos } | Dynamics::DoubleIntegrator { pos, .. } => {
                 pos.len()
             }
-            Dynamics::Unicycle { .. } | Dynamics::AccelerationUnicycle { .. } => 2,
+            Dynamics::Unicycle { .. }
+            | Dynamics::AccelerationUnicycle { .. }
+            | Dynamics::KinematicBicycle { .. } => 2,
         }
     }
 
@@ -138,7 +199,8 @@ impl Dynamics {
                 pos.iter().chain(vel).copied().max().unwrap_or(0)
             }
             Dynamics::Unicycle { x, y, theta, .. } => *x.max(y).max(theta),
-            Dynamics::AccelerationUnicycle { x, y, theta, v } => *x.max(y).max(theta).max(v),
+            Dynamics::AccelerationUnicycle { x, y, theta, v }
+            | Dynamics::KinematicBicycle { x, y, theta, v, .. } => *x.max(y).max(theta).max(v),
         };
         top + 1
     }
@@ -150,7 +212,8 @@ impl Dynamics {
             Dynamics::SingleIntegrator { pos } => pos.contains(&d),
             Dynamics::DoubleIntegrator { vel, .. } => vel.contains(&d),
             Dynamics::Unicycle { x, y, theta, .. } => d == *x || d == *y || d == *theta,
-            Dynamics::AccelerationUnicycle { theta, v, .. } => d == *theta || d == *v,
+            Dynamics::AccelerationUnicycle { theta, v, .. }
+            | Dynamics::KinematicBicycle { theta, v, .. } => d == *theta || d == *v,
         }
     }
 
@@ -160,7 +223,8 @@ impl Dynamics {
         match self {
             Dynamics::SingleIntegrator { .. } | Dynamics::Unicycle { .. } => false,
             Dynamics::DoubleIntegrator { pos, .. } => pos.contains(&d),
-            Dynamics::AccelerationUnicycle { x, y, .. } => d == *x || d == *y,
+            Dynamics::AccelerationUnicycle { x, y, .. }
+            | Dynamics::KinematicBicycle { x, y, .. } => d == *x || d == *y,
         }
     }
 
@@ -174,7 +238,9 @@ impl Dynamics {
                     out[p] = u[w];
                 }
             }
-            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+            // The bicycle's drift is the acceleration unicycle's: steering enters through g.
+            Dynamics::AccelerationUnicycle { x, y, theta, v }
+            | Dynamics::KinematicBicycle { x, y, theta, v, .. } => {
                 let (sin, cos) = s[*theta].sin_cos();
                 out[*x] = -s[*v] * sin * u[*theta] + cos * u[*v];
                 out[*y] = s[*v] * cos * u[*theta] + sin * u[*v];
@@ -192,7 +258,8 @@ impl Dynamics {
                     out[q] = w[p];
                 }
             }
-            Dynamics::AccelerationUnicycle { x, y, theta, v } => {
+            Dynamics::AccelerationUnicycle { x, y, theta, v }
+            | Dynamics::KinematicBicycle { x, y, theta, v, .. } => {
                 let (sin, cos) = s[*theta].sin_cos();
                 out[*theta] = s[*v] * (-sin * w[*x] + cos * w[*y]);
                 out[*v] = cos * w[*x] + sin * w[*y];
@@ -270,6 +337,13 @@ impl Dynamics {
                 out[*theta] = a[1];
                 out[*v] = a[0];
             }
+            Dynamics::KinematicBicycle { l, x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*x] = s[*v] * cos;
+                out[*y] = s[*v] * sin;
+                out[*theta] = s[*v] * a[1] / l;
+                out[*v] = a[0];
+            }
         }
     }
 
@@ -314,6 +388,13 @@ impl Dynamics {
                 g[v * m] = 1.0;
                 g[theta * m + 1] = 1.0;
             }
+            Dynamics::KinematicBicycle { l, x, y, theta, v } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                f[*x] = s[*v] * cos;
+                f[*y] = s[*v] * sin;
+                g[v * m] = 1.0;
+                g[theta * m + 1] = s[*v] / l;
+            }
         }
     }
 }
@@ -333,6 +414,12 @@ impl std::fmt::Display for Dynamics {
                 write!(
                     f,
                     "AccelerationUnicycle(x={x}, y={y}, theta={theta}, v={v})"
+                )
+            }
+            Dynamics::KinematicBicycle { l, x, y, theta, v } => {
+                write!(
+                    f,
+                    "KinematicBicycle(wheelbase={l}, x={x}, y={y}, theta={theta}, v={v})"
                 )
             }
         }
@@ -366,6 +453,9 @@ mod tests {
         assert!(Dynamics::double_integrator(vec![0, 1], vec![2]).is_err());
         assert!(Dynamics::double_integrator(vec![0, 1], vec![1, 2]).is_err());
         assert!(Dynamics::acceleration_unicycle(0, 1, 2, 2).is_err());
+        assert!(Dynamics::kinematic_bicycle(0.0, 0, 1, 2, 3).is_err());
+        assert!(Dynamics::kinematic_bicycle(f64::NAN, 0, 1, 2, 3).is_err());
+        assert!(Dynamics::kinematic_bicycle(0.5, 0, 1, 1, 3).is_err());
     }
 
     proptest::proptest! {
@@ -383,6 +473,7 @@ mod tests {
                 Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
                 Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
                 Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
+                Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
             ] {
                 let m = model.inputs();
                 let f_at = |x: &[f64]| {
@@ -432,6 +523,7 @@ mod tests {
                 Dynamics::single_integrator(vec![1, 4]).unwrap(),
                 Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
                 Dynamics::acceleration_unicycle(0, 1, 2, 3).unwrap(),
+                Dynamics::kinematic_bicycle(0.5, 0, 1, 2, 3).unwrap(),
             ] {
                 let m = model.inputs();
                 let (mut f, mut g, mut out) = (vec![0.0; 5], vec![0.0; 5 * m], vec![0.0; 5]);

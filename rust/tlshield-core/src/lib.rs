@@ -21,6 +21,7 @@ pub mod alloc;
 pub mod automaton;
 pub mod channel;
 pub mod cnf;
+pub mod custom;
 pub mod dynamics;
 pub mod error;
 #[cfg(any(test, feature = "fixtures"))]
@@ -42,6 +43,7 @@ pub mod validate;
 pub mod world;
 
 pub use automaton::{Automaton, Edge, Reading};
+pub use custom::CustomModel;
 pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use formula::Formula;
@@ -52,8 +54,8 @@ pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 #[allow(deprecated)]
 pub use shield::ShieldConfig;
 pub use shield::{
-    Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield, ShieldParams,
-    SolvedBy, SolverChoice, Status,
+    Barrier, BarrierSource, BatchDynamics, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
+    ShieldParams, SolvedBy, SolverChoice, Status,
 };
 pub use spec::Spec;
 

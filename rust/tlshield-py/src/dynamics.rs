@@ -1,5 +1,5 @@
 //! The control-affine models of the shield and of the environments' plants: `Unicycle`,
-//! `SingleIntegrator`, `DoubleIntegrator`, `AccelerationUnicycle`. Each wraps a core
+//! `SingleIntegrator`, `DoubleIntegrator`, `AccelerationUnicycle`, `KinematicBicycle`. Each wraps a core
 //! `Dynamics` and shares `eval`, `step` and `repr` (one `#[pymethods]` block per model from
 //! `model_methods!`).
 
@@ -74,6 +74,13 @@ fn constructor_args<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'p
             theta.into_pyobject(py)?.into_any(),
             v.into_pyobject(py)?.into_any(),
         ],
+        Dynamics::KinematicBicycle { l, x, y, theta, v } => vec![
+            l.into_pyobject(py)?.into_any(),
+            x.into_pyobject(py)?.into_any(),
+            y.into_pyobject(py)?.into_any(),
+            theta.into_pyobject(py)?.into_any(),
+            v.into_pyobject(py)?.into_any(),
+        ],
     };
     PyTuple::new(py, items)
 }
@@ -91,6 +98,9 @@ pub fn to_python<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'py, 
         }
         Dynamics::AccelerationUnicycle { .. } => {
             Bound::new(py, PyAccelerationUnicycle { inner })?.into_any()
+        }
+        Dynamics::KinematicBicycle { .. } => {
+            Bound::new(py, PyKinematicBicycle { inner })?.into_any()
         }
     })
 }
@@ -173,6 +183,38 @@ impl PyAccelerationUnicycle {
 }
 model_methods!(PyAccelerationUnicycle);
 
+/// A kinematic bicycle about its rear axle with the given ``wheelbase``: state ``x, y, theta,
+/// v`` at the given dimensions, inputs ``(a, tan delta)`` for steering angle ``delta``;
+/// ``dx = v cos theta``, ``dy = v sin theta``, ``dtheta = v tan(delta) / wheelbase``,
+/// ``dv = a``. The steering limit is the constant box ``|tan delta| <= tan(delta_max)`` on the
+/// second input: the turn rate it allows shrinks with speed by the model itself. Barriers on
+/// ``x, y`` have relative degree 2.
+#[pyclass(name = "KinematicBicycle", module = "tlshield._core", frozen)]
+pub struct PyKinematicBicycle {
+    pub(crate) inner: Dynamics,
+}
+
+#[pymethods]
+impl PyKinematicBicycle {
+    #[new]
+    #[pyo3(signature = (wheelbase, x=0, y=1, theta=2, v=3))]
+    fn new(wheelbase: f64, x: usize, y: usize, theta: usize, v: usize) -> PyResult<Self> {
+        Ok(PyKinematicBicycle {
+            inner: map(Dynamics::kinematic_bicycle(wheelbase, x, y, theta, v))?,
+        })
+    }
+
+    /// The wheelbase.
+    #[getter]
+    fn wheelbase(&self) -> f64 {
+        match self.inner {
+            Dynamics::KinematicBicycle { l, .. } => l,
+            _ => unreachable!("a KinematicBicycle wraps the core bicycle"),
+        }
+    }
+}
+model_methods!(PyKinematicBicycle);
+
 /// The core model of a Python model object; `None` for `None`.
 pub fn model_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
     if obj.is_none() {
@@ -190,9 +232,13 @@ pub fn model_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
     if let Ok(d) = obj.cast::<PyAccelerationUnicycle>() {
         return Ok(Some(d.get().inner.clone()));
     }
+    if let Ok(d) = obj.cast::<PyKinematicBicycle>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
     Err(PyTypeError::new_err(format!(
         "dynamics: expected tlshield.Unicycle, SingleIntegrator, DoubleIntegrator, \
-         AccelerationUnicycle or None (then pass f and g to every filter call), got {}",
+         AccelerationUnicycle, KinematicBicycle, ControlAffine or None (then pass f and g to \
+         every filter call), got {}",
         obj.get_type()
             .name()
             .map_or_else(|_| "?".into(), |n| n.to_string())

@@ -71,6 +71,12 @@ impl From<CoreShieldError> for PyCoreError {
     }
 }
 
+impl From<PyErr> for PyCoreError {
+    fn from(err: PyErr) -> Self {
+        PyCoreError(err)
+    }
+}
+
 impl From<PyCoreError> for PyErr {
     fn from(err: PyCoreError) -> Self {
         err.0

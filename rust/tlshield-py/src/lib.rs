@@ -7,6 +7,7 @@ mod automaton;
 mod channel;
 mod codes;
 mod convert;
+mod custom;
 mod dynamics;
 mod errors;
 mod literals;
@@ -55,6 +56,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<dynamics::PySingleIntegrator>()?;
     m.add_class::<dynamics::PyDoubleIntegrator>()?;
     m.add_class::<dynamics::PyAccelerationUnicycle>()?;
+    m.add_class::<dynamics::PyKinematicBicycle>()?;
+    m.add_class::<custom::PyControlAffine>()?;
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;
     m.add_class::<shield::PyFilterBatch>()?;

@@ -7,13 +7,14 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::{
-    Automaton, Barrier, BarrierSource, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
-    ShieldParams, SolvedBy, SolverChoice, Status,
+    Automaton, Barrier, BarrierSource, BatchDynamics, BatchOutput, Bounds, ControlAffine, Filtered,
+    Shield, ShieldParams, SolvedBy, SolverChoice, Status,
 };
 
 use crate::automaton::PyAutomaton;
 use crate::codes;
 use crate::convert::{self, state, vector, FloatArray};
+use crate::custom::PyControlAffine;
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
@@ -191,6 +192,8 @@ impl PyFilterBatch {
 #[pyclass(name = "Shield", module = "tlshield._core", frozen)]
 pub struct PyShield {
     inner: Shield,
+    /// The user's model whose callables give `f`, `g` and `J_f` at every call, if any.
+    custom: Option<Py<PyControlAffine>>,
     /// Names of the user barriers, then of every atom (positive, negated), made once.
     barrier_names: Vec<Py<PyString>>,
     literals: LiteralNames,
@@ -203,13 +206,32 @@ impl PyShield {
     }
 
     /// Runs `call` with the per-call dynamics ``f`` (n,) and ``g`` (n, m) when both are given,
-    /// with the model's when neither is.
+    /// with the model's when neither is; a `ControlAffine` model is evaluated at `s`.
     fn with_dynamics<R>(
         &self,
+        py: Python<'_>,
+        s: &[f64],
         f: Option<&Bound<'_, PyAny>>,
         g: Option<&Bound<'_, PyAny>>,
         call: impl FnOnce(Option<ControlAffine<'_>>) -> PyResult<R>,
     ) -> PyResult<R> {
+        if let Some(model) = &self.custom {
+            if f.is_some() || g.is_some() {
+                return Err(PyValueError::new_err(
+                    "this shield's ControlAffine model gives f and g: do not pass them",
+                ));
+            }
+            let model = model.get();
+            let n = s.len();
+            let m = self.inner.inputs();
+            let (mut fv, mut gv, mut jac) = (vec![0.0; n], vec![0.0; n * m], vec![0.0; n * n]);
+            model.evaluate(py, s, &mut fv, &mut gv, Some(&mut jac))?;
+            return call(Some(ControlAffine {
+                f: &fv,
+                g: &gv,
+                jacobian: Some(&jac),
+            }));
+        }
         match (f, g) {
             (None, None) => call(None),
             (Some(f), Some(g)) => {
@@ -223,15 +245,26 @@ impl PyShield {
                         g.shape()[1]
                     )));
                 }
-                call(Some(ControlAffine {
-                    f: f.values(),
-                    g: g.values(),
-                }))
+                call(Some(ControlAffine::new(f.values(), g.values())))
             }
             _ => Err(PyValueError::new_err(
                 "pass both f and g (the control-affine dynamics at s), or neither",
             )),
         }
+    }
+
+    /// A `ControlAffine` model's `f`, `g` and `J_f` at every row of `states`; `None` for a
+    /// shield whose dynamics the core evaluates.
+    #[allow(clippy::type_complexity)]
+    fn evaluate_rows(
+        &self,
+        py: Python<'_>,
+        states: &[f64],
+    ) -> PyResult<Option<(Vec<f64>, Vec<f64>, Vec<f64>)>> {
+        self.custom
+            .as_ref()
+            .map(|model| model.get().evaluate_rows(py, states))
+            .transpose()
     }
 
     /// A batch's columns as numpy arrays, ``(rows, m)`` matrices for the actions.
@@ -306,6 +339,7 @@ impl PyShield {
         spec, dynamics, *, alpha, c3, k, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
+        inputs=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -329,16 +363,45 @@ impl PyShield {
         alpha2: Option<f64>,
         clf_gain: Option<f64>,
         preserve_progress: bool,
+        inputs: Option<usize>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
-        let dynamics = model_of(dynamics)?;
-        // m from the model, else from the CBF bounds (a scalar pair then means m = 1).
-        let m = match &dynamics {
-            Some(d) => d.inputs(),
-            None => {
+        let custom = dynamics
+            .cast::<PyControlAffine>()
+            .ok()
+            .map(|c| c.clone().unbind());
+        let dynamics = match custom {
+            Some(_) => None,
+            None => model_of(dynamics)?,
+        };
+        // m from the model, else from `inputs`, else from per-input CBF bounds; scalar bounds
+        // alone do not say how many inputs there are.
+        let from_model = match (&dynamics, &custom) {
+            (Some(d), _) => Some(d.inputs()),
+            (None, Some(c)) => Some(c.get().inner.inputs()),
+            (None, None) => None,
+        };
+        let m = match (from_model, inputs) {
+            (Some(m), Some(given)) if given != m => {
+                return Err(PyValueError::new_err(format!(
+                    "inputs={given}, but the model has {m} inputs"
+                )))
+            }
+            (Some(m), _) => m,
+            (None, Some(0)) => {
+                return Err(PyValueError::new_err("inputs: expected at least 1, got 0"))
+            }
+            (None, Some(given)) => given,
+            (None, None) => {
                 let [lo, _] = pair(cbf_bounds)
                     .ok_or_else(|| PyTypeError::new_err("cbf_bounds: expected a pair (lo, hi)"))?;
-                lo.len().unwrap_or(1)
+                lo.len().map_err(|_| {
+                    PyValueError::new_err(
+                        "cbf_bounds: with dynamics=None the number of inputs is not known from \
+                         scalar bounds; pass inputs=m, or per-input bounds ([lo_1, ..., lo_m], \
+                         [hi_1, ..., hi_m])",
+                    )
+                })?
             }
         };
         let pos = match pos {
@@ -379,8 +442,13 @@ impl PyShield {
             .map(|b| PyString::new(py, &b.name).unbind())
             .collect();
         let literals = LiteralNames::new(py, automaton.spec().atoms());
+        let inner = match &custom {
+            Some(model) => Shield::with_custom_model(automaton, model.get().inner.clone(), params),
+            None => Shield::new(automaton, dynamics, params),
+        };
         Ok(PyShield {
-            inner: map(Shield::new(automaton, dynamics, params))?,
+            inner: map(inner)?,
+            custom,
             barrier_names,
             literals,
         })
@@ -419,7 +487,8 @@ impl PyShield {
             }
             let a_rl = action(q)?;
             let monitor = monitor.borrow();
-            self.with_dynamics(f, g, |fg| {
+            let s = monitor.inner.state();
+            self.with_dynamics(py, s, f, g, |fg| {
                 map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
             })?
         } else {
@@ -429,7 +498,9 @@ impl PyShield {
             let s = vector(s, "s")?;
             let q = state(q, "q", self.inner.automaton())?;
             let a_rl = action(a_rl)?;
-            self.with_dynamics(f, g, |fg| map(self.inner.filter(&s, q, &a_rl, fg, drift)))?
+            self.with_dynamics(py, &s, f, g, |fg| {
+                map(self.inner.filter(&s, q, &a_rl, fg, drift))
+            })?
         };
         Ok(self.result(py, out))
     }
@@ -474,7 +545,24 @@ impl PyShield {
             let shield = &self.inner;
             let mut out = BatchOutput::default();
             let batch = &monitors.inner;
-            map(py.detach(|| shield.filter_monitors(batch, actions, drift_values, &mut out)))?;
+            let states: Vec<f64> = match &self.custom {
+                Some(_) => batch
+                    .monitors()
+                    .iter()
+                    .flat_map(|m| m.state())
+                    .copied()
+                    .collect(),
+                None => Vec::new(),
+            };
+            let evaluated = self.evaluate_rows(py, &states)?;
+            let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+                f,
+                g,
+                jacobian: Some(j),
+            });
+            map(py.detach(|| {
+                shield.filter_monitors_with(batch, actions, dynamics, drift_values, &mut out)
+            }))?;
             return self.batch_result(py, out, rows);
         }
         let a_rl = a_rl.ok_or_else(|| {
@@ -509,7 +597,23 @@ impl PyShield {
         let shield = &self.inner;
         let mut out = BatchOutput::default();
         let drift = drift_values;
-        map(py.detach(|| shield.filter_batch(values, n, &qs_usize, actions, drift, &mut out)))?;
+        let evaluated = match &self.custom {
+            Some(model) if n != model.get().inner.state_len() => {
+                return Err(PyValueError::new_err(format!(
+                    "states: expected rows of {} values (the model's state_dim), got {n}",
+                    model.get().inner.state_len()
+                )))
+            }
+            _ => self.evaluate_rows(py, values)?,
+        };
+        let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+            f,
+            g,
+            jacobian: Some(j),
+        });
+        map(py.detach(|| {
+            shield.filter_batch_with(values, n, &qs_usize, actions, dynamics, drift, &mut out)
+        }))?;
         self.batch_result(py, out, rows)
     }
 
@@ -532,9 +636,10 @@ impl PyShield {
         let shield = &slf.get().inner;
         let p = shield.params();
         let spec = Bound::new(py, PySpec::from_core(shield.automaton().spec().clone()))?;
-        let model = match shield.dynamics() {
-            Some(d) => crate::dynamics::to_python(py, d)?,
-            None => py.None().into_bound(py),
+        let model = match (shield.dynamics(), &slf.get().custom) {
+            (Some(d), _) => crate::dynamics::to_python(py, d)?,
+            (None, Some(custom)) => custom.bind(py).clone().into_any(),
+            (None, None) => py.None().into_bound(py),
         };
         let pair = |b: &Bounds| (b.lo.clone(), b.hi.clone());
         let barriers = PyDict::new(py);
@@ -566,6 +671,7 @@ impl PyShield {
         kwargs.set_item("alpha2", p.alpha2)?;
         kwargs.set_item("clf_gain", p.clf_gain)?;
         kwargs.set_item("preserve_progress", p.preserve_progress)?;
+        kwargs.set_item("inputs", shield.inputs())?;
         let args = PyTuple::new(py, [spec.into_any(), model])?;
         crate::pickling::reduce(slf.get_type().into_any(), args, Some(kwargs), None)
     }

@@ -34,7 +34,8 @@ use smallvec::SmallVec;
 use crate::active_set::ActiveSetQp;
 use crate::automaton::Automaton;
 use crate::cnf::Literal;
-use crate::dynamics::Dynamics;
+use crate::custom::CustomModel;
+use crate::dynamics::{Dynamics, Structure};
 use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
@@ -513,13 +514,52 @@ impl Workspace {
     }
 }
 
-/// Per-call dynamics `f(s)` (length n) and `g(s)` (n x m, row-major), overriding the model.
+/// Per-call dynamics `f(s)` (length n) and `g(s)` (n x m, row-major), overriding the model,
+/// and the drift's Jacobian `J_f(s)` (n x n, row-major) that second-order rows need. Without
+/// `jacobian` a built-in model's own Jacobian is used; a [`CustomModel`] shield with
+/// second-order rows requires it.
 #[derive(Debug, Clone, Copy)]
 pub struct ControlAffine<'a> {
     /// Drift.
     pub f: &'a [f64],
     /// Input matrix, row-major.
     pub g: &'a [f64],
+    /// `df_i/ds_j` at `[i * n + j]`, when given.
+    pub jacobian: Option<&'a [f64]>,
+}
+
+impl<'a> ControlAffine<'a> {
+    /// `f` and `g` without a Jacobian.
+    pub fn new(f: &'a [f64], g: &'a [f64]) -> Self {
+        ControlAffine {
+            f,
+            g,
+            jacobian: None,
+        }
+    }
+}
+
+/// Per-row dynamics of a batch (a [`CustomModel`] shield's, or a shield without a model):
+/// `f` `(B, n)`, `g` `(B, n, m)` and `jacobian` `(B, n, n)`, row-major.
+#[derive(Debug, Clone, Copy)]
+pub struct BatchDynamics<'a> {
+    /// Drifts.
+    pub f: &'a [f64],
+    /// Input matrices.
+    pub g: &'a [f64],
+    /// Drift Jacobians, when given.
+    pub jacobian: Option<&'a [f64]>,
+}
+
+impl<'a> BatchDynamics<'a> {
+    /// Row `i`'s dynamics (sizes checked by the shield before any row is read).
+    fn row(&self, i: usize, n: usize, m: usize) -> ControlAffine<'a> {
+        ControlAffine {
+            f: &self.f[i * n..(i + 1) * n],
+            g: &self.g[i * n * m..(i + 1) * n * m],
+            jacobian: self.jacobian.map(|j| &j[i * n * n..(i + 1) * n * n]),
+        }
+    }
 }
 
 /// Results of [`Shield::filter_batch`], one row per state (`m` values per row where the
@@ -609,6 +649,8 @@ impl OutRows<'_> {
 pub struct Shield {
     automaton: Arc<Automaton>,
     dynamics: Option<Dynamics>,
+    /// A user's model, whose values come with every call (then `dynamics` is `None`).
+    custom: Option<CustomModel>,
     params: ShieldParams,
     /// Which rows are second order (HOCBF) under the model.
     orders: Orders,
@@ -623,6 +665,7 @@ impl std::fmt::Debug for Shield {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Shield")
             .field("dynamics", &self.dynamics)
+            .field("custom", &self.custom)
             .field("params", &self.params)
             .field("inputs", &self.m)
             .finish()
@@ -720,10 +763,31 @@ fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
 
 impl Shield {
     /// A shield for `automaton`'s task. `dynamics` may be `None` when every call passes
-    /// `f` and `g`; the number of inputs m then comes from the bounds.
+    /// `f` and `g`; the number of inputs m then comes from the bounds, and every row is first
+    /// order (a call whose `g` cannot move what a barrier reads is an error).
     pub fn new(
         automaton: Arc<Automaton>,
         dynamics: Option<Dynamics>,
+        params: ShieldParams,
+    ) -> Result<Self, ShieldError> {
+        Self::build(automaton, dynamics, None, params)
+    }
+
+    /// A shield for `automaton`'s task under a user's model, whose `f`, `g` (and, where a row
+    /// is second order, `J_f`) come with every call. Each barrier's relative degree comes from
+    /// the model's structure, as under a built-in model.
+    pub fn with_custom_model(
+        automaton: Arc<Automaton>,
+        model: CustomModel,
+        params: ShieldParams,
+    ) -> Result<Self, ShieldError> {
+        Self::build(automaton, None, Some(model), params)
+    }
+
+    fn build(
+        automaton: Arc<Automaton>,
+        dynamics: Option<Dynamics>,
+        custom: Option<CustomModel>,
         params: ShieldParams,
     ) -> Result<Self, ShieldError> {
         positive("alpha", params.alpha)?;
@@ -749,9 +813,10 @@ impl Shield {
                 b.slack_weight,
             )?;
         }
-        let m = match &dynamics {
-            Some(d) => d.inputs(),
-            None => params.cbf_bounds.lo.len(),
+        let m = match (&dynamics, &custom) {
+            (Some(d), _) => d.inputs(),
+            (None, Some(c)) => c.inputs(),
+            (None, None) => params.cbf_bounds.lo.len(),
         };
         if m == 0 {
             return Err(ShieldError::Config(
@@ -816,6 +881,16 @@ impl Shield {
         if let Some(d) = &dynamics {
             min_dim = min_dim.max(d.min_dim());
         }
+        if let Some(c) = &custom {
+            if min_dim > c.state_len() {
+                return Err(ShieldError::Config(format!(
+                    "the shield reads {min_dim} state values (barriers, predicates, pos) but \
+                     the model {c} has {}",
+                    c.state_len()
+                )));
+            }
+            min_dim = c.state_len();
+        }
         // Where a predicate fixes the state length, an index past it can never be read: say so
         // here rather than at the first filter call.
         let fixed = spec
@@ -836,10 +911,16 @@ impl Shield {
                 )));
             }
         }
-        let orders = Orders::new(&automaton, &params, dynamics.as_ref(), min_dim)?;
+        let structure: Option<&dyn Structure> = match (&dynamics, &custom) {
+            (Some(d), _) => Some(d),
+            (None, Some(c)) => Some(c),
+            (None, None) => None,
+        };
+        let orders = Orders::new(&automaton, &params, structure, min_dim)?;
         Ok(Shield {
             automaton,
             dynamics,
+            custom,
             params,
             orders,
             m,
@@ -872,6 +953,11 @@ impl Shield {
     /// The dynamics model, if any.
     pub fn dynamics(&self) -> Option<&Dynamics> {
         self.dynamics.as_ref()
+    }
+
+    /// The user's model, if the shield was built with one.
+    pub fn custom_model(&self) -> Option<&CustomModel> {
+        self.custom.as_ref()
     }
 
     fn with_workspace<R>(&self, n: usize, run: impl FnOnce(&mut Workspace) -> R) -> R {
@@ -936,33 +1022,69 @@ impl Shield {
     }
 
     fn check_dynamics(&self, n: usize, fg: Option<ControlAffine<'_>>) -> Result<(), ShieldError> {
-        match fg {
-            None if self.dynamics.is_none() => Err(ShieldError::Config(
-                "this shield has no dynamics model: pass f and g with every call".into(),
-            )),
-            None => Ok(()),
-            Some(ControlAffine { f, g }) => {
-                if f.len() != n {
-                    return Err(InputError::Shape {
-                        what: "f length".into(),
-                        expected: format!("{n} (the state length)"),
-                        got: f.len().to_string(),
-                    }
-                    .into());
+        let Some(ControlAffine { f, g, jacobian }) = fg else {
+            if self.dynamics.is_some() {
+                return Ok(());
+            }
+            return Err(ShieldError::Config(match &self.custom {
+                Some(c) => format!("the model {c} is evaluated by the caller: pass f and g"),
+                None => "this shield has no dynamics model: pass f and g with every call".into(),
+            }));
+        };
+        if let Some(c) = &self.custom {
+            if n != c.state_len() {
+                return Err(InputError::Shape {
+                    what: "s length".into(),
+                    expected: format!("{} (the model's state_dim)", c.state_len()),
+                    got: n.to_string(),
                 }
-                if g.len() != n * self.m {
-                    return Err(InputError::Shape {
-                        what: "g size".into(),
-                        expected: format!("{n} x {} (state length x inputs)", self.m),
-                        got: g.len().to_string(),
-                    }
-                    .into());
-                }
-                check_finite("f", f, n)?;
-                check_finite("g", g, self.m)?;
-                Ok(())
+                .into());
             }
         }
+        if f.len() != n {
+            return Err(InputError::Shape {
+                what: "f length".into(),
+                expected: format!("{n} (the state length)"),
+                got: f.len().to_string(),
+            }
+            .into());
+        }
+        if g.len() != n * self.m {
+            return Err(InputError::Shape {
+                what: "g size".into(),
+                expected: format!("{n} x {} (state length x inputs)", self.m),
+                got: g.len().to_string(),
+            }
+            .into());
+        }
+        check_finite("f", f, n)?;
+        check_finite("g", g, self.m)?;
+        match jacobian {
+            Some(jac) => {
+                if jac.len() != n * n {
+                    return Err(InputError::Shape {
+                        what: "jacobian size".into(),
+                        expected: format!("{n} x {n} (df_i/ds_j)"),
+                        got: jac.len().to_string(),
+                    }
+                    .into());
+                }
+                check_finite("jacobian", jac, n)?;
+            }
+            None if self.custom.is_some() && self.orders.second_order() => {
+                return Err(ShieldError::Config(
+                    "this shield has second-order rows under its ControlAffine model: pass the \
+                     drift's Jacobian with f and g"
+                        .into(),
+                ));
+            }
+            None => {}
+        }
+        if self.dynamics.is_none() && self.custom.is_none() {
+            self.orders
+                .check_authority(&self.automaton, &self.params, g, n)?;
+        }
+        Ok(())
     }
 
     /// Validates the arguments of one step.
@@ -1108,6 +1230,51 @@ impl Shield {
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
+        self.filter_batch_with(states, n, qs, a_rl, None, drift, out)
+    }
+
+    /// Checks a batch's per-row dynamics (or, with none, that the shield has a model).
+    fn check_batch_dynamics(
+        &self,
+        rows: usize,
+        n: usize,
+        dynamics: Option<BatchDynamics<'_>>,
+    ) -> Result<(), ShieldError> {
+        let Some(d) = dynamics else {
+            return self.check_dynamics(n, None);
+        };
+        let m = self.m;
+        let sizes = [
+            ("f", d.f.len(), n),
+            ("g", d.g.len(), n * m),
+            ("jacobian", d.jacobian.map_or(0, <[f64]>::len), n * n),
+        ];
+        for (what, got, per_row) in sizes {
+            if (what != "jacobian" || d.jacobian.is_some()) && got != rows * per_row {
+                return Err(InputError::Shape {
+                    what: what.into(),
+                    expected: format!("{rows} rows of {per_row} values"),
+                    got: format!("{got} values"),
+                }
+                .into());
+            }
+        }
+        (0..rows).try_for_each(|i| self.check_dynamics(n, Some(d.row(i, n, m))))
+    }
+
+    /// [`Shield::filter_batch`] with each row's `f`, `g` (and Jacobian) given: the batch of a
+    /// shield built on a [`CustomModel`] or without a model.
+    #[allow(clippy::too_many_arguments)]
+    pub fn filter_batch_with(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+        out: &mut BatchOutput,
+    ) -> Result<(), ShieldError> {
         let m = self.m;
         let rows = qs.len();
         if n == 0 || rows.checked_mul(n) != Some(states.len()) {
@@ -1119,8 +1286,8 @@ impl Shield {
             .into());
         }
         self.check_batch_actions(a_rl, rows)?;
-        self.check_dynamics(n, None)?;
         self.check_state_len("states row", n)?;
+        self.check_batch_dynamics(rows, n, dynamics)?;
         check_finite("states", states, n)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
@@ -1131,7 +1298,13 @@ impl Shield {
         out.resize(rows, m)?;
         // One contiguous chunk of rows per worker thread, each with its own workspace; small
         // batches stay on the calling thread (waking the pool costs more than they do).
-        self.run_batch(BatchRows::States { states, n, qs }, a_rl, drift, out);
+        self.run_batch(
+            BatchRows::States { states, n, qs },
+            a_rl,
+            dynamics,
+            drift,
+            out,
+        );
         Ok(())
     }
 
@@ -1142,6 +1315,19 @@ impl Shield {
         &self,
         batch: &MonitorBatch,
         a_rl: &[f64],
+        drift: Option<&[f64]>,
+        out: &mut BatchOutput,
+    ) -> Result<(), ShieldError> {
+        self.filter_monitors_with(batch, a_rl, None, drift, out)
+    }
+
+    /// [`Shield::filter_monitors`] with each row's `f`, `g` (and Jacobian) given (see
+    /// [`Shield::filter_batch_with`]).
+    pub fn filter_monitors_with(
+        &self,
+        batch: &MonitorBatch,
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
@@ -1170,12 +1356,12 @@ impl Shield {
         };
         // Every monitor of the batch read a state of its automaton: one length for all.
         let n = first.state().len();
-        self.check_dynamics(n, None)?;
         self.check_state("monitor state", first.state())?;
+        self.check_batch_dynamics(rows, n, dynamics)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
-        self.run_batch(BatchRows::Monitors(monitors), a_rl, drift, out);
+        self.run_batch(BatchRows::Monitors(monitors), a_rl, dynamics, drift, out);
         Ok(())
     }
 
@@ -1186,15 +1372,16 @@ impl Shield {
         &self,
         rows: BatchRows<'_>,
         a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) {
         if rows.len() < PARALLEL_MIN_ROWS {
-            self.batch_rows(rows, a_rl, drift, out, 1);
+            self.batch_rows(rows, a_rl, dynamics, drift, out, 1);
         } else {
             crate::parallel::install(|| {
                 let threads = rayon::current_num_threads().max(1);
-                self.batch_rows(rows, a_rl, drift, out, threads);
+                self.batch_rows(rows, a_rl, dynamics, drift, out, threads);
             });
         }
     }
@@ -1205,6 +1392,7 @@ impl Shield {
         &self,
         rows: BatchRows<'_>,
         a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
         threads: usize,
@@ -1220,7 +1408,8 @@ impl Shield {
                     let (s, q, task) = rows.row(row);
                     let a = &a_rl[row * m..(row + 1) * m];
                     let d = drift.map(|d| &d[row * n..(row + 1) * n]);
-                    self.step(ws, s, q, a, None, d, task, Want::Solution);
+                    let fg = dynamics.map(|x| x.row(row, n, m));
+                    self.step(ws, s, q, a, fg, d, task, Want::Solution);
                     part.write(i, m, &ws.out);
                 }
             });

@@ -2,11 +2,14 @@
 //! predicate reads no state dimension an input moves directly has `Lg h = 0` identically under
 //! the model (relative degree 2: a position constraint under an acceleration-level model), so a
 //! first-order row would be empty and enforce nothing. Decided once, from the structure of the
-//! model and the predicates, when the shield is built.
+//! model and the predicates, when the shield is built. A shield without a model (`f`, `g` with
+//! every call) can only form first-order rows, so each call checks that the `g` it is given
+//! moves something every enforced barrier reads: a row that cannot act is an error, never a
+//! silent pass.
 
 use super::{ShieldError, ShieldParams};
 use crate::automaton::Automaton;
-use crate::dynamics::Dynamics;
+use crate::dynamics::Structure;
 use crate::predicate::Predicate;
 
 /// The order of every barrier row and of the CLF row.
@@ -19,12 +22,14 @@ pub(super) struct Orders {
     pub(super) barriers: Vec<bool>,
     /// The CLF needs its second-order form (no CLF dimension is moved by an input directly).
     pub(super) clf: bool,
+    /// Per atom of the spec: some state's safe set keeps it (the shield may enforce it).
+    pub(super) enforced: Vec<bool>,
 }
 
 /// The relative degree of a barrier on `predicate` under `model`: 1 when it reads a dimension
 /// an input moves, 2 when it reads one an input moves through one integration, else none the
 /// shield can enforce (`None`).
-fn degree(predicate: &Predicate, model: &Dynamics, n: usize) -> Option<u8> {
+fn degree(predicate: &Predicate, model: &dyn Structure, n: usize) -> Option<u8> {
     let reads = |test: &dyn Fn(usize) -> bool| (0..n).any(|d| predicate.reads(d) && test(d));
     if reads(&|d| model.actuates(d)) {
         Some(1)
@@ -42,15 +47,29 @@ impl Orders {
     pub(super) fn new(
         automaton: &Automaton,
         params: &ShieldParams,
-        model: Option<&Dynamics>,
+        model: Option<&dyn Structure>,
         n: usize,
     ) -> Result<Self, ShieldError> {
         let spec = automaton.spec();
+        // Only atoms that some state's safe set can keep are ever enforced.
+        let enforced: Vec<bool> = (0..spec.atoms().len())
+            .map(|atom| {
+                (0..automaton.num_states()).any(|q| {
+                    let cnf = if params.preserve_progress {
+                        automaton.avoid_cnf(q)
+                    } else {
+                        automaton.trap_cnf(q)
+                    };
+                    cnf.is_ok_and(|cnf| cnf.iter().flatten().any(|l| l.atom == atom))
+                })
+            })
+            .collect();
         let Some(model) = model else {
             return Ok(Orders {
                 atoms: vec![false; spec.atoms().len()],
                 barriers: vec![false; params.barriers.len()],
                 clf: false,
+                enforced,
             });
         };
         let order = |what: String, p: &Predicate| -> Result<bool, ShieldError> {
@@ -64,23 +83,12 @@ impl Orders {
                 ))),
             }
         };
-        // Only atoms that some state's safe set can keep are ever enforced.
-        let enforced = |atom: usize| {
-            (0..automaton.num_states()).any(|q| {
-                let cnf = if params.preserve_progress {
-                    automaton.avoid_cnf(q)
-                } else {
-                    automaton.trap_cnf(q)
-                };
-                cnf.is_ok_and(|cnf| cnf.iter().flatten().any(|l| l.atom == atom))
-            })
-        };
         let atoms: Vec<bool> = spec
             .atoms()
             .iter()
             .zip(spec.predicates())
             .enumerate()
-            .map(|(i, (a, p))| match enforced(i) {
+            .map(|(i, (a, p))| match enforced[i] {
                 true => order(format!("atom {a:?}"), p),
                 false => Ok(false),
             })
@@ -113,6 +121,57 @@ impl Orders {
             atoms,
             barriers,
             clf,
+            enforced,
         })
+    }
+
+    /// Whether some row needs the drift's Jacobian (a second-order barrier row or CLF).
+    pub(super) fn second_order(&self) -> bool {
+        self.clf || self.atoms.contains(&true) || self.barriers.contains(&true)
+    }
+
+    /// For a shield without a model: checks that the `g` (n x m) given at `s` moves a state
+    /// dimension that every enforceable barrier reads. A barrier whose dimensions `g` leaves
+    /// alone has `Lg h = 0`: its first-order row could not act, and without a model the shield
+    /// cannot form the second-order one.
+    pub(super) fn check_authority(
+        &self,
+        automaton: &Automaton,
+        params: &ShieldParams,
+        g: &[f64],
+        n: usize,
+    ) -> Result<(), ShieldError> {
+        if !params.use_cbf {
+            return Ok(());
+        }
+        let m = g.len() / n.max(1);
+        let moved = |d: usize| g[d * m..(d + 1) * m].iter().any(|&v| v != 0.0);
+        let acts = |p: &Predicate| (0..n).any(|d| p.reads(d) && moved(d));
+        let spec = automaton.spec();
+        let atoms = spec
+            .atoms()
+            .iter()
+            .zip(spec.predicates())
+            .zip(&self.enforced);
+        let unmoved = params
+            .barriers
+            .iter()
+            .map(|b| (format!("barrier {:?}", b.name), &b.predicate))
+            .chain(
+                atoms
+                    .filter(|(_, &on)| on)
+                    .map(|((a, p), _)| (format!("atom {a:?}"), p)),
+            )
+            .find(|(_, p)| !acts(p));
+        match unmoved {
+            None => Ok(()),
+            Some((what, _)) => Err(ShieldError::Config(format!(
+                "{what}: the g passed with this call moves none of the state dimensions it reads \
+                 (Lg h = 0), so its first-order row cannot act, and a shield without a model \
+                 cannot form the second-order one (relative degree 2, e.g. a position under an \
+                 acceleration input). Build the shield with dynamics=tlshield.ControlAffine(f, \
+                 g, ...) or a built-in model"
+            ))),
+        }
     }
 }

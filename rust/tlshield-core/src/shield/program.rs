@@ -53,6 +53,33 @@ pub(super) struct Program {
     pub(super) clf_vars: usize,
 }
 
+/// `out = J_f(s) u` (or `J_f(s)^T u` when `transpose`): from the Jacobian passed with this
+/// call when there is one, else from the model (the shield checks that one of them exists
+/// whenever a row is second order).
+fn jacobian_times(
+    model: Option<&Dynamics>,
+    fg: Option<ControlAffine<'_>>,
+    s: &[f64],
+    u: &[f64],
+    out: &mut [f64],
+    transpose: bool,
+) {
+    let n = s.len();
+    match (fg.and_then(|fg| fg.jacobian), model) {
+        (Some(jac), _) => {
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = match transpose {
+                    false => dot(&jac[i * n..(i + 1) * n], u),
+                    true => (0..n).map(|k| jac[k * n + i] * u[k]).sum(),
+                };
+            }
+        }
+        (None, Some(model)) if transpose => model.jacobian_f_transpose_times(s, u, out),
+        (None, Some(model)) => model.jacobian_f_times(s, u, out),
+        (None, None) => unreachable!("second-order rows need a model or a Jacobian"),
+    }
+}
+
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
 fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
     let start = qp.g.len();
@@ -102,7 +129,7 @@ impl Program {
         self.jf.resize(n, 0.0);
         self.jt.resize(n, 0.0);
         match (fg, model) {
-            (Some(ControlAffine { f, g }), _) => {
+            (Some(ControlAffine { f, g, .. }), _) => {
                 self.f.copy_from_slice(f);
                 self.g.copy_from_slice(g);
             }
@@ -180,12 +207,12 @@ impl Program {
                 let lf = dot(&self.grad, &self.f);
                 let psi = cfg.alpha * (h - cfg.margin);
                 // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
-                let (coefficients, second_r) = match (second, model) {
-                    (true, Some(model)) => {
+                let (coefficients, second_r) = match second {
+                    true => {
                         predicate.hessian_times(s, &self.f, &mut self.hf);
                         self.hf.iter_mut().for_each(|v| *v *= sign);
-                        model.jacobian_f_times(s, &self.f, &mut self.jf);
-                        model.jacobian_f_transpose_times(s, &self.grad, &mut self.jt);
+                        jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
+                        jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
                         let lf_psi =
                             dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + cfg.alpha * lf;
                         // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
@@ -195,7 +222,7 @@ impl Program {
                         let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
                         (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
                     }
-                    _ => (&self.grad, None),
+                    false => (&self.grad, None),
                 };
                 let mut lg_a = 0.0;
                 for (j, a) in a_rl.iter().enumerate() {
@@ -235,11 +262,11 @@ impl Program {
         self.clf_lg.resize(m, 0.0);
         if self.has_goal {
             let (mut v, mut lf) = (0.0, 0.0);
-            match (orders.clf, model) {
-                (true, Some(model)) => {
+            match orders.clf {
+                true => {
                     // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
                     let k = cfg.clf_gain;
-                    model.jacobian_f_times(s, &self.f, &mut self.jf);
+                    jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
                     self.hf.fill(0.0); // e placed at the pos dimensions
                     for (&p, &c) in cfg.pos.iter().zip(&self.goal) {
                         let e = self.f[p] + k * (s[p] - c);
@@ -247,7 +274,7 @@ impl Program {
                         v += e * e;
                         lf += 2.0 * e * (self.jf[p] + k * self.f[p]);
                     }
-                    model.jacobian_f_transpose_times(s, &self.hf, &mut self.jt);
+                    jacobian_times(model, fg, s, &self.hf, &mut self.jt, true);
                     for (j, l) in self.clf_lg.iter_mut().enumerate() {
                         *l = 2.0
                             * (0..s.len())
@@ -255,7 +282,7 @@ impl Program {
                                 .sum::<f64>();
                     }
                 }
-                _ => {
+                false => {
                     for (&k, &c) in cfg.pos.iter().zip(&self.goal) {
                         let e = s[k] - c;
                         v += e * e;

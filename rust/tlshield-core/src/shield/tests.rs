@@ -207,7 +207,7 @@ fn drift_adds_to_the_model_and_batches_agree() {
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
     let drift: Vec<f64> = (0..N).map(|k| 0.1 * k as f64 - 0.3).collect();
     let moved: Vec<f64> = f.iter().zip(&drift).map(|(a, b)| a + b).collect();
-    let fg = ControlAffine { f: &moved, g: &g };
+    let fg = ControlAffine::new(&moved, &g);
     let a = sh.filter(&s, 0, &[1.0, 1.0], None, Some(&drift)).unwrap();
     let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg), None).unwrap();
     assert_eq!(a, b);
@@ -256,7 +256,7 @@ fn per_call_dynamics_match_the_model() {
     let s = state(2.0, 1.3, -0.4);
     let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
-    let fg = ControlAffine { f: &f, g: &g };
+    let fg = ControlAffine::new(&f, &g);
     let a = sh.filter(&s, 0, &[1.0, 1.0], None, None).unwrap();
     let b = sh.filter(&s, 0, &[1.0, 1.0], Some(fg), None).unwrap();
     assert_eq!(a, b);
@@ -410,13 +410,7 @@ fn bad_input_is_an_error() {
     let f = vec![0.0; N];
     let g = vec![0.0; N];
     assert!(sh
-        .filter(
-            &s,
-            0,
-            &[0.0, 0.0],
-            Some(ControlAffine { f: &f, g: &g }),
-            None
-        )
+        .filter(&s, 0, &[0.0, 0.0], Some(ControlAffine::new(&f, &g)), None)
         .is_err());
     let no_model = Shield::new(task(), None, params(SolverChoice::Auto)).unwrap();
     let err = no_model.filter(&s, 0, &[0.0, 0.0], None, None).unwrap_err();
@@ -743,4 +737,118 @@ proptest! {
             }
         });
     }
+}
+
+/// A 1-D double integrator `s = [x, v]` kept at `x <= 1` by a user barrier, with the task
+/// `F g` far beyond the wall (so the CLF pushes into it).
+fn wall_task() -> (Arc<Automaton>, ShieldParams) {
+    let goal = Predicate::halfspace(vec![1.0, 0.0], -5.0).unwrap();
+    let spec = crate::spec::Spec::new("F g", [("g", goal)]).unwrap();
+    let wall = Predicate::halfspace(vec![-1.0, 0.0], 1.0).unwrap();
+    let one = |lo: f64, hi: f64| Bounds {
+        lo: vec![lo],
+        hi: vec![hi],
+    };
+    let params = ShieldParams::new(2.0, 1.0, 1e4, one(-4.0, 4.0), one(-1.0, 1.0))
+        .with_barriers(vec![Barrier::inside("wall", wall)])
+        .with_pos(vec![0])
+        .with_parts(true, false)
+        .with_alpha2(Some(2.0));
+    (Arc::new(Automaton::build(&spec).unwrap()), params)
+}
+
+#[test]
+fn without_a_model_a_row_that_cannot_act_is_an_error_not_a_pass() {
+    let (automaton, params) = wall_task();
+    let sh = Shield::new(automaton, None, params).unwrap();
+    let (s, f, g) = ([0.5, 1.0], [1.0, 0.0], [0.0, 1.0]);
+    let err = sh
+        .filter(&s, 0, &[1.0], Some(ControlAffine::new(&f, &g)), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("barrier \"wall\"") && err.contains("ControlAffine"),
+        "{err}"
+    );
+    // A velocity-level g moves x: the first-order row acts.
+    let g1 = [1.0, 0.0];
+    let ok = sh.filter(
+        &s,
+        0,
+        &[1.0],
+        Some(ControlAffine::new(&[0.0, 0.0], &g1)),
+        None,
+    );
+    assert!(ok.is_ok());
+}
+
+#[test]
+fn a_custom_double_integrator_equals_the_built_in_one() {
+    let (automaton, params) = wall_task();
+    let built_in = Shield::new(
+        automaton.clone(),
+        Some(Dynamics::double_integrator(vec![0], vec![1]).unwrap()),
+        params.clone(),
+    )
+    .unwrap();
+    let model = CustomModel::new(2, 1, &[1], &[0]).unwrap();
+    let custom = Shield::with_custom_model(automaton, model, params).unwrap();
+    let jac = [0.0, 1.0, 0.0, 0.0];
+    let mut rng = 7u64;
+    let mut next = || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut states, mut fs, mut gs, mut jacs, mut actions) =
+        (vec![], vec![], vec![], vec![], vec![]);
+    for _ in 0..200 {
+        let s = [-1.0 + 1.9 * next(), -3.0 + 6.0 * next()];
+        let a = [-4.0 + 8.0 * next()];
+        let (f, g) = ([s[1], 0.0], [0.0, 1.0]);
+        let fg = ControlAffine {
+            f: &f,
+            g: &g,
+            jacobian: Some(&jac),
+        };
+        let want = built_in.filter(&s, 0, &a, None, None).unwrap();
+        let got = custom.filter(&s, 0, &a, Some(fg), None).unwrap();
+        assert!((want.action[0] - got.action[0]).abs() <= 1e-9, "{s:?}");
+        assert_eq!(want.status, got.status);
+        states.extend_from_slice(&s);
+        fs.extend_from_slice(&f);
+        gs.extend_from_slice(&g);
+        jacs.extend_from_slice(&jac);
+        actions.extend_from_slice(&a);
+    }
+    // The batch path gives the same rows.
+    let qs = vec![0; 200];
+    let (mut want, mut got) = (BatchOutput::default(), BatchOutput::default());
+    built_in
+        .filter_batch(&states, 2, &qs, &actions, None, &mut want)
+        .unwrap();
+    let dynamics = BatchDynamics {
+        f: &fs,
+        g: &gs,
+        jacobian: Some(&jacs),
+    };
+    custom
+        .filter_batch_with(&states, 2, &qs, &actions, Some(dynamics), None, &mut got)
+        .unwrap();
+    for (a, b) in want.action.iter().zip(&got.action) {
+        assert!((a - b).abs() <= 1e-9);
+    }
+    // Without the Jacobian the custom shield's second-order row cannot be formed.
+    let f = [0.0, 0.0];
+    let err = custom
+        .filter(
+            &[0.0, 0.0],
+            0,
+            &[0.0],
+            Some(ControlAffine::new(&f, &[0.0, 1.0])),
+            None,
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("Jacobian"), "{err}");
 }
