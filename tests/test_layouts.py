@@ -46,7 +46,10 @@ def array_parameters() -> dict[str, list[str]]:
             names = [
                 a.arg
                 for a in args
-                if a.annotation is not None and "ArrayLike" in ast.unparse(a.annotation)
+                if a.annotation is not None
+                and "ArrayLike" in ast.unparse(a.annotation)
+                # A callable returning an array (ControlAffine's f, g) is not an array.
+                and "Callable" not in ast.unparse(a.annotation)
             ]
             if names:
                 found[f"{node.name}.{item.name}"] = names
@@ -105,6 +108,18 @@ class Case:
 
 def _model(cls: type, *a: Any) -> Callable[[], Any]:
     return lambda: cls(*a)
+
+
+def _bicycle_f(s: np.ndarray) -> np.ndarray:
+    return np.array([s[3] * np.cos(s[2]), s[3] * np.sin(s[2]), 0.0, 0.0])
+
+
+def _bicycle_g(s: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, 0.0], [0.0, 0.0], [0.0, s[3] / 0.5], [1.0, 0.0]])
+
+
+def _control_affine(probe: Any = None) -> Any:
+    return _core.ControlAffine(_bicycle_f, _bicycle_g, state_dim=4, inputs=2, probe=probe)
 
 
 TRAJ = STATES[:12]
@@ -222,9 +237,18 @@ CASES: dict[str, Case] = {
             ("SingleIntegrator", tlshield.SingleIntegrator, ([0, 1],), 2),
             ("DoubleIntegrator", tlshield.DoubleIntegrator, ([0, 1], [2, 3]), 2),
             ("AccelerationUnicycle", _core.AccelerationUnicycle, (), 2),
+            ("KinematicBicycle", _core.KinematicBicycle, (0.5,), 2),
         )
         for method in ("eval", "step")
     },
+    "ControlAffine.__new__": Case(
+        lambda: _control_affine, "__call__", {"probe": STATES[:3, :4] - 1.0}
+    ),
+    "ControlAffine.eval": Case(_control_affine, "eval", {"s": DYN_S[:4]}),
+    "ControlAffine.drift_jacobian": Case(_control_affine, "drift_jacobian", {"s": DYN_S[:4]}),
+    "ControlAffine.step": Case(
+        _control_affine, "step", {"s": DYN_S[:4], "a": DYN_S[:2], "dt": 0.1}
+    ),
     "Shield.filter": Case(
         _shield,
         "filter",
@@ -325,6 +349,8 @@ def canon(value: Any) -> Any:
         return canon((value.w, value.b))
     if isinstance(value, _core.Ball):
         return canon((value.pos, value.radius, value.center))
+    if isinstance(value, _core.ControlAffine):
+        return canon((value.actuated, value.integrated))
     if isinstance(value, (tuple, list)):
         return [canon(v) for v in value]
     if isinstance(value, (str, type(None))):

@@ -597,14 +597,14 @@ class Shield:
         inputs: int | None = None,
     ) -> Self:
         """``inputs`` is the number of inputs m when ``dynamics`` is None and the bounds are
-        scalars (a model gives m itself); ``slack_penalty`` prices barrier slack when the QP must be relaxed (None: 1e6);
-        ``margin`` is what every barrier is kept above (> 0; None: 1e-6); ``rl_bounds`` is
-        the range of the RL action: when given, a CBF box that cannot cancel every RL action
-        plus every CLF correction is refused here, and an ``a_rl`` outside it is refused per
-        call; ``alpha2`` is the second
-        gain of the HOCBF rows that barriers of relative degree 2 need (an error when such a
-        barrier exists and it is None); ``clf_gain`` is ``k`` of the second-order CLF
-        ``|dp/dt + k (p - goal)|^2`` (None: 1)."""
+        scalars (a model gives m itself); ``slack_penalty`` prices barrier slack when the QP
+        must be relaxed (None: 1e6); ``margin`` is what every barrier is kept above (> 0;
+        None: 1e-6); ``rl_bounds`` is the range of the RL action: when given, a CBF box that
+        cannot cancel every RL action plus every CLF correction is refused here, and an
+        ``a_rl`` outside it is refused per call; ``alpha2`` is the second gain of the HOCBF
+        rows that barriers of relative degree 2 need (an error when such a barrier exists
+        and it is None); ``clf_gain`` is ``k`` of the second-order CLF ``|dp/dt + k (p -
+        goal)|^2`` (None: 1)."""
     @overload
     def filter(
         self,

@@ -11,6 +11,7 @@ use tlshield_core::custom::{jacobian_by_differences, probe_states, PROBES};
 use tlshield_core::CustomModel;
 
 use crate::convert::{shape_text, vector, FloatArray};
+use crate::dynamics::FG;
 use crate::errors::{map, PyCoreError};
 use crate::pickling::reduce;
 
@@ -18,7 +19,7 @@ use crate::pickling::reduce;
 /// ``(state_dim,)``, ``g(s)`` the input matrix ``(state_dim, inputs)``, and ``jacobian(s)``,
 /// when given, the drift's Jacobian ``(state_dim, state_dim)`` (``[i, j] = df_i/ds_j``);
 /// without it the Jacobian is computed by central differences of ``f`` (step
-/// ``1e-6 (1 + |s_j|)``, about 1e-9 accurate for smooth ``f``). Each callable gets a float64
+/// ``eps^(1/3) (1 + |s_j|)``, about 1e-10 accurate for smooth ``f``). Each callable gets a float64
 /// array of the state and may return any array-like.
 ///
 /// At construction the model is evaluated at ``probe`` states ``(k, state_dim)`` (default: 8
@@ -214,11 +215,7 @@ impl PyControlAffine {
     }
 
     /// ``(f, g)`` at state ``s``: drift (n,) and input matrix (n, m).
-    fn eval<'py>(
-        &self,
-        py: Python<'py>,
-        s: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+    fn eval<'py>(&self, py: Python<'py>, s: &Bound<'py, PyAny>) -> PyResult<FG<'py>> {
         let s = vector(s, "s")?;
         let (n, m) = (self.inner.state_len(), self.inner.inputs());
         let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);

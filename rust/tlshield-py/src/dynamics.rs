@@ -14,7 +14,7 @@ use crate::errors::map;
 use crate::pickling::reduce;
 
 /// `(f, g)` as numpy arrays.
-type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
+pub(crate) type FG<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
 
 /// `eval`, `step` and `__repr__` of a model class (its `inner` is the core model).
 macro_rules! model_methods {
