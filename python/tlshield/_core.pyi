@@ -637,6 +637,8 @@ class Shield:
     def filter_batch(
         self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike, drift: ArrayLike | None = None
     ) -> FilterBatch: ...
+    def barrier_values(self, s: ArrayLike) -> dict[str, float]:
+        """Every user barrier's value ``h(s)`` by name (> 0 while it holds)."""
     @property
     def num_inputs(self) -> int: ...
     @property

@@ -20,6 +20,7 @@ from stable_baselines3.common.logger import configure
 from tlshield.codes import Status
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.evaluation import rollouts
+from tlshield.measures import step_violation
 from tlshield.presets import clf_scale
 from tlshield.runs import METRIC_COLUMNS
 from tlshield.saved import save_normalization
@@ -64,7 +65,8 @@ class UpdateMetrics:
         self.returns: list[float] = []
         self.min_h = [math.inf, math.inf]
         self.min_d = math.inf
-        self.violations = self.trap_entries = self.successes = 0
+        self.violations: int | None = None  # None: nothing in the infos measured one
+        self.trap_entries = self.successes = 0
         self.relaxed = self.failed = self.steps = 0
         self.correction = 0.0
 
@@ -76,7 +78,9 @@ class UpdateMetrics:
             self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
             self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
             self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
-            self.violations += bool(info.get("violation", False))
+            violation = step_violation(info, bool(self.was_trapped[i]))
+            if violation is not None:
+                self.violations = (self.violations or 0) + int(violation)
             self.trap_entries += info["trap"] and not self.was_trapped[i]
             self.was_trapped[i] = info["trap"]
             self.successes += info["success"]
@@ -91,6 +95,16 @@ class UpdateMetrics:
                 self.returns.append(float(self.discounted[i]))
                 self.discounted[i], self.discount[i] = 0.0, 1.0
                 self.was_trapped[i] = False
+
+
+def _measured(value: float) -> float:
+    """A running minimum as a metric: NaN when no step measured it (still infinite)."""
+    return math.nan if math.isinf(value) else value
+
+
+def metrics_text(count: float) -> str:
+    """A count column as the progress bar shows it ("n/a": not measured)."""
+    return "n/a" if math.isnan(count) else str(int(count))
 
 
 def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
@@ -214,10 +228,11 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
             "episodes": len(returns),
             "return_mean": float(np.mean(returns)) if returns else math.nan,
             "return_std": float(np.std(returns)) if returns else math.nan,
-            "min_h_c1": metrics.min_h[0],
-            "min_h_c2": metrics.min_h[1],
-            "min_obstacle_distance": metrics.min_d,
-            "violations": metrics.violations,
+            # Not measured (an env without these keys): NaN, never a value that looks safe.
+            "min_h_c1": _measured(metrics.min_h[0]),
+            "min_h_c2": _measured(metrics.min_h[1]),
+            "min_obstacle_distance": _measured(metrics.min_d),
+            "violations": math.nan if metrics.violations is None else metrics.violations,
             "trap_entries": metrics.trap_entries,
             "successes": metrics.successes,
             "relaxed": metrics.relaxed,
@@ -236,4 +251,5 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
                 self.logger.record(f"tlshield/{key}", value)
         metrics.reset_update()
         self.bar.update(1)
-        self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=row["violations"])
+        viol = metrics_text(row["violations"])
+        self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=viol)

@@ -12,9 +12,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from gymnasium import error as gym_error
 
 from tlshield._core import Automaton, SpecError
-from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
+from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
@@ -139,6 +140,7 @@ def _settings(args: argparse.Namespace, env_id: str = ENV_ID) -> dict[str, objec
 def _train(args: argparse.Namespace) -> int:
     from tlshield.training import train
 
+    import_modules(args.imports)  # before --set is read against the env's parameters
     options = _settings(args, args.env)
     run = train(
         args.config,
@@ -147,6 +149,7 @@ def _train(args: argparse.Namespace) -> int:
         args.out,
         env=args.env,
         progress=not args.quiet,
+        imports=args.imports,
         **options,  # type: ignore[arg-type]
     )
     print(f"wrote {run} (metrics.csv, model.zip, tb/, run.json)")
@@ -167,15 +170,20 @@ def _evaluate_run(
 
 
 def _print_evaluation(result: dict[str, object]) -> None:
+    from tlshield.measures import shown
+
+    collisions, steps = result["collisions"], result["violation_steps"]
     print(
         f"{result['config']} seed {result['seed']} ({result.get('policy', 'kept')} policy): "
         f"success {result['successes']}/"
-        f"{result['trials']} ({result['success_rate']:.0%}), collisions {result['collisions']}, "
-        f"violation steps {result['violation_steps']}"
+        f"{result['trials']} ({result['success_rate']:.0%}), "
+        f"collisions {shown(collisions)}, "  # type: ignore[arg-type]
+        f"violation steps {shown(steps)}"  # type: ignore[arg-type]
     )
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    import_modules(args.imports)
     for run in args.runs:
         _print_evaluation(_evaluate_run(run, args.trials, args.policy, args.trust_pickles))
     return 0
@@ -315,6 +323,18 @@ def _add_ray(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_import(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import MODULE first, where your environment registers itself (repeatable; "
+        "recorded in run.json, so evaluate imports it again)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``tlshield`` command."""
     parser = argparse.ArgumentParser(
@@ -348,11 +368,12 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--env",
         default=ENV_ID,
-        help="a registered Gymnasium id whose factory takes config= and evaluation= and wraps "
-        "the task (tlshield.wrappers.FsaAugmented, tlshield.wrappers.Shielded); default: the "
-        "paper's case study. "
-        f"Bundled: {ENV_ID}, {POINT_MASS_ID}, {FLATWORLD_ID} (--set formula=...)",
+        help="a registered Gymnasium id, or module:Env-v0 (module is imported first, as in "
+        "gymnasium.make), whose factory takes config= and evaluation= and wraps the task "
+        "(tlshield.wrappers.FsaAugmented, tlshield.wrappers.Shielded); default: the paper's "
+        f"case study. Bundled: {ENV_ID}, {POINT_MASS_ID}, {FLATWORLD_ID} (--set formula=...)",
     )
+    _add_import(train)
     train.add_argument(
         "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"
     )
@@ -381,6 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="also load older run folders whose statistics are a pickle (vecnormalize.pkl); "
         "loading a pickle runs its code: only for folders you made yourself",
     )
+    _add_import(evaluate)
     evaluate.set_defaults(handler=_evaluate)
 
     repro = sub.add_parser(
@@ -504,9 +526,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        # Bad paths and files (missing, the wrong kind, unwritable, corrupt, truncated): one
-        # line, exit 2, as argparse reports a bad argument.
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, gym_error.Error) as err:
+        # Bad paths and files (missing, the wrong kind, unwritable, corrupt, truncated) and
+        # environments Gymnasium cannot make: one line, exit 2, as argparse reports a bad
+        # argument.
         print(f"tlshield {args.command}: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except RuntimeError as err:

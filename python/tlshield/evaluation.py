@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, env_horizon, make
+from tlshield import measures
+from tlshield.envs import ENV_ID, env_horizon, import_modules, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_record
@@ -35,7 +36,9 @@ def rollouts(
 ) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
     by side with one batched policy call per step: per-trial outcomes, start states, agent
-    paths and obstacle paths (the last three for Channel-v0 only; empty for other envs)."""
+    paths and obstacle paths (the last three for Channel-v0 only; empty for other envs).
+    Violations and collisions are counted as :mod:`tlshield.measures` says; ``None`` where the
+    environment gives nothing to measure them by."""
     # The paper's evaluation rules: the CBF on in every configuration.
     envs = [make(env_id, config, evaluation=True, **overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
@@ -43,10 +46,11 @@ def rollouts(
     starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))
     paths = [[env.state[[X, Y]]] for env in envs] if channel else []
     obstacle_paths = [[_obstacles(env)] for env in envs] if channel else []
-    outcomes = [
-        {"reset_seed": s, "success": False, "collision": False, "steps": 0, "violations": 0}
+    outcomes: list[dict[str, Any]] = [
+        {"reset_seed": s, "success": False, "collision": None, "steps": 0, "violations": None}
         for s in seeds
     ]
+    trapped = [False] * len(seeds)
     horizon = env_horizon(envs[0]) or 1000
     active = list(range(len(seeds)))
     for t in range(horizon):
@@ -61,12 +65,16 @@ def rollouts(
                 paths[i].append(envs[i].state[[X, Y]])
                 obstacle_paths[i].append(_obstacles(envs[i]))
             out = outcomes[i]
-            out["violations"] += int(info.get("violation", False))
+            violation = measures.step_violation(info, trapped[i])
+            trapped[i] = bool(info.get("trap", False))
+            if violation is not None:
+                out["violations"] = (out["violations"] or 0) + int(violation)
             out["steps"] = t + 1
-            collision = bool(info.get("collision", False))
+            collision = measures.collision(info)
+            if collision is not None:
+                out["collision"] = collision
             if terminated or truncated or collision:
                 out["success"] = bool(info["success"])
-                out["collision"] = collision
             else:
                 still.append(i)
         active = still
@@ -76,6 +84,11 @@ def rollouts(
         [np.array(p) for p in paths],
         [np.array(p) for p in obstacle_paths],
     )
+
+
+def _count(value: bool | int | None) -> int | None:
+    """1 for a trial that collided or violated, 0 for one that did not, None if unmeasured."""
+    return None if value is None else int(bool(value))
 
 
 #: The files an evaluation writes, per policy ("kept": the run's model, "last": its last).
@@ -109,6 +122,7 @@ def evaluate(
     if which not in EVALUATION_FILES:
         raise ValueError(f"which = {which!r}: expected one of {', '.join(EVALUATION_FILES)}")
     record = read_record(run)
+    import_modules(record.get("imports", []))  # where the run's environment registers itself
     if policy is None:
         policy = saved_policy(Path(run), which, trust_pickles=trust_pickles)
     evaluation_file, trajectories_file = EVALUATION_FILES[which]
@@ -129,9 +143,9 @@ def evaluate(
         "eval_seed": seed,
         "success_rate": successes / trials,
         "successes": successes,
-        "collisions": sum(o["collision"] for o in outcomes),
-        "violation_steps": sum(o["violations"] for o in outcomes),
-        "violating_trials": sum(o["violations"] > 0 for o in outcomes),
+        "collisions": measures.total([_count(o["collision"]) for o in outcomes]),
+        "violation_steps": measures.total([o["violations"] for o in outcomes]),
+        "violating_trials": measures.total([_count(o["violations"]) for o in outcomes]),
         "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
         "outcomes": outcomes,
     }

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tlshield import measures
 from tlshield.runs import Run, load_results
 
 __all__ = ["SEED_COLUMNS", "TABLE_COLUMNS", "results_table", "seeds_table"]
@@ -109,8 +110,10 @@ def results_table(results: str | Path) -> str:
             rate = seed_stat([float(e.get("success_rate", math.nan)) for e in evaluations])
             success = f"{_pm(rate, 2)} ({trials_note(evaluations)})"
             trials = sum(int(e.get("trials", 0)) for e in evaluations)
-            collisions = f"{sum(int(e.get('collisions', 0)) for e in evaluations)} / {trials}"
-            violation_steps = str(sum(int(e.get("violation_steps", 0)) for e in evaluations))
+            hits = measures.total([e.get("collisions", 0) for e in evaluations])
+            collisions = f"{measures.shown(hits)} / {trials}"
+            steps = measures.total([e.get("violation_steps", 0) for e in evaluations])
+            violation_steps = measures.shown(steps)
         else:
             success = collisions = violation_steps = _MISSING
         relaxed_failed = f"{total('relaxed')} / {total('failed')}" if trained else _MISSING

@@ -31,7 +31,7 @@ env index``), validation episodes from ``VALIDATION_SEED`` (20,000+), evaluation
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -39,7 +39,14 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, check_env_id, check_task_env, make
+from tlshield.envs import (
+    ENV_ID,
+    check_env_id,
+    check_task_env,
+    factory_takes,
+    import_modules,
+    make,
+)
 from tlshield.envs.channel import CONFIGS
 from tlshield.envs.params import as_flat
 from tlshield.evaluation import evaluate
@@ -102,6 +109,7 @@ def train(
     ppo: dict[str, Any] | None = None,
     env: str = ENV_ID,
     on_update: Callable[[dict[str, float]], Any] | None = None,
+    imports: Sequence[str] = (),
     **overrides: Any,
 ) -> Path:
     """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
@@ -110,16 +118,21 @@ def train(
     the metrics so far and the model are kept (``run.json`` then says ``"interrupted":
     true``).
     ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
-    once it is written."""
+    once it is written. ``env`` may be ``"module:Env-v0"`` (``module`` is imported first, as
+    ``gymnasium.make`` does); ``imports`` are modules to import before it (where a user's
+    environments register themselves). Both are recorded in ``run.json``, so that
+    :func:`tlshield.evaluation.evaluate` finds the environment again."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     check_seeds((seed,))
+    imports = list(imports)
+    import_modules(imports)
     check_env_id(env)
     if env != ENV_ID and clf_schedule != "fixed":
         raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
     settings = _ppo_settings(preset, ppo)
     # The progress reward is shaped for the discount PPO uses (the bundled environments take
     # it as a keyword; a user's environment is checked below).
-    if env.startswith("tlshield/"):
+    if env.startswith("tlshield/") or factory_takes(env, "gamma"):
         overrides = {"gamma": settings.ppo["gamma"], **overrides}
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
@@ -137,6 +150,7 @@ def train(
     cfg = _env_params(inner)
     schedule = (clf_schedule, clf_final_scale)
     record = _run_record(env, config, seed, updates, preset, schedule, settings, cfg, overrides)
+    record["imports"] = imports
     (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
     model = _ppo(settings, venv, seed)
     run = TrainingRun(

@@ -163,7 +163,9 @@ class Shielded(IndependentCopies, gym.Wrapper):
     to ``f`` (see ``Shield.filter``). ``action_fn`` maps the policy's action to the RL action
     in the shield's units (as the vector wrappers' ``action_fn``; default: as it is): the
     wrapped env then receives the shielded action in those units. ``info["shield"]`` carries
-    ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``.
+    ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``; ``info["barriers"]`` each user
+    barrier's value at the new state (:mod:`tlshield.measures` counts a value below zero as a
+    violation when the env reports none of its own).
     """
 
     def __init__(
@@ -207,6 +209,9 @@ class Shielded(IndependentCopies, gym.Wrapper):
         obs, reward, terminated, truncated, info = self.env.step(result.action)
         self._state = self.state_fn(obs)
         info = {**info, "shield": shield_info(result, a_rl)}
+        barriers = self.shield.barrier_values(self._state)
+        if barriers:  # the new state's barrier values: what training and evaluation count
+            info["barriers"] = barriers
         return obs, reward, terminated, truncated, info
 
 

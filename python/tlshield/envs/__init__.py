@@ -3,6 +3,8 @@ imported: the paper's channel case study ``tlshield/Channel-v0``, a double-integ
 with a sequencing task, ``tlshield/PointMass-v0``, and DeepLTL's benchmark with any formula over
 its colours, ``tlshield/FlatWorld-v0``."""
 
+import importlib
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -30,14 +32,50 @@ if FLATWORLD_ID not in gym.registry:
     gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
 
 
+def import_modules(modules: Sequence[str]) -> None:
+    """Imports each module (a user's environments register themselves on import); a module
+    that cannot be found is a ValueError naming it."""
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            raise ValueError(
+                f"import {name}: no module named {err.name!r} (run from the folder that holds "
+                "it, or put that folder on PYTHONPATH)"
+            ) from None
+
+
 def check_env_id(env_id: str) -> None:
-    """Raises ValueError unless ``env_id`` is a registered Gymnasium id."""
+    """Raises ValueError unless ``env_id`` is a registered Gymnasium id. As in
+    ``gymnasium.make``, ``"module:Env-v0"`` imports ``module`` first (where a user's
+    environment registers itself)."""
+    if ":" in env_id:
+        module, _, env_id = env_id.partition(":")
+        import_modules([module])
     if env_id not in gym.registry:
         tlshield_ids = sorted(k for k in gym.registry if k.startswith("tlshield/"))
         raise ValueError(
             f"env {env_id!r}: not a registered Gymnasium id (register your environment with "
             f"gymnasium.register first; bundled: {', '.join(tlshield_ids)})"
         )
+
+
+def factory_takes(env_id: str, keyword: str) -> bool:
+    """Whether the registered factory of ``env_id`` names ``keyword`` among its parameters
+    (``**kwargs`` alone does not count: it may not reach the reward): the trainer then hands
+    it its own value (``gamma``), so the task's reward is sized for the discount PPO uses."""
+    import inspect
+
+    name = env_id.partition(":")[2] or env_id
+    entry = gym.spec(name).entry_point
+    if isinstance(entry, str):
+        module, _, attr = entry.partition(":")
+        entry = getattr(importlib.import_module(module), attr)
+    try:
+        parameters = inspect.signature(entry).parameters.values()
+    except (TypeError, ValueError):  # a builtin or C callable: no signature to read
+        return False
+    return any(p.name == keyword for p in parameters)
 
 
 def env_horizon(env: Any) -> int | None:
@@ -102,6 +140,8 @@ __all__ = [
     "check_env_id",
     "check_task_env",
     "env_horizon",
+    "factory_takes",
+    "import_modules",
     "make",
 ]
 

@@ -617,6 +617,23 @@ impl PyShield {
         self.batch_result(py, out, rows)
     }
 
+    /// Every user barrier's value ``h(s)`` by name (> 0 while it holds): how a step is
+    /// measured when the environment reports no violation of its own.
+    fn barrier_values<'py>(
+        &self,
+        py: Python<'py>,
+        s: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let s = vector(s, "s")?;
+        let mut values = Vec::new();
+        map(self.inner.barrier_values(&s, &mut values))?;
+        let out = PyDict::new(py);
+        for (name, h) in self.barrier_names.iter().zip(values) {
+            out.set_item(name.bind(py), h)?;
+        }
+        Ok(out)
+    }
+
     /// Number of inputs m.
     #[getter]
     fn num_inputs(&self) -> usize {

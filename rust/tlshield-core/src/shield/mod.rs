@@ -113,6 +113,17 @@ impl Barrier {
         }
     }
 
+    /// The barrier's value `h(s)` (the predicate's robustness, negated for an `outside`
+    /// barrier): the barrier holds while it is > 0.
+    pub fn value(&self, s: &[f64]) -> f64 {
+        let h = self.predicate.value(s);
+        if self.positive {
+            h
+        } else {
+            -h
+        }
+    }
+
     /// The same barrier with slack weight `weight` (see [`Barrier::slack_weight`]).
     pub fn with_slack_weight(self, weight: f64) -> Self {
         Barrier {
@@ -953,6 +964,16 @@ impl Shield {
     /// The dynamics model, if any.
     pub fn dynamics(&self) -> Option<&Dynamics> {
         self.dynamics.as_ref()
+    }
+
+    /// Every user barrier's value at `s` (in the order of [`ShieldParams::barriers`]), into
+    /// `out`: what an environment's step can be measured by, with no key of its own.
+    pub fn barrier_values(&self, s: &[f64], out: &mut Vec<f64>) -> Result<(), ShieldError> {
+        self.check_state("s", s)?;
+        check_finite("s", s, s.len())?;
+        out.clear();
+        out.extend(self.params.barriers.iter().map(|b| b.value(s)));
+        Ok(())
     }
 
     /// The user's model, if the shield was built with one.

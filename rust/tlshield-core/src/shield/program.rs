@@ -183,7 +183,7 @@ impl Program {
             }
             let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
                 let sign = if b.positive { 1.0 } else { -1.0 };
-                let h = sign * b.predicate.value(s);
+                let h = b.value(s);
                 let second = orders.barriers[i];
                 (
                     BarrierSource::User(i),
