@@ -123,6 +123,7 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
     if env_id == ENV_ID:
         return ChannelEnv(config=config, **kwargs)
+    check_env_id(env_id)  # an unknown id or module is one clear ValueError
     return gym.make(env_id, config=config, **kwargs)
 
 
