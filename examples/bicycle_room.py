@@ -17,7 +17,7 @@ shield on and off, and prints the violating steps of each.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -47,7 +47,7 @@ class BicycleRoom(gym.Env):
     state's four values: ``state_of`` reads the state back); action in ``[-1, 1]^2`` scaled to
     (acceleration, tan steering). Terminated when the car leaves the room."""
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
     def __init__(self) -> None:
         # Bounds that hold whatever the policy: one step past a wall, and the speed that full
@@ -92,7 +92,8 @@ def physical(action: np.ndarray) -> np.ndarray:
 
 
 def room_spec() -> tlshield.Spec:
-    """The task: goal a, then goal b. The obstacles and walls are barriers, not atoms (see the guide)."""
+    """The task: goal a, then goal b. Obstacles and walls are barriers, not atoms (see the
+    guide)."""
     goals = {name: tlshield.Ball([0, 1], GOAL_RADIUS, center=c) for name, c in GOALS.items()}
     return tlshield.Spec("F (a & F b)", goals)
 
