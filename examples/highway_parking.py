@@ -3,19 +3,24 @@ the package registry, no downloaded assets) with a temporal-logic task and the s
 
 The task: ``(w1 & w2 & w3 & w4) U g``: stay inside the lot's walls until the ego car is within
 1 m of its goal spot. The parked cars are user barriers: each car is two discs (at +-1.5 m
-along its heading, radius ``CAR_RADIUS``) that the ego's centre must stay out of. The shield's
-model is an approximation of the simulator: ``tlshield.AccelerationUnicycle`` (position moves
-along the heading at speed ``v``; inputs forward acceleration and turn rate) where highway-env
-integrates a kinematic bicycle (the velocity points along heading + slip angle, the turn rate
-is ``v sin(beta) / (L / 2)`` with ``beta = atan(tan(delta) / 2)``) at 15 Hz under a 5 Hz
-policy. The shield's turn rate is turned into a steering angle by inverting that relation
-(saturated at the steering limit), its acceleration passed as is; positions are constraints of
-relative degree 2 under this model, so the shield uses higher-order barriers (``alpha2``).
+along its heading, radius ``CAR_RADIUS``) that the ego's reference point must stay out of.
 
-``python examples/highway_parking.py [--steps N] [--seed S]`` drives a naive policy (steer and
-accelerate towards the goal, 30% random actions) for N environment steps with and without the
-shield and prints crashes (highway-env's own collision check, rectangles), successes and the
-shield's relaxed/failed counts. Needs ``pip install highway-env``.
+highway-env integrates a kinematic bicycle about the car's centre (velocity along heading +
+slip angle ``beta = atan(tan(delta) / 2)``, turn rate ``v sin(beta) / (L / 2)``) at 15 Hz under
+a 5 Hz policy. Its **rear axle**, ``L / 2`` behind the centre, moves exactly as
+``tlshield.KinematicBicycle(L)`` with speed ``v cos(beta)`` and inputs (acceleration,
+``tan(delta)``), so ``--model bicycle`` (the default) shields the rear axle with the exact
+model: the steering limit is the box ``|tan delta| <= 1``, and the turn rate the car can make
+shrinks with its speed as it does in the simulator. ``--model unicycle`` is the approximation
+this example used before: ``tlshield.AccelerationUnicycle`` on the centre, whose turn rate is
+bounded by a constant box whatever the speed, its output mapped to a steering angle by
+inverting the relation above (saturated at the steering limit). Positions are constraints of
+relative degree 2 under both, so the shield uses higher-order barriers (``alpha2``).
+
+``python examples/highway_parking.py [--steps N] [--seed S] [--model M]`` drives a naive policy
+(steer and accelerate towards the goal, 30% random actions) for N environment steps with and
+without the shield and prints crashes (highway-env's own collision check, rectangles),
+successes and the shield's relaxed/failed counts. Needs ``pip install highway-env``.
 """
 
 from __future__ import annotations
@@ -49,8 +54,26 @@ def state_of(env: gym.Env) -> np.ndarray:
     return np.array([car.position[0], car.position[1], car.heading, car.speed])
 
 
-def make_spec(env: gym.Env) -> tlshield.Spec:
-    """The task of the episode just reset (the goal spot moves per episode)."""
+def rear_state_of(env: gym.Env) -> np.ndarray:
+    """``[x, y, theta, v]`` of the rear axle: its position, the heading and its speed
+    ``v cos(beta)`` (the exact bicycle's state)."""
+    car = env.unwrapped.vehicle
+    heading = np.array([math.cos(car.heading), math.sin(car.heading)])
+    rear = car.position - LENGTH / 2 * heading
+    beta = math.atan(math.tan(car.action["steering"]) / 2)
+    return np.array([*rear, car.heading, car.speed * math.cos(beta)])
+
+
+def parked(env: gym.Env) -> bool:
+    """The task's goal, whatever the shield's model: the centre within ``GOAL_RADIUS``."""
+    car = env.unwrapped.vehicle
+    return bool(np.linalg.norm(car.position - car.goal.position) <= GOAL_RADIUS)
+
+
+def make_spec(env: gym.Env, model: str = "bicycle") -> tlshield.Spec:
+    """The task of the episode just reset (the goal spot moves per episode), on the shielded
+    point: the centre (unicycle) or the rear axle, whose goal disc is larger by the half length
+    that separates the two (success is still judged on the centre: :func:`parked`)."""
     goal = env.unwrapped.vehicle.goal.position
     walls = {
         "w1": tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], HALF_X - WALL_MARGIN),
@@ -58,12 +81,17 @@ def make_spec(env: gym.Env) -> tlshield.Spec:
         "w3": tlshield.Halfspace([0.0, -1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
         "w4": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
     }
-    g = tlshield.Ball(pos=[0, 1], radius=GOAL_RADIUS, center=list(goal))
+    radius = GOAL_RADIUS + (LENGTH / 2 if model == "bicycle" else 0.0)
+    g = tlshield.Ball(pos=[0, 1], radius=radius, center=list(goal))
     return tlshield.Spec("(w1 & w2 & w3 & w4) U g", {**walls, "g": g})
 
 
 def make_shield(
-    env: gym.Env, spec: tlshield.Spec, car_radius: float = CAR_RADIUS, alpha: float = 1.0
+    env: gym.Env,
+    spec: tlshield.Spec,
+    car_radius: float = CAR_RADIUS,
+    alpha: float = 1.0,
+    model: str = "bicycle",
 ) -> tlshield.Shield:
     """The shield of the episode just reset: the task's walls, the parked cars as barriers."""
     u = env.unwrapped
@@ -73,16 +101,22 @@ def make_shield(
         for end, sign in (("f", 1.0), ("r", -1.0)):
             centre = list(car.position + sign * along)
             cars[f"!car{k}{end}"] = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre)
+    if model == "bicycle":
+        dynamics: Any = tlshield.KinematicBicycle(LENGTH, x=0, y=1, theta=2, v=3)
+        limits = ((-MAX_ACCEL, -math.tan(MAX_STEER)), (MAX_ACCEL, math.tan(MAX_STEER)))
+    else:
+        dynamics = tlshield.AccelerationUnicycle(x=0, y=1, theta=2, v=3)
+        limits = ((-MAX_ACCEL, -2.0), (MAX_ACCEL, 2.0))
     return tlshield.Shield(
         spec,
-        tlshield.AccelerationUnicycle(x=0, y=1, theta=2, v=3),
+        dynamics,
         alpha=alpha,
         alpha2=alpha,
         c3=1.0,
         k=1e4,
         cbf_bounds=(-20.0, 20.0),
         clf_bounds=(-0.5, 0.5),
-        action_bounds=((-MAX_ACCEL, -2.0), (MAX_ACCEL, 2.0)),
+        action_bounds=limits,
         use_clf=False,
         margin=0.05,
         barriers=cars,
@@ -101,6 +135,25 @@ def to_env_action(accel: float, turn_rate: float, speed: float) -> np.ndarray:
     return np.array([accel / MAX_ACCEL, steer / MAX_STEER], dtype=np.float32)
 
 
+def bicycle_to_env_action(accel: float, tan_steer: float) -> np.ndarray:
+    """The exact bicycle's ``(a, tan delta)`` as highway-env's normalised action: the steering
+    angle ``atan(tan delta)``, and the centre's acceleration ``a / cos(beta)`` that gives the
+    rear axle ``a``."""
+    steer = max(-MAX_STEER, min(MAX_STEER, math.atan(tan_steer)))
+    beta = math.atan(math.tan(steer) / 2)
+    return np.array([accel / math.cos(beta) / MAX_ACCEL, steer / MAX_STEER], dtype=np.float32)
+
+
+def naive_bicycle(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
+    """The same controller in the bicycle's inputs ``(a, tan delta)``."""
+    if rng.random() < 0.3:
+        return rng.uniform(-MAX_ACCEL, MAX_ACCEL), rng.uniform(-1.0, 1.0)
+    x, y, theta, v = state_of(env)
+    gx, gy = env.unwrapped.vehicle.goal.position
+    error = (math.atan2(gy - y, gx - x) - theta + math.pi) % (2 * math.pi) - math.pi
+    return 2.0 * (3.0 - v), max(-1.0, min(1.0, 2.0 * error))
+
+
 def naive(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
     """A user's unsafe controller: turn towards the goal, hold 3 m/s; 30% random actions.
     Returns ``(a, omega)`` in physical units."""
@@ -113,9 +166,17 @@ def naive(env: gym.Env, rng: np.random.Generator) -> tuple[float, float]:
 
 
 def run(
-    steps: int, shielded: bool, seed: int, car_radius: float = CAR_RADIUS, alpha: float = 1.0
+    steps: int,
+    shielded: bool,
+    seed: int,
+    car_radius: float = CAR_RADIUS,
+    alpha: float = 1.0,
+    model: str = "bicycle",
 ) -> dict[str, Any]:
     """``steps`` environment steps of the naive policy, shielded or not."""
+    bicycle = model == "bicycle"
+    observe = rear_state_of if bicycle else state_of
+    policy = naive_bicycle if bicycle else naive
     env = gym.make("parking-v0", config={"vehicles_count": 10, "duration": 60})
     rng = np.random.default_rng(seed)
     counts = {"steps": 0, "episodes": 0, "crashes": 0, "wall_crashes": 0, "successes": 0}
@@ -124,28 +185,32 @@ def run(
     while counts["steps"] < steps:
         env.reset(seed=seed * 10_000 + episode)
         episode += 1
-        spec = make_spec(env)
-        shield = make_shield(env, spec, car_radius, alpha) if shielded else None
+        spec = make_spec(env, model)
+        shield = make_shield(env, spec, car_radius, alpha, model) if shielded else None
         aut = spec.automaton()
-        q = aut.step(state_of(env), aut.initial)
+        q = aut.step(observe(env), aut.initial)
         while counts["steps"] < steps:
-            accel, turn = naive(env, rng)
-            s = state_of(env)
+            accel, turn = policy(env, rng)
+            s = observe(env)
             if shield is not None:
                 out = shield.filter(s, q, [accel, turn])
                 accel, turn = float(out.action[0]), float(out.action[1])
                 counts["relaxed"] += out.status == tlshield.Status.RELAXED
                 counts["failed"] += out.status == tlshield.Status.FAILED
-            _, _, terminated, truncated, info = env.step(to_env_action(accel, turn, s[3]))
+            if bicycle:
+                action = bicycle_to_env_action(accel, turn)
+            else:
+                action = to_env_action(accel, turn, s[3])
+            _, _, terminated, truncated, info = env.step(action)
             counts["steps"] += 1
-            q = aut.step(state_of(env), q)
+            q = aut.step(observe(env), q)
             if info["crashed"]:
                 counts["crashes"] += 1
-                x, y = state_of(env)[:2]
+                x, y = observe(env)[:2]
                 near_wall = abs(x) > HALF_X - WALL_MARGIN or abs(y) > HALF_Y - WALL_MARGIN
                 counts["wall_crashes"] += bool(near_wall)
                 break
-            if q in aut.accepting:
+            if parked(env):
                 counts["successes"] += 1
                 break
             if terminated or truncated:
@@ -167,10 +232,17 @@ def main() -> int:
         help="radius of each parked car's two discs (m); several values: one shielded row each",
     )
     parser.add_argument("--alpha", type=float, default=1.0, help="alpha = alpha2 of the HOCBF")
+    parser.add_argument(
+        "--model",
+        choices=("bicycle", "unicycle"),
+        default="bicycle",
+        help="the shield's model: the exact rear-axle bicycle (default) or the centre as an "
+        "acceleration unicycle (the approximation)",
+    )
     args = parser.parse_args()
     print(
         f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each, "
-        f"alpha = alpha2 = {args.alpha:g}:"
+        f"model {args.model}, alpha = alpha2 = {args.alpha:g}:"
     )
     print(
         "| shield | car disc radius | episodes | crashes (at a wall) | successes | relaxed | "
@@ -180,7 +252,7 @@ def main() -> int:
     settings = [(False, math.nan)] + [(True, r) for r in args.car_radius]
     for shielded, radius in settings:
         start = time.perf_counter()
-        c = run(args.steps, shielded, args.seed, radius, args.alpha)
+        c = run(args.steps, shielded, args.seed, radius, args.alpha, args.model)
         print(
             f"| {'on' if shielded else 'off'} | {radius:g} | {c['episodes']} | "
             f"{c['crashes']} ({c['wall_crashes']}) | "
