@@ -254,6 +254,7 @@ CASES: dict[str, Case] = {
         "filter",
         {"s": S, "q": Q, "a_rl": A_RL[5], "f": F, "g": G, "drift": DRIFT[5]},
     ),
+    "Shield.barrier_values": Case(_shield, "barrier_values", {"s": S}),
     "Shield.filter_batch": Case(
         _shield, "filter_batch", {"states": STATES, "qs": QS, "a_rl": A_RL, "drift": DRIFT}
     ),
@@ -353,6 +354,8 @@ def canon(value: Any) -> Any:
         return canon((value.actuated, value.integrated))
     if isinstance(value, (tuple, list)):
         return [canon(v) for v in value]
+    if isinstance(value, dict):
+        return {k: canon(v) for k, v in value.items()}
     if isinstance(value, (str, type(None))):
         return value
     return np.asarray(value, dtype=np.float64).tolist()

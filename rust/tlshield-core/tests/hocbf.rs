@@ -173,6 +173,24 @@ fn acceleration_unicycle_never_enters_the_obstacle() {
 }
 
 #[test]
+fn kinematic_bicycle_never_enters_the_obstacle() {
+    // Wheelbase 0.5; the second input is tan(steering), limited to +-2 by the action box.
+    let model = Dynamics::kinematic_bicycle(0.5, 0, 1, 2, 3).unwrap();
+    let start = |rng: &mut Rng| loop {
+        let angle = rng.uniform(-PI, PI);
+        let r = rng.uniform(1.05, 3.0);
+        let (px, py) = (r * angle.cos(), r * angle.sin());
+        let theta = rng.uniform(-PI, PI);
+        let v = rng.uniform(0.0, 1.0);
+        let psi = v * (px * theta.cos() + py * theta.sin()) / r + 2.0 * (r - 1.0);
+        if psi >= 0.0 {
+            return vec![px, py, theta, v];
+        }
+    };
+    never_enters("kinematic bicycle", model, start);
+}
+
+#[test]
 fn a_second_order_barrier_needs_alpha2() {
     let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
     let spec = Spec::new("F o", [("o", obstacle.clone())]).unwrap();

@@ -30,13 +30,13 @@ use crate::pickling::reduce;
 /// the callables are defined if they are not defined everywhere.
 #[pyclass(name = "ControlAffine", module = "tlshield._core", frozen)]
 pub struct PyControlAffine {
-    fns: Callables,
+    pub(crate) fns: Callables,
     probe: Option<Py<PyAny>>,
     pub(crate) inner: CustomModel,
 }
 
 /// The user's callables over `n` state values and `m` inputs.
-struct Callables {
+pub(crate) struct Callables {
     f: Py<PyAny>,
     g: Py<PyAny>,
     jacobian: Option<Py<PyAny>>,
@@ -69,7 +69,7 @@ impl Callables {
     }
 
     /// Writes `f(s)`, `g(s)` and, when `jac` is given, `J_f(s)` (given or by differences).
-    fn evaluate(
+    pub(crate) fn evaluate(
         &self,
         py: Python<'_>,
         s: &[f64],
@@ -101,18 +101,6 @@ impl Callables {
 }
 
 impl PyControlAffine {
-    /// Writes `f(s)`, `g(s)` and, when `jac` is given, `J_f(s)` (given or by differences).
-    pub(crate) fn evaluate(
-        &self,
-        py: Python<'_>,
-        s: &[f64],
-        f: &mut [f64],
-        g: &mut [f64],
-        jac: Option<&mut [f64]>,
-    ) -> PyResult<()> {
-        self.fns.evaluate(py, s, f, g, jac)
-    }
-
     /// Every row's `f`, `g` and `J_f` for `states` (rows x n), into flat buffers.
     pub(crate) fn evaluate_rows(
         &self,
@@ -133,7 +121,7 @@ impl PyControlAffine {
             alloc("jacobian", n * n)?,
         );
         for (i, s) in states.chunks_exact(n).enumerate() {
-            self.evaluate(
+            self.fns.evaluate(
                 py,
                 s,
                 &mut f[i * n..(i + 1) * n],
@@ -219,7 +207,7 @@ impl PyControlAffine {
         let s = vector(s, "s")?;
         let (n, m) = (self.inner.state_len(), self.inner.inputs());
         let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);
-        self.evaluate(py, &s, &mut f, &mut g, None)?;
+        self.fns.evaluate(py, &s, &mut f, &mut g, None)?;
         let g = numpy::ndarray::Array2::from_shape_vec((n, m), g)
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok((f.into_pyarray(py), g.into_pyarray(py)))
@@ -235,7 +223,7 @@ impl PyControlAffine {
         let s = vector(s, "s")?;
         let (n, m) = (self.inner.state_len(), self.inner.inputs());
         let (mut f, mut g, mut jac) = (vec![0.0; n], vec![0.0; n * m], vec![0.0; n * n]);
-        self.evaluate(py, &s, &mut f, &mut g, Some(&mut jac))?;
+        self.fns.evaluate(py, &s, &mut f, &mut g, Some(&mut jac))?;
         let jac = numpy::ndarray::Array2::from_shape_vec((n, n), jac)
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(jac.into_pyarray(py))
@@ -263,7 +251,7 @@ impl PyControlAffine {
             )));
         }
         let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);
-        self.evaluate(py, &s, &mut f, &mut g, None)?;
+        self.fns.evaluate(py, &s, &mut f, &mut g, None)?;
         let next: Vec<f64> = (0..n)
             .map(|i| s[i] + dt * (f[i] + (0..m).map(|j| g[i * m + j] * a[j]).sum::<f64>()))
             .collect();
