@@ -119,8 +119,13 @@ def test_the_room_trains_and_evaluates_from_the_command_line(tmp_path: Path) -> 
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     assert json.loads((other / "run.json").read_text())["imports"] == ["bicycle_room"]
-    # The training environment's failures are one line and exit 2 as well.
-    for bad in ("nomodule:Env-v0", "NotRegistered-v0"):
+    # The training environment's failures are one line and exit 2 as well, a factory that
+    # does not take the trainer's keywords among them.
+    (tmp_path / "badfactory.py").write_text(
+        "import gymnasium as gym\n"
+        "gym.register(id='Bad-v0', entry_point=lambda: gym.make('CartPole-v1'))\n"
+    )
+    for bad in ("nomodule:Env-v0", "NotRegistered-v0", "badfactory:Bad-v0"):
         done = _cli("train", "--env", bad, "--updates", "1", "--out", str(tmp_path / "x"),
                     "--quiet", cwd=tmp_path)  # fmt: skip
         assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr

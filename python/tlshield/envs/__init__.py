@@ -124,7 +124,15 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     if env_id == ENV_ID:
         return ChannelEnv(config=config, **kwargs)
     check_env_id(env_id)  # an unknown id or module is one clear ValueError
-    return gym.make(env_id, config=config, **kwargs)
+    try:
+        return gym.make(env_id, config=config, **kwargs)
+    except TypeError as err:
+        # Most often a factory that does not take the trainer's keywords: say which.
+        keywords = ", ".join(f"{k}=" for k in ("config", *kwargs))
+        raise ValueError(
+            f"env {env_id!r}: gymnasium.make with {keywords} failed: {err} (the trainer's "
+            "factory must accept config= and evaluation=)"
+        ) from err
 
 
 __all__ = [
