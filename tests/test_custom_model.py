@@ -193,8 +193,10 @@ def test_a_custom_model_that_cannot_act_on_a_barrier_is_refused_at_construction(
 
 
 def test_bad_callables_are_clear_errors_at_construction() -> None:
-    with pytest.raises(TypeError, match="ControlAffine f: expected a callable"):
-        tlshield.ControlAffine(np.zeros(4), di_g, state_dim=4, inputs=2)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="ControlAffine f: expected a callable s -> array or a"):
+        tlshield.ControlAffine("f", di_g, state_dim=4, inputs=2)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"ControlAffine g: expected shape \(4, 2\), got \(4, 1\)"):
+        tlshield.ControlAffine(di_f, np.ones((4, 1)), state_dim=4, inputs=2)
     with pytest.raises(ValueError, match=r"g\(s\): expected shape \(4, 2\), got \(4, 1\)"):
         tlshield.ControlAffine(di_f, lambda s: np.ones((4, 1)), state_dim=4, inputs=2)
     with pytest.raises(ValueError, match=r"f.*probe state"):
@@ -216,6 +218,22 @@ def test_bad_callables_are_clear_errors_at_construction() -> None:
         tlshield.ControlAffine(sqrt_f, one, state_dim=2, inputs=1)
     probed = tlshield.ControlAffine(sqrt_f, one, state_dim=2, inputs=1, probe=[[1.0, 0.0]])
     assert probed.actuated == [1] and probed.integrated == []
+
+
+def test_parts_that_do_not_depend_on_the_state_may_be_arrays() -> None:
+    """A constant g and the Jacobian of a linear f, given as arrays, are the callables'
+    model; the arrays are copied (changing the caller's array later changes nothing)."""
+    g, jac = di_g(np.zeros(4)), di_jacobian(np.zeros(4))
+    by_arrays = tlshield.ControlAffine(di_f, g, state_dim=4, inputs=2, jacobian=jac)
+    by_calls = tlshield.ControlAffine(di_f, di_g, state_dim=4, inputs=2, jacobian=di_jacobian)
+    g[:] = 0.0
+    a, b = shield(by_arrays), shield(by_calls)
+    rng = np.random.default_rng(5)
+    for s in states(rng, 50, 4):
+        u = rng.uniform(-4.0, 4.0, 2)
+        np.testing.assert_array_equal(a.filter(s, 0, u).action, b.filter(s, 0, u).action)
+    back = pickle.loads(pickle.dumps(by_arrays))
+    np.testing.assert_array_equal(back.eval(np.ones(4))[1], di_g(np.ones(4)))
 
 
 def test_a_custom_model_pickles_with_its_named_functions() -> None:

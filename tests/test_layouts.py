@@ -47,9 +47,8 @@ def array_parameters() -> dict[str, list[str]]:
                 a.arg
                 for a in args
                 if a.annotation is not None
-                and "ArrayLike" in ast.unparse(a.annotation)
-                # A callable returning an array (ControlAffine's f, g) is not an array.
-                and "Callable" not in ast.unparse(a.annotation)
+                # An array (ControlAffine's f, g: a callable returning one, or the array).
+                and "ArrayLike" in ast.unparse(a.annotation).replace("], ArrayLike]", "]")
             ]
             if names:
                 found[f"{node.name}.{item.name}"] = names
@@ -118,8 +117,8 @@ def _bicycle_g(s: np.ndarray) -> np.ndarray:
     return np.array([[0.0, 0.0], [0.0, 0.0], [0.0, s[3] / 0.5], [1.0, 0.0]])
 
 
-def _control_affine(probe: Any = None) -> Any:
-    return _core.ControlAffine(_bicycle_f, _bicycle_g, state_dim=4, inputs=2, probe=probe)
+def _control_affine() -> Any:
+    return _core.ControlAffine(_bicycle_f, _bicycle_g, state_dim=4, inputs=2)
 
 
 TRAJ = STATES[:12]
@@ -242,7 +241,17 @@ CASES: dict[str, Case] = {
         for method in ("eval", "step")
     },
     "ControlAffine.__new__": Case(
-        lambda: _control_affine, "__call__", {"probe": STATES[:3, :4] - 1.0}
+        lambda: _core.ControlAffine,
+        "__call__",
+        {
+            # Constant parts: a drift, an input matrix moving dimensions 2 and 3, a Jacobian.
+            "f": DYN_S[:4],
+            "g": np.array([[0.0, 0.0], [0.0, 0.0], [0.5, 0.0], [0.0, 2.0]]),
+            "state_dim": 4,
+            "inputs": 2,
+            "jacobian": np.triu(np.ones((4, 4)), 1),
+            "probe": STATES[:3, :4] - 1.0,
+        },
     ),
     "ControlAffine.eval": Case(_control_affine, "eval", {"s": DYN_S[:4]}),
     "ControlAffine.drift_jacobian": Case(_control_affine, "drift_jacobian", {"s": DYN_S[:4]}),

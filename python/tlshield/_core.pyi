@@ -487,12 +487,12 @@ class ControlAffine:
 
     def __new__(
         cls,
-        f: Callable[[NDArray[np.float64]], ArrayLike],
-        g: Callable[[NDArray[np.float64]], ArrayLike],
+        f: Callable[[NDArray[np.float64]], ArrayLike] | ArrayLike,
+        g: Callable[[NDArray[np.float64]], ArrayLike] | ArrayLike,
         *,
         state_dim: int,
         inputs: int,
-        jacobian: Callable[[NDArray[np.float64]], ArrayLike] | None = None,
+        jacobian: Callable[[NDArray[np.float64]], ArrayLike] | ArrayLike | None = None,
         probe: ArrayLike | None = None,
     ) -> Self: ...
     def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...

@@ -3,7 +3,7 @@
 //! shield evaluates the callables at every state it is asked about and hands the values to the
 //! core.
 
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
@@ -20,7 +20,8 @@ use crate::pickling::reduce;
 /// when given, the drift's Jacobian ``(state_dim, state_dim)`` (``[i, j] = df_i/ds_j``);
 /// without it the Jacobian is computed by central differences of ``f`` (step
 /// ``eps^(1/3) (1 + |s_j|)``, about 1e-10 accurate for smooth ``f``). Each callable gets a float64
-/// array of the state and may return any array-like.
+/// array of the state and may return any array-like; a part that does not depend on the state
+/// (a constant ``g``, the Jacobian of a linear ``f``) may be given as that array instead.
 ///
 /// At construction the model is evaluated at ``probe`` states ``(k, state_dim)`` (default: 8
 /// fixed states uniform in [-2, 2]) to find which dimensions the inputs move directly (rows of
@@ -35,26 +36,77 @@ pub struct PyControlAffine {
     pub(crate) inner: CustomModel,
 }
 
-/// The user's callables over `n` state values and `m` inputs.
+/// One part of the model: a callable of the state, or a constant array (a `g` or a Jacobian
+/// that does not depend on the state), kept as values and as a numpy copy for pickling.
+enum Source {
+    Call(Py<PyAny>),
+    Fixed(Py<PyAny>, Vec<f64>),
+}
+
+impl Source {
+    /// `obj` as a callable, or as a constant array of `shape`.
+    fn new(obj: &Bound<'_, PyAny>, name: &str, shape: &[usize]) -> PyResult<Self> {
+        if obj.is_callable() {
+            return Ok(Source::Call(obj.clone().unbind()));
+        }
+        let layout = shape_text(shape);
+        let array = FloatArray::extract(obj, name, shape.len(), &layout).map_err(|_| {
+            PyTypeError::new_err(format!(
+                "ControlAffine {name}: expected a callable s -> array or a constant array of \
+                 shape {layout}, got {}",
+                obj.get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
+            ))
+        })?;
+        if array.shape() != shape {
+            return Err(PyValueError::new_err(format!(
+                "ControlAffine {name}: expected shape {layout}, got {}",
+                shape_text(array.shape())
+            )));
+        }
+        // Kept as a copy: a later change to the caller's array changes neither the model nor
+        // its pickle.
+        let values = array.values().to_vec();
+        let copy = PyArray1::from_vec(obj.py(), values.clone()).reshape(shape.to_vec())?;
+        Ok(Source::Fixed(copy.into_any().unbind(), values))
+    }
+
+    /// The object as given.
+    fn given(&self, py: Python<'_>) -> Py<PyAny> {
+        match self {
+            Source::Call(obj) | Source::Fixed(obj, _) => obj.clone_ref(py),
+        }
+    }
+}
+
+/// The user's model over `n` state values and `m` inputs.
 pub(crate) struct Callables {
-    f: Py<PyAny>,
-    g: Py<PyAny>,
-    jacobian: Option<Py<PyAny>>,
+    f: Source,
+    g: Source,
+    jacobian: Option<Source>,
     n: usize,
     m: usize,
 }
 
 impl Callables {
-    /// Calls `fun(s)` and checks the answer's shape and values.
+    /// Evaluates `source` at `s` and checks the answer's shape and values.
     fn call<'py>(
         &self,
         py: Python<'py>,
-        fun: &Py<PyAny>,
+        source: &Source,
         name: &str,
         s: &[f64],
         shape: &[usize],
         out: &mut [f64],
     ) -> PyResult<()> {
+        let fun = match source {
+            Source::Fixed(_, values) => {
+                out.copy_from_slice(values);
+                return Ok(());
+            }
+            Source::Call(fun) => fun,
+        };
         let layout = shape_text(shape);
         let answer = fun.call1(py, (s.to_vec().into_pyarray(py),))?;
         let array = FloatArray::extract(answer.bind(py), name, shape.len(), &layout)?;
@@ -133,18 +185,6 @@ impl PyControlAffine {
     }
 }
 
-fn callable(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Py<PyAny>> {
-    if !obj.is_callable() {
-        return Err(PyTypeError::new_err(format!(
-            "ControlAffine {name}: expected a callable s -> array, got {}",
-            obj.get_type()
-                .name()
-                .map_or_else(|_| "?".into(), |n| n.to_string())
-        )));
-    }
-    Ok(obj.clone().unbind())
-}
-
 #[pymethods]
 impl PyControlAffine {
     #[new]
@@ -164,15 +204,16 @@ impl PyControlAffine {
                  inputs={inputs}"
             )));
         }
+        let (n, m) = (state_dim, inputs);
         let fns = Callables {
-            f: callable(f, "f")?,
-            g: callable(g, "g")?,
+            f: Source::new(f, "f", &[n])?,
+            g: Source::new(g, "g", &[n, m])?,
             jacobian: jacobian
                 .filter(|j| !j.is_none())
-                .map(|j| callable(j, "jacobian"))
+                .map(|j| Source::new(j, "jacobian", &[n, n]))
                 .transpose()?,
-            n: state_dim,
-            m: inputs,
+            n,
+            m,
         };
         let probe_obj = probe.filter(|p| !p.is_none());
         let states = match probe_obj {
@@ -295,12 +336,9 @@ impl PyControlAffine {
         let kwargs = PyDict::new(py);
         kwargs.set_item("state_dim", me.inner.state_len())?;
         kwargs.set_item("inputs", me.inner.inputs())?;
-        kwargs.set_item(
-            "jacobian",
-            me.fns.jacobian.as_ref().map(|j| j.clone_ref(py)),
-        )?;
+        kwargs.set_item("jacobian", me.fns.jacobian.as_ref().map(|j| j.given(py)))?;
         kwargs.set_item("probe", me.probe.as_ref().map(|p| p.clone_ref(py)))?;
-        let args = PyTuple::new(py, [me.fns.f.clone_ref(py), me.fns.g.clone_ref(py)])?;
+        let args = PyTuple::new(py, [me.fns.f.given(py), me.fns.g.given(py)])?;
         reduce(slf.get_type().into_any(), args, Some(kwargs), None)
     }
 }

@@ -225,7 +225,9 @@ impl PyShield {
             let n = s.len();
             let m = self.inner.inputs();
             let (mut fv, mut gv, mut jac) = (vec![0.0; n], vec![0.0; n * m], vec![0.0; n * n]);
-            model.fns.evaluate(py, s, &mut fv, &mut gv, Some(&mut jac))?;
+            model
+                .fns
+                .evaluate(py, s, &mut fv, &mut gv, Some(&mut jac))?;
             return call(Some(ControlAffine {
                 f: &fv,
                 g: &gv,
