@@ -28,7 +28,7 @@ from tlshield.wrappers import FsaAugmented, Shielded
 #: The car: wheelbase (m), steering limit (rad), acceleration limit (m/s^2), top speed (m/s).
 WHEELBASE, MAX_STEER, MAX_ACCEL, TOP_SPEED = 0.5, 0.5, 2.0, 2.0
 #: The room's side (m), the control period (s) and the episode length (steps).
-ROOM, DT, HORIZON = 10.0, 0.1, 400
+ROOM, DT, HORIZON = 10.0, 0.2, 200
 GOALS = {"a": (2.0, 8.0), "b": (8.0, 2.0)}
 GOAL_RADIUS = 0.6
 OBSTACLES = {"!o1": ((5.4, 5.4), 1.0), "!o2": ((3.3, 5.0), 0.7), "!o3": ((7.5, 7.5), 0.7)}
