@@ -178,25 +178,35 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
     # A user's env whose reward is sized for another discount, or a shorter horizon.
     spec = flatworld_spec("F yellow")
 
+    def fixed_discount(config: str = "rl", evaluation: bool = False) -> gym.Env:
+        """A factory that sizes its reward for gamma 0.9 and does not take the trainer's."""
+        from tlshield.envs.flatworld import FlatWorld, FlatWorldParams
+        from tlshield.wrappers import FsaAugmented
+
+        return FsaAugmented(FlatWorld(FlatWorldParams()), spec, gamma=0.9, horizon=500)
+
     def user_env(
         config: str = "rl", evaluation: bool = False, gamma: float = 0.9, horizon: int = 500
     ) -> gym.Env:
+        """A factory that names gamma: the trainer hands it its own discount."""
         from tlshield.envs.flatworld import FlatWorld, FlatWorldParams
         from tlshield.wrappers import FsaAugmented
 
         return FsaAugmented(FlatWorld(FlatWorldParams()), spec, gamma=gamma, horizon=horizon)
 
+    gym.register("tests/FixedFlat-v0", entry_point=fixed_discount)
     gym.register("tests/UserFlat-v0", entry_point=user_env)
     try:
         with pytest.raises(ValueError, match="gamma"):
-            train("rl", 0, 1, tmp_path / "b", env="tests/UserFlat-v0")
+            train("rl", 0, 1, tmp_path / "b", env="tests/FixedFlat-v0")
         with pytest.raises(ValueError, match="horizon"):
-            train("rl", 0, 1, tmp_path / "c", env="tests/UserFlat-v0", gamma=0.999, horizon=100)
-        run = train(
-            "rl", 0, 1, tmp_path / "d", env="tests/UserFlat-v0", progress=False, gamma=0.999
-        )
-        assert json.loads((run / "run.json").read_text())["finished"]
+            train("rl", 0, 1, tmp_path / "c", env="tests/UserFlat-v0", horizon=100)
+        run = train("rl", 0, 1, tmp_path / "d", env="tests/UserFlat-v0", progress=False)
+        record = json.loads((run / "run.json").read_text())
+        assert record["finished"]
+        assert record["overrides"]["gamma"] == record["ppo"]["gamma"]
     finally:
+        del gym.registry["tests/FixedFlat-v0"]
         del gym.registry["tests/UserFlat-v0"]
 
 
