@@ -99,6 +99,19 @@ class Structure:
             ]
             for q in range(automaton.num_states)
         }
+        if automaton.trap is not None:
+            # The trap keeps what every state with an edge into it kept: the intersection of
+            # their negated trap guards (as sets of literals, whatever their order).
+            into = [
+                {frozenset(clause) for clause in automaton.trap_cnf(q)}
+                for q in range(automaton.num_states)
+                if q != automaton.trap and automaton.trap_cnf(q)
+            ]
+            kept = set.intersection(*into) if into else set()
+            self.cnf[automaton.trap] = [
+                [(atoms.index(a), pos) for a, pos in map(literal, sorted(clause))]
+                for clause in sorted(kept, key=sorted)
+            ]
         self.ranks = automaton.ranks
         self.progress: dict[int, list[list[Cube]]] = {q: [] for q in range(automaton.num_states)}
         self.edges: dict[int, list[tuple[int, list[Cube]]]] = {

@@ -266,6 +266,18 @@ impl PyAutomaton {
             .collect())
     }
 
+    /// The trap's recovery safe set: the clauses every state with an edge into the trap keeps
+    /// (the intersection of their ``trap_cnf``). A shield in the trap keeps enforcing them, so
+    /// a slip (model error, a relaxed step, a start inside a region to avoid) is driven back.
+    #[getter]
+    fn recovery_cnf<'py>(&self, py: Python<'py>) -> Vec<Vec<Bound<'py, PyString>>> {
+        self.inner
+            .recovery_cnf()
+            .iter()
+            .map(|clause| clause.iter().map(|l| self.literals.get(py, l)).collect())
+            .collect()
+    }
+
     /// The CNF of the progress-preserving safe set of ``q``: the negation of every guard to a
     /// state farther from acceptance (``ranks``), the trap's included; ``trap_cnf(q)`` where
     /// the trap is the only setback.

@@ -761,6 +761,7 @@ impl Automaton {
             .iter()
             .map(|g| regions::dedup_cnf(cnf::complement_cnf(g)))
             .collect();
+        let recovery_cnf = regions::recovery_cnf(&trap_cnf);
 
         // 5. A table for one-lookup steps, when small.
         let letters = 1usize << n;
@@ -801,6 +802,7 @@ impl Automaton {
             progress: progress_cubes,
             trap_guard,
             trap_cnf,
+            recovery_cnf,
             pairs,
             ranks,
             goal_alternatives,

@@ -82,11 +82,12 @@ impl Reading<'_> {
 
     /// The CBF safe set of Eq. 5C1 at `(s, q)` into `out`: per clause of the negated trap
     /// guard, the literal with the LARGEST robustness (the first on ties) and that robustness;
-    /// empty without a trap edge. The paper prints argmin, which would keep e.g. "be inside g3"
+    /// empty without a trap edge. In the trap itself: its recovery safe set (beyond the paper,
+    /// which leaves the trap unshielded). The paper prints argmin, which would keep e.g. "be inside g3"
     /// for the clause (g3 | c1); argmax keeps the literal that holds with the largest margin.
     /// A literal chosen by two clauses appears once.
     pub fn safe_set(&self, q: usize, out: &mut Vec<(Literal, f64)>) {
-        self.choose(&self.aut.trap_cnf[q], out);
+        self.choose(self.clauses(q, &self.aut.trap_cnf), out);
     }
 
     /// The progress-preserving safe set (beyond the paper): [`Reading::safe_set`] over the
@@ -94,7 +95,17 @@ impl Reading<'_> {
     /// the task back (to a state farther from acceptance). Equal to the Eq. 5C1 safe set where
     /// the trap is the only setback.
     pub fn progress_safe_set(&self, q: usize, out: &mut Vec<(Literal, f64)>) {
-        self.choose(&self.aut.avoid_cnf[q], out);
+        self.choose(self.clauses(q, &self.aut.avoid_cnf), out);
+    }
+
+    /// `per_state[q]`, or in the trap its recovery safe set ([`Automaton::recovery_cnf`]): no
+    /// state of the task turns the shield off.
+    fn clauses<'b>(&'b self, q: usize, per_state: &'b [Vec<Vec<Literal>>]) -> &'b [Vec<Literal>] {
+        if Some(q) == self.aut.trap {
+            &self.aut.recovery_cnf
+        } else {
+            &per_state[q]
+        }
     }
 
     fn choose(&self, clauses: &[Vec<Literal>], out: &mut Vec<(Literal, f64)>) {

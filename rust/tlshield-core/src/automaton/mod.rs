@@ -64,6 +64,8 @@ pub struct Automaton {
     trap_guard: Vec<Vec<Cube>>,
     /// Per state: the CNF of the negated trap guard (empty: no trap edge).
     trap_cnf: Vec<Vec<Vec<Literal>>>,
+    /// The trap's safe set: what every way into it kept (`regions::recovery_cnf`).
+    recovery_cnf: Vec<Vec<Literal>>,
     /// Per atom pair (row-major, atoms x atoms): whether the two can hold together.
     pairs: Vec<Option<bool>>,
     /// Per state: transitions to acceptance over admissible letters.
@@ -172,6 +174,12 @@ impl Automaton {
     pub fn avoid_cnf(&self, q: usize) -> Result<&[Vec<Literal>], AutomatonError> {
         self.check_state("q", q)?;
         Ok(&self.avoid_cnf[q])
+    }
+
+    /// The trap's recovery safe set (empty without a trap): the clauses every state with an
+    /// edge into the trap keeps, which the shield keeps enforcing once the task has failed.
+    pub fn recovery_cnf(&self) -> &[Vec<Literal>] {
+        &self.recovery_cnf
     }
 
     /// Transitions to acceptance from each state over the letters the regions' geometry
@@ -423,6 +431,27 @@ mod tests {
         );
         assert_eq!(cnf_text(&aut, 0), ["!a | c", "!b | c"]);
         assert!(aut.trap_cnf(2).unwrap().is_empty());
+    }
+
+    #[test]
+    fn the_trap_keeps_what_every_way_into_it_kept() {
+        // Only q0 enters the trap: the trap's recovery set is q0's, and the trap's safe set
+        // (Eq. 5C1 and progress-preserving alike) chooses from it instead of being empty.
+        let aut = running_example();
+        let trap = aut.trap().unwrap();
+        assert_eq!(aut.recovery_cnf(), aut.trap_cnf(0).unwrap());
+        let s = [0.5, 0.0];
+        for progress in [false, true] {
+            let in_trap = aut.safe_set(trap, &s, progress).unwrap();
+            assert_eq!(in_trap, aut.safe_set(0, &s, progress).unwrap());
+        }
+        // A formula without a trap keeps nothing.
+        let spec = Spec::new(
+            "F a",
+            [("a", Predicate::halfspace(vec![1.0], 0.0).unwrap())],
+        )
+        .unwrap();
+        assert!(Automaton::build(&spec).unwrap().recovery_cnf().is_empty());
     }
 
     #[test]

@@ -192,6 +192,26 @@ pub(super) fn avoid_cnf(
         .collect()
 }
 
+/// The trap's recovery safe set: the clauses that every state with an edge into the trap keeps
+/// (the intersection of their negated trap guards). The trap has no edge out, so without it a
+/// shield would stop enforcing anything after one slip (model error, a relaxed step, a start
+/// inside a hazard); with it, the barriers every way into the trap was holding keep acting and
+/// drive the state back (the CBF condition pushes up wherever `h < 0`). The intersection, not
+/// the union: a literal only some predecessor kept (for example "not yet in g3" before g1) is
+/// no longer a promise worth keeping once the task has failed, and the union could conflict.
+pub(super) fn recovery_cnf(trap_cnf: &[Vec<Vec<Literal>>]) -> Vec<Vec<Literal>> {
+    let mut into_trap = trap_cnf.iter().filter(|cnf| !cnf.is_empty());
+    let Some(first) = into_trap.next() else {
+        return Vec::new();
+    };
+    let rest: Vec<&Vec<Vec<Literal>>> = into_trap.collect();
+    first
+        .iter()
+        .filter(|clause| rest.iter().all(|cnf| cnf.contains(clause)))
+        .cloned()
+        .collect()
+}
+
 /// Sorted literals per clause, no repeated clause.
 pub(super) fn dedup_cnf(clauses: Vec<Vec<Literal>>) -> Vec<Vec<Literal>> {
     let mut out: Vec<Vec<Literal>> = Vec::with_capacity(clauses.len());
