@@ -38,7 +38,8 @@ trajectory generator):
    evaluated in Python: the next state is the edge whose guard holds; the reward is
    ``min(rho(D_q), c_r * -rho(psi_trap))`` with the robustness of a DNF the max over its cubes
    of the min over their literals (``rho(D_q)`` alone without a trap edge); the safe set keeps
-   per clause of ``aut.trap_cnf(q')`` the literal with the largest robustness. Before timing,
+   per clause of ``aut.trap_cnf(q')`` the literal with the largest robustness (in the trap: of
+   the clauses every state with a trap edge has, ``aut.recovery_cnf``). Before timing,
    both must agree on 2000 random (q, s) pairs: the same next state, the reward within 1e-12,
    the same safe-set literals with robustness within 1e-12.
 
@@ -210,6 +211,15 @@ class PythonFsa:
                     )
                 )
                 for clause in aut.trap_cnf(q)
+            ]
+        if self.trap is not None:
+            # The trap keeps what every way into it kept: the clauses of the first state with a
+            # trap edge that every such state has (compared as sets of literals), in its order.
+            into = [self.cnf[q] for q in range(self.num_states) if q != self.trap and self.cnf[q]]
+            self.cnf[self.trap] = [
+                clause
+                for clause in (into[0] if into else [])
+                if all(set(clause) in [set(c) for c in other] for other in into[1:])
             ]
 
     def next_state(self, q: int, holds: Sequence[bool]) -> int:
