@@ -30,8 +30,12 @@ def goals(n: int, width: int) -> str:
 LONG = goals(9, 3)
 
 
+# The child restores Python's own SIGINT handler first: an ignored SIGINT is inherited across
+# exec, and a test runner's worker may ignore it (seen under pytest-xdist), which would leave
+# the child deaf to Ctrl-C whatever the build does.
 SCRIPT = """
-import sys, time, tlshield
+import signal, sys, time, tlshield
+signal.signal(signal.SIGINT, signal.default_int_handler)
 print("start", flush=True)
 try:
     tlshield.Automaton.from_formula(sys.argv[1])
