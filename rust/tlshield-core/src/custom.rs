@@ -157,6 +157,23 @@ impl CustomModel {
         Ok(Self::new(n, m, &actuated, &integrated)?)
     }
 
+    /// One Euler step `s + dt (f + g a)` with `f` (n) and `g` (n x m) evaluated at `s` by the
+    /// caller: the plant of an environment built on this model. Checks `a` and `dt`.
+    pub fn checked_euler_step(
+        &self,
+        s: &[f64],
+        a: &[f64],
+        dt: f64,
+        f: &[f64],
+        g: &[f64],
+    ) -> Result<Vec<f64>, InputError> {
+        crate::dynamics::check_step_input(a, self.m, dt)?;
+        let m = self.m;
+        Ok((0..self.n)
+            .map(|i| s[i] + dt * (f[i] + (0..m).map(|j| g[i * m + j] * a[j]).sum::<f64>()))
+            .collect())
+    }
+
     /// Number of state values n.
     pub fn state_len(&self) -> usize {
         self.n

@@ -101,6 +101,26 @@ fn distinct(what: &str, dims: &[usize]) -> Result<(), InputError> {
     Ok(())
 }
 
+/// Checks an Euler step's action (`m` finite values) and time step (finite, > 0).
+pub(crate) fn check_step_input(a: &[f64], m: usize, dt: f64) -> Result<(), InputError> {
+    if a.len() != m {
+        return Err(InputError::Shape {
+            what: "a".into(),
+            expected: format!("{m} values (one per input)"),
+            got: a.len().to_string(),
+        });
+    }
+    check_finite("a", a, a.len())?;
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(InputError::Value {
+            what: "dt".into(),
+            expected: "a finite time step > 0".into(),
+            got: dt.to_string(),
+        });
+    }
+    Ok(())
+}
+
 impl Dynamics {
     /// A single integrator on `pos` (non-empty, distinct dimensions).
     pub fn single_integrator(pos: Vec<usize>) -> Result<Self, InputError> {
@@ -288,21 +308,7 @@ impl Dynamics {
         dt: f64,
     ) -> Result<Vec<f64>, InputError> {
         self.check_state(s)?;
-        if a.len() != self.inputs() {
-            return Err(InputError::Shape {
-                what: "a".into(),
-                expected: format!("{} values (one per input)", self.inputs()),
-                got: a.len().to_string(),
-            });
-        }
-        check_finite("a", a, a.len())?;
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(InputError::Value {
-                what: "dt".into(),
-                expected: "a finite time step > 0".into(),
-                got: dt.to_string(),
-            });
-        }
+        check_step_input(a, self.inputs(), dt)?;
         let mut out = vec![0.0; s.len()];
         self.euler_step(s, a, dt, &mut out);
         Ok(out)

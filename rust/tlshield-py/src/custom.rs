@@ -281,21 +281,9 @@ impl PyControlAffine {
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (s, a) = (vector(s, "s")?, vector(a, "a")?);
         let (n, m) = (self.inner.state_len(), self.inner.inputs());
-        if a.len() != m || a.iter().any(|x| !x.is_finite()) {
-            return Err(PyValueError::new_err(format!(
-                "a: expected {m} finite values (one per input), got {a:?}"
-            )));
-        }
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "dt: expected a finite time step > 0, got {dt}"
-            )));
-        }
         let (mut f, mut g) = (vec![0.0; n], vec![0.0; n * m]);
         self.fns.evaluate(py, &s, &mut f, &mut g, None)?;
-        let next: Vec<f64> = (0..n)
-            .map(|i| s[i] + dt * (f[i] + (0..m).map(|j| g[i * m + j] * a[j]).sum::<f64>()))
-            .collect();
+        let next = map(self.inner.checked_euler_step(&s, &a, dt, &f, &g))?;
         Ok(next.into_pyarray(py))
     }
 
