@@ -484,6 +484,28 @@ class KinematicBicycle:
         """One Euler step ``s + dt (f(s) + g(s) a)``."""
 
 @final
+class ThrustTurn:
+    """A body pushed along its heading and turned at a commanded rate, with linear drag:
+    state ``x, y, theta, vx, vy``, inputs ``(thrust, turn)`` (Safety-Gymnasium's Point)."""
+
+    def __new__(
+        cls,
+        thrust: float,
+        turn: float,
+        drag: float,
+        x: int = 0,
+        y: int = 1,
+        theta: int = 2,
+        vx: int = 3,
+        vy: int = 4,
+    ) -> Self: ...
+    @property
+    def gains(self) -> tuple[float, float, float]: ...
+    def eval(self, s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+    def step(self, s: ArrayLike, a: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """One Euler step ``s + dt (f(s) + g(s) a)``."""
+
+@final
 class ControlAffine:
     """A user's control-affine model ``ds/dt = f(s) + g(s) a`` given as callables; its
     structure (which dimensions the inputs move) is probed at construction."""
@@ -521,6 +543,7 @@ Dynamics: TypeAlias = (
     | DoubleIntegrator
     | AccelerationUnicycle
     | KinematicBicycle
+    | ThrustTurn
     | ControlAffine
 )
 
@@ -598,6 +621,7 @@ class Shield:
         clf_gain: float | None = None,
         preserve_progress: bool = True,
         inputs: int | None = None,
+        disturbance: Mapping[int, float] | None = None,
     ) -> Self:
         """``inputs`` is the number of inputs m when ``dynamics`` is None and the bounds are
         scalars (a model gives m itself); ``slack_penalty`` prices barrier slack when the QP
@@ -607,7 +631,9 @@ class Shield:
         ``a_rl`` outside it is refused per call; ``alpha2`` is the second gain of the HOCBF
         rows that barriers of relative degree 2 need (an error when such a barrier exists
         and it is None); ``clf_gain`` is ``k`` of the second-order CLF ``|dp/dt + k (p -
-        goal)|^2`` (None: 1)."""
+        goal)|^2`` (None: 1); ``disturbance`` bounds the model's error per
+        state dimension, ``{d: w_d}`` (the plant's ``ds_d/dt`` may differ from the model's by
+        up to ``w_d``): each barrier row then holds for every such error (a robust CBF)."""
     @overload
     def filter(
         self,

@@ -67,6 +67,31 @@ pub enum Dynamics {
         /// State index of the forward speed.
         v: usize,
     },
+    /// A body pushed along its heading, turned at a commanded rate and slowed by linear drag,
+    /// with its velocity a state of its own (not tied to the heading): `dx = vx`, `dy = vy`,
+    /// `dtheta = turn a[1]`, `dvx = thrust a[0] cos theta - drag vx`,
+    /// `dvy = thrust a[0] sin theta - drag vy`; m = 2. Safety-Gymnasium's Point robot is this
+    /// model, identified from MuJoCo (`tlshield.envs.safety_gym`). A barrier on `x, y` has
+    /// relative degree 2, acted on by the thrust alone: it loses authority while the heading
+    /// is perpendicular to the barrier's gradient (the drag then slows the body).
+    ThrustTurn {
+        /// Acceleration per unit of `a[0]` (m/s^2, > 0).
+        thrust: f64,
+        /// Turn rate per unit of `a[1]` (rad/s, > 0).
+        turn: f64,
+        /// Linear drag (1/s, >= 0).
+        drag: f64,
+        /// State index of x.
+        x: usize,
+        /// State index of y.
+        y: usize,
+        /// State index of the heading.
+        theta: usize,
+        /// State index of the x velocity.
+        vx: usize,
+        /// State index of the y velocity.
+        vy: usize,
+    },
 }
 
 /// What the relative-degree analysis (`shield/order.rs`) reads of a model: which state
@@ -199,6 +224,46 @@ impl Dynamics {
         Ok(Dynamics::KinematicBicycle { l, x, y, theta, v })
     }
 
+    /// The thrust-and-turn body; `thrust` and `turn` finite and > 0, `drag` finite and
+    /// >= 0, `dims = [x, y, theta, vx, vy]` distinct.
+    pub fn thrust_turn(
+        thrust: f64,
+        turn: f64,
+        drag: f64,
+        dims: [usize; 5],
+    ) -> Result<Self, InputError> {
+        for (what, value, min_ok) in [
+            ("thrust", thrust, false),
+            ("turn", turn, false),
+            ("drag", drag, true),
+        ] {
+            if !(value.is_finite() && (value > 0.0 || (min_ok && value == 0.0))) {
+                return Err(InputError::Value {
+                    what: format!("ThrustTurn {what}"),
+                    expected: if min_ok {
+                        "a finite number >= 0"
+                    } else {
+                        "a finite number > 0"
+                    }
+                    .into(),
+                    got: value.to_string(),
+                });
+            }
+        }
+        distinct("ThrustTurn x, y, theta, vx, vy", &dims)?;
+        let [x, y, theta, vx, vy] = dims;
+        Ok(Dynamics::ThrustTurn {
+            thrust,
+            turn,
+            drag,
+            x,
+            y,
+            theta,
+            vx,
+            vy,
+        })
+    }
+
     /// Number of inputs m.
     pub fn inputs(&self) -> usize {
         match self {
@@ -207,7 +272,8 @@ impl Dynamics {
             }
             Dynamics::Unicycle { .. }
             | Dynamics::AccelerationUnicycle { .. }
-            | Dynamics::KinematicBicycle { .. } => 2,
+            | Dynamics::KinematicBicycle { .. }
+            | Dynamics::ThrustTurn { .. } => 2,
         }
     }
 
@@ -221,6 +287,14 @@ impl Dynamics {
             Dynamics::Unicycle { x, y, theta, .. } => *x.max(y).max(theta),
             Dynamics::AccelerationUnicycle { x, y, theta, v }
             | Dynamics::KinematicBicycle { x, y, theta, v, .. } => *x.max(y).max(theta).max(v),
+            Dynamics::ThrustTurn {
+                x,
+                y,
+                theta,
+                vx,
+                vy,
+                ..
+            } => *x.max(y).max(theta).max(vx).max(vy),
         };
         top + 1
     }
@@ -234,6 +308,7 @@ impl Dynamics {
             Dynamics::Unicycle { x, y, theta, .. } => d == *x || d == *y || d == *theta,
             Dynamics::AccelerationUnicycle { theta, v, .. }
             | Dynamics::KinematicBicycle { theta, v, .. } => d == *theta || d == *v,
+            Dynamics::ThrustTurn { theta, vx, vy, .. } => d == *theta || d == *vx || d == *vy,
         }
     }
 
@@ -244,7 +319,8 @@ impl Dynamics {
             Dynamics::SingleIntegrator { .. } | Dynamics::Unicycle { .. } => false,
             Dynamics::DoubleIntegrator { pos, .. } => pos.contains(&d),
             Dynamics::AccelerationUnicycle { x, y, .. }
-            | Dynamics::KinematicBicycle { x, y, .. } => d == *x || d == *y,
+            | Dynamics::KinematicBicycle { x, y, .. }
+            | Dynamics::ThrustTurn { x, y, .. } => d == *x || d == *y,
         }
     }
 
@@ -265,6 +341,14 @@ impl Dynamics {
                 out[*x] = -s[*v] * sin * u[*theta] + cos * u[*v];
                 out[*y] = s[*v] * cos * u[*theta] + sin * u[*v];
             }
+            Dynamics::ThrustTurn {
+                drag, x, y, vx, vy, ..
+            } => {
+                out[*x] = u[*vx];
+                out[*y] = u[*vy];
+                out[*vx] = -drag * u[*vx];
+                out[*vy] = -drag * u[*vy];
+            }
         }
     }
 
@@ -283,6 +367,12 @@ impl Dynamics {
                 let (sin, cos) = s[*theta].sin_cos();
                 out[*theta] = s[*v] * (-sin * w[*x] + cos * w[*y]);
                 out[*v] = cos * w[*x] + sin * w[*y];
+            }
+            Dynamics::ThrustTurn {
+                drag, x, y, vx, vy, ..
+            } => {
+                out[*vx] = w[*x] - drag * w[*vx];
+                out[*vy] = w[*y] - drag * w[*vy];
             }
         }
     }
@@ -350,6 +440,23 @@ impl Dynamics {
                 out[*theta] = s[*v] * a[1] / l;
                 out[*v] = a[0];
             }
+            Dynamics::ThrustTurn {
+                thrust,
+                turn,
+                drag,
+                x,
+                y,
+                theta,
+                vx,
+                vy,
+            } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*x] = s[*vx];
+                out[*y] = s[*vy];
+                out[*theta] = turn * a[1];
+                out[*vx] = thrust * a[0] * cos - drag * s[*vx];
+                out[*vy] = thrust * a[0] * sin - drag * s[*vy];
+            }
         }
     }
 
@@ -401,6 +508,25 @@ impl Dynamics {
                 g[v * m] = 1.0;
                 g[theta * m + 1] = s[*v] / l;
             }
+            Dynamics::ThrustTurn {
+                thrust,
+                turn,
+                drag,
+                x,
+                y,
+                theta,
+                vx,
+                vy,
+            } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                f[*x] = s[*vx];
+                f[*y] = s[*vy];
+                f[*vx] = -drag * s[*vx];
+                f[*vy] = -drag * s[*vy];
+                g[vx * m] = thrust * cos;
+                g[vy * m] = thrust * sin;
+                g[theta * m + 1] = *turn;
+            }
         }
     }
 }
@@ -428,6 +554,20 @@ impl std::fmt::Display for Dynamics {
                     "KinematicBicycle(wheelbase={l}, x={x}, y={y}, theta={theta}, v={v})"
                 )
             }
+            Dynamics::ThrustTurn {
+                thrust,
+                turn,
+                drag,
+                x,
+                y,
+                theta,
+                vx,
+                vy,
+            } => write!(
+                f,
+                "ThrustTurn(thrust={thrust}, turn={turn}, drag={drag}, x={x}, y={y}, \
+                 theta={theta}, vx={vx}, vy={vy})"
+            ),
         }
     }
 }
@@ -462,6 +602,11 @@ mod tests {
         assert!(Dynamics::kinematic_bicycle(0.0, 0, 1, 2, 3).is_err());
         assert!(Dynamics::kinematic_bicycle(f64::NAN, 0, 1, 2, 3).is_err());
         assert!(Dynamics::kinematic_bicycle(0.5, 0, 1, 1, 3).is_err());
+        assert!(Dynamics::thrust_turn(0.0, 1.0, 1.0, [0, 1, 2, 3, 4]).is_err());
+        assert!(Dynamics::thrust_turn(1.0, f64::INFINITY, 1.0, [0, 1, 2, 3, 4]).is_err());
+        assert!(Dynamics::thrust_turn(1.0, 1.0, -0.1, [0, 1, 2, 3, 4]).is_err());
+        assert!(Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 3]).is_err());
+        assert!(Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 4]).is_ok());
     }
 
     proptest::proptest! {
@@ -480,6 +625,7 @@ mod tests {
                 Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
                 Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
                 Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
+                Dynamics::thrust_turn(2.8, 3.2, 1.9, [3, 1, 4, 0, 2]).unwrap(),
             ] {
                 let m = model.inputs();
                 let f_at = |x: &[f64]| {
@@ -530,6 +676,7 @@ mod tests {
                 Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
                 Dynamics::acceleration_unicycle(0, 1, 2, 3).unwrap(),
                 Dynamics::kinematic_bicycle(0.5, 0, 1, 2, 3).unwrap(),
+                Dynamics::thrust_turn(2.8, 3.2, 1.9, [0, 1, 2, 3, 4]).unwrap(),
             ] {
                 let m = model.inputs();
                 let (mut f, mut g, mut out) = (vec![0.0; 5], vec![0.0; 5 * m], vec![0.0; 5]);

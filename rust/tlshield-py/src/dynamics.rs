@@ -81,6 +81,26 @@ fn constructor_args<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'p
             theta.into_pyobject(py)?.into_any(),
             v.into_pyobject(py)?.into_any(),
         ],
+        Dynamics::ThrustTurn {
+            thrust,
+            turn,
+            drag,
+            x,
+            y,
+            theta,
+            vx,
+            vy,
+        } => {
+            let mut items = vec![
+                thrust.into_pyobject(py)?.into_any(),
+                turn.into_pyobject(py)?.into_any(),
+                drag.into_pyobject(py)?.into_any(),
+            ];
+            for d in [x, y, theta, vx, vy] {
+                items.push(d.into_pyobject(py)?.into_any());
+            }
+            items
+        }
     };
     PyTuple::new(py, items)
 }
@@ -102,6 +122,7 @@ pub fn to_python<'py>(py: Python<'py>, model: &Dynamics) -> PyResult<Bound<'py, 
         Dynamics::KinematicBicycle { .. } => {
             Bound::new(py, PyKinematicBicycle { inner })?.into_any()
         }
+        Dynamics::ThrustTurn { .. } => Bound::new(py, PyThrustTurn { inner })?.into_any(),
     })
 }
 
@@ -215,6 +236,56 @@ impl PyKinematicBicycle {
 }
 model_methods!(PyKinematicBicycle);
 
+/// A body pushed along its heading, turned at a commanded rate and slowed by linear drag, its
+/// velocity a state of its own: state ``x, y, theta, vx, vy`` at the given dimensions, inputs
+/// ``(thrust, turn)``; ``dx = vx``, ``dy = vy``, ``dtheta = turn * a[1]``,
+/// ``dvx = thrust * a[0] * cos(theta) - drag * vx`` (and ``sin`` for ``vy``).
+/// Safety-Gymnasium's Point robot is this model (``tlshield.envs.safety_gym``). Barriers on
+/// ``x, y`` have relative degree 2 and are acted on by the thrust alone.
+#[pyclass(name = "ThrustTurn", module = "tlshield._core", frozen)]
+pub struct PyThrustTurn {
+    pub(crate) inner: Dynamics,
+}
+
+#[pymethods]
+impl PyThrustTurn {
+    #[new]
+    #[pyo3(signature = (thrust, turn, drag, x=0, y=1, theta=2, vx=3, vy=4))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        thrust: f64,
+        turn: f64,
+        drag: f64,
+        x: usize,
+        y: usize,
+        theta: usize,
+        vx: usize,
+        vy: usize,
+    ) -> PyResult<Self> {
+        Ok(PyThrustTurn {
+            inner: map(Dynamics::thrust_turn(
+                thrust,
+                turn,
+                drag,
+                [x, y, theta, vx, vy],
+            ))?,
+        })
+    }
+
+    /// ``(thrust, turn, drag)``: acceleration per unit of the first input, turn rate per unit
+    /// of the second, linear drag.
+    #[getter]
+    fn gains(&self) -> (f64, f64, f64) {
+        match self.inner {
+            Dynamics::ThrustTurn {
+                thrust, turn, drag, ..
+            } => (thrust, turn, drag),
+            _ => unreachable!("a ThrustTurn wraps the core model"),
+        }
+    }
+}
+model_methods!(PyThrustTurn);
+
 /// The core model of a Python model object; `None` for `None`.
 pub fn model_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
     if obj.is_none() {
@@ -235,9 +306,12 @@ pub fn model_of(obj: &Bound<'_, PyAny>) -> PyResult<Option<Dynamics>> {
     if let Ok(d) = obj.cast::<PyKinematicBicycle>() {
         return Ok(Some(d.get().inner.clone()));
     }
+    if let Ok(d) = obj.cast::<PyThrustTurn>() {
+        return Ok(Some(d.get().inner.clone()));
+    }
     Err(PyTypeError::new_err(format!(
         "dynamics: expected tlshield.Unicycle, SingleIntegrator, DoubleIntegrator, \
-         AccelerationUnicycle, KinematicBicycle, ControlAffine or None (then pass f and g to \
+         AccelerationUnicycle, KinematicBicycle, ThrustTurn, ControlAffine or None (then pass f and g to \
          every filter call), got {}",
         obj.get_type()
             .name()

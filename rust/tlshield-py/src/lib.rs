@@ -57,6 +57,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<dynamics::PyDoubleIntegrator>()?;
     m.add_class::<dynamics::PyAccelerationUnicycle>()?;
     m.add_class::<dynamics::PyKinematicBicycle>()?;
+    m.add_class::<dynamics::PyThrustTurn>()?;
     m.add_class::<custom::PyControlAffine>()?;
     m.add_class::<shield::PyShield>()?;
     m.add_class::<shield::PyFilterResult>()?;

@@ -334,6 +334,36 @@ fn automaton_of(obj: &Bound<'_, PyAny>) -> PyResult<Arc<Automaton>> {
     )))
 }
 
+/// `{dimension: bound}` as the core's `(d, w_d)` pairs, in order of dimension; the bounds'
+/// values are checked by the core.
+fn disturbance_bounds(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(usize, f64)>> {
+    let dict = obj.cast::<PyDict>().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "disturbance: expected a dict {{state dimension: bound}}, got {}",
+            obj.get_type()
+                .name()
+                .map_or_else(|_| "?".into(), |n| n.to_string())
+        ))
+    })?;
+    let mut out = Vec::with_capacity(dict.len());
+    for (key, value) in dict.iter() {
+        let d: i64 = key.extract().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "disturbance: key {key}: expected a state dimension (int)"
+            ))
+        })?;
+        let d = usize::try_from(d).map_err(|_| {
+            PyValueError::new_err(format!("disturbance: key {d}: expected a dimension >= 0"))
+        })?;
+        let w: f64 = value.extract().map_err(|_| {
+            PyTypeError::new_err(format!("disturbance[{d}]: expected a number, got {value}"))
+        })?;
+        out.push((d, w));
+    }
+    out.sort_by_key(|&(d, _)| d);
+    Ok(out)
+}
+
 #[pymethods]
 impl PyShield {
     #[new]
@@ -341,7 +371,7 @@ impl PyShield {
         spec, dynamics, *, alpha, c3, k, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
-        inputs=None,
+        inputs=None, disturbance=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -366,6 +396,7 @@ impl PyShield {
         clf_gain: Option<f64>,
         preserve_progress: bool,
         inputs: Option<usize>,
+        disturbance: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let custom = dynamics
@@ -437,7 +468,13 @@ impl PyShield {
         .with_margin(margin.unwrap_or(ShieldParams::DEFAULT_MARGIN))
         .with_alpha2(alpha2)
         .with_clf_gain(clf_gain.unwrap_or(ShieldParams::DEFAULT_CLF_GAIN))
-        .with_preserve_progress(preserve_progress);
+        .with_preserve_progress(preserve_progress)
+        .with_disturbance(
+            disturbance
+                .map(disturbance_bounds)
+                .transpose()?
+                .unwrap_or_default(),
+        );
         let barrier_names = params
             .barriers
             .iter()
@@ -691,6 +728,11 @@ impl PyShield {
         kwargs.set_item("clf_gain", p.clf_gain)?;
         kwargs.set_item("preserve_progress", p.preserve_progress)?;
         kwargs.set_item("inputs", shield.inputs())?;
+        let bounds = PyDict::new(py);
+        for &(d, w) in &p.disturbance {
+            bounds.set_item(d, w)?;
+        }
+        kwargs.set_item("disturbance", bounds)?;
         let args = PyTuple::new(py, [spec.into_any(), model])?;
         crate::pickling::reduce(slf.get_type().into_any(), args, Some(kwargs), None)
     }

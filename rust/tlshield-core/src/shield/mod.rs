@@ -306,6 +306,13 @@ pub struct ShieldParams {
     /// progress-preserving safe set, [`crate::Reading::progress_safe_set`]; beyond the paper).
     /// The same as Eq. 5C1's safe set where the trap is the only setback. On by default.
     pub preserve_progress: bool,
+    /// Bounds on the model's error, `(d, w_d)`: the plant's `ds_d/dt` may differ from the
+    /// model's `f_d + (g a)_d` by up to `w_d` (>= 0) in state dimension `d`; every unlisted
+    /// dimension is exact. Each barrier row asks for `sum_d |dB/ds_d| w_d` more than the
+    /// nominal condition (`B` is `h` for a first-order row, `psi_1` for a second-order one),
+    /// so it holds for every error within the bounds (a robust CBF; DESIGN.md: "Plants the
+    /// shield only approximates"). Empty by default: the model is the plant.
+    pub disturbance: Vec<(usize, f64)>,
 }
 
 impl ShieldParams {
@@ -341,7 +348,14 @@ impl ShieldParams {
             slack_penalty: Self::DEFAULT_SLACK_PENALTY,
             margin: Self::DEFAULT_MARGIN,
             preserve_progress: true,
+            disturbance: Vec::new(),
         }
+    }
+
+    /// Bounds on the model's error per state dimension (see [`ShieldParams::disturbance`]).
+    pub fn with_disturbance(mut self, disturbance: Vec<(usize, f64)>) -> Self {
+        self.disturbance = disturbance;
+        self
     }
 
     /// Limits on the applied action `a_rl + a_cbf + a_clf`.
@@ -818,6 +832,18 @@ impl Shield {
                 params.margin
             )));
         }
+        for (i, &(d, w)) in params.disturbance.iter().enumerate() {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(ShieldError::Config(format!(
+                    "disturbance bound of dimension {d} = {w}: expected a finite number >= 0"
+                )));
+            }
+            if params.disturbance[..i].iter().any(|&(e, _)| e == d) {
+                return Err(ShieldError::Config(format!(
+                    "disturbance: dimension {d} is given twice"
+                )));
+            }
+        }
         for b in &params.barriers {
             positive(
                 &format!("slack weight of barrier {:?}", b.name),
@@ -888,7 +914,15 @@ impl Shield {
             .map(Predicate::min_dim)
             .max()
             .unwrap_or(0)
-            .max(params.pos.iter().max().map_or(0, |p| p + 1));
+            .max(params.pos.iter().max().map_or(0, |p| p + 1))
+            .max(
+                params
+                    .disturbance
+                    .iter()
+                    .map(|&(d, _)| d + 1)
+                    .max()
+                    .unwrap_or(0),
+            );
         if let Some(d) = &dynamics {
             min_dim = min_dim.max(d.min_dim());
         }
@@ -917,7 +951,7 @@ impl Shield {
             }
             if min_dim > n {
                 return Err(ShieldError::Config(format!(
-                    "the shield reads {min_dim} state values (model, barriers) but the predicates fix \
+                    "the shield reads {min_dim} state values (model, barriers, disturbance) but the predicates fix \
                      the state length at {n}"
                 )));
             }

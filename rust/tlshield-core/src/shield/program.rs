@@ -224,6 +224,19 @@ impl Program {
                     }
                     false => (&self.grad, None),
                 };
+                // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
+                // order) or H f + J_f^T grad h + alpha grad h (second order).
+                let robust: f64 = cfg
+                    .disturbance
+                    .iter()
+                    .map(|&(d, w)| {
+                        let c = match second_r {
+                            Some(_) => coefficients[d] + cfg.alpha * self.grad[d],
+                            None => coefficients[d],
+                        };
+                        c.abs() * w
+                    })
+                    .sum();
                 let mut lg_a = 0.0;
                 for (j, a) in a_rl.iter().enumerate() {
                     let lg = (0..s.len())
@@ -232,11 +245,13 @@ impl Program {
                     lg_a += lg * a;
                     self.lg.push(lg);
                 }
-                self.rhs.push(match second_r {
-                    Some(r) => r + lg_a,
-                    // In this order (Lf h + Lg h . a_rl first), bit for bit as before HOCBF rows.
-                    None => lf + lg_a + psi,
-                });
+                self.rhs.push(
+                    match second_r {
+                        Some(r) => r + lg_a,
+                        // In this order (Lf h + Lg h . a_rl first), bit for bit as before HOCBF rows.
+                        None => lf + lg_a + psi,
+                    } - robust,
+                );
                 if let Some(out) = barriers_out.as_deref_mut() {
                     out.push((source, h));
                 }

@@ -852,3 +852,46 @@ fn a_custom_double_integrator_equals_the_built_in_one() {
         .unwrap_err();
     assert!(err.to_string().contains("Jacobian"), "{err}");
 }
+
+#[test]
+fn a_disturbance_bound_tightens_each_row_by_its_gradient() {
+    // Wall x <= 1 under a double integrator (x, v): psi_1 = -v + alpha (1 - x - margin), and
+    // the second-order row asks -a - alpha v + alpha2 psi_1 >= |dpsi_1/dv| w_v = w_v (x is
+    // exact). The RL action pushes into the wall, so the row is active.
+    let (automaton, params) = wall_task();
+    let (alpha, alpha2, margin) = (params.alpha, params.alpha2.unwrap(), params.margin);
+    let model = Dynamics::double_integrator(vec![0], vec![1]).unwrap();
+    let (s, a_rl) = ([0.4, 0.3], [4.0]);
+    let psi = -s[1] + alpha * (1.0 - s[0] - margin);
+    let nominal = -alpha * s[1] + alpha2 * psi;
+    for w in [0.0, 0.25, 0.7] {
+        let p = params.clone().with_disturbance(vec![(1, w)]);
+        let sh = Shield::new(automaton.clone(), Some(model.clone()), p).unwrap();
+        let out = sh.filter(&s, 0, &a_rl, None, None).unwrap();
+        assert!(
+            (out.action[0] - (nominal - w)).abs() < 1e-7,
+            "w = {w}: {:?}",
+            out.action
+        );
+    }
+    // First order (single integrator on x): a <= alpha (1 - x - margin) - w_x.
+    let p = params.clone().with_disturbance(vec![(0, 0.2)]);
+    let sh = Shield::new(
+        automaton.clone(),
+        Some(Dynamics::single_integrator(vec![0]).unwrap()),
+        p,
+    )
+    .unwrap();
+    let out = sh.filter(&[0.4, 0.0], 0, &[4.0], None, None).unwrap();
+    let want = alpha * (1.0 - 0.4 - margin) - 0.2;
+    assert!((out.action[0] - want).abs() < 1e-7, "{:?}", out.action);
+    // Bad bounds are refused where they are given.
+    for bad in [
+        vec![(1, -0.1)],
+        vec![(1, f64::NAN)],
+        vec![(1, 0.1), (1, 0.2)],
+    ] {
+        let p = params.clone().with_disturbance(bad);
+        assert!(Shield::new(automaton.clone(), Some(model.clone()), p).is_err());
+    }
+}
