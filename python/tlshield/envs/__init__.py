@@ -30,6 +30,16 @@ if POINT_MASS_ID not in gym.registry:
     gym.register(id=POINT_MASS_ID, entry_point="tlshield.envs.point_mass:make_point_mass")
 if FLATWORLD_ID not in gym.registry:
     gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
+#: Safety-Gymnasium's tasks, shielded (``make safety-gym`` installs their stack; registering
+#: imports none of it).
+SAFETY_GYM_IDS = ("tlshield/SafetyPointGoal1-v0", "tlshield/SafetyPointGoal2-v0")
+for _id in SAFETY_GYM_IDS:
+    if _id not in gym.registry:
+        gym.register(
+            id=_id,
+            entry_point="tlshield.envs.safety_gym:make_safety_goal",
+            kwargs={"task": _id.removeprefix("tlshield/")},
+        )
 
 
 def import_modules(modules: Sequence[str]) -> None:
@@ -140,6 +150,7 @@ __all__ = [
     "ENV_ID",
     "FLATWORLD_ID",
     "POINT_MASS_ID",
+    "SAFETY_GYM_IDS",
     "STATE_DIM",
     "TASK",
     "ChannelEnv",

@@ -1,0 +1,386 @@
+"""Safety-Gymnasium's navigation tasks (PKU-Alignment), adapted to tlshield's stack and shielded.
+
+**The adapter.** safety-gymnasium 1.0.0 as published does not import with gymnasium 1.x and
+Python 3.11: its package ``__init__`` imports ``gymnasium.wrappers.compatibility`` (removed in
+gymnasium 1.0), and its colours are numpy arrays used as dataclass defaults (refused since
+Python 3.11: unhashable). :func:`load_builder` checks the installed versions
+(:data:`VERSIONS`), makes the package importable without running its ``__init__`` (a module
+shell whose ``__path__`` is the package's folder), makes the colour arrays hashable (a view
+with identity hashing; the values are untouched), and returns its ``Builder``, the env class
+every Safety-Gymnasium task is made from. Nothing else is patched. ``make safety-gym``
+installs the stack (docs/guides/safety-gym.md says what and why).
+
+**The shielded envs** ``tlshield/SafetyPointGoal1-v0`` and ``tlshield/SafetyPointGoal2-v0``
+(:class:`SafetyGoalEnv`) keep Safety-Gymnasium's observation, action, reward and cost
+(``info["cost"]``); the shield reads the **privileged true state** (the agent's pose and
+velocity from MuJoCo, the goal, hazards and vases), which the policy never sees:
+
+* the robot: :class:`tlshield.ThrustTurn`, identified from MuJoCo (:data:`POINT`), with the
+  measured one-step error as the shield's ``disturbance`` bounds;
+* the task: ``(!h1 & ... & !hN & !v1 & ...) U goal``, hazards (and Goal2's vases) in the
+  formula: its safe set keeps them out, and its CLF drives to the goal. When the goal is met
+  Safety-Gymnasium places a new one and the task starts again.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import importlib.util
+import math
+import os
+import sys
+import types
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from tlshield._core import Automaton, Ball, Monitor, Shield, Spec, ThrustTurn
+from tlshield.envs.params import CONFIGS, build
+from tlshield.tracking import shield_info
+
+#: The versions the adapter was written and tested against (it patches exactly these).
+VERSIONS = {"safety-gymnasium": "1.0.0", "mujoco": "2.3.7"}
+#: What installs them.
+INSTALL = (
+    "make safety-gym (or: pip install --no-deps safety-gymnasium==1.0.0 && pip install "
+    "mujoco==2.3.7 xmltodict pyyaml imageio)"
+)
+#: The tasks registered as ``tlshield/<task>``.
+TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0")
+
+
+def installed() -> bool:
+    """Whether the Safety-Gymnasium stack of :data:`VERSIONS` is installed."""
+    try:
+        return all(importlib.metadata.version(p) == v for p, v in VERSIONS.items())
+    except importlib.metadata.PackageNotFoundError:
+        return False
+
+
+class _HashableArray(np.ndarray):
+    """A colour array that dataclasses accept as a default (identity hash, values as given)."""
+
+    __hash__ = object.__hash__  # type: ignore[assignment]
+
+
+@functools.cache
+def load_builder() -> type:
+    """Safety-Gymnasium's ``Builder`` after the adapter's checks and patches (see the module
+    docs); an ImportError saying what to install when the stack is missing or at another
+    version."""
+    for package, wanted in VERSIONS.items():
+        try:
+            got = importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            raise ImportError(f"{package} is not installed; install it with {INSTALL}") from None
+        if got != wanted:
+            raise ImportError(
+                f"{package} {got} is installed, but the adapter patches {package} {wanted}; "
+                f"install it with {INSTALL}"
+            )
+    if "safety_gymnasium" not in sys.modules:
+        spec = importlib.util.find_spec("safety_gymnasium")
+        assert spec is not None and spec.submodule_search_locations is not None
+        root = list(spec.submodule_search_locations)[0]
+        shell = types.ModuleType("safety_gymnasium")
+        shell.__path__ = [root]
+        shell.__file__ = os.path.join(root, "__init__.py")
+        sys.modules["safety_gymnasium"] = shell
+        from safety_gymnasium.assets import color  # type: ignore[import-not-found]
+
+        for name, value in list(color.COLOR.items()):
+            color.COLOR[name] = np.asarray(value).view(_HashableArray)
+    from safety_gymnasium.builder import Builder  # type: ignore[import-not-found]
+
+    return Builder
+
+
+def make_builder(task: str) -> Any:
+    """Safety-Gymnasium's own env of ``task`` (e.g. ``"SafetyPointGoal1-v0"``), through the
+    adapter. Its ``step`` returns Safety-Gymnasium's 6-tuple."""
+    robot = task.removeprefix("Safety").split("Goal")[0]
+    if robot != "Point" or task not in TASKS:
+        raise ValueError(
+            f"task = {task!r}: the adapter supports {', '.join(TASKS)} (the Car robot fails in "
+            "safety-gymnasium 1.0.0 under numpy 2: model.jnt() is given a numpy array)"
+        )
+    return load_builder()(task, config={"agent_name": robot})
+
+
+@dataclass(frozen=True)
+class PointModel:
+    """The Point robot as :class:`tlshield.ThrustTurn`, identified from MuJoCo.
+
+    The first action is the motor's control: MuJoCo clips the motor's force at ``±0.05``
+    (``forcerange``) before its gear of 0.3, so the thrust saturates at ``|a0| = 0.05``;
+    the shield's first input is that saturated thrust scaled to ``[-1, 1]``
+    (``u0 = clip(a0 / 0.05, -1, 1)``), and ``a0 = 0.05 u0`` is what is sent back. The second
+    action commands the turn rate (a velocity actuator). The gains are least-squares fits of
+    ``(v_{t+1} - v_t) / dt`` and of the heading's rate over random rollouts
+    (``scripts/safety_gym_model.py`` measures them and the one-step error)."""
+
+    #: Acceleration at full thrust (m/s^2), turn rate per unit of a1 (rad/s), drag (1/s).
+    thrust: float = 2.846
+    turn: float = 2.896
+    drag: float = 1.915
+    #: The control at which the motor's force saturates.
+    saturation: float = 0.05
+
+    def model(self) -> ThrustTurn:
+        """The core model over ``[x, y, theta, vx, vy, ...]``."""
+        return ThrustTurn(self.thrust, self.turn, self.drag)
+
+
+#: The Point robot's identified model.
+POINT = PointModel()
+
+#: The shield's state: agent ``x, y, theta, vx, vy``, then the goal's ``x, y``, then two values
+#: per hazard and per vase.
+AGENT_DIM, GOAL = 5, (5, 6)
+
+
+@dataclass(frozen=True)
+class SafetyGoalParams:
+    """The shield's settings for ``tlshield/SafetyPoint*`` (each a keyword override)."""
+
+    #: The hazard's cost radius is 0.2 (agent centre to hazard centre); the barrier keeps
+    #: this much more.
+    hazard_margin: float = 0.1
+    #: Keep the agent's centre this far from a vase's centre (a vase is a 0.2 m cube and the
+    #: agent a 0.1 m sphere with a 0.05 m box ahead: touching needs at most 0.32 m).
+    vase_radius: float = 0.4
+    #: HOCBF gains, the CLF's and the QP's.
+    alpha: float = 1.0
+    alpha2: float = 2.0
+    c3: float = 1.0
+    k: float = 1e4
+    clf_gain: float = 1.0
+    #: Box on a_clf (the CLF's thrust), in units of full thrust.
+    clf_bound: float = 0.5
+    #: Barriers are kept this far above 0 (in h = distance - radius, metres).
+    margin: float = 0.02
+    #: The model's measured one-step error bound on the velocity's rate (m/s^2), the
+    #: shield's ``disturbance`` on ``vx, vy`` (0 turns the robust rows off).
+    disturbance: float = 0.0
+
+    def check(self) -> None:
+        """Raises ValueError naming the first bad setting."""
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v)):
+                raise ValueError(f"{f.name} = {v!r}: expected a finite number")
+            if v < 0 or (v == 0 and f.name != "disturbance"):
+                raise ValueError(f"{f.name} = {v!r}: expected a number > 0")
+
+
+def goal_spec(hazards: int, vases: int, params: SafetyGoalParams) -> Spec:
+    """``(!h1 & ... & !v1 & ...) U goal`` over the shield's state (the objects' centres are
+    read from the state, so one spec serves every layout)."""
+    # The goal is 0.3 m in Safety-Gymnasium; 0.25 here, so that Safety-Gymnasium meets it (and
+    # places the next one, which restarts the task) before the automaton accepts.
+    preds: dict[str, Ball] = {"goal": Ball(pos=[0, 1], radius=0.25, center_dims=list(GOAL))}
+    radius = {"h": 0.2 + params.hazard_margin, "v": params.vase_radius}
+    start = AGENT_DIM + 2
+    for kind, count in (("h", hazards), ("v", vases)):
+        for i in range(count):
+            preds[f"{kind}{i + 1}"] = Ball(
+                pos=[0, 1], radius=radius[kind], center_dims=[start, start + 1]
+            )
+            start += 2
+    avoid = " & ".join(f"!{name}" for name in preds if name != "goal")
+    return Spec(f"({avoid}) U goal", preds)
+
+
+class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+    """``tlshield/SafetyPointGoal1-v0`` and ``Goal2``: Safety-Gymnasium's env, shielded.
+
+    Observation, action, reward and termination are Safety-Gymnasium's. ``info``: ``cost``
+    (Safety-Gymnasium's ``cost_sum``), ``violation`` (cost > 0), ``goal_met``, ``shield`` (as
+    in the bundled envs, with a shield) and ``state`` (the privileged state the shield
+    read). ``config`` picks the shield's parts (``rl`` is Safety-Gymnasium unshielded);
+    ``evaluation=True`` turns the CBF on in every configuration, as for every bundled env.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(
+        self,
+        task: str = "SafetyPointGoal1-v0",
+        config: str = "rl_cbf_clf",
+        evaluation: bool = False,
+        **overrides: Any,
+    ) -> None:
+        if config not in CONFIGS:
+            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        self.params = build(SafetyGoalParams, overrides, task)
+        self.config = config
+        self.task = task
+        self._env = make_builder(task)
+        self.observation_space = self._env.observation_space
+        self.action_space = self._env.action_space
+        sg = self._env.task
+        self._hazards = sg.hazards.num if hasattr(sg, "hazards") else 0
+        vases = getattr(sg, "vases", None)
+        self._vases = vases.num if vases is not None and vases.is_constrained else 0
+        spec = goal_spec(self._hazards, self._vases, self.params)
+        self.automaton: Automaton = spec.automaton()
+        self.monitor = Monitor(self.automaton)
+        use_cbf, use_clf = CONFIGS[config]
+        use_cbf = use_cbf or evaluation
+        self.shield = self._shield(use_cbf, use_clf)
+        self._state: NDArray[np.float64] | None = None
+        self._lidar: dict[str, NDArray[np.intp]] | None = None
+
+    def _shield(self, use_cbf: bool, use_clf: bool) -> Shield | None:
+        if not (use_cbf or use_clf):
+            return None
+        p = self.params
+        w = p.disturbance
+        return Shield(
+            self.automaton,
+            POINT.model(),
+            alpha=p.alpha,
+            alpha2=p.alpha2,
+            c3=p.c3,
+            k=p.k,
+            clf_gain=p.clf_gain,
+            cbf_bounds=(-2.0, 2.0),
+            clf_bounds=(-p.clf_bound, p.clf_bound),
+            action_bounds=(-1.0, 1.0),
+            rl_bounds=(-1.0, 1.0),
+            margin=p.margin,
+            use_cbf=use_cbf,
+            use_clf=use_clf,
+            disturbance={3: w, 4: w} if w > 0 else None,
+        )
+
+    def _find_agent(self) -> None:
+        # Safety-Gymnasium rebuilds the MuJoCo world on reset and when it places a new goal
+        # (the agent's body then starts where it was, its joints at 0).
+        # Its slide joints move along the body's axes as placed: rotated by its initial yaw.
+        model = self._env.task.model
+        body = model.body("agent")
+        self._base = body.pos.copy()
+        w, _, _, z = body.quat  # a rotation about the vertical axis
+        self._yaw0 = 2.0 * math.atan2(z, w)
+        self._rot0 = (math.cos(self._yaw0), math.sin(self._yaw0))
+        self._qpos = [int(model.joint(n).qposadr[0]) for n in "xyz"]
+        self._qvel = [int(model.joint(n).dofadr[0]) for n in "xyz"]
+
+    def true_state(self) -> NDArray[np.float64]:
+        """The privileged state ``[x, y, theta, vx, vy, goal x, y, hazards..., vases...]``,
+        read from MuJoCo's joints (after a step, a body's ``xpos`` is one substep old)."""
+        sg = self._env.task
+        qpos, qvel = sg.data.qpos, sg.data.qvel
+        (x, y, z), (dx, dy, _) = self._qpos, self._qvel
+        c, sn = self._rot0
+        s = [
+            self._base[0] + c * qpos[x] - sn * qpos[y],
+            self._base[1] + sn * qpos[x] + c * qpos[y],
+            self._yaw0 + qpos[z],
+            c * qvel[dx] - sn * qvel[dy],
+            sn * qvel[dx] + c * qvel[dy],
+            *sg.goal.pos[:2],
+        ]
+        if self._hazards:
+            for p in sg.hazards.pos:
+                s.extend(p[:2])
+        if self._vases:
+            for p in sg.vases.pos:
+                s.extend(p[:2])
+        return np.asarray(s, dtype=np.float64)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        super().reset(seed=seed)
+        if seed is None:  # Safety-Gymnasium draws its layout from its own seed
+            seed = int(self.np_random.integers(2**31 - 1))
+        obs, info = self._env.reset(seed=seed)
+        self._find_agent()
+        self._state = self.true_state()
+        self.monitor.reset(self._state)
+        return np.asarray(obs, dtype=np.float64), {**info, "state": self._state}
+
+    @property
+    def lidar_range(self) -> float:
+        """The lidar's range (m): a bin reads ``1 - distance / range``."""
+        return float(self._env.task.lidar_conf.max_dist)
+
+    def lidar(self, obs: NDArray[np.float64], name: str = "hazards") -> NDArray[np.float64]:
+        """The bins of the observation's ``<name>_lidar`` (closeness in ``[0, 1]`` per
+        direction, counter-clockwise from the heading)."""
+        if self._lidar is None:
+            space = self._env.task.obs_info.obs_space_dict
+            marks = {k: np.full(v.shape, i, dtype=np.float64) for i, (k, v) in enumerate(space.items())}
+            flat = gym.spaces.utils.flatten(space, marks)
+            self._lidar = {k: np.flatnonzero(flat == i) for i, k in enumerate(space)}
+        return np.asarray(obs)[self._lidar[f"{name}_lidar"]]
+
+    def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The policy's action in the shield's units: the motor's control scaled to its
+        saturation and clipped, the turn as it is (see :class:`PointModel`)."""
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        return np.array([np.clip(a[0] / POINT.saturation, -1.0, 1.0), a[1]])
+
+    def step(
+        self, action: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], float, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (2,) or not np.all(np.isfinite(action)):
+            raise ValueError(f"action: expected 2 finite values, got {action!r}")
+        result = None
+        applied = action
+        if self.shield is not None:
+            u_rl = self.shield_input(action)
+            result = self.shield.filter(self.monitor, u_rl)
+            u = result.action
+            applied = np.array([POINT.saturation * u[0], u[1]])
+        obs, reward, cost, terminated, truncated, info = self._env.step(applied)
+        goal_met = bool(info.get("goal_met", False))
+        if goal_met:
+            self._find_agent()
+        self._state = self.true_state()
+        if goal_met:  # a new goal was placed: the task starts again
+            self.monitor.reset(self._state)
+        else:
+            self.monitor.advance(self._state)
+        info = {
+            **info,
+            "cost": float(cost),
+            "violation": float(cost) > 0.0,
+            "goal_met": goal_met,
+            "action": applied,
+            "state": self._state,
+        }
+        if self.shield is not None:
+            info["shield"] = shield_info(result, self.shield_input(action))
+        return np.asarray(obs, dtype=np.float64), float(reward), terminated, truncated, info
+
+
+def make_safety_goal(
+    task: str, config: str = "rl_cbf_clf", evaluation: bool = False, **overrides: Any
+) -> gym.Env:
+    """``gymnasium.make("tlshield/SafetyPointGoal1-v0", config=..., evaluation=..., ...)``."""
+    return SafetyGoalEnv(task, config, evaluation, **overrides)
+
+
+def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """An attacker that sees what a policy sees: it turns towards the nearest hazard on the
+    hazard lidar and drives at it, braking near its centre so as to stay inside (full thrust
+    ahead when no hazard is in range)."""
+    bins = env.lidar(obs, "hazards")
+    if bins.max() <= 0.0:
+        return np.array([1.0, 0.0])
+    i = int(np.argmax(bins))
+    angle = (i + 0.5) * 2.0 * np.pi / bins.size
+    angle = (angle + np.pi) % (2.0 * np.pi) - np.pi  # (-pi, pi]: left is positive
+    distance = env.lidar_range * (1.0 - bins[i])
+    thrust = POINT.saturation * float(np.clip(20.0 * (distance - 0.05), -1.0, 1.0))
+    return np.array([thrust * max(math.cos(angle), 0.0), float(np.clip(3.0 * angle, -1, 1))])
