@@ -3,7 +3,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test bench lint setup wheel docs
+.PHONY: run test bench lint setup wheel docs safety-gym
 
 setup:
 	@bash scripts/setup.sh
@@ -15,14 +15,21 @@ run: setup
 
 ## Every test: Rust (cargo test), Python (pytest on every core, pytest-xdist; the benchmark
 ## scripts and the examples run on tiny budgets, so their comparison tools and third-party
-## environments are installed too), the docs' strict build, and the wheel installed and run in
+## environments are installed too, Safety-Gymnasium included), the docs' strict build, and the wheel installed and run in
 ## fresh venvs without Rust.
 test:
 	@EXTRAS=train,test,bench,examples,build,docs bash scripts/setup.sh
+	@bash scripts/setup-safety-gym.sh
 	cargo test --workspace
 	$(BIN)/python -m pytest -n auto --durations=10
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	bash scripts/check-wheel.sh
+
+## Safety-Gymnasium (safety-gymnasium 1.0.0, mujoco 2.3.7) for tlshield/SafetyPointGoal*-v0 and
+## `tlshield benchmark safety-gym` (docs/guides/safety-gym.md).
+safety-gym:
+	@EXTRAS=train bash scripts/setup.sh
+	@bash scripts/setup-safety-gym.sh
 
 ## A manylinux wheel and an sdist in dist/ (maturin with zig; auditwheel names the tag).
 wheel:

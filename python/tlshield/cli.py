@@ -453,23 +453,42 @@ def build_parser() -> argparse.ArgumentParser:
     tune.set_defaults(handler=_tune)
 
     bench = sub.add_parser(
-        "benchmark", help="published benchmarks: FlatWorld against DeepLTL's table"
+        "benchmark",
+        help="published benchmarks: FlatWorld against DeepLTL's table; Safety-Gymnasium "
+        "against OmniSafe's",
     )
-    bench.add_argument("suite", choices=["flatworld"], help="which benchmark")
+    bench.add_argument("suite", choices=["flatworld", "safety-gym"], help="which benchmark")
     bench.add_argument(
-        "--formulas", nargs="+", metavar="FORMULA", help="default: DeepLTL's five, as published"
+        "--formulas", nargs="+", metavar="FORMULA", help="flatworld: default DeepLTL's five"
+    )
+    bench.add_argument(
+        "--envs",
+        nargs="+",
+        metavar="ENV",
+        help="safety-gym: default SafetyPointGoal1-v0 SafetyPointGoal2-v0",
     )
     bench.add_argument(
         "--configs",
         nargs="+",
         choices=sorted(CONFIGS),
-        default=["rl_cbf_clf", "rl"],
-        help="trained configurations (default: rl_cbf_clf rl)",
+        help="trained configurations (default: flatworld rl_cbf_clf rl; safety-gym rl rl_cbf "
+        "rl_cbf_clf)",
     )
-    bench.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
-    bench.add_argument("--episodes", type=_positive, default=500, help="evaluation episodes")
-    bench.add_argument("--steps", type=_positive, default=600_000, help="PPO steps per agent")
-    bench.add_argument("--out", default="results_flatworld", help="(default: results_flatworld)")
+    bench.add_argument(
+        "--seeds", nargs="+", type=int, help="default: flatworld 1 2 3; safety-gym 0 1 2"
+    )
+    bench.add_argument(
+        "--episodes",
+        type=_positive,
+        help="evaluation episodes (default: flatworld 500; safety-gym 10)",
+    )
+    bench.add_argument(
+        "--steps",
+        type=_positive,
+        help="PPO steps per agent (default: flatworld 600000; safety-gym 1000000 on Goal1, "
+        "300000 on Goal2)",
+    )
+    bench.add_argument("--out", help="(default: results_flatworld, results_safety_gym)")
     _add_ray(bench)
     bench.add_argument("--quiet", action="store_true")
     bench.set_defaults(handler=_benchmark)
@@ -482,21 +501,46 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _benchmark(args: argparse.Namespace) -> int:
+    if args.suite == "safety-gym":
+        return _benchmark_safety_gym(args)
+    if args.envs:
+        raise ValueError("--envs: the flatworld benchmark has one env; use --formulas")
     from tlshield.benchmark import flatworld
 
     out = flatworld(
-        args.out,
+        args.out or "results_flatworld",
         formulas=args.formulas,
-        configs=args.configs,
-        seeds=args.seeds,
-        episodes=args.episodes,
-        steps=args.steps,
+        configs=args.configs or ["rl_cbf_clf", "rl"],
+        seeds=args.seeds or [1, 2, 3],
+        episodes=args.episodes or 500,
+        steps=args.steps or 600_000,
         address=args.address,
         workers=args.workers,
         progress=not args.quiet,
     )
     print((out / "flatworld.md").read_text())
     print(f"wrote {out / 'flatworld.csv'}, {out / 'flatworld.md'}, {out / 'flatworld_paths.png'}")
+    return 0
+
+
+def _benchmark_safety_gym(args: argparse.Namespace) -> int:
+    from tlshield import benchmark_safety_gym as sg
+
+    if args.formulas:
+        raise ValueError("--formulas: the safety-gym benchmark's task is Safety-Gymnasium's")
+    out = sg.safety_gym(
+        args.out or "results_safety_gym",
+        envs=args.envs or tuple(sg.DEFAULT_STEPS),
+        configs=args.configs or sg.DEFAULT_CONFIGS,
+        seeds=args.seeds or sg.DEFAULT_SEEDS,
+        steps=args.steps,
+        episodes=args.episodes or sg.DEFAULT_EPISODES,
+        address=args.address,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
+    print((out / "safety_gym.md").read_text())
+    print(f"wrote {out / 'safety_gym.csv'}, {out / 'safety_gym.md'}, {out / 'safety_gym.png'}")
     return 0
 
 

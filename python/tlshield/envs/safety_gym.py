@@ -85,7 +85,7 @@ def load_builder() -> type:
     if "safety_gymnasium" not in sys.modules:
         spec = importlib.util.find_spec("safety_gymnasium")
         assert spec is not None and spec.submodule_search_locations is not None
-        root = list(spec.submodule_search_locations)[0]
+        root = next(iter(spec.submodule_search_locations))
         shell = types.ModuleType("safety_gymnasium")
         shell.__path__ = [root]
         shell.__file__ = os.path.join(root, "__init__.py")
@@ -316,7 +316,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         direction, counter-clockwise from the heading)."""
         if self._lidar is None:
             space = self._env.task.obs_info.obs_space_dict
-            marks = {k: np.full(v.shape, i, dtype=np.float64) for i, (k, v) in enumerate(space.items())}
+            marks = {
+                k: np.full(v.shape, i, dtype=np.float64) for i, (k, v) in enumerate(space.items())
+            }
             flat = gym.spaces.utils.flatten(space, marks)
             self._lidar = {k: np.flatnonzero(flat == i) for i, k in enumerate(space)}
         return np.asarray(obs)[self._lidar[f"{name}_lidar"]]
