@@ -163,9 +163,11 @@ class SafetyGoalParams:
     clf_bound: float = 0.5
     #: Barriers are kept this far above 0 (in h = distance - radius, metres).
     margin: float = 0.02
-    #: The model's measured one-step error bound on the velocity's rate (m/s^2), the
-    #: shield's ``disturbance`` on ``vx, vy`` (0 turns the robust rows off).
-    disturbance: float = 0.0
+    #: The shield's ``disturbance`` bounds: the model's one-step error on the position's
+    #: rate (m/s, on ``x, y``) and on the velocity's rate (m/s^2, on ``vx, vy``), from
+    #: ``scripts/safety_gym_model.py`` (0 turns a bound off).
+    position_error: float = 0.05
+    velocity_error: float = 0.0
 
     def check(self) -> None:
         """Raises ValueError naming the first bad setting."""
@@ -173,7 +175,7 @@ class SafetyGoalParams:
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"{f.name} = {v!r}: expected a finite number")
-            if v < 0 or (v == 0 and f.name != "disturbance"):
+            if v < 0 or (v == 0 and not f.name.endswith("_error")):
                 raise ValueError(f"{f.name} = {v!r}: expected a number > 0")
 
 
@@ -239,7 +241,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if not (use_cbf or use_clf):
             return None
         p = self.params
-        w = p.disturbance
+        bounds = {0: p.position_error, 1: p.position_error}
+        bounds |= {3: p.velocity_error, 4: p.velocity_error}
         return Shield(
             self.automaton,
             POINT.model(),
@@ -255,7 +258,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             margin=p.margin,
             use_cbf=use_cbf,
             use_clf=use_clf,
-            disturbance={3: w, 4: w} if w > 0 else None,
+            disturbance={d: w for d, w in bounds.items() if w > 0},
         )
 
     def _find_agent(self) -> None:
