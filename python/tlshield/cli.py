@@ -17,6 +17,7 @@ from gymnasium import error as gym_error
 from tlshield._core import Automaton, SpecError
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
+from tlshield.envs.safety_gym import MissingStack
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
 TRAINING_MODULES = frozenset(
@@ -569,6 +570,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{err.name!r}); install it with: pip install 'tlshield[train]'",
             file=sys.stderr,
         )
+        return 2
+    except MissingStack as err:
+        print(f"tlshield {args.command}: {err}", file=sys.stderr)
         return 2
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, gym_error.Error) as err:
         # Bad paths and files (missing, the wrong kind, unwritable, corrupt, truncated) and

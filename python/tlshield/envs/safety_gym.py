@@ -53,6 +53,10 @@ INSTALL = (
 TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0")
 
 
+class MissingStack(ImportError):
+    """The Safety-Gymnasium stack is missing or at another version than :data:`VERSIONS`."""
+
+
 def installed() -> bool:
     """Whether the Safety-Gymnasium stack of :data:`VERSIONS` is installed."""
     try:
@@ -70,15 +74,15 @@ class _HashableArray(np.ndarray):
 @functools.cache
 def load_builder() -> type:
     """Safety-Gymnasium's ``Builder`` after the adapter's checks and patches (see the module
-    docs); an ImportError saying what to install when the stack is missing or at another
-    version."""
+    docs); :class:`MissingStack` (an ImportError) saying what to install when the stack is
+    missing or at another version."""
     for package, wanted in VERSIONS.items():
         try:
             got = importlib.metadata.version(package)
         except importlib.metadata.PackageNotFoundError:
-            raise ImportError(f"{package} is not installed; install it with {INSTALL}") from None
+            raise MissingStack(f"{package} is not installed; install it with {INSTALL}") from None
         if got != wanted:
-            raise ImportError(
+            raise MissingStack(
                 f"{package} {got} is installed, but the adapter patches {package} {wanted}; "
                 f"install it with {INSTALL}"
             )

@@ -1,0 +1,227 @@
+"""Safety-Gymnasium (issue 33): the adapter makes safety-gymnasium 1.0.0 run on tlshield's stack
+and says what to install when it cannot; the shielded envs keep Safety-Gymnasium's spaces,
+reward and cost and pass Gymnasium's checker; under an attacker that steers at the nearest
+hazard from the lidar they cost 0 where the same attacker unshielded costs plenty; a start
+inside a hazard is driven out and stays out; the ThrustTurn model and the shield's
+disturbance bounds hold their equations; and the benchmark writes its table and resumes.
+
+``make test`` installs the stack (scripts/setup-safety-gym.sh), so these tests run in CI."""
+
+from __future__ import annotations
+
+import csv
+import importlib.metadata
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tlshield
+from tlshield import cli
+from tlshield.envs import safety_gym as sg
+
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # gymnasium's Box casts
+
+
+def attack(env: sg.SafetyGoalEnv, episodes: int, steps: int, seed: int) -> float:
+    cost = 0.0
+    for ep in range(episodes):
+        obs, _ = env.reset(seed=seed + ep)
+        for _ in range(steps):
+            obs, _, terminated, truncated, info = env.step(sg.hazard_attacker(env, obs))
+            cost += info["cost"]
+            if terminated or truncated:
+                break
+    return cost
+
+
+def test_the_adapter_checks_versions_and_says_what_to_install(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    assert sg.installed()
+    assert sg.load_builder().__name__ == "Builder"
+    real = importlib.metadata.version
+    sg.load_builder.cache_clear()
+    try:
+        monkeypatch.setattr(
+            importlib.metadata,
+            "version",
+            lambda p: "3.1.0" if p == "mujoco" else real(p),
+        )
+        with pytest.raises(sg.MissingStack, match=r"mujoco 3\.1\.0 .* make safety-gym"):
+            sg.load_builder()
+        assert not sg.installed()
+    finally:
+        sg.load_builder.cache_clear()
+        monkeypatch.undo()
+    with pytest.raises(ValueError, match="Car robot"):
+        sg.make_builder("SafetyCarGoal1-v0")
+
+
+@pytest.mark.parametrize("task", sg.TASKS)
+def test_spaces_reward_and_cost_are_safety_gymnasiums(task: str) -> None:
+    env = gym.make(f"tlshield/{task}", config="rl")
+    raw = sg.make_builder(task)
+    assert env.observation_space == raw.observation_space
+    assert env.action_space == raw.action_space
+    obs, _ = env.reset(seed=3)
+    raw_obs, _ = raw.reset(seed=3)
+    np.testing.assert_array_equal(obs, raw_obs)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        a = rng.uniform(-1, 1, 2)
+        obs, r, terminated, truncated, info = env.step(a)
+        raw_obs, raw_r, raw_cost, raw_term, raw_trunc, _ = raw.step(a)
+        np.testing.assert_array_equal(obs, raw_obs)
+        assert (r, info["cost"], terminated, truncated) == (raw_r, raw_cost, raw_term, raw_trunc)
+        # The privileged state is MuJoCo's: the agent where Safety-Gymnasium reads it.
+        np.testing.assert_allclose(info["state"][:2], raw.task.agent.pos[:2], atol=1e-9)
+
+
+@pytest.mark.parametrize("config", ["rl_cbf", "rl_cbf_clf"])
+def test_check_env(config: str) -> None:
+    env = sg.SafetyGoalEnv("SafetyPointGoal1-v0", config)
+    check_env(env, skip_render_check=True)
+    env.reset(seed=1)
+    _, _, _, _, info = env.step(np.array([1.0, 0.2]))
+    assert {"a_rl", "a_cbf", "a_clf", "status"} <= set(info["shield"])
+
+
+@pytest.mark.parametrize("task", sg.TASKS)
+def test_the_lidar_attacker_costs_nothing_shielded(task: str) -> None:
+    unshielded = attack(sg.SafetyGoalEnv(task, "rl"), 2, 400, seed=40)
+    assert unshielded > 50  # the attack works: the shield has something to stop
+    for config in ("rl_cbf", "rl_cbf_clf"):
+        assert attack(sg.SafetyGoalEnv(task, config), 2, 400, seed=40) == 0.0
+
+
+def test_a_start_inside_a_hazard_is_driven_out_and_stays_out() -> None:
+    env = sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
+    env.reset(seed=7)
+    task = env.unwrapped._env.task
+    hazard = np.asarray(task.hazards.pos[0][:2])
+    # Put the agent 0.1 m from the hazard's centre (its cost radius is 0.2), at rest.
+    state = env.true_state()
+    offset = hazard + np.array([0.1, 0.0]) - state[:2]
+    c, s = env._rot0
+    qx, qy = env._qpos[:2]
+    task.data.qpos[qx] += c * offset[0] + s * offset[1]
+    task.data.qpos[qy] += -s * offset[0] + c * offset[1]
+    task.data.qvel[:] = 0.0
+    mujoco.mj_forward(task.model, task.data)
+    env._state = env.true_state()
+    env.monitor.reset(env._state)
+    assert np.linalg.norm(env._state[:2] - hazard) < 0.2
+    rng = np.random.default_rng(0)
+    costs = []
+    for _ in range(300):  # random actions: only the shield drives out
+        *_, info = env.step(rng.uniform(-1, 1, 2))
+        costs.append(info["cost"])
+    out = next(i for i, c in enumerate(costs) if c == 0.0)
+    assert out < 50, costs[:60]
+    assert sum(costs[out:]) == 0.0  # and it stays out
+
+
+def test_thrust_turn_is_its_equations() -> None:
+    model = tlshield.ThrustTurn(2.0, 3.0, 0.5)
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        s = rng.uniform(-2, 2, 7)
+        a = rng.uniform(-1, 1, 2)
+        f, g = model.eval(s)
+        th, vx, vy = s[2:5]
+        want = [vx, vy, 3.0 * a[1], 2.0 * a[0] * np.cos(th) - 0.5 * vx]
+        want += [2.0 * a[0] * np.sin(th) - 0.5 * vy, 0.0, 0.0]
+        np.testing.assert_allclose(f + g @ a, want, atol=1e-12)
+        np.testing.assert_allclose(model.step(s, a, 0.1), s + 0.1 * np.array(want), atol=1e-12)
+    assert pickle.loads(pickle.dumps(model)).gains == (2.0, 3.0, 0.5)
+    for bad in [(0.0, 1.0, 1.0), (1.0, -1.0, 1.0), (1.0, 1.0, -0.5), (1.0, 1.0, float("nan"))]:
+        with pytest.raises(ValueError, match="ThrustTurn"):
+            tlshield.ThrustTurn(*bad)
+
+
+def wall_shield(**kw: Any) -> tlshield.Shield:
+    wall = tlshield.Halfspace([-1.0, 0, 0, 0, 0], 1.0)  # x <= 1
+    spec = tlshield.Spec("F g", {"g": tlshield.Halfspace([0, 1.0, 0, 0, 0], -5.0)})
+    return tlshield.Shield(
+        spec,
+        tlshield.ThrustTurn(2.0, 3.0, 0.5),
+        alpha=1.0,
+        alpha2=2.0,
+        c3=1.0,
+        k=1e4,
+        cbf_bounds=(-2.0, 2.0),
+        clf_bounds=(-0.5, 0.5),
+        barriers={"wall": wall},
+        use_clf=False,
+        **kw,
+    )
+
+
+def test_disturbance_bounds_tighten_the_rows_and_survive_a_pickle() -> None:
+    # Heading along x, moving at the wall: the HOCBF row caps the thrust. psi_1 = -vx +
+    # alpha (1 - x - margin); the row: -2 a0 cos(theta) + 0.5 vx - alpha vx + alpha2 psi_1 >=
+    # sum_d |dpsi_1/ds_d| w_d, and dpsi_1/dvx = -1, dpsi_1/dx = -alpha.
+    s = np.array([0.3, 0.0, 0.0, 0.4, 0.0])
+    margin = 1e-6
+    psi = -0.4 + (1 - 0.3 - margin)
+    nominal = (0.5 * 0.4 - 0.4 + 2.0 * psi) / 2.0
+    for bounds, extra in [(None, 0.0), ({3: 0.3}, 0.3), ({0: 0.1, 3: 0.3}, 0.4)]:
+        shield = wall_shield(disturbance=bounds)
+        a0 = shield.filter(s, 0, np.array([1.0, 0.0])).action[0]
+        assert a0 == pytest.approx(nominal - extra / 2.0, abs=1e-7)
+        again = pickle.loads(pickle.dumps(shield))
+        assert again.filter(s, 0, np.array([1.0, 0.0])).action[0] == a0
+    with pytest.raises(TypeError, match="disturbance: expected a dict"):
+        wall_shield(disturbance=[0.1, 0.2])
+    with pytest.raises(ValueError, match="disturbance: key -1"):
+        wall_shield(disturbance={-1: 0.1})
+    with pytest.raises(ValueError, match=r"dimension 3 = -0\.1"):
+        wall_shield(disturbance={3: -0.1})
+
+
+def test_the_benchmark_writes_its_table_and_resumes(tmp_path: Path) -> None:
+    from tlshield import benchmark_safety_gym as bench
+
+    out = bench.safety_gym(
+        tmp_path,
+        envs=["SafetyPointGoal1-v0"],
+        configs=["rl_cbf"],
+        seeds=[0],
+        steps=64,
+        episodes=1,
+        workers=1,
+        progress=False,
+    )
+    with open(out / "safety_gym.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [tuple(rows[0])] == [bench.COLUMNS] and len(rows) == 1
+    assert rows[0]["method"] == "rl_cbf" and float(rows[0]["eval_cost"]) == 0.0
+    assert (out / "safety_gym.png").stat().st_size > 0
+    assert "privileged" in (out / "safety_gym.md").read_text()
+    result = next((out / "runs").glob("*/result.json"))
+    before = json.loads(result.read_text())
+    bench.safety_gym(
+        tmp_path,
+        envs=["SafetyPointGoal1-v0"],
+        configs=["rl_cbf"],
+        seeds=[0],
+        steps=64,
+        episodes=1,
+        workers=1,
+        progress=False,
+    )
+    assert json.loads(result.read_text()) == before  # kept, not re-run
+
+
+def test_the_cli_refuses_what_the_suite_does_not_take(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["benchmark", "safety-gym", "--formulas", "F a"]) == 2
+    assert "--formulas" in capsys.readouterr().err
+    assert cli.main(["benchmark", "safety-gym", "--envs", "SafetyCarGoal1-v0"]) == 2
+    assert "SafetyCarGoal1-v0" in capsys.readouterr().err
