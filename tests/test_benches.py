@@ -29,6 +29,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("compare_cbfpy.py", ["--quick"], "tlshield speedup"),
         ("ray_overhead.py", ["--quick"], "runs identical: yes"),
         ("ray_scaling.py", ["--quick"], "runs identical at every size: yes"),
+        ("safety_gym_overhead.py", ["--rounds", "1", "--steps", "100"], "shield overhead"),
     ],
 )
 def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:

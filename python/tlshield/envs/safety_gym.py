@@ -277,29 +277,26 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._rot0 = (math.cos(self._yaw0), math.sin(self._yaw0))
         self._qpos = [int(model.joint(n).qposadr[0]) for n in "xyz"]
         self._qvel = [int(model.joint(n).dofadr[0]) for n in "xyz"]
+        names = ["goal", *(f"hazard{i}" for i in range(self._hazards))]
+        names += [f"vase{i}" for i in range(self._vases)]
+        self._bodies = np.array([model.body(n).id for n in names])
+        self._buffer = np.zeros(AGENT_DIM + 2 * len(names))
 
     def true_state(self) -> NDArray[np.float64]:
         """The privileged state ``[x, y, theta, vx, vy, goal x, y, hazards..., vases...]``,
         read from MuJoCo's joints (after a step, a body's ``xpos`` is one substep old)."""
-        sg = self._env.task
-        qpos, qvel = sg.data.qpos, sg.data.qvel
+        data = self._env.task.data
+        qpos, qvel = data.qpos, data.qvel
         (x, y, z), (dx, dy, _) = self._qpos, self._qvel
         c, sn = self._rot0
-        s = [
-            self._base[0] + c * qpos[x] - sn * qpos[y],
-            self._base[1] + sn * qpos[x] + c * qpos[y],
-            self._yaw0 + qpos[z],
-            c * qvel[dx] - sn * qvel[dy],
-            sn * qvel[dx] + c * qvel[dy],
-            *sg.goal.pos[:2],
-        ]
-        if self._hazards:
-            for p in sg.hazards.pos:
-                s.extend(p[:2])
-        if self._vases:
-            for p in sg.vases.pos:
-                s.extend(p[:2])
-        return np.asarray(s, dtype=np.float64)
+        s = self._buffer
+        s[0] = self._base[0] + c * qpos[x] - sn * qpos[y]
+        s[1] = self._base[1] + sn * qpos[x] + c * qpos[y]
+        s[2] = self._yaw0 + qpos[z]
+        s[3] = c * qvel[dx] - sn * qvel[dy]
+        s[4] = sn * qvel[dx] + c * qvel[dy]
+        s[AGENT_DIM:] = data.xpos[self._bodies, :2].ravel()
+        return s.copy()
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -333,8 +330,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """The policy's action in the shield's units: the motor's control scaled to its
         saturation and clipped, the turn as it is (see :class:`PointModel`)."""
-        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-        return np.array([np.clip(a[0] / POINT.saturation, -1.0, 1.0), a[1]])
+        a0 = min(max(float(action[0]) / POINT.saturation, -1.0), 1.0)
+        return np.array([a0, min(max(float(action[1]), -1.0), 1.0)])
 
     def step(
         self, action: NDArray[np.float64]
@@ -346,8 +343,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             raise ValueError(f"action: expected 2 finite values, got {action!r}")
         result = None
         applied = action
+        u_rl = self.shield_input(action)
         if self.shield is not None:
-            u_rl = self.shield_input(action)
             result = self.shield.filter(self.monitor, u_rl)
             u = result.action
             applied = np.array([POINT.saturation * u[0], u[1]])
@@ -369,7 +366,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             "state": self._state,
         }
         if self.shield is not None:
-            info["shield"] = shield_info(result, self.shield_input(action))
+            info["shield"] = shield_info(result, u_rl)
         return np.asarray(obs, dtype=np.float64), float(reward), terminated, truncated, info
 
 
