@@ -1,6 +1,6 @@
 """A fingerprint of what the bundled environments and training produce: hashes of seeded random
-rollouts of Channel-v0 (every configuration and observation), FlatWorld-v0 and PointMass-v0,
-and of a 12-update training run (metrics, kept and last policy weights). Run it in two
+rollouts of Channel-v0 (every configuration and observation), FlatWorld-v0 and PointMass-v0
+(and SafetyPointGoal1-v0 where ``make safety-gym`` installed it), and of a 12-update training run (metrics, kept and last policy weights). Run it in two
 checkouts (or with two PYTHONPATHs) to show that a refactor left every number as it was:
 
     python scripts/fingerprint.py > before.txt   # in the old checkout
@@ -84,6 +84,12 @@ def main() -> None:
     ):
         for config in ("rl", "rl_cbf_clf"):
             print(f"{env_id} {config}: {rollout(gym.make(env_id, config=config, **kwargs))}")
+    from tlshield.envs import safety_gym
+
+    if safety_gym.installed():  # make safety-gym
+        for config in ("rl", "rl_cbf_clf"):
+            env = safety_gym.SafetyGoalEnv("SafetyPointGoal1-v0", config)
+            print(f"SafetyPointGoal1-v0 {config}: {rollout(env)}")
     print(f"train rl_cbf_clf seed 0, 12 updates: {training()}")
 
 
