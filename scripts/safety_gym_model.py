@@ -79,11 +79,94 @@ def errors(s: np.ndarray, s2: np.ndarray, u: np.ndarray, gains: tuple[float, ...
     return np.array(out)
 
 
+def reference_point_model(d: float) -> object:
+    """The paper's answer for the unicycle, on the Point: the shield's position is a point
+    ``d`` ahead of the centre, ``p = c + d (cos theta, sin theta)``, so
+    ``dp/dt = v + d turn a1 (-sin theta, cos theta)``: a barrier on ``p`` is first order in
+    the turn alone (the thrust enters only through ``v``, one integration further)."""
+    from tlshield import ControlAffine
+    from tlshield.envs.safety_gym import POINT
+
+    def f(s: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(s)
+        out[0:2] = s[3:5]
+        out[3:5] = -POINT.drag * s[3:5]
+        return out
+
+    def g(s: np.ndarray) -> np.ndarray:
+        out = np.zeros((s.size, 2))
+        c, sn = np.cos(s[2]), np.sin(s[2])
+        out[0, 1], out[1, 1] = -d * POINT.turn * sn, d * POINT.turn * c
+        out[2, 1] = POINT.turn
+        out[3, 0], out[4, 0] = POINT.thrust * c, POINT.thrust * sn
+        return out
+
+    return ControlAffine(f, g, state_dim=5 + 2 + 2 * 8, inputs=2)  # Goal1: goal, 8 hazards
+
+
+def compare_models(episodes: int, d: float) -> None:
+    """The lidar attacker against the shield (hazards in the formula, ``rl_cbf``) with each
+    model: cost, and steps whose QP had to be relaxed."""
+    from tlshield import Monitor, Shield, Status
+    from tlshield.envs.safety_gym import POINT, SafetyGoalEnv, hazard_attacker
+
+    print("\n| shield model | attacker episodes | cost | relaxed steps |")
+    print("|---|---:|---:|---:|")
+    names = ("ThrustTurn (HOCBF rows, heading in the state)", f"reference point {d} m ahead")
+    for name in names:
+        env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
+        p = env.params
+        shield = Shield(
+            env.automaton,
+            reference_point_model(d),
+            alpha=p.alpha,
+            c3=p.c3,
+            k=p.k,
+            cbf_bounds=(-2.0, 2.0),
+            clf_bounds=(-p.clf_bound, p.clf_bound),
+            action_bounds=(-1.0, 1.0),
+            rl_bounds=(-1.0, 1.0),
+            margin=p.margin,
+            use_clf=False,
+        )
+        reference = name.startswith("reference")
+        if reference:
+            env.shield = None  # the env steps unshielded; this loop shields the point ahead
+        monitor = Monitor(env.automaton)
+        cost, relaxed = 0.0, 0
+        for ep in range(episodes):
+            obs, _ = env.reset(seed=900 + ep)
+            monitor.reset(ahead(env.true_state(), d))
+            for _ in range(1000):
+                action = hazard_attacker(env, obs)
+                if reference:
+                    out = shield.filter(monitor, env.shield_input(action))
+                    action = np.array([POINT.saturation * out.action[0], out.action[1]])
+                    relaxed += out.status != Status.SOLVED
+                obs, _, term, trunc, info = env.step(action)
+                if not reference:
+                    relaxed += info["shield"]["status"] != Status.SOLVED
+                s = ahead(env.true_state(), d)
+                _ = monitor.reset(s) if info["goal_met"] else monitor.advance(s)
+                cost += info["cost"]
+                if term or trunc:
+                    break
+        print(f"| {name} | {episodes} | {cost:.0f} | {relaxed} |")
+
+
+def ahead(s: np.ndarray, d: float) -> np.ndarray:
+    out = s.copy()
+    out[0] += d * np.cos(s[2])
+    out[1] += d * np.sin(s[2])
+    return out
+
+
 def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)  # gymnasium's Box casts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=6)
     parser.add_argument("--steps", type=int, default=500)
+    parser.add_argument("--ahead", type=float, default=0.1, help="the reference point (m)")
     args = parser.parse_args()
     data = {p: rollouts(p, args.episodes, args.steps) for p in ("random", "attack")}
     gains = fit(*data["random"])
@@ -102,6 +185,7 @@ def main() -> None:
         for d, name in enumerate(names):
             p = np.percentile(e[:, d], [50, 90, 99, 100])
             print(f"| {policy} | {len(s)} | {name} | " + " | ".join(f"{v:.3f}" for v in p) + " |")
+    compare_models(args.episodes, args.ahead)
 
 
 if __name__ == "__main__":
