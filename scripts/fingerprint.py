@@ -1,7 +1,8 @@
 """A fingerprint of what the bundled environments and training produce: hashes of seeded random
 rollouts of Channel-v0 (every configuration and observation), FlatWorld-v0 and PointMass-v0
 (and SafetyPointGoal1-v0 where ``make safety-gym`` installed it), and of a 12-update training
-run (metrics, kept and last policy weights). Run it in two (or with two PYTHONPATHs) to show that a refactor left every number as it was:
+run (metrics, kept and last policy weights). Run it in two checkouts (or with two PYTHONPATHs)
+to show that a refactor left every number as it was:
 
     python scripts/fingerprint.py > before.txt   # in the old checkout
     python scripts/fingerprint.py > after.txt    # in the new one
