@@ -21,6 +21,12 @@ def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)  # gymnasium's Box casts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--tasks", nargs="+", help="default: both")
+    parser.add_argument("--policies", nargs="+", default=["attacker", "random"])
+    parser.add_argument("--configs", nargs="+", default=["rl", "rl_cbf", "rl_cbf_clf"])
+    parser.add_argument(
+        "--velocity-error", type=float, help="the env's velocity_error override (m/s^2)"
+    )
     args = parser.parse_args()
     from tlshield import Status
     from tlshield.envs.safety_gym import TASKS, SafetyGoalEnv, hazard_attacker
@@ -29,10 +35,11 @@ def main() -> None:
         "| env | policy | config | episodes | cost | cost / episode | goals met | relaxed steps |"
     )
     print("|---|---|---|---:|---:|---:|---:|---:|")
-    for task in TASKS:
-        for policy in ("attacker", "random"):
-            for config in ("rl", "rl_cbf", "rl_cbf_clf"):
-                env = SafetyGoalEnv(task, config)
+    overrides = {} if args.velocity_error is None else {"velocity_error": args.velocity_error}
+    for task in args.tasks or TASKS:
+        for policy in args.policies:
+            for config in args.configs:
+                env = SafetyGoalEnv(task, config, **overrides)
                 rng = np.random.default_rng(3)
                 cost, goals, relaxed = 0.0, 0, 0
                 for ep in range(args.episodes):
