@@ -8,7 +8,10 @@
 //! `L = Lg h`, `r = Lf h + alpha (h - margin)`. Second order (Xiao & Belta): with
 //! `psi_1 = Lf h + alpha (h - margin)`, `L = Lg psi_1 = (H f + J_f^T grad h)^T g` and
 //! `r = Lf psi_1 + alpha2 psi_1`, `Lf psi_1 = f^T H f + grad h . J_f f + alpha Lf h`
-//! (`H` the barrier's Hessian, `J_f` the Jacobian of the drift; both exact).
+//! (`H` the barrier's Hessian, `J_f` the Jacobian of the drift; both exact). With
+//! disturbance bounds `w_d` ([`ShieldParams::disturbance`]) every `r` drops by
+//! `sum_d |dB/ds_d| w_d`, `B` the row's function (`h`, or `psi_1` with
+//! `dpsi_1/ds = H f + J_f^T grad h + alpha grad h`): the robust CBF.
 //!
 //! The buffers live in [`Program`] and are reused from step to step: nothing here allocates
 //! once they have grown to the problem's size.
