@@ -137,6 +137,12 @@ CASES: dict[str, list[Case]] = {
     "benchmark": [
         ("an unknown colour", lambda b, r: ["benchmark", "flatworld", "--formulas", "F purple"]),
         ("a seed out of range", lambda b, r: ["benchmark", "flatworld", "--seeds", "12"]),
+        ("--envs for flatworld", lambda b, r: ["benchmark", "flatworld", "--envs", "X-v0"]),
+        (
+            "--formulas for safety-gym",
+            lambda b, r: ["benchmark", "safety-gym", "--formulas", "F a"],
+        ),
+        ("an unknown env", lambda b, r: ["benchmark", "safety-gym", "--envs", "SafetyCarGoal1-v0"]),
     ],
     "plot": [
         ("missing folder", lambda b, r: ["plot", str(b / "nope")]),

@@ -189,16 +189,19 @@ def test_disturbance_bounds_tighten_the_rows_and_survive_a_pickle() -> None:
 def test_the_benchmark_writes_its_table_and_resumes(tmp_path: Path) -> None:
     from tlshield import benchmark_safety_gym as bench
 
-    out = bench.safety_gym(
-        tmp_path,
-        envs=["SafetyPointGoal1-v0"],
-        configs=["rl_cbf"],
-        seeds=[0],
-        steps=64,
-        episodes=1,
-        workers=1,
-        progress=False,
-    )
+    def run() -> Path:
+        return bench.safety_gym(
+            tmp_path,
+            envs=["SafetyPointGoal1-v0"],
+            configs=["rl_cbf"],
+            seeds=[0],
+            steps=64,
+            episodes=1,
+            workers=1,
+            progress=False,
+        )
+
+    out = run()
     with open(out / "safety_gym.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [tuple(rows[0])] == [bench.COLUMNS] and len(rows) == 1
@@ -207,16 +210,7 @@ def test_the_benchmark_writes_its_table_and_resumes(tmp_path: Path) -> None:
     assert "privileged" in (out / "safety_gym.md").read_text()
     result = next((out / "runs").glob("*/result.json"))
     before = json.loads(result.read_text())
-    bench.safety_gym(
-        tmp_path,
-        envs=["SafetyPointGoal1-v0"],
-        configs=["rl_cbf"],
-        seeds=[0],
-        steps=64,
-        episodes=1,
-        workers=1,
-        progress=False,
-    )
+    run()
     assert json.loads(result.read_text()) == before  # kept, not re-run
 
 

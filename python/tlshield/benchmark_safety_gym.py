@@ -189,19 +189,9 @@ def safety_gym(
                 folder = runs / f"{e}-{c}-s{s}-{budget}"
                 if not (folder / "result.json").exists():
                     jobs[folder] = partial(train_and_evaluate, e, c, s, budget, episodes)
-    if jobs:
-        from tlshield import cluster
+    from tlshield import cluster
 
-        done = 0
-        with cluster.session(address, workers):
-
-            def tick(folder: Path) -> None:
-                nonlocal done
-                done += 1
-                if progress:
-                    print(f"  {done}/{len(jobs)} {folder.name}", flush=True)
-
-            cluster.run(jobs, on_done=tick)
+    cluster.run_counted(jobs, address, workers, progress)
     return write_report(out)
 
 

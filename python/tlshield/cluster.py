@@ -146,6 +146,28 @@ def run(
         raise RuntimeError(f"{len(failures)} run(s) failed on Ray:\n" + "\n".join(failures))
 
 
+def run_counted(
+    jobs: dict[Path, Job],
+    address: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+) -> None:
+    """:func:`run` inside a :func:`session`, printing ``done/total folder`` as each job
+    arrives when ``progress`` (the benchmarks' loop); nothing to do when ``jobs`` is empty."""
+    if not jobs:
+        return
+    done = 0
+
+    def tick(folder: Path) -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            print(f"  {done}/{len(jobs)} {folder.name}", flush=True)
+
+    with session(address, workers):
+        run(jobs, on_done=tick)
+
+
 def run_in_tempdir(job: Job, name: str) -> bytes:
     """Runs ``job`` on a folder ``name`` in a temporary directory and returns it packed (the
     body of the Ray task)."""
