@@ -133,6 +133,12 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
     if env_id == ENV_ID:
         return ChannelEnv(config=config, **kwargs)
+    if env_id in SAFETY_GYM_IDS:
+        raise ValueError(
+            f"env {env_id!r}: Safety-Gymnasium's tasks are scored by its reward and cost, not "
+            "by a temporal-logic task; train and evaluate them with `tlshield benchmark "
+            "safety-gym` (docs/guides/safety-gym.md)"
+        )
     check_env_id(env_id)  # an unknown id or module is one clear ValueError
     try:
         return gym.make(env_id, config=config, **kwargs)
