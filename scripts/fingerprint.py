@@ -85,9 +85,11 @@ def main() -> None:
     ):
         for config in ("rl", "rl_cbf_clf"):
             print(f"{env_id} {config}: {rollout(gym.make(env_id, config=config, **kwargs))}")
-    from tlshield.envs import safety_gym
-
-    if safety_gym.installed():  # make safety-gym
+    try:
+        from tlshield.envs import safety_gym
+    except ImportError:  # a checkout from before the Safety-Gymnasium envs
+        safety_gym = None
+    if safety_gym is not None and safety_gym.installed():  # make safety-gym
         for config in ("rl", "rl_cbf_clf"):
             env = safety_gym.SafetyGoalEnv("SafetyPointGoal1-v0", config)
             print(f"SafetyPointGoal1-v0 {config}: {rollout(env)}")
