@@ -239,7 +239,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         use_cbf = use_cbf or evaluation
         self.shield = self._shield(use_cbf, use_clf)
         self._state: NDArray[np.float64] | None = None
-        self._lidar: dict[str, NDArray[np.intp]] | None = None
+        self._entries: dict[str, NDArray[np.intp]] | None = None
 
     def _shield(self, use_cbf: bool, use_clf: bool) -> Shield | None:
         if not (use_cbf or use_clf):
@@ -315,17 +315,20 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         """The lidar's range (m): a bin reads ``1 - distance / range``."""
         return float(self._env.task.lidar_conf.max_dist)
 
+    def sensor(self, obs: NDArray[np.float64], name: str) -> NDArray[np.float64]:
+        """The values of one entry of the (flat) observation, e.g. ``"velocimeter"`` (the
+        body-frame velocity) or ``"hazards_lidar"``."""
+        if self._entries is None:
+            space = self._env.task.obs_info.obs_space_dict
+            marks = {k: np.full(v.shape, i, float) for i, (k, v) in enumerate(space.items())}
+            flat = gym.spaces.utils.flatten(space, marks)
+            self._entries = {k: np.flatnonzero(flat == i) for i, k in enumerate(space)}
+        return np.asarray(obs)[self._entries[name]]
+
     def lidar(self, obs: NDArray[np.float64], name: str = "hazards") -> NDArray[np.float64]:
         """The bins of the observation's ``<name>_lidar`` (closeness in ``[0, 1]`` per
         direction, counter-clockwise from the heading)."""
-        if self._lidar is None:
-            space = self._env.task.obs_info.obs_space_dict
-            marks = {
-                k: np.full(v.shape, i, dtype=np.float64) for i, (k, v) in enumerate(space.items())
-            }
-            flat = gym.spaces.utils.flatten(space, marks)
-            self._lidar = {k: np.flatnonzero(flat == i) for i, k in enumerate(space)}
-        return np.asarray(obs)[self._lidar[f"{name}_lidar"]]
+        return self.sensor(obs, f"{name}_lidar")
 
     def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """The policy's action in the shield's units: the motor's control scaled to its
@@ -378,9 +381,10 @@ def make_safety_goal(
 
 
 def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.float64]:
-    """An attacker that sees what a policy sees: it turns towards the nearest hazard on the
-    hazard lidar and drives at it, braking near its centre so as to stay inside (full thrust
-    ahead when no hazard is in range)."""
+    """An attacker that sees what a policy sees: it steers at the nearest hazard on the hazard
+    lidar and, from the velocimeter, drives at a speed that falls with the distance to it, so
+    that it stops at the centre and stays there (full thrust ahead when no hazard is in
+    range)."""
     bins = env.lidar(obs, "hazards")
     if bins.max() <= 0.0:
         return np.array([1.0, 0.0])
@@ -388,5 +392,7 @@ def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.
     angle = (i + 0.5) * 2.0 * np.pi / bins.size
     angle = (angle + np.pi) % (2.0 * np.pi) - np.pi  # (-pi, pi]: left is positive
     distance = env.lidar_range * (1.0 - bins[i])
-    thrust = POINT.saturation * float(np.clip(20.0 * (distance - 0.05), -1.0, 1.0))
-    return np.array([thrust * max(math.cos(angle), 0.0), float(np.clip(3.0 * angle, -1, 1))])
+    speed = min(1.0, 2.0 * distance)  # wanted, towards the hazard
+    forward = env.sensor(obs, "velocimeter")[0]
+    thrust = float(np.clip(5.0 * (speed * math.cos(angle) - forward), -1.0, 1.0))
+    return np.array([POINT.saturation * thrust, float(np.clip(3.0 * angle, -1.0, 1.0))])
