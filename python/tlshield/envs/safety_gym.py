@@ -342,7 +342,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
         action = np.asarray(action, dtype=np.float64)
-        if action.shape != (2,) or not np.all(np.isfinite(action)):
+        if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             raise ValueError(f"action: expected 2 finite values, got {action!r}")
         result = None
         applied = action
