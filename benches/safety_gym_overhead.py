@@ -79,7 +79,7 @@ def main() -> int:
         print(f"| {name} | {1e6 * statistics.median(times):.0f} |")
     print(
         f"\nshield overhead: {100 * overhead:.1f} % of Safety-Gymnasium's step "
-        f"(median of {args.rounds} paired rounds; target <= {100 * TARGET:.0f} %)"
+        f"(median of {args.rounds} rounds; target <= {100 * TARGET:.0f} %)"
     )
     return 0 if overhead <= TARGET else 2
 
