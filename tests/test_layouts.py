@@ -237,6 +237,7 @@ CASES: dict[str, Case] = {
             ("DoubleIntegrator", tlshield.DoubleIntegrator, ([0, 1], [2, 3]), 2),
             ("AccelerationUnicycle", _core.AccelerationUnicycle, (), 2),
             ("KinematicBicycle", _core.KinematicBicycle, (0.5,), 2),
+            ("ThrustTurn", _core.ThrustTurn, (2.8, 2.9, 1.9), 2),
         )
         for method in ("eval", "step")
     },
