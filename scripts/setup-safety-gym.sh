@@ -10,3 +10,4 @@ VENV="${VENV:-.venv}"
 echo "==> installing safety-gymnasium 1.0.0 and mujoco 2.3.7 into $VENV"
 "$VENV/bin/python" -m pip install --quiet --no-deps "safety-gymnasium==1.0.0"
 "$VENV/bin/python" -m pip install --quiet "mujoco==2.3.7" xmltodict pyyaml imageio
+echo "==> (pip's notes about safety-gymnasium's pins above are expected: tlshield's adapter runs it on gymnasium 1.x and mujoco 2.3.7)"
