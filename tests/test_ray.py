@@ -180,9 +180,25 @@ def test_an_interrupted_reproduce_resumes_keeping_finished_runs(tmp_path: Path) 
     assert "| rl_cbf | 0, 1 | 40 |" in proc2.stdout
 
 
-def _task_workers() -> list[int]:
-    ps = subprocess.run(["ps", "-eo", "pid,args"], capture_output=True, text=True).stdout
-    return [int(line.split()[0]) for line in ps.splitlines() if "ray::run_in_tempdir" in line]
+def _task_workers(root: int) -> list[int]:
+    """The Ray task workers of the run started as process ``root`` (its local Ray's raylet is
+    its child, the workers the raylet's): never another Ray's on the same machine."""
+    ps = subprocess.run(["ps", "-eo", "pid,ppid,args"], capture_output=True, text=True).stdout
+    rows = [line.split(None, 2) for line in ps.splitlines()[1:]]
+    parent = {int(r[0]): int(r[1]) for r in rows}
+
+    def under_root(pid: int) -> bool:
+        while pid > 1:
+            if pid == root:
+                return True
+            pid = parent.get(pid, 1)
+        return False
+
+    return [
+        int(r[0])
+        for r in rows
+        if len(r) == 3 and "ray::run_in_tempdir" in r[2] and under_root(int(r[0]))
+    ]
 
 
 def test_a_worker_that_dies_is_retried_without_losing_finished_runs(tmp_path: Path) -> None:
@@ -190,7 +206,7 @@ def test_a_worker_that_dies_is_retried_without_losing_finished_runs(tmp_path: Pa
     proc, first = _first_of_two_jobs(out)
     kept = first.stat().st_mtime_ns
     deadline = time.monotonic() + HANG
-    while not (pids := _task_workers()):  # the worker that trains the second run
+    while not (pids := _task_workers(proc.pid)):  # the worker that trains the second run
         assert proc.poll() is None and time.monotonic() < deadline
         time.sleep(0.05)
     for pid in pids:
