@@ -251,6 +251,7 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import EngFormatter
 
     envs = sorted({r["env"] for r in rows})
     if not envs:
@@ -274,6 +275,8 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
         axes[0, j].set_ylabel("training return / episode")
         axes[1, j].set_ylabel("training cost / episode")
         axes[1, j].set_xlabel("PPO steps")
+        for ax in axes[:, j]:
+            ax.xaxis.set_major_formatter(EngFormatter())
         axes[0, j].legend(fontsize=7, ncol=3)
     fig.tight_layout()
     fig.savefig(out / "safety_gym.png", dpi=110)
