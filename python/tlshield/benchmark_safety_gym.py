@@ -43,12 +43,18 @@ COLUMNS = (
     "train_cost_rate",
     "wall_s",
 )
-#: OmniSafe's published on-policy rows (1e7 steps, cost limit 25): return, cost per episode.
+#: OmniSafe's published on-policy rows (1e7 steps, cost limit 25; the means of its
+#: ``benchmarks/on-policy/README.md``): return, cost per episode.
 OMNISAFE = {
     "SafetyPointGoal1-v0": {
         "PPO": (25.44, 55.72),
         "PPO-Lag": (12.96, 25.80),
         "CPO": (20.46, 28.84),
+    },
+    "SafetyPointGoal2-v0": {
+        "PPO": (25.49, 159.28),
+        "PPO-Lag": (1.98, 41.20),
+        "CPO": (2.50, 40.84),
     },
 }
 
