@@ -179,7 +179,9 @@ class SafetyGoalParams:
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"{f.name} = {v!r}: expected a finite number")
-            if v < 0 or (v == 0 and not f.name.endswith("_error")):
+            if f.name.endswith("_error") and v < 0:
+                raise ValueError(f"{f.name} = {v!r}: expected a bound >= 0")
+            if not f.name.endswith("_error") and v <= 0:
                 raise ValueError(f"{f.name} = {v!r}: expected a number > 0")
 
 
