@@ -285,8 +285,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._buffer = np.zeros(AGENT_DIM + 2 * len(names))
 
     def true_state(self) -> NDArray[np.float64]:
-        """The privileged state ``[x, y, theta, vx, vy, goal x, y, hazards..., vases...]``,
-        read from MuJoCo's joints (after a step, a body's ``xpos`` is one substep old)."""
+        """The privileged state ``[x, y, theta, vx, vy, goal x, y, hazards..., vases...]``:
+        the agent from MuJoCo's joints, the objects from their bodies' positions."""
         data = self._env.task.data
         qpos, qvel = data.qpos, data.qvel
         (x, y, z), (dx, dy, _) = self._qpos, self._qvel
