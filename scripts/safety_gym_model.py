@@ -115,23 +115,23 @@ def compare_models(episodes: int, d: float) -> None:
     names = ("ThrustTurn (HOCBF rows, heading in the state)", f"reference point {d} m ahead")
     for name in names:
         env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
-        p = env.params
-        shield = Shield(
-            env.automaton,
-            reference_point_model(d),
-            alpha=p.alpha,
-            c3=p.c3,
-            k=p.k,
-            cbf_bounds=(-2.0, 2.0),
-            clf_bounds=(-p.clf_bound, p.clf_bound),
-            action_bounds=(-1.0, 1.0),
-            rl_bounds=(-1.0, 1.0),
-            margin=p.margin,
-            use_clf=False,
-        )
         reference = name.startswith("reference")
-        if reference:
-            env.shield = None  # the env steps unshielded; this loop shields the point ahead
+        if reference:  # the env steps unshielded; this loop shields the point ahead
+            p = env.params
+            shield = Shield(
+                env.automaton,
+                reference_point_model(d),
+                alpha=p.alpha,
+                c3=p.c3,
+                k=p.k,
+                cbf_bounds=(-2.0, 2.0),
+                clf_bounds=(-p.clf_bound, p.clf_bound),
+                action_bounds=(-1.0, 1.0),
+                rl_bounds=(-1.0, 1.0),
+                margin=p.margin,
+                use_clf=False,
+            )
+            env.shield = None
         monitor = Monitor(env.automaton)
         cost, relaxed = 0.0, 0
         for ep in range(episodes):
