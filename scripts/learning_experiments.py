@@ -42,13 +42,28 @@ VARIANTS: dict[str, dict[str, Any]] = {
     },
     "tanh_mean+raw+lr1e-3": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 1e-3},
     "tanh_mean+raw+lr2e-3": {"policy": "tanh_mean", "norm_reward": False, "learning_rate": 2e-3},
+    # Issue 34's levers, each over the current default preset.
+    "default": {},
+    "budget_x4": {"updates_scale": 4.0},
+    "vec64": {"n_envs": 64, "batch_size": 2048, "updates_scale": 0.4},
+    "vec64_x4": {"n_envs": 64, "batch_size": 2048, "updates_scale": 1.6},
+    "gsde": {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4, "log_std_init": -2.0},
+    "clf_linear": {"clf_schedule": "linear"},
+    "clf_exponential": {"clf_schedule": "exponential"},
+    "executed": {"executed_action": True},
 }
 
 
 def _options(variant: str) -> dict[str, Any]:
     from tlshield import settings
 
-    return settings.split(VARIANTS[variant])
+    return settings.split({k: v for k, v in VARIANTS[variant].items() if k != "updates_scale"})
+
+
+def _updates(variant: str, updates: int) -> int:
+    """The variant's updates: ``updates`` times its ``updates_scale`` (a variant with more
+    samples per update takes fewer updates for about the same wall time)."""
+    return max(1, round(updates * VARIANTS[variant].get("updates_scale", 1.0)))
 
 
 def table(root: Path, variants: list[str]) -> str:
@@ -71,14 +86,13 @@ def main() -> None:
     jobs = {}
     for variant in args.variants:
         options = _options(variant)
+        updates = _updates(variant, args.updates)
         for config in args.configs:
             for seed in args.seeds:
                 folder = root / variant / f"{config}_s{seed}"
                 done = (folder / "last_evaluation.json").is_file()
-                if not (done and is_finished(folder, args.updates)):
-                    jobs[folder] = partial(
-                        run_job, config, seed, args.updates, args.trials, options
-                    )
+                if not (done and is_finished(folder, updates)):
+                    jobs[folder] = partial(run_job, config, seed, updates, args.trials, options)
     _run_jobs(jobs, args.workers, None, True)
     text = table(root, args.variants)
     (root / "candidates.md").write_text(text + "\n")

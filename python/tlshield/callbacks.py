@@ -1,5 +1,6 @@
-"""The training loop's callback, in the style of SB3's own ``callbacks.py``: per-step metrics,
-the CLF-bound schedule, validation (the kept checkpoint) and one ``metrics.csv`` row per update.
+"""The training loop's callbacks, in the style of SB3's own ``callbacks.py``: per-step metrics,
+the CLF-bound schedule, validation (the kept checkpoint) and one ``metrics.csv`` row per update;
+and, as an option, learning from the executed action (:class:`ExecutedActions`).
 Importing this module loads SB3 (and torch); :func:`tlshield.training.train` does so when it
 trains."""
 
@@ -109,13 +110,15 @@ def metrics_text(count: float) -> str:
 
 def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
     """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
-    policy's std per dimension, the sampled actions outside the box, the shield's mean
+    policy's std per dimension (under gSDE, the root mean square of its noise weights' stds), the sampled actions outside the box, the shield's mean
     correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
     before this rollout; NaN before the first)."""
     import torch
 
     log_std = getattr(model.policy, "log_std", None)
     std = torch.exp(log_std).detach().cpu().numpy() if log_std is not None else np.array([])
+    if std.ndim == 2:  # gSDE: the std of each (latent feature, action) noise weight
+        std = np.sqrt(np.mean(std**2, axis=0))
     actions = np.asarray(model.rollout_buffer.actions).reshape(-1, model.action_space.shape[0])
     low, high = model.action_space.low, model.action_space.high
     logged = model.logger.name_to_value
@@ -253,3 +256,42 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
         self.bar.update(1)
         viol = metrics_text(row["violations"])
         self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=viol)
+
+
+class ExecutedActions(BaseCallback):  # type: ignore[misc]
+    """PPO learns from the action the environment executed instead of the one it sampled.
+
+    After each step, the rollout's sampled actions are replaced, in place, by the executed ones
+    (``info["action"]``: the shield's output, mapped back to the policy's units), and their
+    log-likelihoods by the sampling policy's log-likelihood of the executed actions. The ratio
+    PPO clips is then the ratio of what was done. The map back is the inverse of the env's
+    ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env whose actions
+    are already in the shield's units (PointMass-v0)."""
+
+    def __init__(self, inner: Any) -> None:
+        super().__init__()
+        m = inner.action_space.shape[0]
+        try:
+            rl_action = inner.get_attr("rl_action", [0])[0]
+        except AttributeError:
+            self.centre, self.half = np.zeros(m), np.ones(m)
+        else:
+            self.centre = np.asarray(rl_action(np.zeros(m)), dtype=np.float64)
+            self.half = np.asarray(rl_action(np.ones(m)), dtype=np.float64) - self.centre
+
+    def _on_step(self) -> bool:
+        import torch
+
+        infos = self.locals["infos"]
+        if any("action" not in info for info in infos):
+            raise ValueError(
+                "executed_action: the environment's info has no 'action' (the executed action)"
+            )
+        executed = (np.stack([info["action"] for info in infos]) - self.centre) / self.half
+        actions, log_probs = self.locals["actions"], self.locals["log_probs"]
+        actions[...] = executed.reshape(actions.shape)
+        with torch.no_grad():
+            dist = self.model.policy.get_distribution(self.locals["obs_tensor"])
+            taken = torch.as_tensor(actions, dtype=torch.float32, device=log_probs.device)
+            log_probs.copy_(dist.log_prob(taken))
+        return True

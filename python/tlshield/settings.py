@@ -29,7 +29,9 @@ from tlshield.runs import json_tuples
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
 #: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
-#: POLICIES`) and whether rewards are normalised).
+#: POLICIES`) and whether rewards are normalised). ``use_sde`` (generalized state-dependent
+#: exploration) needs ``policy: "gaussian"``, SB3's own policy; ``executed_action`` trains on
+#: the executed action (:class:`tlshield.callbacks.ExecutedActions`).
 PPO_NAMES = (
     "learning_rate",
     "ent_coef",
@@ -45,6 +47,9 @@ PPO_NAMES = (
     "log_std_init",
     "policy",
     "norm_reward",
+    "use_sde",
+    "sde_sample_freq",
+    "executed_action",
 )
 #: Keywords of a bundled environment's factory besides its parameters (the task).
 TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}

@@ -172,7 +172,14 @@ def train(
         on_update=on_update,
         progress=progress,
     )
-    _learn(run, updates * settings.n_envs * settings.ppo["n_steps"], TrainingCallback(run))
+    before = []
+    if settings.executed_action:
+        from tlshield.callbacks import ExecutedActions
+
+        # First: the rollout holds the executed actions before anything else reads the step.
+        before.append(ExecutedActions(inner))
+    timesteps = updates * settings.n_envs * settings.ppo["n_steps"]
+    _learn(run, timesteps, TrainingCallback(run), before)
     return folder
 
 
@@ -187,11 +194,13 @@ class PpoSettings:
     policy: str
     norm_reward: bool
     lr_schedule: str
+    executed_action: bool
 
 
 def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
-    ``policy``, ``norm_reward``, ``log_std_init``) are taken out of SB3's keywords."""
+    ``policy``, ``norm_reward``, ``log_std_init``, ``executed_action``) are taken out of SB3's
+    keywords."""
     from tlshield.policies import policy_class
 
     spec = PRESETS[preset]
@@ -201,11 +210,15 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         n_envs=int(kwargs.pop("n_envs", spec["n_envs"])),
         policy=str(kwargs.pop("policy", spec.get("policy", "gaussian"))),
         norm_reward=bool(kwargs.pop("norm_reward", spec.get("norm_reward", True))),
+        executed_action=bool(kwargs.pop("executed_action", spec.get("executed_action", False))),
         ppo=kwargs,
         net_arch=spec["net_arch"],
         lr_schedule=spec.get("lr_schedule", "constant"),
     )
     policy_class(settings.policy)  # an unknown name fails here, before any environment is built
+    if settings.ppo.get("use_sde") and settings.policy != "gaussian":
+        # SB3's gSDE replaces the policy's Gaussian head: only its own policy has one.
+        raise ValueError(f"use_sde needs policy 'gaussian', not {settings.policy!r}")
     return settings
 
 
@@ -236,6 +249,7 @@ def _run_record(
             "log_std_init": settings.log_std_init,
             "policy": settings.policy,
             "norm_reward": settings.norm_reward,
+            "executed_action": settings.executed_action,
             "net_arch": settings.net_arch,
             "activation": "ReLU",
         },
@@ -272,14 +286,16 @@ def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
     )
 
 
-def _learn(run: Any, timesteps: int, callback: Any) -> None:
-    """Trains, then keeps the last policy (and the kept one when validation chose none) and the
-    final ``run.json``, also when interrupted (Ctrl-C is raised again afterwards)."""
+def _learn(run: Any, timesteps: int, callback: Any, before: Sequence[Any] = ()) -> None:
+    """Trains (the callbacks ``before`` run ahead of ``callback``, the run's
+    :class:`tlshield.callbacks.TrainingCallback`), then keeps the last policy (and the kept
+    one when validation chose none) and the final ``run.json``, also when interrupted (Ctrl-C
+    is raised again afterwards)."""
     from tlshield.saved import save_normalization
 
     model, venv, record, folder = run.model, run.venv, run.record, run.folder
     try:
-        model.learn(total_timesteps=timesteps, callback=callback)
+        model.learn(total_timesteps=timesteps, callback=[*before, callback])
         record["finished"] = True
     except KeyboardInterrupt:
         record["interrupted"] = True

@@ -1,0 +1,98 @@
+"""The learning levers of docs/learning.md that training offers as settings: learning from the
+executed action, and gSDE."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+
+from tlshield import settings
+from tlshield.callbacks import ExecutedActions
+from tlshield.sb3 import make_vec_env
+from tlshield.training import train
+
+
+class Check(BaseCallback):  # type: ignore[misc]
+    """Records each step's executed actions and, at the rollout's end (before PPO trains),
+    what the rollout buffer holds and the policy's log-likelihood of it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.executed: list[np.ndarray] = []
+
+    def _on_step(self) -> bool:
+        self.executed.append(np.stack([i["action"] for i in self.locals["infos"]]))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        buf = self.model.rollout_buffer
+        self.actions = buf.actions.copy()
+        obs = torch.as_tensor(buf.observations.reshape(-1, buf.observations.shape[-1]))
+        taken = torch.as_tensor(buf.actions.reshape(-1, buf.actions.shape[-1]))
+        with torch.no_grad():
+            _, log_prob, _ = self.model.policy.evaluate_actions(obs, taken)
+        self.log_prob = log_prob.numpy().reshape(buf.log_probs.shape)
+        self.stored = buf.log_probs.copy()
+
+
+@pytest.mark.parametrize("env_id", ["tlshield/Channel-v0", "tlshield/PointMass-v0"])
+def test_the_rollout_holds_the_executed_actions(env_id: str) -> None:
+    venv = make_vec_env(env_id, 4, "rl_cbf_clf")
+    venv.seed(5)
+    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=64, seed=0, device="cpu")
+    check = Check()
+    model.learn(total_timesteps=64, callback=[ExecutedActions(venv), check])
+    executed = np.stack(check.executed)  # (steps, envs, 2), in the plant's units
+    first = venv.envs[0]
+    if hasattr(first, "rl_action"):  # Channel-v0: policy units map affinely onto the plant's
+        mapped = np.stack([first.rl_action(np.clip(a, -1.0, 1.0)) for a in check.actions])
+        inside = np.all(np.abs(check.actions) <= 1.0, axis=-1)
+        assert inside.sum() > 0
+        np.testing.assert_allclose(mapped[inside], executed[inside], atol=1e-5)
+    else:  # PointMass-v0: the policy acts in the plant's units
+        np.testing.assert_allclose(check.actions, executed, atol=1e-6)
+    # Their stored log-likelihoods are the sampling policy's, of the executed actions.
+    np.testing.assert_allclose(check.stored, check.log_prob, rtol=1e-5, atol=1e-5)
+
+
+def test_without_the_callback_the_rollout_holds_other_actions() -> None:
+    # The control of the test above: the shield and the CLF change the actions, so the
+    # sampled ones it would otherwise find are not the executed ones.
+    venv = make_vec_env("tlshield/Channel-v0", 4, "rl_cbf_clf")
+    venv.seed(5)
+    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=64, seed=0, device="cpu")
+    check = Check()
+    model.learn(total_timesteps=64, callback=[check])
+    first = venv.envs[0]
+    mapped = np.stack([first.rl_action(np.clip(a, -1.0, 1.0)) for a in check.actions])
+    assert np.abs(mapped - np.stack(check.executed)).max() > 0.1
+
+
+def test_training_with_the_levers(tmp_path: Path) -> None:
+    run = train(
+        "rl_cbf_clf", 0, 2, tmp_path / "e", progress=False, ppo={"executed_action": True}
+    )
+    assert json.loads((run / "run.json").read_text())["ppo"]["executed_action"] is True
+    sde: dict[str, Any] = {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4}
+    run = train("rl_cbf", 0, 2, tmp_path / "g", progress=False, ppo=sde)
+    lines = (run / "metrics.csv").read_text().splitlines()
+    header, last = lines[0].split(","), lines[-1].split(",")
+    std = float(last[header.index("policy_std_0")])
+    assert np.isfinite(std) and std > 0.0
+    assert settings.split({"use_sde": True, "executed_action": True})["ppo"] == {
+        "use_sde": True,
+        "executed_action": True,
+    }
+
+
+def test_gsde_needs_sb3s_own_policy(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="use_sde needs policy 'gaussian', not 'tanh_mean'"):
+        train("rl_cbf", 0, 1, tmp_path / "x", ppo={"use_sde": True})
+    assert not (tmp_path / "x").exists()
