@@ -74,7 +74,9 @@ def run(config: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
             self.kept: tuple[Any, Any, int] | None = None
 
         def _on_step(self) -> bool:
-            self.metrics.step(venv.get_original_reward(), self.locals["dones"], self.locals["infos"])
+            self.metrics.step(
+                venv.get_original_reward(), self.locals["dones"], self.locals["infos"]
+            )
             if self.num_timesteps % args.validate_every < args.n_envs:
                 seeds = [validation_seed(seed, k) for k in range(20)]
                 value = success(self.model, venv, seeds)

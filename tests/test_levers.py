@@ -76,9 +76,7 @@ def test_without_the_callback_the_rollout_holds_other_actions() -> None:
 
 
 def test_training_with_the_levers(tmp_path: Path) -> None:
-    run = train(
-        "rl_cbf_clf", 0, 2, tmp_path / "e", progress=False, ppo={"executed_action": True}
-    )
+    run = train("rl_cbf_clf", 0, 2, tmp_path / "e", progress=False, ppo={"executed_action": True})
     assert json.loads((run / "run.json").read_text())["ppo"]["executed_action"] is True
     sde: dict[str, Any] = {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4}
     run = train("rl_cbf", 0, 2, tmp_path / "g", progress=False, ppo=sde)

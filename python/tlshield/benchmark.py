@@ -12,8 +12,9 @@ The comparison is not like for like, and every table says so: DeepLTL learns one
 all formulas (15M steps, zero-shot) with no map and no model; tlshield trains one agent per
 formula, and its shield knows the discs and the dynamics.
 
-Seeds (:mod:`tlshield.seeds`): training env ``i`` of seed ``s`` resets from ``1000 s + i``;
-evaluation episode ``k`` from ``EVAL_SEED + 1000 s + k`` (disjoint, and never used for tuning).
+Seeds (:mod:`tlshield.seeds`): training env ``i`` of seed ``s`` resets from ``train_seed(s) +
+i``, evaluation episode ``k`` from ``eval_block_seed(s, k)`` and PPO takes ``learner_seed(s)``:
+streams of ``SeedSequence(s)`` in disjoint ranges, the evaluation ones never used for tuning.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.seeds import check_block, check_seeds, eval_block_seed, train_seed
+from tlshield.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
 
 #: The columns of ``flatworld.csv``.
 COLUMNS = (
@@ -200,7 +201,7 @@ def train_agent(formula: str, config: str, seed: int, steps: int) -> tuple[Any, 
     model = SB3PPO(
         "MlpPolicy",
         venv,
-        seed=seed,
+        seed=learner_seed(seed),
         device="cpu",
         verbose=0,
         policy_kwargs={"net_arch": [64, 64]},

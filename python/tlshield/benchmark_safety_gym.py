@@ -9,7 +9,8 @@ resumes where it stopped. The shield reads the privileged true state (agent pose
 goal, hazards, vases), which the policy never sees; every table says so.
 
 Seeds (:mod:`tlshield.seeds`): training resets from ``train_seed(seed)``, evaluation episode
-``k`` from ``eval_block_seed(seed, k)`` (disjoint, never used for tuning).
+``k`` from ``eval_block_seed(seed, k)`` (disjoint, never used for tuning), and PPO takes
+``learner_seed(seed)``.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.seeds import check_block, check_seeds, eval_block_seed, train_seed
+from tlshield.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
 
 #: The default budget per env (PPO steps per agent).
 DEFAULT_STEPS = {"SafetyPointGoal1-v0": 1_000_000, "SafetyPointGoal2-v0": 300_000}
@@ -108,7 +109,7 @@ def train_and_evaluate(
                 )
                 finished.clear()
 
-    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0)
+    model = PPO("MlpPolicy", venv, seed=learner_seed(seed), device="cpu", verbose=0)
     model.learn(total_timesteps=steps, callback=Count())
     venv.close()
     returns, costs = evaluate(env, config, model, seed, episodes)

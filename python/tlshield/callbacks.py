@@ -110,7 +110,8 @@ def metrics_text(count: float) -> str:
 
 def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
     """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
-    policy's std per dimension (under gSDE, the root mean square of its noise weights' stds), the sampled actions outside the box, the shield's mean
+    policy's std per dimension (under gSDE, the root mean square of its noise weights' stds),
+    the sampled actions outside the box, the shield's mean
     correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
     before this rollout; NaN before the first)."""
     import torch

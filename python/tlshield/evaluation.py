@@ -2,7 +2,7 @@
 episode ends at the horizon, on success or on collision. All trials run side by side with one
 batched policy call per step.
 
-Evaluation reset seeds start at ``EVAL_SEED`` (10,000 + trial); the seed ranges of training,
+Evaluation reset seeds start at ``EVAL_SEED`` (``3 * 2**30`` + trial); the seed ranges of training,
 validation and evaluation live in :mod:`tlshield.seeds`, so the three never meet.
 """
 
@@ -23,8 +23,6 @@ from tlshield.runs import read_record
 from tlshield.seeds import EVAL_SEED
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
-
-#: Reset seeds of evaluation trials start here (training seeds stay below 10,000).
 
 
 def rollouts(

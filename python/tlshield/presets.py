@@ -36,8 +36,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         # lost it again within the same run, measured).
         "lr_schedule": "linear",
         # Every 10 updates the deterministic policy runs 20 validation episodes (reset seeds
-        # from VALIDATION_SEED, never used for evaluation); the best checkpoint is kept (the
-        # policy found the task and lost it again in some runs, measured).
+        # from tlshield.seeds.validation_seed, never used for evaluation); the best checkpoint
+        # is kept (the policy found the task and lost it again in some runs, measured).
         "validate_every": 10,
         "validation_trials": 20,
         "ppo": {

@@ -1,12 +1,24 @@
 """Where every random stream of tlshield starts, in one place, so that training, validation and
 evaluation reset seeds never meet and nothing is tuned on evaluation seeds.
 
-- A training run has a seed ``s`` in ``[0, MAX_SEED)``; its environment ``i`` resets from
-  ``train_seed(s, i) = STRIDE * s + i`` (below ``EVAL_SEED``).
-- Validation episode ``k`` of run ``s`` (checkpoint selection) resets from
-  ``VALIDATION_SEED + STRIDE * s + k``.
-- Evaluation trial ``k`` resets from ``EVAL_SEED + k``; the FlatWorld benchmark gives each seed
-  its own block, ``EVAL_SEED + STRIDE * s + k`` (below ``VALIDATION_SEED``).
+A run seed is any non-negative integer (0, 42, 2**31 - 1, 2**64, ...). Its streams are the
+spawned children of numpy's ``SeedSequence(seed)``, one per use (:data:`STREAMS`): training,
+validation, the run's own evaluation block, and the learner's seed (PPO's, torch's). Each reset
+stream is a block of ``STRIDE`` consecutive reset seeds (environment ``i``, episode ``k``) that
+starts at a point its child draws, inside the stream's own quarter of ``[0, 2**32)``:
+
+- training environments: ``[0, 2**30)``;
+- validation episodes (checkpoint selection): ``[2**30, 2**31)``;
+- evaluation blocks of one run seed (the FlatWorld and Safety-Gym benchmarks): ``[2**31,
+  3 * 2**30)``;
+- the evaluation trials every run shares (:func:`tlshield.evaluation.evaluate`):
+  ``EVAL_SEED + k``, ``EVAL_SEED = 3 * 2**30``; the tuning trials (``tlshield tune``'s
+  objective): ``TUNE_SEED + k``, ``TUNE_SEED = 3.5 * 2**30``.
+
+The quarters never meet, so no training or validation reset seed is ever an evaluation one.
+Two run seeds' blocks of the same stream may overlap (with odds of about ``STRIDE / 2**30``);
+that only means two runs share a few episodes. Every reset seed is below ``2**32``, which every
+environment accepts.
 """
 
 from __future__ import annotations
@@ -14,41 +26,55 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-#: Reset seeds per run seed: at most this many environments or episodes per block.
+import numpy as np
+
+#: Reset seeds per stream block: at most this many environments or episodes per run seed.
 STRIDE = 1000
-#: Training seeds are ``0 .. MAX_SEED - 1``.
-MAX_SEED = 10
-#: First evaluation reset seed.
-EVAL_SEED = 10_000
-#: First validation reset seed (checkpoint selection; never evaluation).
-VALIDATION_SEED = 20_000
+#: The width of each stream's quarter of ``[0, 2**32)``.
+QUARTER = 2**30
+#: The spawn key of each stream's child of ``SeedSequence(seed)``, and its quarter.
+STREAMS = {"training": 0, "validation": 1, "evaluation": 2, "learner": 3}
+#: First of the evaluation trials every run shares (trial ``k`` resets from ``EVAL_SEED + k``).
+EVAL_SEED = 3 * QUARTER
+#: First of the tuning trials (``tlshield tune`` evaluates its samples on ``TUNE_SEED + k``).
+TUNE_SEED = EVAL_SEED + QUARTER // 2
+
+
+def _start(seed: int, stream: str) -> int:
+    """Where ``stream``'s block of run ``seed`` starts inside its quarter."""
+    child = np.random.SeedSequence(seed, spawn_key=(STREAMS[stream],))
+    offset = int(child.generate_state(1, np.uint64)[0]) % (QUARTER - STRIDE)
+    return STREAMS[stream] * QUARTER + offset
 
 
 def train_seed(seed: int, env: int = 0) -> int:
-    """The reset seed of training environment ``env`` of run ``seed``."""
-    return STRIDE * seed + env
+    """The reset seed of training environment ``env`` of run ``seed`` (SB3 seeds environment
+    ``i`` of a vector env with ``train_seed(seed) + i``)."""
+    return _start(seed, "training") + env
 
 
 def validation_seed(seed: int, episode: int) -> int:
     """The reset seed of validation episode ``episode`` of run ``seed``."""
-    return VALIDATION_SEED + STRIDE * seed + episode
+    return _start(seed, "validation") + episode
 
 
 def eval_block_seed(seed: int, episode: int) -> int:
     """The reset seed of evaluation episode ``episode`` in run ``seed``'s own block."""
-    return EVAL_SEED + STRIDE * seed + episode
+    return _start(seed, "evaluation") + episode
+
+
+def learner_seed(seed: int) -> int:
+    """The learner's seed for run ``seed`` (SB3's ``seed=``: Python's, numpy's and torch's
+    generators and the action space), below ``2**31``."""
+    child = np.random.SeedSequence(seed, spawn_key=(STREAMS["learner"],))
+    return int(child.generate_state(1, np.uint32)[0]) >> 1
 
 
 def check_seeds(seeds: Iterable[Any]) -> None:
-    """Raises ValueError unless every seed is an integer in ``[0, MAX_SEED)``: their reset
-    seeds (``STRIDE * seed + i``) then stay below the evaluation seeds and their validation
-    seeds below the tuning seeds."""
+    """Raises ValueError unless every seed is a non-negative integer."""
     for seed in seeds:
-        if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < MAX_SEED):
-            raise ValueError(
-                f"seed = {seed!r}: expected an integer in [0, {MAX_SEED}) (training reset seeds "
-                f"seed * {STRIDE} + i must stay below the evaluation seeds, {EVAL_SEED}+)"
-            )
+        if not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
+            raise ValueError(f"seed = {seed!r}: expected a non-negative integer")
 
 
 def check_block(count: int, what: str) -> None:

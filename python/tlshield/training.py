@@ -23,9 +23,10 @@ Observations are normalised by running statistics (SB3 ``VecNormalize``, saved a
 says ``norm_reward: False``; the metrics are in raw units. The policy is one of
 :data:`tlshield.policies.POLICIES` (the preset's ``policy``; PPO setting ``policy``).
 
-Reset seeds (:mod:`tlshield.seeds`): training environments from the run seed (``seed * 1000 +
-env index``), validation episodes from ``VALIDATION_SEED`` (20,000+), evaluation trials from
-``EVAL_SEED`` (10,000+), so the three never meet.
+Seeds (:mod:`tlshield.seeds`, any non-negative integer): training environments reset from
+``train_seed(seed) + env index``, validation episodes from ``validation_seed(seed, k)`` and
+evaluation trials from ``EVAL_SEED + k``, in disjoint ranges, so the three never meet; PPO takes
+``learner_seed(seed)``.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ from tlshield.envs.params import as_flat
 from tlshield.evaluation import evaluate
 from tlshield.presets import PRESETS, SCHEDULES
 from tlshield.runs import RUN_FILE, is_finished, load_run
-from tlshield.seeds import check_seeds, train_seed
+from tlshield.seeds import check_seeds, learner_seed, train_seed
 
 
 def _check_run_args(
@@ -274,7 +275,7 @@ def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
     return PPO(
         policy_class(settings.policy),
         venv,
-        seed=seed,
+        seed=learner_seed(seed),
         device="cpu",
         verbose=0,
         policy_kwargs={

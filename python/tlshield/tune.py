@@ -3,13 +3,13 @@ TPE sampler and ASHA early stopping (the paper's future work: take the tuning of
 
 Each sample trains one run of the configuration (training seed ``seed``) and reports after
 every PPO update a ``score``: the best validation success so far (validation reset seeds
-20,000+), or -1 once a shielded run violated the channel. ASHA stops the samples whose score
-trails at its rungs. A sample that trains to the end is evaluated on the tuning seeds
-(:data:`TUNE_SEED` + trial, disjoint from the training, validation and evaluation seeds, so
-``tlshield evaluate`` on the chosen settings measures on seeds the search never saw); its
-``objective`` is the evaluation success rate when no step violated the channel (in the
-evaluation, and in training for configurations with a CBF), else -1: violations are a hard
-constraint, and only samples that meet it can be chosen.
+:func:`tlshield.seeds.validation_seed`), or -1 once a shielded run violated the channel. ASHA
+stops the samples whose score trails at its rungs. A sample that trains to the end is evaluated
+on the tuning seeds (:data:`tlshield.seeds.TUNE_SEED` + trial, disjoint from the training,
+validation and evaluation seeds, so ``tlshield evaluate`` on the chosen settings measures on
+seeds the search never saw); its ``objective`` is the evaluation success rate when no step
+violated the channel (in the evaluation, and in training for configurations with a CBF), else
+-1: violations are a hard constraint, and only samples that meet it can be chosen.
 
 Writes, in the output folder: ``best.json`` (``{"config", "objective", "settings", ...}``,
 usable as ``tlshield train --settings``), ``trials.csv`` and ``trials.md`` (every sample: its
@@ -32,11 +32,8 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.presets import PRESETS, SCHEDULES
+from tlshield.seeds import TUNE_SEED
 from tlshield.settings import split
-
-#: Reset seeds of the tuning evaluation: 30,000 + trial (training < 10,000, evaluation
-#: 10,000+, validation 20,000+).
-TUNE_SEED = 30_000
 
 #: The searchable settings: name -> (the configurations' part it needs: "cbf", "clf" or "",
 #: Optuna suggestion: ("float", low, high, log) / ("int", low, high) / ("choice", options)).
