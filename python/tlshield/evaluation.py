@@ -2,7 +2,7 @@
 episode ends at the horizon, on success or on collision. All trials run side by side with one
 batched policy call per step.
 
-Evaluation reset seeds start at ``EVAL_SEED`` (``3 * 2**30`` + trial); the seed ranges of training,
+Evaluation reset seeds start at ``EVAL_SEED`` (10,000 + trial); the seed ranges of training,
 validation and evaluation live in :mod:`tlshield.seeds`, so the three never meet.
 """
 
@@ -20,7 +20,7 @@ from tlshield.envs import ENV_ID, env_horizon, import_modules, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.runs import read_record
-from tlshield.seeds import EVAL_SEED
+from tlshield.seeds import EVAL_SEED, MAX_TRIALS
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
 
@@ -115,8 +115,8 @@ def evaluate(
     ``which="last"`` evaluates the last policy instead of the kept one and writes
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
     folder's pickled statistics load (see :mod:`tlshield.saved`)."""
-    if not (isinstance(trials, int) and trials > 0):
-        raise ValueError(f"trials = {trials!r}: expected a positive integer")
+    if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
+        raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")
     if which not in EVALUATION_FILES:
         raise ValueError(f"which = {which!r}: expected one of {', '.join(EVALUATION_FILES)}")
     record = read_record(run)

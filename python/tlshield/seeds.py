@@ -1,23 +1,25 @@
 """Where every random stream of tlshield starts, in one place, so that training, validation and
 evaluation reset seeds never meet and nothing is tuned on evaluation seeds.
 
-A run seed is any non-negative integer (0, 42, 2**31 - 1, 2**64, ...). Its streams are the
-spawned children of numpy's ``SeedSequence(seed)``, one per use (:data:`STREAMS`): training,
-validation, the run's own evaluation block, and the learner's seed (PPO's, torch's). Each reset
-stream is a block of ``STRIDE`` consecutive reset seeds (environment ``i``, episode ``k``) that
-starts at a point its child draws, inside the stream's own quarter of ``[0, 2**32)``:
+A run seed is any non-negative integer (0, 42, 2**31 - 1, 2**64, ...). Each of its streams is a
+block of ``STRIDE`` consecutive reset seeds (environment ``i``, episode ``k``):
 
-- training environments: ``[0, 2**30)``;
-- validation episodes (checkpoint selection): ``[2**30, 2**31)``;
-- evaluation blocks of one run seed (the FlatWorld and Safety-Gym benchmarks): ``[2**31,
-  3 * 2**30)``;
-- the evaluation trials every run shares (:func:`tlshield.evaluation.evaluate`):
-  ``EVAL_SEED + k``, ``EVAL_SEED = 3 * 2**30``; the tuning trials (``tlshield tune``'s
-  objective): ``TUNE_SEED + k``, ``TUNE_SEED = 3.5 * 2**30``.
+- **Seeds 0-9** (:data:`LEGACY_SEEDS`) keep the reset seeds every bundled table was measured
+  with: training environment ``i`` of run ``s`` resets from ``1000 s + i``, validation episode
+  ``k`` from ``20,000 + 1000 s + k``, the run's own evaluation block from ``10,000 + 1000 s +
+  k``, and the learner (PPO) takes ``s`` itself. So the published numbers stay reproducible.
+- **Every other seed** draws its streams from the spawned children of numpy's
+  ``SeedSequence(seed)``, one per use (:data:`STREAMS`): training, validation, the evaluation
+  block, the learner. Each reset block starts where its child says, inside the stream's own
+  quarter of ``[0, 2**32)`` and above ``FLOOR`` (so past every legacy reset seed):
+  training ``[FLOOR, 2**30)``, validation ``[2**30 + FLOOR, 2**31)``, evaluation blocks
+  ``[2**31 + FLOOR, 3 * 2**30)``.
 
-The quarters never meet, so no training or validation reset seed is ever an evaluation one.
-Two run seeds' blocks of the same stream may overlap (with odds of about ``STRIDE / 2**30``);
-that only means two runs share a few episodes. Every reset seed is below ``2**32``, which every
+The evaluation trials every run shares (:func:`tlshield.evaluation.evaluate`) reset from
+``EVAL_SEED + k`` (10,000+), and ``tlshield tune`` evaluates its samples on ``TUNE_SEED + k``
+(30,000+). No training or validation reset seed is ever an evaluation or tuning one. Two run
+seeds' blocks of one stream may overlap (odds about ``STRIDE / 2**30`` for drawn blocks): two
+runs then share a few episodes, nothing more. Every reset seed is below ``2**32``, which every
 environment accepts.
 """
 
@@ -30,21 +32,34 @@ import numpy as np
 
 #: Reset seeds per stream block: at most this many environments or episodes per run seed.
 STRIDE = 1000
-#: The width of each stream's quarter of ``[0, 2**32)``.
+#: Run seeds below this keep tlshield 0.1's reset seeds (``1000 s + i``: the bundled tables').
+LEGACY_SEEDS = 10
+#: First of the evaluation trials every run shares (trial ``k`` resets from ``EVAL_SEED + k``).
+EVAL_SEED = 10_000
+#: The most evaluation trials of one policy (so that ``EVAL_SEED + k`` stays below
+#: ``VALIDATION_SEED``).
+MAX_TRIALS = 10_000
+#: First legacy validation reset seed (``VALIDATION_SEED + 1000 s + k`` for a legacy seed).
+VALIDATION_SEED = 20_000
+#: First of the tuning trials (``tlshield tune`` evaluates its samples on ``TUNE_SEED + k``).
+TUNE_SEED = 30_000
+#: The width of each drawn stream's quarter of ``[0, 2**32)``.
 QUARTER = 2**30
+#: Drawn blocks start at or above ``stream quarter + FLOOR``: past the legacy, evaluation and
+#: tuning reset seeds (all below 40,000 for up to 10,000 trials).
+FLOOR = 2**16
 #: The spawn key of each stream's child of ``SeedSequence(seed)``, and its quarter.
 STREAMS = {"training": 0, "validation": 1, "evaluation": 2, "learner": 3}
-#: First of the evaluation trials every run shares (trial ``k`` resets from ``EVAL_SEED + k``).
-EVAL_SEED = 3 * QUARTER
-#: First of the tuning trials (``tlshield tune`` evaluates its samples on ``TUNE_SEED + k``).
-TUNE_SEED = EVAL_SEED + QUARTER // 2
 
 
 def _start(seed: int, stream: str) -> int:
-    """Where ``stream``'s block of run ``seed`` starts inside its quarter."""
+    """Where ``stream``'s block of run ``seed`` starts."""
+    if seed < LEGACY_SEEDS:
+        legacy = {"training": 0, "validation": VALIDATION_SEED, "evaluation": EVAL_SEED}
+        return legacy[stream] + STRIDE * seed
     child = np.random.SeedSequence(seed, spawn_key=(STREAMS[stream],))
-    offset = int(child.generate_state(1, np.uint64)[0]) % (QUARTER - STRIDE)
-    return STREAMS[stream] * QUARTER + offset
+    offset = int(child.generate_state(1, np.uint64)[0]) % (QUARTER - FLOOR - STRIDE)
+    return STREAMS[stream] * QUARTER + FLOOR + offset
 
 
 def train_seed(seed: int, env: int = 0) -> int:
@@ -65,7 +80,10 @@ def eval_block_seed(seed: int, episode: int) -> int:
 
 def learner_seed(seed: int) -> int:
     """The learner's seed for run ``seed`` (SB3's ``seed=``: Python's, numpy's and torch's
-    generators and the action space), below ``2**31``."""
+    generators and the action space): the seed itself for a legacy seed, else drawn, below
+    ``2**31`` (numpy's legacy seeding inside SB3 takes only 32 bits)."""
+    if seed < LEGACY_SEEDS:
+        return seed
     child = np.random.SeedSequence(seed, spawn_key=(STREAMS["learner"],))
     return int(child.generate_state(1, np.uint32)[0]) >> 1
 

@@ -82,7 +82,7 @@ def _env_params(venv: Any) -> Any:
 def make_vec_env(
     config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
 ) -> Any:
-    """The training VecEnv: ``n_envs`` copies of ``env_id``, seeded ``seed * 1000 + i``.
+    """The training VecEnv: ``n_envs`` copies of ``env_id``, seeded ``train_seed(seed) + i``.
     Channel-v0 and PointMass-v0 step all their envs in one core call
     (:func:`tlshield.sb3.make_vec_env`, the same numbers as SB3's ``DummyVecEnv`` over the
     single envs, bit for bit); other envs run in a ``DummyVecEnv``."""

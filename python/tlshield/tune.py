@@ -32,7 +32,7 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.presets import PRESETS, SCHEDULES
-from tlshield.seeds import TUNE_SEED
+from tlshield.seeds import MAX_TRIALS, TUNE_SEED
 from tlshield.settings import split
 
 #: The searchable settings: name -> (the configurations' part it needs: "cbf", "clf" or "",
@@ -124,6 +124,8 @@ def _check(config: str, names: Sequence[str], samples: int, updates: int, trials
     for name, value in (("samples", samples), ("updates", updates), ("trials", trials)):
         if not (isinstance(value, int) and value > 0):
             raise ValueError(f"{name} = {value!r}: expected a positive integer")
+    if trials > MAX_TRIALS:
+        raise ValueError(f"trials = {trials}: expected at most {MAX_TRIALS}")
 
 
 def _define(names: Sequence[str], trial: Any) -> None:
