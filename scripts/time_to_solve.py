@@ -38,6 +38,8 @@ def main(out: str, sets: list[str]) -> None:
             for run in runs:
                 t, v = run.metrics["wall_time"], run.metrics["validation_success"]
                 ok = np.isfinite(v)
+                if not ok.any():  # a run too short to validate
+                    continue
                 curves.append((t[ok], v[ok]))
                 ax.plot(t[ok], v[ok], color=color, lw=0.7, alpha=0.5)
             if not curves:

@@ -94,3 +94,46 @@ def test_gsde_needs_sb3s_own_policy(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="use_sde needs policy 'gaussian', not 'tanh_mean'"):
         train("rl_cbf", 0, 1, tmp_path / "x", ppo={"use_sde": True})
     assert not (tmp_path / "x").exists()
+
+
+def _script(name: str, *args: str) -> str:
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(root / "scripts" / name), *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def test_the_lever_scripts_run(tmp_path: Path) -> None:
+    # SAC on the core vector env: trains, validates, evaluates kept and last, writes its table.
+    out = _script(
+        "learning_sac.py",
+        *("--out", str(tmp_path / "sac"), "--configs", "rl_cbf_clf", "--seeds", "0"),
+        *("--steps", "1600", "--validate-every", "800", "--trials", "2"),
+    )
+    assert "| rl_cbf_clf | 0 |" in out
+    row = json.loads((tmp_path / "sac" / "rl_cbf_clf_s0.json").read_text())
+    assert row["violations"] == 0 and row["kept_step"] in (800, 1600)
+    # The profile's parts add up to the rollouts and gradient steps it measured.
+    out = _script("profile_update.py", "--updates", "2")
+    shares = [
+        float(line.rsplit("|", 2)[1].strip().rstrip("%"))
+        for line in out.splitlines()
+        if line.startswith("| -")
+    ]
+    assert len(shares) == 7 and all(s >= 0 for s in shares)
+    # The time-to-solve figure from two sets of runs.
+    for name in ("a", "b"):
+        train("rl_cbf_clf", 0, 10, tmp_path / name / "rl_cbf_clf_s0", progress=False)
+    _script(
+        "time_to_solve.py", str(tmp_path / "t.png"), f"a={tmp_path / 'a'}", f"b={tmp_path / 'b'}"
+    )
+    assert (tmp_path / "t.png").stat().st_size > 10_000
