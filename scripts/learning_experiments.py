@@ -50,7 +50,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "gsde": {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4, "log_std_init": -2.0},
     "clf_linear": {"clf_schedule": "linear"},
     "clf_exponential": {"clf_schedule": "exponential"},
-    "executed": {"executed_action": True},
+    "executed": {"learn_from": "executed"},
+    "executed_without_clf": {"learn_from": "executed_without_clf"},
 }
 
 

@@ -26,9 +26,11 @@ class Check(BaseCallback):  # type: ignore[misc]
     def __init__(self) -> None:
         super().__init__()
         self.executed: list[np.ndarray] = []
+        self.clf: list[np.ndarray] = []
 
     def _on_step(self) -> bool:
         self.executed.append(np.stack([i["action"] for i in self.locals["infos"]]))
+        self.clf.append(np.stack([i["shield"]["a_clf"] for i in self.locals["infos"]]))
         return True
 
     def _on_rollout_end(self) -> None:
@@ -76,17 +78,24 @@ def test_without_the_callback_the_rollout_holds_other_actions() -> None:
 
 
 def test_training_with_the_levers(tmp_path: Path) -> None:
-    run = train("rl_cbf_clf", 0, 2, tmp_path / "e", progress=False, ppo={"executed_action": True})
-    assert json.loads((run / "run.json").read_text())["ppo"]["executed_action"] is True
+    run = train(
+        "rl_cbf_clf",
+        0,
+        2,
+        tmp_path / "e",
+        progress=False,
+        ppo={"learn_from": "executed_without_clf"},
+    )
+    assert json.loads((run / "run.json").read_text())["ppo"]["learn_from"] == "executed_without_clf"
     sde: dict[str, Any] = {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4}
     run = train("rl_cbf", 0, 2, tmp_path / "g", progress=False, ppo=sde)
     lines = (run / "metrics.csv").read_text().splitlines()
     header, last = lines[0].split(","), lines[-1].split(",")
     std = float(last[header.index("policy_std_0")])
     assert np.isfinite(std) and std > 0.0
-    assert settings.split({"use_sde": True, "executed_action": True})["ppo"] == {
+    assert settings.split({"use_sde": True, "learn_from": "executed"})["ppo"] == {
         "use_sde": True,
-        "executed_action": True,
+        "learn_from": "executed",
     }
 
 
@@ -94,6 +103,22 @@ def test_gsde_needs_sb3s_own_policy(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="use_sde needs policy 'gaussian', not 'tanh_mean'"):
         train("rl_cbf", 0, 1, tmp_path / "x", ppo={"use_sde": True})
     assert not (tmp_path / "x").exists()
+    with pytest.raises(ValueError, match="learn_from = 'shield': expected one of"):
+        train("rl_cbf", 0, 1, tmp_path / "x", ppo={"learn_from": "shield"})
+
+
+def test_without_the_clf_the_rollout_holds_the_safety_correction_only() -> None:
+    venv = make_vec_env("tlshield/Channel-v0", 4, "rl_cbf_clf")
+    venv.seed(5)
+    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=64, seed=0, device="cpu")
+    check = Check()
+    model.learn(total_timesteps=64, callback=[ExecutedActions(venv, without_clf=True), check])
+    first = venv.envs[0]
+    mapped = np.stack([first.rl_action(np.clip(a, -1.0, 1.0)) for a in check.actions])
+    wanted = np.stack(check.executed) - np.stack(check.clf)
+    inside = np.all(np.abs(check.actions) <= 1.0, axis=-1)
+    assert inside.sum() > 0 and np.abs(np.stack(check.clf)).max() > 0.1
+    np.testing.assert_allclose(mapped[inside], wanted[inside], atol=1e-5)
 
 
 def _script(name: str, *args: str) -> str:

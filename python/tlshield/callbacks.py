@@ -263,14 +263,18 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
     """PPO learns from the action the environment executed instead of the one it sampled.
 
     After each step, the rollout's sampled actions are replaced, in place, by the executed ones
-    (``info["action"]``: the shield's output, mapped back to the policy's units), and their
-    log-likelihoods by the sampling policy's log-likelihood of the executed actions. The ratio
-    PPO clips is then the ratio of what was done. The map back is the inverse of the env's
-    ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env whose actions
-    are already in the shield's units (PointMass-v0)."""
+    (``info["action"]``, mapped back to the policy's units) and their log-likelihoods by the
+    sampling policy's log-likelihood of the executed actions, so that the ratio PPO clips is
+    the ratio of what was done. With ``without_clf``, the CLF's part of the correction
+    (``info["shield"]["a_clf"]``) is taken out first: the policy learns the shield's safety
+    correction, while the CLF stays a guide of the environment (learning the CLF's push as
+    its own action makes the CLF push again on top of it). The map back is the inverse of the
+    env's ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env whose
+    actions are already in the shield's units (PointMass-v0)."""
 
-    def __init__(self, inner: Any) -> None:
+    def __init__(self, inner: Any, without_clf: bool = False) -> None:
         super().__init__()
+        self.without_clf = without_clf
         m = inner.action_space.shape[0]
         try:
             rl_action = inner.get_attr("rl_action", [0])[0]
@@ -280,15 +284,20 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
             self.centre = np.asarray(rl_action(np.zeros(m)), dtype=np.float64)
             self.half = np.asarray(rl_action(np.ones(m)), dtype=np.float64) - self.centre
 
+    def _executed(self, info: dict[str, Any]) -> Any:
+        if "action" not in info:
+            raise ValueError(
+                "learn_from: the environment's info has no 'action' (the executed action)"
+            )
+        if self.without_clf and "shield" in info:
+            return info["action"] - info["shield"]["a_clf"]
+        return info["action"]
+
     def _on_step(self) -> bool:
         import torch
 
         infos = self.locals["infos"]
-        if any("action" not in info for info in infos):
-            raise ValueError(
-                "executed_action: the environment's info has no 'action' (the executed action)"
-            )
-        executed = (np.stack([info["action"] for info in infos]) - self.centre) / self.half
+        executed = (np.stack([self._executed(i) for i in infos]) - self.centre) / self.half
         actions, log_probs = self.locals["actions"], self.locals["log_probs"]
         actions[...] = executed.reshape(actions.shape)
         with torch.no_grad():

@@ -30,8 +30,8 @@ from tlshield.runs import json_tuples
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
 #: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
 #: POLICIES`) and whether rewards are normalised). ``use_sde`` (generalized state-dependent
-#: exploration) needs ``policy: "gaussian"``, SB3's own policy; ``executed_action`` trains on
-#: the executed action (:class:`tlshield.callbacks.ExecutedActions`).
+#: exploration) needs ``policy: "gaussian"``, SB3's own policy; ``learn_from`` chooses the action
+#: PPO learns from (:data:`tlshield.training.LEARN_FROM`).
 PPO_NAMES = (
     "learning_rate",
     "ent_coef",
@@ -49,7 +49,7 @@ PPO_NAMES = (
     "norm_reward",
     "use_sde",
     "sde_sample_freq",
-    "executed_action",
+    "learn_from",
 )
 #: Keywords of a bundled environment's factory besides its parameters (the task).
 TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}

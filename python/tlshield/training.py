@@ -174,14 +174,20 @@ def train(
         progress=progress,
     )
     before = []
-    if settings.executed_action:
+    if settings.learn_from != "sampled":
         from tlshield.callbacks import ExecutedActions
 
         # First: the rollout holds the executed actions before anything else reads the step.
-        before.append(ExecutedActions(inner))
+        before.append(ExecutedActions(inner, settings.learn_from == "executed_without_clf"))
     timesteps = updates * settings.n_envs * settings.ppo["n_steps"]
     _learn(run, timesteps, TrainingCallback(run), before)
     return folder
+
+
+#: What PPO's rollout stores as the action taken (setting ``learn_from``): the sampled action
+#: (SB3's own), the executed one, or the executed one without the CLF's part
+#: (:class:`tlshield.callbacks.ExecutedActions`).
+LEARN_FROM = ("sampled", "executed", "executed_without_clf")
 
 
 @dataclass(frozen=True)
@@ -195,12 +201,12 @@ class PpoSettings:
     policy: str
     norm_reward: bool
     lr_schedule: str
-    executed_action: bool
+    learn_from: str
 
 
 def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
-    ``policy``, ``norm_reward``, ``log_std_init``, ``executed_action``) are taken out of SB3's
+    ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``) are taken out of SB3's
     keywords."""
     from tlshield.policies import policy_class
 
@@ -211,12 +217,14 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         n_envs=int(kwargs.pop("n_envs", spec["n_envs"])),
         policy=str(kwargs.pop("policy", spec.get("policy", "gaussian"))),
         norm_reward=bool(kwargs.pop("norm_reward", spec.get("norm_reward", True))),
-        executed_action=bool(kwargs.pop("executed_action", spec.get("executed_action", False))),
+        learn_from=str(kwargs.pop("learn_from", spec.get("learn_from", "sampled"))),
         ppo=kwargs,
         net_arch=spec["net_arch"],
         lr_schedule=spec.get("lr_schedule", "constant"),
     )
     policy_class(settings.policy)  # an unknown name fails here, before any environment is built
+    if settings.learn_from not in LEARN_FROM:
+        raise ValueError(f"learn_from = {settings.learn_from!r}: expected one of {LEARN_FROM}")
     if settings.ppo.get("use_sde") and settings.policy != "gaussian":
         # SB3's gSDE replaces the policy's Gaussian head: only its own policy has one.
         raise ValueError(f"use_sde needs policy 'gaussian', not {settings.policy!r}")
@@ -250,7 +258,7 @@ def _run_record(
             "log_std_init": settings.log_std_init,
             "policy": settings.policy,
             "norm_reward": settings.norm_reward,
-            "executed_action": settings.executed_action,
+            "learn_from": settings.learn_from,
             "net_arch": settings.net_arch,
             "activation": "ReLU",
         },
