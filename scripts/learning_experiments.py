@@ -52,6 +52,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "clf_exponential": {"clf_schedule": "exponential"},
     "executed": {"learn_from": "executed"},
     "executed_without_clf": {"learn_from": "executed_without_clf"},
+    "vec64+executed_without_clf": {
+        "n_envs": 64,
+        "batch_size": 2048,
+        "updates_scale": 0.4,
+        "learn_from": "executed_without_clf",
+    },
 }
 
 
