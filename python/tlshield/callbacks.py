@@ -300,8 +300,9 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
         executed = (np.stack([self._executed(i) for i in infos]) - self.centre) / self.half
         actions, log_probs = self.locals["actions"], self.locals["log_probs"]
         actions[...] = executed.reshape(actions.shape)
+        policy: Any = self.model.policy
         with torch.no_grad():
-            dist = self.model.policy.get_distribution(self.locals["obs_tensor"])
+            dist = policy.get_distribution(self.locals["obs_tensor"])
             taken = torch.as_tensor(actions, dtype=torch.float32, device=log_probs.device)
             log_probs.copy_(dist.log_prob(taken))
         return True
