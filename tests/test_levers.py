@@ -15,6 +15,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from tlshield import settings
 from tlshield.callbacks import ExecutedActions
+from tlshield.evaluation import evaluate
 from tlshield.sb3 import make_vec_env
 from tlshield.training import train
 
@@ -89,6 +90,8 @@ def test_training_with_the_levers(tmp_path: Path) -> None:
     assert json.loads((run / "run.json").read_text())["ppo"]["learn_from"] == "executed_without_clf"
     sde: dict[str, Any] = {"policy": "gaussian", "use_sde": True, "sde_sample_freq": 4}
     run = train("rl_cbf", 0, 2, tmp_path / "g", progress=False, ppo=sde)
+    # A gSDE policy loads back from its run folder (its noise weights are part of it).
+    assert evaluate(run, trials=2)["trials"] == 2
     lines = (run / "metrics.csv").read_text().splitlines()
     header, last = lines[0].split(","), lines[-1].split(",")
     std = float(last[header.index("policy_std_0")])

@@ -130,6 +130,7 @@ def _policy_network(record: dict[str, Any], model: Path) -> Any:
         net_arch=ppo.get("net_arch"),
         activation_fn=_activation(str(ppo.get("activation", "ReLU"))),
         log_std_init=float(ppo.get("log_std_init", 0.0)),
+        use_sde=bool(ppo.get("use_sde", False)),  # gSDE's noise weights are in the state dict
     )
     env.close()
     try:
