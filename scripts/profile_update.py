@@ -1,5 +1,6 @@
 """Where one PPO update's time goes (docs/learning.md): rollout (the vector env's step, the
-policy's forward pass, the per-step metrics), gradient steps, validation and logging.
+policy's forward pass, the per-step metrics, the executed actions), gradient steps,
+validation and logging.
 
     .venv/bin/python scripts/profile_update.py --updates 30 [--set n_envs=64 --set batch_size=2048]
 
@@ -48,7 +49,7 @@ def main() -> None:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from tlshield import settings
-    from tlshield.callbacks import TrainingCallback
+    from tlshield.callbacks import ExecutedActions, TrainingCallback
     from tlshield.sb3 import WorldVecEnv
     from tlshield.training import train
 
@@ -57,6 +58,7 @@ def main() -> None:
     timed(VecNormalize, "step_wait", "env step + normalisation")
     timed(ActorCriticPolicy, "forward", "policy forward")
     timed(TrainingCallback, "_on_step", "per-step metrics")
+    timed(ExecutedActions, "_on_step", "executed actions")
     timed(PPO, "train", "gradient steps (PPO.train)")
     timed(TrainingCallback, "_validate", "validation")
     timed(TrainingCallback, "_on_rollout_end", "update end (validation + logging)")
@@ -76,6 +78,7 @@ def main() -> None:
         ),
         ("- policy forward", TOTALS["policy forward"]),
         ("- per-step metrics (callback)", TOTALS["per-step metrics"]),
+        ("- executed actions (callback)", TOTALS["executed actions"]),
         ("- validation", TOTALS["validation"]),
         ("- logging", TOTALS["update end (validation + logging)"] - TOTALS["validation"]),
         ("gradient steps (PPO.train)", TOTALS["gradient steps (PPO.train)"]),

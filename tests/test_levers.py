@@ -157,7 +157,7 @@ def test_the_lever_scripts_run(tmp_path: Path) -> None:
         for line in out.splitlines()
         if line.startswith("| -")
     ]
-    assert len(shares) == 7 and all(s >= 0 for s in shares)
+    assert len(shares) == 8 and all(s >= 0 for s in shares)
     # The time-to-solve figure from two sets of runs.
     for name in ("a", "b"):
         train("rl_cbf_clf", 0, 10, tmp_path / name / "rl_cbf_clf_s0", progress=False)
