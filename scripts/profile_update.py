@@ -59,6 +59,7 @@ def main() -> None:
     timed(ActorCriticPolicy, "forward", "policy forward")
     timed(TrainingCallback, "_on_step", "per-step metrics")
     timed(ExecutedActions, "_on_step", "executed actions")
+    timed(ExecutedActions, "_on_rollout_end", "executed actions")
     timed(PPO, "train", "gradient steps (PPO.train)")
     timed(TrainingCallback, "_validate", "validation")
     timed(TrainingCallback, "_on_rollout_end", "update end (validation + logging)")

@@ -263,14 +263,15 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
     """PPO learns from the action the environment executed instead of the one it sampled.
 
     After each step, the rollout's sampled actions are replaced, in place, by the executed ones
-    (``info["action"]``, mapped back to the policy's units) and their log-likelihoods by the
-    sampling policy's log-likelihood of the executed actions, so that the ratio PPO clips is
-    the ratio of what was done. With ``without_clf``, the CLF's part of the correction
-    (``info["shield"]["a_clf"]``) is taken out first: the policy learns the shield's safety
-    correction, while the CLF stays a guide of the environment (learning the CLF's push as
-    its own action makes the CLF push again on top of it). The map back is the inverse of the
-    env's ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env whose
-    actions are already in the shield's units (PointMass-v0)."""
+    (``info["action"]``, mapped back to the policy's units). At the rollout's end, before PPO
+    trains, their log-likelihoods under the policy that sampled them replace the sampled
+    actions' (one batched pass: the policy does not change during a rollout), so that the
+    ratio PPO clips is the ratio of what was done. With ``without_clf``, the CLF's part of the
+    correction (``info["shield"]["a_clf"]``) is taken out first: the policy learns the shield's
+    safety correction, while the CLF stays a guide of the environment (learning the CLF's push
+    as its own action makes the CLF push again on top of it). The map back is the inverse of
+    the env's ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env
+    whose actions are already in the shield's units (PointMass-v0)."""
 
     def __init__(self, inner: Any, without_clf: bool = False) -> None:
         super().__init__()
@@ -294,15 +295,20 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
         return info["action"]
 
     def _on_step(self) -> bool:
-        import torch
-
         infos = self.locals["infos"]
         executed = (np.stack([self._executed(i) for i in infos]) - self.centre) / self.half
-        actions, log_probs = self.locals["actions"], self.locals["log_probs"]
+        actions = self.locals["actions"]  # what the rollout buffer stores after this call
         actions[...] = executed.reshape(actions.shape)
-        policy: Any = self.model.policy
-        with torch.no_grad():
-            dist = policy.get_distribution(self.locals["obs_tensor"])
-            taken = torch.as_tensor(actions, dtype=torch.float32, device=log_probs.device)
-            log_probs.copy_(dist.log_prob(taken))
         return True
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        model: Any = self.model  # PPO: an on-policy algorithm, with a rollout buffer
+        buffer, policy = model.rollout_buffer, model.policy
+        steps, envs = buffer.log_probs.shape
+        obs = torch.as_tensor(buffer.observations.reshape(steps * envs, -1), device=policy.device)
+        taken = torch.as_tensor(buffer.actions.reshape(steps * envs, -1), device=policy.device)
+        with torch.no_grad():
+            _, log_prob, _ = policy.evaluate_actions(obs, taken)
+        buffer.log_probs[...] = log_prob.cpu().numpy().reshape(steps, envs)
