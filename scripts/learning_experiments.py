@@ -7,9 +7,10 @@ trained on several seeds at the default budget, with the kept and the last polic
 Each variant is a set of training settings (:data:`VARIANTS`, names as ``tlshield train
 --set``). Runs go to ``OUT/<variant>/<config>_s<seed>/`` as Ray tasks (2 at a time on 2 cores)
 and finished runs are kept, so an interrupted sweep resumes. Prints, and writes to
-``OUT/candidates.md``, per variant, one row per run (:func:`tlshield.report.seeds_table`): the
-kept and the last policy's evaluation success (100 trials), the best and the last validation
-success, and the training violations.
+``OUT/candidates.md``, one table of every run (:func:`table`): per variant, configuration and
+seed, the kept and the last policy's evaluation success (100 trials), the best and the last
+validation success, and the training violations. ``--table`` prints the table of what ``OUT``
+holds for the given variants, configurations and seeds, and runs nothing.
 """
 
 from __future__ import annotations
@@ -99,10 +100,21 @@ def _updates(variant: str, updates: int) -> int:
     return max(1, round(updates * VARIANTS[variant].get("updates_scale", 1.0)))
 
 
-def table(root: Path, variants: list[str]) -> str:
-    """One :func:`tlshield.report.seeds_table` per variant, under its name."""
-    parts = [f"### {v}\n\n{seeds_table(root / v)}" for v in variants if (root / v).is_dir()]
-    return "\n\n".join(parts)
+def table(root: Path, variants: list[str], configs: list[str], seeds: list[int]) -> str:
+    """One table of every variant's runs of ``configs`` and ``seeds``: a variant column, then
+    :func:`tlshield.report.seeds_table`'s columns (kept and last policy side by side)."""
+    lines: list[str] = []
+    for variant in variants:
+        if not (root / variant).is_dir():
+            continue
+        head, rule, *rows = seeds_table(root / variant).splitlines()
+        if not lines:
+            lines = ["| variant " + head, "|---" + rule]
+        for row in rows:
+            cells = [c.strip() for c in row.strip("|").split("|")]
+            if cells[0] in configs and int(cells[1]) in seeds:
+                lines.append(f"| {variant} " + row)
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -114,8 +126,12 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--trials", type=int, default=100)
     parser.add_argument("--workers", type=int, default=None)
+    parser.add_argument("--table", action="store_true", help="only print the table of OUT")
     args = parser.parse_args()
     root = Path(args.out)
+    if args.table:
+        print(table(root, args.variants, args.configs, args.seeds))
+        return
     jobs = {}
     for variant in args.variants:
         options = _options(variant)
@@ -127,7 +143,7 @@ def main() -> None:
                 if not (done and is_finished(folder, updates)):
                     jobs[folder] = partial(run_job, config, seed, updates, args.trials, options)
     _run_jobs(jobs, args.workers, None, True)
-    text = table(root, args.variants)
+    text = table(root, args.variants, args.configs, args.seeds)
     (root / "candidates.md").write_text(text + "\n")
     print(text)
 
