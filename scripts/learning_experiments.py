@@ -78,6 +78,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "clf_linear": {**SAMPLED, "clf_schedule": "linear"},
     "clf_exponential": {**SAMPLED, "clf_schedule": "exponential"},
     "executed": {"learn_from": "executed"},
+    "default+clf_exponential": {"clf_schedule": "exponential"},
     "executed_without_clf": {"learn_from": "executed_without_clf"},
     "vec64+executed_without_clf": {
         "n_envs": 64,
