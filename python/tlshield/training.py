@@ -16,8 +16,7 @@ per update; 10 epochs of minibatches of 250; Adam 3e-4; gamma 0.99, clip 0.2); `
 what the ablation (docs/reproduction.md) and the learning experiments (docs/learning.md) chose (8
 environments x 128 steps, minibatches of 512, gamma 0.999, clip 0.1, a learning rate of 1e-3
 decaying linearly, 64-64 networks, a Gaussian policy with a tanh-bounded mean, raw rewards,
-learning from the executed action without the CLF's part, the best validated checkpoint kept
-and the last one beside it). Both: GAE lambda 0.95, CPU, one
+the best validated checkpoint kept and the last one beside it). Both: GAE lambda 0.95, CPU, one
 torch thread (deterministic for a seed).
 Observations are normalised by running statistics (SB3 ``VecNormalize``, saved as
 ``normalization.json`` and used by the evaluation); rewards are normalised too unless the preset
