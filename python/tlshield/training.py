@@ -173,7 +173,7 @@ def train(
         on_update=on_update,
         progress=progress,
     )
-    before = []
+    before: list[Any] = []
     if settings.learn_from != "sampled":
         from tlshield.callbacks import ExecutedActions
 
