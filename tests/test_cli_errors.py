@@ -140,7 +140,7 @@ CASES: dict[str, list[Case]] = {
     ],
     "benchmark": [
         ("an unknown colour", lambda b, r: ["benchmark", "flatworld", "--formulas", "F purple"]),
-        ("a seed out of range", lambda b, r: ["benchmark", "flatworld", "--seeds", "12"]),
+        ("a negative seed", lambda b, r: ["benchmark", "flatworld", "--seeds", "-1"]),
         ("--envs for flatworld", lambda b, r: ["benchmark", "flatworld", "--envs", "X-v0"]),
         (
             "--formulas for safety-gym",
