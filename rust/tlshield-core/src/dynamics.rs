@@ -377,6 +377,38 @@ impl Dynamics {
         }
     }
 
+    /// `out_i = sum_{k,j} u_k v_j dg_kj/ds_i` (u length n, v length m, out length n): how
+    /// `u' g(s) v` moves with the state, which the state gradient of a shielded action needs.
+    /// Zero for the models whose `g` is constant.
+    pub fn input_jacobian_contract(&self, s: &[f64], u: &[f64], v: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        match self {
+            Dynamics::SingleIntegrator { .. }
+            | Dynamics::DoubleIntegrator { .. }
+            | Dynamics::AccelerationUnicycle { .. } => {}
+            Dynamics::Unicycle { eps, x, y, theta } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*theta] = u[*x] * (-sin * v[0] - eps * cos * v[1])
+                    + u[*y] * (cos * v[0] - eps * sin * v[1]);
+            }
+            Dynamics::KinematicBicycle {
+                l, theta, v: speed, ..
+            } => {
+                out[*speed] = u[*theta] * v[1] / l;
+            }
+            Dynamics::ThrustTurn {
+                thrust,
+                theta,
+                vx,
+                vy,
+                ..
+            } => {
+                let (sin, cos) = s[*theta].sin_cos();
+                out[*theta] = thrust * v[0] * (-sin * u[*vx] + cos * u[*vy]);
+            }
+        }
+    }
+
     /// Checks a state for this model: at least [`Dynamics::min_dim`] values, all finite.
     pub fn check_state(&self, s: &[f64]) -> Result<(), InputError> {
         if s.len() < self.min_dim() {
@@ -655,6 +687,43 @@ mod tests {
                     if !model.actuates(d) {
                         proptest::prop_assert!(g[d * m..(d + 1) * m].iter().all(|&x| x == 0.0));
                     }
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(300))]
+
+        /// `input_jacobian_contract` is the gradient of `u' g(s) v`, by central differences.
+        #[test]
+        fn input_jacobian_contract_matches_finite_differences(
+            s in proptest::collection::vec(-3.0..3.0f64, 5),
+            u in proptest::collection::vec(-2.0..2.0f64, 5),
+            v in proptest::collection::vec(-2.0..2.0f64, 2),
+        ) {
+            for model in [
+                Dynamics::single_integrator(vec![1, 4]).unwrap(),
+                Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
+                Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
+                Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
+                Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
+                Dynamics::thrust_turn(2.8, 3.2, 1.9, [3, 1, 4, 0, 2]).unwrap(),
+            ] {
+                let m = model.inputs();
+                let ugv = |x: &[f64]| {
+                    let (mut f, mut g) = (vec![0.0; 5], vec![0.0; 5 * m]);
+                    model.eval(x, &mut f, &mut g);
+                    (0..5).map(|k| (0..m).map(|j| u[k] * g[k * m + j] * v[j]).sum::<f64>()).sum::<f64>()
+                };
+                let mut out = vec![0.0; 5];
+                model.input_jacobian_contract(&s, &u, &v[..m], &mut out);
+                for i in 0..5 {
+                    let (mut p, mut q) = (s.clone(), s.clone());
+                    p[i] += 1e-6;
+                    q[i] -= 1e-6;
+                    let fd = (ugv(&p) - ugv(&q)) / 2e-6;
+                    proptest::prop_assert!((out[i] - fd).abs() < 1e-6, "{model:?} dim {i}");
                 }
             }
         }

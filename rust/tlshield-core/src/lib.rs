@@ -36,6 +36,7 @@ pub mod progress;
 pub mod qp;
 pub mod region;
 pub mod robustness;
+pub mod sensitivity;
 pub mod shield;
 pub mod slots;
 pub mod spec;
@@ -54,8 +55,8 @@ pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 #[allow(deprecated)]
 pub use shield::ShieldConfig;
 pub use shield::{
-    Barrier, BarrierSource, BatchDynamics, BatchOutput, Bounds, ControlAffine, Filtered, Shield,
-    ShieldParams, SolvedBy, SolverChoice, Status,
+    Barrier, BarrierSource, BatchDynamics, BatchGradient, BatchOutput, Bounds, ControlAffine,
+    Filtered, Shield, ShieldParams, SolvedBy, SolverChoice, Status,
 };
 pub use spec::Spec;
 

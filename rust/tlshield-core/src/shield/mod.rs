@@ -43,8 +43,10 @@ use crate::qp::{ClarabelQp, DenseQp, QpSolution, QpStatus};
 use crate::slots::Slots;
 use crate::validate::check_finite;
 
+mod gradient;
 mod order;
 mod program;
+pub use gradient::{BatchGradient, GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_SINGULAR};
 use order::Orders;
 use program::Program;
 
@@ -480,6 +482,8 @@ struct Workspace {
     qp: DenseQp,
     solvers: Solvers,
     out: Filtered,
+    /// Buffers of the gradient pass (`gradient.rs`), empty until it first runs.
+    grad: gradient::Buffers,
 }
 
 /// The two QP solvers and the last solution.
@@ -535,6 +539,7 @@ impl Workspace {
                 clarabel: ClarabelQp::new(),
             },
             out: Filtered::new(m),
+            grad: gradient::Buffers::default(),
         }
     }
 }
@@ -1330,7 +1335,30 @@ impl Shield {
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
-        let m = self.m;
+        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
+        out.resize(qs.len(), self.m)?;
+        // One contiguous chunk of rows per worker thread, each with its own workspace; small
+        // batches stay on the calling thread (waking the pool costs more than they do).
+        self.run_batch(
+            BatchRows::States { states, n, qs },
+            a_rl,
+            dynamics,
+            drift,
+            out,
+        );
+        Ok(())
+    }
+
+    /// Checks the input of a batch over given states (see [`Shield::filter_batch_with`]).
+    fn check_state_batch(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+    ) -> Result<(), ShieldError> {
         let rows = qs.len();
         if n == 0 || rows.checked_mul(n) != Some(states.len()) {
             return Err(InputError::Shape {
@@ -1350,16 +1378,6 @@ impl Shield {
         for (i, &q) in qs.iter().enumerate() {
             self.automaton.check_state(&format!("qs[{i}]"), q)?;
         }
-        out.resize(rows, m)?;
-        // One contiguous chunk of rows per worker thread, each with its own workspace; small
-        // batches stay on the calling thread (waking the pool costs more than they do).
-        self.run_batch(
-            BatchRows::States { states, n, qs },
-            a_rl,
-            dynamics,
-            drift,
-            out,
-        );
         Ok(())
     }
 
@@ -1386,6 +1404,31 @@ impl Shield {
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
+        out.resize(batch.monitors().len(), self.m)?;
+        if self
+            .check_monitor_batch(batch, a_rl, dynamics, drift)?
+            .is_some()
+        {
+            self.run_batch(
+                BatchRows::Monitors(batch.monitors()),
+                a_rl,
+                dynamics,
+                drift,
+                out,
+            );
+        }
+        Ok(())
+    }
+
+    /// Checks the input of a batch over monitors (see [`Shield::filter_monitors_with`]);
+    /// returns the state length, `None` for an empty batch.
+    fn check_monitor_batch(
+        &self,
+        batch: &MonitorBatch,
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+    ) -> Result<Option<usize>, ShieldError> {
         let monitors = batch.monitors();
         if !Arc::ptr_eq(batch.automaton(), &self.automaton) {
             return Err(ShieldError::Config(
@@ -1402,12 +1445,11 @@ impl Shield {
             }
             .into());
         }
-        let (rows, m) = (monitors.len(), self.m);
+        let rows = monitors.len();
         self.check_batch_actions(a_rl, rows)?;
-        out.resize(rows, m)?;
         let Some(first) = monitors.first() else {
             // An empty batch: nothing to check a state length against, nothing to solve.
-            return Ok(());
+            return Ok(None);
         };
         // Every monitor of the batch read a state of its automaton: one length for all.
         let n = first.state().len();
@@ -1416,8 +1458,7 @@ impl Shield {
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
-        self.run_batch(BatchRows::Monitors(monitors), a_rl, dynamics, drift, out);
-        Ok(())
+        Ok(Some(n))
     }
 
     /// The rows of a validated batch: one contiguous chunk of rows per worker thread, each

@@ -29,21 +29,21 @@ use crate::qp::DenseQp;
 #[derive(Debug, Default)]
 pub(super) struct Program {
     /// `f(s)` (plus the drift) and `g(s)` (n x m).
-    f: Vec<f64>,
-    g: Vec<f64>,
+    pub(super) f: Vec<f64>,
+    pub(super) g: Vec<f64>,
     grad: Vec<f64>,
     /// Second-order terms: `H f`, `J_f f` and `J_f^T w` (n each).
     hf: Vec<f64>,
     jf: Vec<f64>,
     jt: Vec<f64>,
-    safe: Vec<(Literal, f64)>,
+    pub(super) safe: Vec<(Literal, f64)>,
     /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
-    lg: Vec<f64>,
+    pub(super) lg: Vec<f64>,
     rhs: Vec<f64>,
     weights: Vec<f64>,
     /// The CLF goal and `Lg V` (m values).
     pub(super) goal: Vec<f64>,
-    clf_lg: Vec<f64>,
+    pub(super) clf_lg: Vec<f64>,
     /// Whether this step has a CLF goal (CLF on and a goal in this FSA state).
     pub(super) has_goal: bool,
     clf_rhs: f64,

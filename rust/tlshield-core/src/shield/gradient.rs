@@ -1,0 +1,606 @@
+//! Gradients through the shield: vector-Jacobian products of the safe action
+//! `a = a_rl + a_cbf + a_clf` with respect to `a_rl` and to the state, for a batch.
+//!
+//! Each row is solved as [`Shield::filter_batch`] solves it; then the QP's adjoint
+//! ([`crate::sensitivity`]) gives `dL/dh` and `dL/dG` on the active rows, and the chain rule runs
+//! back through the rows of Eq. 5D2 (`program.rs`):
+//! - `a_rl` enters every barrier row's and the CLF row's right-hand side through `Lg . a_rl`,
+//!   the actuator-limit rows through `limit - a_rl`, and the action directly;
+//! - the state enters a first-order barrier row through `h`, `grad h`, `f` and `g`
+//!   (`d(Lf h)/ds = H f + J_f' grad h`, `d(Lg h)/ds = H g + (dg/ds)' grad h`, `H` the barrier's
+//!   Hessian), and the first-order CLF row through `V`, `Lf V` and `Lg V` likewise.
+//!
+//! State gradients of second-order (HOCBF) rows would need third derivatives of the barriers
+//! and second derivatives of the drift; a shield with such rows refuses them with an error
+//! (the gradient with respect to `a_rl` is available for every shield).
+//!
+//! What each row's flags mean ([`GRAD_RELAXED`], [`GRAD_FAILED`], [`GRAD_DEGENERATE`],
+//! [`GRAD_SINGULAR`]): the gradient is always that of the action actually returned. A relaxed
+//! step is differentiated as the relaxed QP it solved; a failed step returned `a_rl`, whose
+//! gradient is the identity. At a point where the active set changes, the one-sided derivative
+//! of the piece on which the weakly active rows are inactive (see `sensitivity.rs`).
+
+use rayon::prelude::*;
+use smallvec::SmallVec;
+
+use super::{BatchDynamics, BatchRows, Shield, Status, Want, Workspace};
+use crate::error::{InputError, ShieldError};
+use crate::linalg::dot;
+use crate::monitor::MonitorBatch;
+use crate::predicate::{Center, Predicate};
+use crate::sensitivity::{QpAdjointSolver, Singular};
+use crate::validate::check_finite;
+
+/// Flag: the step was relaxed (slacks on the barrier rows); the gradient is the relaxed QP's.
+pub const GRAD_RELAXED: u8 = 1;
+/// Flag: the step failed and returned `a_rl`; the gradient is the identity.
+pub const GRAD_FAILED: u8 = 2;
+/// Flag: the active set changes here; the gradient is one-sided (see the module docs).
+pub const GRAD_DEGENERATE: u8 = 4;
+/// Flag: the KKT system on the active rows was singular; only the identity part of the
+/// gradient (`da/da_rl` through `a_rl` itself) is returned.
+pub const GRAD_SINGULAR: u8 = 8;
+
+/// Gradients of a batch: `a_rl` `(B, m)`, `states` `(B, n)` (empty when not asked for) and a
+/// flag byte per row (`GRAD_*`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BatchGradient {
+    /// `dL/da_rl`, row-major `(B, m)`.
+    pub a_rl: Vec<f64>,
+    /// `dL/ds`, row-major `(B, n)`, or empty.
+    pub states: Vec<f64>,
+    /// Per row, an OR of `GRAD_*` flags (0: an exact two-sided gradient of a solved step).
+    pub flags: Vec<u8>,
+}
+
+impl BatchGradient {
+    fn resize(&mut self, rows: usize, m: usize, n: usize) -> Result<(), InputError> {
+        crate::alloc::try_resize(&mut self.a_rl, "rows", rows * m, 0.0)?;
+        crate::alloc::try_resize(&mut self.states, "rows", rows * n, 0.0)?;
+        crate::alloc::try_resize(&mut self.flags, "rows", rows, 0)
+    }
+}
+
+/// Buffers of one workspace's gradient pass (they only grow).
+#[derive(Debug, Default)]
+pub(super) struct Buffers {
+    adjoint: QpAdjointSolver,
+    dx: Vec<f64>,
+    dh: Vec<f64>,
+    dg: Vec<f64>,
+    /// The barrier's gradient, the vector its Hessian multiplies and the products (n each).
+    grad: Vec<f64>,
+    u: Vec<f64>,
+    hu: Vec<f64>,
+    tmp: Vec<f64>,
+    /// `dL/d(Lg h)` of one row (m).
+    beta: Vec<f64>,
+    /// `dL/de` of the CLF error (one per `pos`), the centre dimensions, a shifted state and
+    /// the goals at `s +- step`.
+    de: Vec<f64>,
+    centres: Vec<usize>,
+    shifted: Vec<f64>,
+    plus: Vec<f64>,
+    minus: Vec<f64>,
+}
+
+/// Appends the state dimensions any ball in `p` reads its centre from.
+fn centre_dims(p: &Predicate, out: &mut Vec<usize>) {
+    match p {
+        Predicate::Ball(b) => {
+            if let Center::Dims(d) = b.center() {
+                out.extend(
+                    d.iter()
+                        .filter(|d| !out.contains(d))
+                        .copied()
+                        .collect::<SmallVec<[usize; 4]>>(),
+                );
+            }
+        }
+        Predicate::Halfspace(_) => {}
+        _ => p.parts().iter().for_each(|q| centre_dims(q, out)),
+    }
+}
+
+/// Relative step of the central differences of a moving goal.
+const GOAL_STEP: f64 = 1e-6;
+
+impl Shield {
+    /// Why this shield cannot give state gradients, if it cannot.
+    fn state_gradient_refusal(&self, custom_rows: bool) -> Option<String> {
+        if self.dynamics.is_none() || custom_rows {
+            return Some(
+                "state gradients need a built-in dynamics model (f and g given per call have \
+                 no derivatives); ask for the gradient with respect to a_rl only"
+                    .into(),
+            );
+        }
+        if self.orders.second_order() {
+            return Some(
+                "state gradients are not available for second-order (HOCBF) rows or the \
+                 second-order CLF: they need third derivatives of the barriers; ask for the \
+                 gradient with respect to a_rl only"
+                    .into(),
+            );
+        }
+        None
+    }
+
+    /// Vector-Jacobian products of [`Shield::filter_batch`]: for the rows `(states, qs, a_rl)`
+    /// and `grad_action = dL/da` `(B, m)`, writes `dL/da_rl` and, with `want_states`,
+    /// `dL/ds` into `out`, with a flag byte per row. `dynamics` as in
+    /// [`Shield::filter_batch_with`] (then only `a_rl` gradients). Parallel over rows.
+    #[allow(clippy::too_many_arguments)]
+    pub fn vjp_batch(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        grad_action: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+        want_states: bool,
+        out: &mut BatchGradient,
+    ) -> Result<(), ShieldError> {
+        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
+        self.check_gradient(grad_action, qs.len(), want_states, dynamics.is_some())?;
+        out.resize(qs.len(), self.m, if want_states { n } else { 0 })?;
+        let rows = BatchRows::States { states, n, qs };
+        self.gradient_rows(rows, a_rl, grad_action, dynamics, drift, out);
+        Ok(())
+    }
+
+    /// [`Shield::vjp_batch`] at the monitors' last states and FSA states (gradients with
+    /// respect to `a_rl` only: the states are not inputs here).
+    pub fn vjp_monitors(
+        &self,
+        batch: &MonitorBatch,
+        a_rl: &[f64],
+        grad_action: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+        out: &mut BatchGradient,
+    ) -> Result<(), ShieldError> {
+        let rows = batch.monitors().len();
+        let n = self.check_monitor_batch(batch, a_rl, dynamics, drift)?;
+        self.check_gradient(grad_action, rows, false, dynamics.is_some())?;
+        out.resize(rows, self.m, 0)?;
+        if n.is_some() {
+            let rows = BatchRows::Monitors(batch.monitors());
+            self.gradient_rows(rows, a_rl, grad_action, dynamics, drift, out);
+        }
+        Ok(())
+    }
+
+    fn check_gradient(
+        &self,
+        grad_action: &[f64],
+        rows: usize,
+        want_states: bool,
+        custom_rows: bool,
+    ) -> Result<(), ShieldError> {
+        if grad_action.len() != rows * self.m {
+            return Err(InputError::Shape {
+                what: "grad_action".into(),
+                expected: format!("({rows}, {})", self.m),
+                got: format!("{} values", grad_action.len()),
+            }
+            .into());
+        }
+        check_finite("grad_action", grad_action, self.m)?;
+        match want_states.then(|| self.state_gradient_refusal(custom_rows)) {
+            Some(Some(why)) => Err(ShieldError::Config(why)),
+            _ => Ok(()),
+        }
+    }
+
+    /// The rows of a validated gradient batch, in parallel chunks as [`Shield::filter_batch`].
+    fn gradient_rows(
+        &self,
+        rows: BatchRows<'_>,
+        a_rl: &[f64],
+        grad_action: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+        out: &mut BatchGradient,
+    ) {
+        let (m, n, len) = (self.m, rows.state_len(), rows.len());
+        let sn = if out.states.is_empty() { 0 } else { n };
+        let run = |threads: usize, out: &mut BatchGradient| {
+            let chunk = len.div_ceil(threads).max(1);
+            let mut parts: SmallVec<[_; 8]> = out
+                .a_rl
+                .chunks_mut(chunk * m)
+                .zip(out.flags.chunks_mut(chunk))
+                .enumerate()
+                .map(|(c, (a, f))| (c, a, f))
+                .collect();
+            let mut state_parts: SmallVec<[&mut [f64]; 8]> = match sn {
+                0 => SmallVec::new(),
+                _ => out.states.chunks_mut(chunk * sn).collect(),
+            };
+            let mut joined: SmallVec<[_; 8]> = parts
+                .iter_mut()
+                .zip(
+                    state_parts
+                        .iter_mut()
+                        .map(Some)
+                        .chain(std::iter::repeat_with(|| None)),
+                )
+                .collect();
+            joined.par_iter_mut().for_each(|((c, ga, flags), gs)| {
+                self.with_workspace(n, |ws| {
+                    for i in 0..flags.len() {
+                        let row = *c * chunk + i;
+                        let (s, q, task) = rows.row(row);
+                        let a = &a_rl[row * m..(row + 1) * m];
+                        let v = &grad_action[row * m..(row + 1) * m];
+                        let d = drift.map(|d| &d[row * n..(row + 1) * n]);
+                        let fg = dynamics.map(|x| x.row(row, n, m));
+                        self.step(ws, s, q, a, fg, d, task, Want::Solution);
+                        let gs = gs.as_deref_mut().map(|g| &mut g[i * sn..(i + 1) * sn]);
+                        flags[i] =
+                            self.row_gradient(ws, s, q, a, v, &mut ga[i * m..(i + 1) * m], gs);
+                    }
+                });
+            });
+        };
+        if len < super::PARALLEL_MIN_ROWS {
+            run(1, out);
+        } else {
+            crate::parallel::install(|| run(rayon::current_num_threads().max(1), out));
+        }
+    }
+
+    /// Adds `-sum_k de_k dgoal_k/ds_c` to `gs` for every centre dimension `c`, by central
+    /// differences of the goal (exact for a ball's centre, which is linear in the state).
+    /// Returns true when the goal changes its choice within the step (a kink: skipped).
+    fn goal_motion(
+        &self,
+        s: &[f64],
+        q: usize,
+        goal: &[f64],
+        b: &mut Buffers,
+        gs: &mut [f64],
+    ) -> bool {
+        b.centres.clear();
+        for p in self.automaton.spec().predicates() {
+            centre_dims(p, &mut b.centres);
+        }
+        let mut kink = false;
+        for ci in 0..b.centres.len() {
+            let c = b.centres[ci];
+            let h = GOAL_STEP * (1.0 + s[c].abs());
+            for (sign, into) in [(1.0, &mut b.plus), (-1.0, &mut b.minus)] {
+                b.shifted.clear();
+                b.shifted.extend_from_slice(s);
+                b.shifted[c] += sign * h;
+                if !self.automaton.read_validated(&b.shifted).goal(q, into) {
+                    into.clear();
+                }
+            }
+            if b.plus.len() != goal.len() || b.minus.len() != goal.len() {
+                kink = true;
+                continue;
+            }
+            let mut dl = 0.0;
+            for (((&p, &g), &mm), &de) in b.plus.iter().zip(goal).zip(&b.minus).zip(&b.de) {
+                // A switch of goal within the step shows as a curvature far above rounding.
+                if (p - 2.0 * g + mm).abs() > 1e-4 * h.max((p - mm).abs()) {
+                    kink = true;
+                }
+                dl += de * (p - mm) / (2.0 * h);
+            }
+            gs[c] -= dl;
+        }
+        kink
+    }
+
+    /// The gradient of the step just taken in `ws`: `dL/da_rl` into `ga`, `dL/ds` into `gs`
+    /// (when asked); returns the row's flags.
+    #[allow(clippy::too_many_arguments)]
+    fn row_gradient(
+        &self,
+        ws: &mut Workspace,
+        s: &[f64],
+        q: usize,
+        a_rl: &[f64],
+        v: &[f64],
+        ga: &mut [f64],
+        mut gs: Option<&mut [f64]>,
+    ) -> u8 {
+        ga.copy_from_slice(v);
+        if let Some(gs) = gs.as_deref_mut() {
+            gs.fill(0.0);
+        }
+        let Workspace {
+            program,
+            qp,
+            solvers,
+            out,
+            grad: b,
+        } = ws;
+        if out.status == Status::Failed {
+            return GRAD_FAILED;
+        }
+        let mut flags = if out.status == Status::Solved {
+            0
+        } else {
+            GRAD_RELAXED
+        };
+        if program.vars() == 0 {
+            return flags;
+        }
+        let cfg = &self.params;
+        let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
+        let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
+        b.dx.clear();
+        b.dx.resize(nv, 0.0);
+        if cfg.use_cbf {
+            b.dx[..m].copy_from_slice(v);
+        }
+        if has_goal {
+            b.dx[cbf_vars..cbf_vars + m].copy_from_slice(v);
+        }
+        b.dh.resize(rows, 0.0);
+        b.dg.resize(rows * nv, 0.0);
+        let x = &solvers.solution.x;
+        match b
+            .adjoint
+            .vjp(qp, x, &solvers.solution.z, &b.dx, &mut b.dh, &mut b.dg)
+        {
+            Err(Singular) => return flags | GRAD_SINGULAR,
+            Ok(a) if a.degenerate => flags |= GRAD_DEGENERATE,
+            Ok(_) => {}
+        }
+        for buf in [&mut b.grad, &mut b.u, &mut b.hu, &mut b.tmp] {
+            buf.resize(n, 0.0);
+        }
+        b.beta.resize(m, 0.0);
+
+        // Barrier rows: h_b = r_b + L_b . a_rl, G_b = -L_b on the a_cbf and a_clf columns.
+        let barriers = program.barriers();
+        let sources =
+            cfg.barriers
+                .iter()
+                .map(|bar| (&bar.predicate, bar.positive))
+                .chain(program.safe.iter().map(|&(lit, _)| {
+                    (&self.automaton.spec().predicates()[lit.atom], lit.positive)
+                }));
+        for (row, (predicate, positive)) in sources.enumerate().take(barriers) {
+            let alpha = b.dh[row];
+            let lg = &program.lg[row * m..(row + 1) * m];
+            for j in 0..m {
+                ga[j] += alpha * lg[j];
+                let mut d = 0.0;
+                if cfg.use_cbf {
+                    d += b.dg[row * nv + j];
+                }
+                if has_goal {
+                    d += b.dg[row * nv + cbf_vars + j];
+                }
+                b.beta[j] = -d + alpha * a_rl[j];
+            }
+            let Some(gs) = gs.as_deref_mut() else {
+                continue;
+            };
+            let model = self
+                .dynamics
+                .as_ref()
+                .expect("checked: state gradients need a model");
+            let sign = if positive { 1.0 } else { -1.0 };
+            predicate.gradient_into(s, &mut b.grad);
+            b.grad.iter_mut().for_each(|g| *g *= sign);
+            // u = alpha f + sum_j beta_j g_j - alpha sum_d w_d sgn(grad_d) e_d; then H' u.
+            for k in 0..n {
+                let gk = &program.g[k * m..(k + 1) * m];
+                b.u[k] = alpha * program.f[k] + dot(gk, &b.beta);
+            }
+            for &(d, w) in &cfg.disturbance {
+                b.u[d] -= alpha * w * b.grad[d].signum() * f64::from(b.grad[d] != 0.0);
+            }
+            predicate.hessian_times(s, &b.u, &mut b.hu);
+            model.jacobian_f_transpose_times(s, &b.grad, &mut b.tmp);
+            for (k, g) in gs.iter_mut().enumerate() {
+                *g += sign * b.hu[k] + alpha * (b.tmp[k] + cfg.alpha * b.grad[k]);
+            }
+            model.input_jacobian_contract(s, &b.grad, &b.beta, &mut b.tmp);
+            gs.iter_mut().zip(&b.tmp).for_each(|(g, t)| *g += t);
+        }
+
+        // The CLF row: G = [Lg V on a_clf, -1 on d], h = clf_rhs + delta_0, where
+        // clf_rhs = -(Lf V + Lg V . a_rl + c3 V); when delta_0 > 0, h = min over the box of
+        // Lg V . a_clf, which reads Lg V alone.
+        let mut next = barriers;
+        if has_goal {
+            let (alpha, l) = (b.dh[barriers], &program.clf_lg);
+            let (mut lf_weight, mut v_weight) = (0.0, 0.0);
+            let start = barriers * nv + cbf_vars;
+            b.beta.copy_from_slice(&b.dg[start..start + m]);
+            if program.delta_0 > 0.0 {
+                let box_ = cfg.clf_bounds.lo.iter().zip(&cfg.clf_bounds.hi);
+                for ((beta, &l), (&lo, &hi)) in b.beta.iter_mut().zip(l).zip(box_) {
+                    if l == 0.0 && lo != hi {
+                        flags |= GRAD_DEGENERATE;
+                    }
+                    *beta += alpha * if l > 0.0 { lo } else { hi };
+                }
+            } else {
+                for j in 0..m {
+                    b.beta[j] -= alpha * a_rl[j];
+                    ga[j] -= alpha * l[j];
+                }
+                lf_weight = -alpha;
+                v_weight = -alpha * cfg.c3;
+            }
+            if let Some(gs) = gs {
+                // V = |e|^2, Lf V = 2 e . f[pos], Lg V_j = 2 e . g[pos, j], e = s[pos] - goal.
+                let model = self
+                    .dynamics
+                    .as_ref()
+                    .expect("checked: state gradients need a model");
+                b.u.fill(0.0);
+                for (&p, &c) in cfg.pos.iter().zip(&program.goal) {
+                    b.u[p] = s[p] - c;
+                }
+                model.jacobian_f_transpose_times(s, &b.u, &mut b.tmp);
+                gs.iter_mut()
+                    .zip(&b.tmp)
+                    .for_each(|(g, t)| *g += 2.0 * lf_weight * t);
+                for &p in &cfg.pos {
+                    let gp = &program.g[p * m..(p + 1) * m];
+                    gs[p] +=
+                        2.0 * (v_weight * b.u[p] + lf_weight * program.f[p] + dot(gp, &b.beta));
+                }
+                model.input_jacobian_contract(s, &b.u, &b.beta, &mut b.tmp);
+                gs.iter_mut().zip(&b.tmp).for_each(|(g, t)| *g += 2.0 * t);
+                // dL/de_k, then the goal's own motion when ball centres are read from the
+                // state: e = s[pos] - goal(s).
+                b.de.clear();
+                for &p in &cfg.pos {
+                    let gp = &program.g[p * m..(p + 1) * m];
+                    b.de.push(
+                        2.0 * (v_weight * b.u[p] + lf_weight * program.f[p] + dot(gp, &b.beta)),
+                    );
+                }
+                if self.goal_motion(s, q, &program.goal, b, gs) {
+                    flags |= GRAD_DEGENERATE;
+                }
+            }
+            next += 2;
+        }
+
+        // Actuator limits: h = hi - a_rl (upper rows), then a_rl - lo (lower rows).
+        if cfg.action_bounds.is_some() {
+            next += 2 * m * (usize::from(cfg.use_cbf) + usize::from(has_goal));
+            for (k, sign) in [1.0, -1.0].into_iter().enumerate() {
+                let rows = &b.dh[next + k * m..next + (k + 1) * m];
+                ga.iter_mut().zip(rows).for_each(|(g, d)| *g -= sign * d);
+            }
+        }
+        flags
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::automaton::Automaton;
+    use crate::dynamics::Dynamics;
+    use crate::fixtures::{task_automaton, STATE_DIM as N};
+    use crate::shield::{Bounds, ShieldParams, SolverChoice};
+    use proptest::prelude::*;
+    use std::sync::Arc;
+
+    fn paper_shield(use_cbf: bool, use_clf: bool) -> Shield {
+        let b = |lo: f64, hi: f64| Bounds {
+            lo: vec![lo; 2],
+            hi: vec![hi; 2],
+        };
+        let params = ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5))
+            .with_solver(SolverChoice::Auto)
+            .with_action_bounds(Some(b(-4.0, 4.0)))
+            .with_parts(use_cbf, use_clf);
+        let model = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
+        Shield::new(Arc::new(task_automaton()), Some(model), params).unwrap()
+    }
+
+    /// `v . a(s, a_rl)` for one row.
+    fn value(sh: &Shield, s: &[f64], q: usize, a: &[f64], v: &[f64]) -> f64 {
+        let out = sh.filter(s, q, a, None, None).unwrap();
+        dot(v, &out.action)
+    }
+
+    proptest! {
+        #![proptest_config(crate::tests_support::seeded(96))]
+
+        /// The batch VJP equals central differences of the shielded action, in `a_rl` and in
+        /// every state dimension (goal centres included), on rows that are not degenerate.
+        #[test]
+        fn vjp_matches_finite_differences(
+            xy in (-1.0..4.0f64, -1.4..1.4f64),
+            theta in -3.0..3.0f64,
+            a in proptest::collection::vec(-3.5..3.5f64, 2),
+            v in proptest::collection::vec(-1.0..1.0f64, 2),
+            parts in 0..3usize,
+        ) {
+            let (use_cbf, use_clf) = [(true, true), (true, false), (false, true)][parts];
+            let sh = paper_shield(use_cbf, use_clf);
+            let mut s = vec![0.0; N];
+            s[0] = xy.0 + xy.1 / 2.0;
+            s[1] = xy.0 - xy.1 / 2.0;
+            s[2] = theta;
+            s[3..9].copy_from_slice(&[4.0, 4.0, 4.5, 6.5, 9.0, 9.0]);
+            s[9..13].copy_from_slice(&[20.0, 20.0, 20.0, -20.0]);
+            let aut: &Automaton = sh.automaton();
+            let q = aut.read(&s).unwrap().step(aut.initial());
+            let mut out = BatchGradient::default();
+            sh.vjp_batch(&s, N, &[q], &a, &v, None, None, true, &mut out).unwrap();
+            prop_assume!(out.flags[0] == 0);
+            let eps = 1e-6;
+            for j in 0..2 {
+                let (mut p, mut m) = (a.clone(), a.clone());
+                p[j] += eps;
+                m[j] -= eps;
+                // The FSA state is read at s: a_rl moves nothing discrete.
+                let fd = (value(&sh, &s, q, &p, &v) - value(&sh, &s, q, &m, &v)) / (2.0 * eps);
+                prop_assert!((out.a_rl[j] - fd).abs() < 1e-5 * (1.0 + fd.abs()), "a_rl[{j}]: {} vs {fd}", out.a_rl[j]);
+            }
+            for i in 0..N {
+                let (mut p, mut m) = (s.clone(), s.clone());
+                p[i] += eps;
+                m[i] -= eps;
+                let fd = (value(&sh, &p, q, &a, &v) - value(&sh, &m, q, &a, &v)) / (2.0 * eps);
+                prop_assert!((out.states[i] - fd).abs() < 1e-5 * (1.0 + fd.abs()), "s[{i}]: {} vs {fd}", out.states[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn second_order_rows_refuse_state_gradients_but_not_action_gradients() {
+        let b = |lo: f64, hi: f64| Bounds {
+            lo: vec![lo; 2],
+            hi: vec![hi; 2],
+        };
+        let params =
+            ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5)).with_alpha2(Some(2.0));
+        let model = Dynamics::acceleration_unicycle(0, 1, 2, 12).unwrap();
+        let sh = Shield::new(Arc::new(task_automaton()), Some(model), params).unwrap();
+        let mut s = vec![0.0; N];
+        s[3..9].copy_from_slice(&[4.0, 4.0, 4.5, 6.5, 9.0, 9.0]);
+        let q = sh
+            .automaton()
+            .read(&s)
+            .unwrap()
+            .step(sh.automaton().initial());
+        let mut out = BatchGradient::default();
+        let err = sh
+            .vjp_batch(
+                &s,
+                N,
+                &[q],
+                &[1.0, 0.0],
+                &[1.0, 1.0],
+                None,
+                None,
+                true,
+                &mut out,
+            )
+            .unwrap_err();
+        assert!(err.to_string().contains("second-order"), "{err}");
+        sh.vjp_batch(
+            &s,
+            N,
+            &[q],
+            &[1.0, 0.0],
+            &[1.0, 1.0],
+            None,
+            None,
+            false,
+            &mut out,
+        )
+        .unwrap();
+        assert_eq!((out.a_rl.len(), out.states.len()), (2, 0));
+    }
+}
