@@ -39,7 +39,7 @@ from tlshield._core import (
     __version__,
     formula_atoms,
 )
-from tlshield.codes import Solver, Status
+from tlshield.codes import GradFlag, Solver, Status
 
 __all__ = [
     "AccelerationUnicycle",
@@ -50,6 +50,7 @@ __all__ = [
     "DoubleIntegrator",
     "FilterBatch",
     "FilterResult",
+    "GradFlag",
     "Halfspace",
     "Intersection",
     "KinematicBicycle",

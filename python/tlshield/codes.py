@@ -1,11 +1,13 @@
 """The shield's outcome codes, one encoding for ``Shield.filter`` and ``Shield.filter_batch``:
 ``FilterResult.status`` is a :class:`Status`, ``FilterBatch.status`` an array of its values
 (compare with ``batch.status == Status.RELAXED``). Both are :class:`enum.IntEnum`, so they
-serialise as plain integers."""
+serialise as plain integers. ``Shield.vjp_batch``'s per-row flags are :class:`GradFlag` bits."""
 
-from enum import IntEnum
+from enum import IntEnum, IntFlag
 
-__all__ = ["Solver", "Status"]
+from tlshield._core import GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_SINGULAR
+
+__all__ = ["GradFlag", "Solver", "Status"]
 
 
 class Status(IntEnum):
@@ -39,3 +41,19 @@ class Solver(IntEnum):
 
     def __str__(self) -> str:
         return self.name.lower()
+
+
+class GradFlag(IntFlag):
+    """What one row of ``Shield.vjp_batch`` differentiated (bits; 0 is an exact two-sided
+    gradient of a step solved as posed). Test with ``flags & GradFlag.DEGENERATE``."""
+
+    #: The step was relaxed: the gradient is the relaxed QP's (slacks on the barrier rows).
+    RELAXED = GRAD_RELAXED
+    #: The step failed and returned ``a_rl``: the gradient is the identity.
+    FAILED = GRAD_FAILED
+    #: The active set changes at this point (a tight row with a zero multiplier, or tight rows
+    #: that depend on each other): the one-sided derivative of the piece on which every tight
+    #: row stays tight.
+    DEGENERATE = GRAD_DEGENERATE
+    #: The KKT system on the active rows was singular: only the identity part is returned.
+    SINGULAR = GRAD_SINGULAR

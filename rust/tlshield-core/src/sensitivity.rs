@@ -13,12 +13,14 @@
 //! symmetric); then `dL/dh_A = omega`, `dL/dG_A = -(z_A w' + omega x')`, `dL/dc = -w`, and
 //! every inactive row gets zero.
 //!
-//! Which rows are active: those whose multiplier exceeds [`MULTIPLIER_TOL`] of the largest
-//! one (in decreasing order, skipping a row linearly dependent on those already taken). At a
-//! point where the active set changes, a row can be tight with a zero multiplier (weakly
-//! active) or depend on the others; such rows are left out, and the answer is the derivative
-//! of the piece on which they are inactive: a one-sided derivative, flagged as
-//! [`Adjoint::degenerate`]. Away from such points the derivative is two-sided and exact.
+//! Which rows are active: every tight row (or one with a positive multiplier), an
+//! independent subset of them taken by decreasing multiplier, and the multipliers are
+//! recomputed from the KKT system on that subset. The answer is the derivative of the piece on
+//! which every tight row stays tight. Away from a change of active set that piece is the only
+//! one and the derivative is two-sided and exact. At a change, a tight row has a zero
+//! multiplier (weakly active) or depends on the others: the answer is then one of the one-sided
+//! derivatives, flagged as [`Adjoint::degenerate`]. A row the caller knows to be implied by the
+//! others (`implied`) is taken last and is no sign of degeneracy when it depends on them.
 //!
 //! The workspace's buffers only grow: nothing is allocated once it has seen the shape.
 
@@ -61,6 +63,8 @@ pub struct QpAdjointSolver {
     sol: Vec<f64>,
     /// Row interchanges of the factorisation.
     piv: Vec<usize>,
+    /// The active rows' multipliers, from the KKT system.
+    multipliers: Vec<f64>,
 }
 
 impl QpAdjointSolver {
@@ -76,13 +80,16 @@ impl QpAdjointSolver {
 
     /// `dh = dL/dh` (length rows) and `dg = dL/dG` (rows x n, row-major) for `dx = dL/dx` at
     /// the solution `x` with multipliers `z` (`z >= 0`, as [`crate::qp::QpSolution`] gives
-    /// them). The slices must have the problem's sizes.
+    /// them). `implied` names a row the others imply whenever it is tight (see the module
+    /// docs). The slices must have the problem's sizes.
+    #[allow(clippy::too_many_arguments)]
     pub fn vjp(
         &mut self,
         qp: &DenseQp,
         x: &[f64],
         z: &[f64],
         dx: &[f64],
+        implied: Option<usize>,
         dh: &mut [f64],
         dg: &mut [f64],
     ) -> Result<Adjoint, Singular> {
@@ -95,23 +102,23 @@ impl QpAdjointSolver {
         let zmax = z.iter().fold(1.0_f64, |a, &b| a.max(b));
         let ztol = MULTIPLIER_TOL * zmax;
 
-        // Candidates by decreasing multiplier; tight rows without one make the point degenerate.
+        // Tight rows, the implied one last, then by decreasing multiplier.
         self.order.clear();
         for (i, &zi) in z.iter().enumerate() {
             let row = &qp.g[i * n..(i + 1) * n];
-            if zi > ztol {
+            let scale =
+                1.0 + qp.h[i].abs() + row.iter().zip(x).map(|(g, x)| (g * x).abs()).sum::<f64>();
+            let tight = qp.h[i] - dot(row, x) <= TIGHT_TOL * scale;
+            if zi > ztol || (tight && row.iter().any(|&g| g != 0.0)) {
                 self.order.push(i);
-            } else {
-                let scale = 1.0
-                    + qp.h[i].abs()
-                    + row.iter().zip(x).map(|(g, x)| (g * x).abs()).sum::<f64>();
-                if qp.h[i] - dot(row, x) <= TIGHT_TOL * scale && row.iter().any(|&g| g != 0.0) {
-                    adjoint.degenerate = true;
-                }
             }
         }
-        self.order
-            .sort_by(|&a, &b| z[b].partial_cmp(&z[a]).unwrap_or(std::cmp::Ordering::Equal));
+        let key = |i: usize| (Some(i) == implied, -z[i]);
+        self.order.sort_by(|&a, &b| {
+            key(a)
+                .partial_cmp(&key(b))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
 
         // Gram-Schmidt (twice, for stability) keeps the independent ones.
         self.active.clear();
@@ -121,9 +128,6 @@ impl QpAdjointSolver {
             let start = self.basis.len();
             let row = &qp.g[i * n..(i + 1) * n];
             let norm = dot(row, row).sqrt();
-            if norm == 0.0 {
-                continue;
-            }
             self.basis.extend(row.iter().map(|g| g / norm));
             for _ in 0..2 {
                 for b in 0..self.active.len() {
@@ -136,14 +140,15 @@ impl QpAdjointSolver {
             let rest = dot(&self.basis[start..], &self.basis[start..]).sqrt();
             if rest < DEPENDENT {
                 self.basis.truncate(start);
-                adjoint.degenerate = true;
+                adjoint.degenerate |= Some(i) != implied;
                 continue;
             }
             self.basis[start..].iter_mut().for_each(|v| *v /= rest);
             self.active.push(i);
         }
 
-        // K = [P G_A'; G_A 0], right-hand side [dx; 0].
+        // K = [P G_A'; G_A 0]; the multipliers from K [x; z_A] = [-c; h_A], then
+        // K [w; omega] = [dx; 0].
         let na = self.active.len();
         let d = n + na;
         self.kkt.clear();
@@ -158,23 +163,32 @@ impl QpAdjointSolver {
                 self.kkt[j * d + n + k] = g;
             }
         }
+        self.factor(d)?;
+        self.sol.clear();
+        self.sol.extend(qp.c.iter().map(|c| -c));
+        self.sol.extend(self.active.iter().map(|&i| qp.h[i]));
+        self.solve(d);
+        self.multipliers.clear();
+        self.multipliers.extend_from_slice(&self.sol[n..]);
+        let lmax = self.multipliers.iter().fold(1.0_f64, |a, &b| a.max(b));
+        adjoint.degenerate |= self.multipliers.iter().any(|&l| l <= MULTIPLIER_TOL * lmax);
         self.sol.clear();
         self.sol.extend_from_slice(dx);
         self.sol.resize(d, 0.0);
-        self.factor_solve(d)?;
+        self.solve(d);
 
         let (w, omega) = self.sol.split_at(n);
         for (k, &i) in self.active.iter().enumerate() {
             dh[i] = omega[k];
             for j in 0..n {
-                dg[i * n + j] = -(z[i] * w[j] + omega[k] * x[j]);
+                dg[i * n + j] = -(self.multipliers[k] * w[j] + omega[k] * x[j]);
             }
         }
         Ok(adjoint)
     }
 
-    /// LU with partial pivoting of the d x d `kkt`, then `sol <- kkt^{-1} sol`.
-    fn factor_solve(&mut self, d: usize) -> Result<(), Singular> {
+    /// LU factors of the d x d `kkt` with partial pivoting, in place.
+    fn factor(&mut self, d: usize) -> Result<(), Singular> {
         let a = &mut self.kkt;
         let scale = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if scale == 0.0 && d > 0 {
@@ -193,25 +207,38 @@ impl QpAdjointSolver {
                 for j in 0..d {
                     a.swap(col * d + j, p * d + j);
                 }
-                self.sol.swap(col, p);
             }
             let pivot = a[col * d + col];
             for r in col + 1..d {
                 let f = a[r * d + col] / pivot;
+                a[r * d + col] = f;
                 if f != 0.0 {
-                    a[r * d + col] = f;
                     for j in col + 1..d {
                         a[r * d + j] -= f * a[col * d + j];
                     }
-                    self.sol[r] -= f * self.sol[col];
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// `sol <- kkt^{-1} sol` with the factors of [`factor`](Self::factor).
+    fn solve(&mut self, d: usize) {
+        let a = &self.kkt;
+        // The factors are of P K (whole rows were swapped): permute, then L, then U.
+        for col in 0..d {
+            self.sol.swap(col, self.piv[col]);
+        }
+        for col in 0..d {
+            let v = self.sol[col];
+            for r in col + 1..d {
+                self.sol[r] -= a[r * d + col] * v;
             }
         }
         for r in (0..d).rev() {
             let s = (r + 1..d).map(|j| a[r * d + j] * self.sol[j]).sum::<f64>();
             self.sol[r] = (self.sol[r] - s) / a[r * d + r];
         }
-        Ok(())
     }
 }
 
@@ -290,7 +317,7 @@ mod tests {
         let sol = ActiveSetQp::new().solve(&qp);
         let (mut dh, mut dg) = (vec![0.0], vec![0.0]);
         let adj = QpAdjointSolver::new()
-            .vjp(&qp, &sol.x, &sol.z, &[1.0], &mut dh, &mut dg)
+            .vjp(&qp, &sol.x, &sol.z, &[1.0], None, &mut dh, &mut dg)
             .unwrap();
         assert!(!adj.degenerate);
         assert!(
@@ -311,11 +338,11 @@ mod tests {
         let sol = ActiveSetQp::new().solve(&qp);
         let (mut dh, mut dg) = (vec![0.0], vec![0.0]);
         let adj = QpAdjointSolver::new()
-            .vjp(&qp, &sol.x, &sol.z, &[1.0], &mut dh, &mut dg)
+            .vjp(&qp, &sol.x, &sol.z, &[1.0], None, &mut dh, &mut dg)
             .unwrap();
-        // The piece where the row is inactive: x = 1 whatever h, so zero.
+        // The piece on which the row stays tight: x = h, so dL/dh = 1 (one-sided).
         assert!(adj.degenerate);
-        assert_eq!((dh[0], dg[0]), (0.0, 0.0));
+        assert!((dh[0] - 1.0).abs() < 1e-12, "{dh:?}");
     }
 
     proptest! {
@@ -332,7 +359,7 @@ mod tests {
             prop_assume!(sol.status == QpStatus::Solved);
             let (mut dh, mut dg) = (vec![0.0; qp.rows()], vec![0.0; qp.g.len()]);
             let mut adjoint = QpAdjointSolver::new();
-            let adj = adjoint.vjp(&qp, &sol.x, &sol.z, &v, &mut dh, &mut dg);
+            let adj = adjoint.vjp(&qp, &sol.x, &sol.z, &v, None, &mut dh, &mut dg);
             prop_assume!(adj.is_ok_and(|a| !a.degenerate));
             // Away from a change of active set: no row within 1e-4 of switching.
             let n = qp.vars();

@@ -41,6 +41,11 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
         m.py().get_type::<errors::AutomatonError>(),
     )?;
     m.add("ShieldError", m.py().get_type::<errors::ShieldError>())?;
+    // The flag bits of `Shield.vjp_batch` (`tlshield.codes.GradFlag` reads them).
+    m.add("GRAD_RELAXED", tlshield_core::shield::GRAD_RELAXED)?;
+    m.add("GRAD_FAILED", tlshield_core::shield::GRAD_FAILED)?;
+    m.add("GRAD_DEGENERATE", tlshield_core::shield::GRAD_DEGENERATE)?;
+    m.add("GRAD_SINGULAR", tlshield_core::shield::GRAD_SINGULAR)?;
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<predicate::PyUnion>()?;

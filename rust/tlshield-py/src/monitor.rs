@@ -1,8 +1,8 @@
 //! `Monitor`: the task along one episode (core `monitor`), and `TaskStep`, what one step gives;
 //! `MonitorBatch` and `TaskBatch`, their batch twins.
 
-use numpy::{IntoPyArray, PyArray1, PyUntypedArrayMethods};
-use pyo3::exceptions::PyTypeError;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use tlshield_core::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
@@ -310,6 +310,22 @@ impl PyMonitorBatch {
     fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
         let qs: Vec<i64> = self.inner.monitors().iter().map(|m| m.q() as i64).collect();
         qs.into_pyarray(py)
+    }
+
+    /// Every row's last state, ``(num, n)`` (a copy; rows not yet reset raise ``ValueError``).
+    #[getter]
+    fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let monitors = self.inner.monitors();
+        if let Some(row) = monitors.iter().position(|m| !m.started()) {
+            return Err(PyValueError::new_err(format!(
+                "states: monitors row {row} has no episode yet (reset it first)"
+            )));
+        }
+        let n = monitors.first().map_or(0, |m| m.state().len());
+        let values: Vec<f64> = monitors.iter().flat_map(|m| m.state()).copied().collect();
+        numpy::ndarray::Array2::from_shape_vec((monitors.len(), n), values)
+            .map(|a| a.into_pyarray(py))
+            .map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
     /// The automaton monitored.

@@ -7,8 +7,8 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::{
-    Automaton, Barrier, BarrierSource, BatchDynamics, BatchOutput, Bounds, ControlAffine, Filtered,
-    Shield, ShieldParams, SolvedBy, SolverChoice, Status,
+    Automaton, Barrier, BarrierSource, BatchDynamics, BatchGradient, BatchOutput, Bounds,
+    ControlAffine, Filtered, Shield, ShieldParams, SolvedBy, SolverChoice, Status,
 };
 
 use crate::automaton::PyAutomaton;
@@ -656,6 +656,73 @@ impl PyShield {
         self.batch_result(py, out, rows)
     }
 
+    /// Vector-Jacobian products of ``filter_batch(states, qs, a_rl)``: for ``grad_action``
+    /// ``(B, m)``, the upstream gradient ``dL/daction``, returns ``(grad_a_rl, grad_states,
+    /// flags)``: ``dL/da_rl`` ``(B, m)``, ``dL/dstates`` ``(B, n)`` (``None`` with
+    /// ``state_grad=False``) and a ``uint8`` per row, an OR of ``tlshield.GRAD_RELAXED``
+    /// (the relaxed QP was solved and differentiated), ``GRAD_FAILED`` (the step returned
+    /// ``a_rl``; identity gradient), ``GRAD_DEGENERATE`` (the active set changes here: the
+    /// one-sided derivative of the piece on which every tight row stays tight) and
+    /// ``GRAD_SINGULAR``. Each row is solved again as ``filter_batch`` solves it. Parallel
+    /// over rows with the GIL released. State gradients need a built-in model and
+    /// first-order rows (HOCBF rows raise ``ShieldError``).
+    #[pyo3(signature = (states, qs, a_rl, grad_action, drift=None, state_grad=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn vjp_batch<'py>(
+        &self,
+        py: Python<'py>,
+        states: &Bound<'py, PyAny>,
+        qs: &Bound<'py, PyAny>,
+        a_rl: &Bound<'py, PyAny>,
+        grad_action: &Bound<'py, PyAny>,
+        drift: Option<&Bound<'py, PyAny>>,
+        state_grad: bool,
+    ) -> PyResult<GradientTuple> {
+        let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
+        let grad = FloatArray::extract(grad_action, "grad_action", 2, "(B, m)")?;
+        let drift = drift
+            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
+            .transpose()?;
+        let qs = convert::states(qs, "qs", self.inner.automaton())?;
+        let (rows, n, m) = (states.shape()[0], states.shape()[1], self.inner.inputs());
+        for (what, got, want) in [
+            ("qs", vec![qs.len()], vec![rows]),
+            ("a_rl", a_rl.shape().to_vec(), vec![rows, m]),
+            ("grad_action", grad.shape().to_vec(), vec![rows, m]),
+        ]
+        .into_iter()
+        .chain(
+            drift
+                .as_ref()
+                .map(|d| ("drift", d.shape().to_vec(), vec![rows, n])),
+        ) {
+            if got != want {
+                return Err(PyValueError::new_err(format!(
+                    "vjp_batch: expected {what} {} for {rows} states, got {}",
+                    convert::shape_text(&want),
+                    convert::shape_text(&got)
+                )));
+            }
+        }
+        let evaluated = self.evaluate_rows(py, states.values())?;
+        let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+            f,
+            g,
+            jacobian: Some(j),
+        });
+        let (values, actions, grads) = (states.values(), a_rl.values(), grad.values());
+        let drift = drift.as_ref().map(|d| d.values());
+        let mut out = BatchGradient::default();
+        let shield = &self.inner;
+        map(py.detach(|| {
+            shield.vjp_batch(
+                values, n, &qs, actions, grads, dynamics, drift, state_grad, &mut out,
+            )
+        }))?;
+        gradient_tuple(py, out, rows, m, state_grad.then_some(n))
+    }
+
     /// Every user barrier's value ``h(s)`` by name (> 0 while it holds): how a step is
     /// measured when the environment reports no violation of its own.
     fn barrier_values<'py>(
@@ -751,4 +818,32 @@ impl PyShield {
             self.inner.inputs()
         )
     }
+}
+
+/// What ``vjp_batch`` returns: ``(grad_a_rl, grad_states or None, flags)``.
+type GradientTuple = (
+    Py<PyArray2<f64>>,
+    Option<Py<PyArray2<f64>>>,
+    Py<PyArray1<u8>>,
+);
+
+/// The gradient's arrays as numpy: `(rows, m)`, `(rows, n)` when `n` is given, `(rows,)`.
+fn gradient_tuple(
+    py: Python<'_>,
+    out: BatchGradient,
+    rows: usize,
+    m: usize,
+    n: Option<usize>,
+) -> PyResult<GradientTuple> {
+    let matrix = |v: Vec<f64>, cols: usize| {
+        numpy::ndarray::Array2::from_shape_vec((rows, cols), v)
+            .map(|a| a.into_pyarray(py).unbind())
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    };
+    let states = n.map(|n| matrix(out.states, n)).transpose()?;
+    Ok((
+        matrix(out.a_rl, m)?,
+        states,
+        out.flags.into_pyarray(py).unbind(),
+    ))
 }

@@ -18,7 +18,7 @@
 //! [`GRAD_SINGULAR`]): the gradient is always that of the action actually returned. A relaxed
 //! step is differentiated as the relaxed QP it solved; a failed step returned `a_rl`, whose
 //! gradient is the identity. At a point where the active set changes, the one-sided derivative
-//! of the piece on which the weakly active rows are inactive (see `sensitivity.rs`).
+//! of the piece on which every tight row stays tight (see `sensitivity.rs`).
 
 use rayon::prelude::*;
 use smallvec::SmallVec;
@@ -26,7 +26,6 @@ use smallvec::SmallVec;
 use super::{BatchDynamics, BatchRows, Shield, Status, Want, Workspace};
 use crate::error::{InputError, ShieldError};
 use crate::linalg::dot;
-use crate::monitor::MonitorBatch;
 use crate::predicate::{Center, Predicate};
 use crate::sensitivity::{QpAdjointSolver, Singular};
 use crate::validate::check_finite;
@@ -148,28 +147,6 @@ impl Shield {
         out.resize(qs.len(), self.m, if want_states { n } else { 0 })?;
         let rows = BatchRows::States { states, n, qs };
         self.gradient_rows(rows, a_rl, grad_action, dynamics, drift, out);
-        Ok(())
-    }
-
-    /// [`Shield::vjp_batch`] at the monitors' last states and FSA states (gradients with
-    /// respect to `a_rl` only: the states are not inputs here).
-    pub fn vjp_monitors(
-        &self,
-        batch: &MonitorBatch,
-        a_rl: &[f64],
-        grad_action: &[f64],
-        dynamics: Option<BatchDynamics<'_>>,
-        drift: Option<&[f64]>,
-        out: &mut BatchGradient,
-    ) -> Result<(), ShieldError> {
-        let rows = batch.monitors().len();
-        let n = self.check_monitor_batch(batch, a_rl, dynamics, drift)?;
-        self.check_gradient(grad_action, rows, false, dynamics.is_some())?;
-        out.resize(rows, self.m, 0)?;
-        if n.is_some() {
-            let rows = BatchRows::Monitors(batch.monitors());
-            self.gradient_rows(rows, a_rl, grad_action, dynamics, drift, out);
-        }
         Ok(())
     }
 
@@ -335,6 +312,7 @@ impl Shield {
         let cfg = &self.params;
         let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
         let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
+        let barriers = program.barriers();
         b.dx.clear();
         b.dx.resize(nv, 0.0);
         if cfg.use_cbf {
@@ -346,9 +324,13 @@ impl Shield {
         b.dh.resize(rows, 0.0);
         b.dg.resize(rows * nv, 0.0);
         let x = &solvers.solution.x;
+        // With delta_0 > 0, `d >= 0` is implied by the CLF row and the CLF box (delta_0 is their
+        // bound in closed form): tight with them at a corner of the box, but no kink.
+        let implied = (has_goal && program.delta_0 > 0.0).then_some(barriers + 1);
+        let z = &solvers.solution.z;
         match b
             .adjoint
-            .vjp(qp, x, &solvers.solution.z, &b.dx, &mut b.dh, &mut b.dg)
+            .vjp(qp, x, z, &b.dx, implied, &mut b.dh, &mut b.dg)
         {
             Err(Singular) => return flags | GRAD_SINGULAR,
             Ok(a) if a.degenerate => flags |= GRAD_DEGENERATE,
@@ -360,7 +342,6 @@ impl Shield {
         b.beta.resize(m, 0.0);
 
         // Barrier rows: h_b = r_b + L_b . a_rl, G_b = -L_b on the a_cbf and a_clf columns.
-        let barriers = program.barriers();
         let sources =
             cfg.barriers
                 .iter()

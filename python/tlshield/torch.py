@@ -1,0 +1,138 @@
+"""The shield as a differentiable PyTorch layer.
+
+``ShieldLayer(shield)`` maps RL actions to safe actions, ``layer(states, qs, a_rl)`` or
+``layer(monitors, a_rl)``, and its backward pass is the core's vector-Jacobian product
+(``Shield.vjp_batch``): exact, from the active rows of each solved QP, parallel over rows with
+the GIL released. Gradients flow to ``a_rl`` and, when ``states`` requires them, to the states
+(first-order rows and a built-in model; see ``Shield.vjp_batch``).
+
+Numbers: the core computes in float64. float32 and float64 tensors are accepted and the result
+has ``a_rl``'s dtype and device. CUDA tensors are copied to the host for the solve and the
+result is copied back (a device-to-host and a host-to-device copy per call, each way).
+
+The forward pass keeps a copy of the rows it solved (states, FSA states, ``a_rl``), so a
+backward pass after the monitors have moved on still differentiates the step taken. Each
+backward pass solves the rows again (about as long as the forward pass) rather than keeping
+solver state between the two calls.
+
+This module imports torch; ``import tlshield`` does not import it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from tlshield._core import FilterBatch, MonitorBatch, Shield
+
+__all__ = ["ShieldFunction", "ShieldLayer"]
+
+
+def _host(t: torch.Tensor | NDArray[Any] | Any, name: str) -> NDArray[np.float64]:
+    """A float64 host copy of a tensor (or an array as given)."""
+    if isinstance(t, torch.Tensor):
+        if not (t.is_floating_point()):
+            raise TypeError(f"{name}: expected a floating-point tensor, got {t.dtype}")
+        return t.detach().to("cpu", torch.float64).numpy()
+    return np.asarray(t, dtype=np.float64)
+
+
+def _qs(qs: Any) -> NDArray[np.int64]:
+    if isinstance(qs, torch.Tensor):
+        if qs.is_floating_point() or qs.is_complex():
+            raise TypeError(f"qs: expected an integer tensor, got {qs.dtype}")
+        return qs.detach().cpu().numpy().astype(np.int64)
+    return np.asarray(qs)
+
+
+class ShieldFunction(torch.autograd.Function):
+    """``safe = ShieldFunction.apply(a_rl, states, layer, qs, drift)``: the autograd function
+    behind :class:`ShieldLayer` (``states`` a float tensor, or None for monitors' rows)."""
+
+    @staticmethod
+    def forward(  # type: ignore[override]
+        ctx: Any,
+        a_rl: torch.Tensor,
+        states: torch.Tensor | None,
+        layer: ShieldLayer,
+        qs: NDArray[np.int64],
+        host_states: NDArray[np.float64],
+        drift: NDArray[np.float64] | None,
+    ) -> torch.Tensor:
+        a = _host(a_rl, "a_rl")
+        out = layer.shield.filter_batch(host_states, qs, a, drift)
+        layer.last = out
+        ctx.layer = layer
+        ctx.rows = (host_states, qs, a, drift)
+        return torch.from_numpy(np.ascontiguousarray(out.action)).to(a_rl.device, a_rl.dtype)
+
+    @staticmethod
+    def backward(  # type: ignore[override]
+        ctx: Any, grad: torch.Tensor
+    ) -> tuple[torch.Tensor | None, ...]:
+        layer: ShieldLayer = ctx.layer
+        host_states, qs, a, drift = ctx.rows
+        want_states = bool(ctx.needs_input_grad[1])
+        ga, gs, flags = layer.shield.vjp_batch(
+            host_states, qs, a, _host(grad, "grad"), drift, state_grad=want_states
+        )
+        layer.last_flags = flags
+        a_rl_grad = torch.from_numpy(ga).to(grad.device, grad.dtype)
+        states_grad = None
+        if want_states and gs is not None:
+            states_grad = torch.from_numpy(gs).to(grad.device, grad.dtype)
+        return a_rl_grad, states_grad, None, None, None, None
+
+
+class ShieldLayer(torch.nn.Module):
+    """A :class:`tlshield.Shield` as a layer: ``layer(states, qs, a_rl)`` (``states`` ``(B, n)``,
+    ``qs`` ``(B,)``, ``a_rl`` ``(B, m)``) or ``layer(monitors, a_rl)`` with a
+    :class:`tlshield.MonitorBatch`, returning the safe actions ``(B, m)``.
+
+    After a call, ``layer.last`` holds the forward pass's ``FilterBatch`` (status, corrections)
+    and, after a backward pass, ``layer.last_flags`` the per-row ``tlshield.GradFlag`` bits.
+    """
+
+    def __init__(self, shield: Shield) -> None:
+        super().__init__()
+        if not isinstance(shield, Shield):
+            raise TypeError(f"shield: expected a tlshield.Shield, got {type(shield).__name__}")
+        self.shield = shield
+        #: The ``FilterBatch`` of the last forward pass.
+        self.last: FilterBatch | None = None
+        #: The per-row gradient flags of the last backward pass.
+        self.last_flags: NDArray[np.uint8] | None = None
+
+    def forward(
+        self,
+        states: torch.Tensor | MonitorBatch,
+        qs: Any,
+        a_rl: torch.Tensor | None = None,
+        drift: torch.Tensor | NDArray[Any] | None = None,
+    ) -> torch.Tensor:
+        if isinstance(states, MonitorBatch):
+            if a_rl is not None:
+                raise TypeError(
+                    "ShieldLayer(monitors, a_rl): the monitors hold the states and the FSA "
+                    "states; pass the RL actions second"
+                )
+            monitors, a_rl = states, qs
+            if not isinstance(a_rl, torch.Tensor):
+                raise TypeError(f"a_rl: expected a tensor, got {type(a_rl).__name__}")
+            host_states, q = monitors.states, np.asarray(monitors.q)
+            states_t = None
+        else:
+            if a_rl is None:
+                raise TypeError("ShieldLayer(states, qs, a_rl): missing the RL actions a_rl")
+            if not isinstance(a_rl, torch.Tensor):
+                raise TypeError(f"a_rl: expected a tensor, got {type(a_rl).__name__}")
+            states_t = states if isinstance(states, torch.Tensor) else None
+            host_states, q = _host(states, "states"), _qs(qs)
+        d = None if drift is None else _host(drift, "drift")
+        return ShieldFunction.apply(a_rl, states_t, self, q, host_states, d)
+
+    def extra_repr(self) -> str:
+        return repr(self.shield)
