@@ -268,6 +268,11 @@ CASES: dict[str, Case] = {
     "Shield.filter_batch": Case(
         _shield, "filter_batch", {"states": STATES, "qs": QS, "a_rl": A_RL, "drift": DRIFT}
     ),
+    "Shield.vjp_batch": Case(
+        _shield,
+        "vjp_batch",
+        {"states": STATES, "qs": QS, "a_rl": A_RL, "grad_action": A_RL[::-1], "drift": DRIFT},
+    ),
     "Monitor.reset": Case(lambda: _core.Monitor(AUT, AUT.progress_reward()), "reset", {"s0": S}),
     "Monitor.advance": Case(_started_monitor, "advance", {"s_next": S}),
     "MonitorBatch.reset": Case(

@@ -22,6 +22,11 @@ def _restore(
 ) -> Any:
     """Rebuilds a pickled tlshield object (refuses a pickle of another version)."""
 
+GRAD_RELAXED: int
+GRAD_FAILED: int
+GRAD_DEGENERATE: int
+GRAD_SINGULAR: int
+
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""
 
@@ -268,6 +273,8 @@ class MonitorBatch:
     def advance(self, states: ArrayLike) -> TaskBatch: ...
     @property
     def q(self) -> NDArray[np.int64]: ...
+    @property
+    def states(self) -> NDArray[np.float64]: ...
     @property
     def automaton(self) -> Automaton: ...
     def __len__(self) -> int: ...
@@ -666,6 +673,17 @@ class Shield:
     def filter_batch(
         self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike, drift: ArrayLike | None = None
     ) -> FilterBatch: ...
+    def vjp_batch(
+        self,
+        states: ArrayLike,
+        qs: ArrayLike,
+        a_rl: ArrayLike,
+        grad_action: ArrayLike,
+        drift: ArrayLike | None = None,
+        state_grad: bool = True,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.uint8]]:
+        """``(dL/da_rl, dL/dstates or None, flags)`` of ``filter_batch`` for ``grad_action``
+        ``= dL/daction`` (B, m); flags are ``tlshield.GradFlag`` bits."""
     def barrier_values(self, s: ArrayLike) -> dict[str, float]:
         """Every user barrier's value ``h(s)`` by name (> 0 while it holds)."""
     @property
