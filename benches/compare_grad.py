@@ -183,8 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def problems(n: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
         rows = [
-            build_rows(task, structure, params, states[i], int(qs[i]), actions[i])
-            for i in range(n)
+            build_rows(task, structure, params, states[i], int(qs[i]), actions[i]) for i in range(n)
         ]
         return qp_data(rows, actions[:n], params), actions[:n]
 

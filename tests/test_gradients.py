@@ -216,7 +216,11 @@ def test_layer_dtypes_and_what_it_returns() -> None:
     np.testing.assert_allclose(out.detach().numpy(), want.action, rtol=1e-6, atol=1e-6)
     out.sum().backward()
     assert a32.grad is not None and a32.grad.dtype == torch.float32
-    assert layer.last is not None and layer.last.status.shape == (16,)
+    assert layer.last_flags is not None and layer.last_flags.shape == (16,)
+    with torch.no_grad():  # no gradient wanted: the plain batch call
+        np.testing.assert_array_equal(
+            layer(torch.tensor(s), q, torch.tensor(a)).numpy(), shield.filter_batch(s, q, a).action
+        )
     with pytest.raises(TypeError, match="a_rl"):
         layer(torch.tensor(s), q)
     with pytest.raises(TypeError, match="shield"):
@@ -323,6 +327,25 @@ def test_state_gradients_are_refused_where_they_are_not_available() -> None:
         plain.vjp_batch(s, q, a, np.ones((4, 3)))
     with pytest.raises(ValueError, match="qs"):
         plain.vjp_batch(s, q[:2], a, np.ones_like(a))
+
+
+def test_jacobian_batch_is_the_vjps_of_unit_vectors() -> None:
+    """jacobian_batch's rows are vjp_batch with the unit vectors, and its actions are
+    filter_batch's, on the env's shield with drift."""
+    shield = task_shield()
+    s, q, a = _layer_rows(shield, 48, 8)
+    drift = np.random.default_rng(8).normal(scale=0.2, size=s.shape) * (np.arange(13) >= 9)
+    action, jac_a, jac_s, flags = shield.jacobian_batch(s, q, a, drift)
+    np.testing.assert_array_equal(action, shield.filter_batch(s, q, a, drift).action)
+    assert jac_a.shape == (48, 2, 2) and jac_s is not None and jac_s.shape == (48, 2, 13)
+    for k in range(2):
+        unit = np.zeros_like(a)
+        unit[:, k] = 1.0
+        ga, gs, f = shield.vjp_batch(s, q, a, unit, drift)
+        np.testing.assert_array_equal(jac_a[:, k], ga)
+        np.testing.assert_array_equal(jac_s[:, k], gs)
+        np.testing.assert_array_equal(f, flags)
+    assert shield.jacobian_batch(s, q, a, state_grad=False)[2] is None
 
 
 def test_import_tlshield_still_loads_no_torch() -> None:

@@ -273,6 +273,9 @@ CASES: dict[str, Case] = {
         "vjp_batch",
         {"states": STATES, "qs": QS, "a_rl": A_RL, "grad_action": A_RL[::-1], "drift": DRIFT},
     ),
+    "Shield.jacobian_batch": Case(
+        _shield, "jacobian_batch", {"states": STATES, "qs": QS, "a_rl": A_RL, "drift": DRIFT}
+    ),
     "Monitor.reset": Case(lambda: _core.Monitor(AUT, AUT.progress_reward()), "reset", {"s0": S}),
     "Monitor.advance": Case(_started_monitor, "advance", {"s_next": S}),
     "MonitorBatch.reset": Case(

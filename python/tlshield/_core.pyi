@@ -684,6 +684,18 @@ class Shield:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.uint8]]:
         """``(dL/da_rl, dL/dstates or None, flags)`` of ``filter_batch`` for ``grad_action``
         ``= dL/daction`` (B, m); flags are ``tlshield.GradFlag`` bits."""
+    def jacobian_batch(
+        self,
+        states: ArrayLike,
+        qs: ArrayLike,
+        a_rl: ArrayLike,
+        drift: ArrayLike | None = None,
+        state_grad: bool = True,
+    ) -> tuple[
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.uint8]
+    ]:
+        """``(action, d action/d a_rl (B, m, m), d action/d states (B, m, n) or None, flags)``
+        of ``filter_batch`` in one pass."""
     def barrier_values(self, s: ArrayLike) -> dict[str, float]:
         """Every user barrier's value ``h(s)`` by name (> 0 while it holds)."""
     @property

@@ -1,19 +1,19 @@
 """The shield as a differentiable PyTorch layer.
 
 ``ShieldLayer(shield)`` maps RL actions to safe actions, ``layer(states, qs, a_rl)`` or
-``layer(monitors, a_rl)``, and its backward pass is the core's vector-Jacobian product
-(``Shield.vjp_batch``): exact, from the active rows of each solved QP, parallel over rows with
-the GIL released. Gradients flow to ``a_rl`` and, when ``states`` requires them, to the states
-(first-order rows and a built-in model; see ``Shield.vjp_batch``).
+``layer(monitors, a_rl)``. When a gradient is wanted, the forward pass asks the core for the
+actions and their Jacobians in one pass (``Shield.jacobian_batch``: exact, from the active rows
+of each solved QP, parallel over rows with the GIL released), and the backward pass is a
+batched product with them. Gradients flow to ``a_rl`` and, when ``states`` requires them, to
+the states (first-order rows and a built-in model; see ``Shield.vjp_batch``). Without a
+gradient (``torch.no_grad()``, or nothing requiring one) the forward pass is ``filter_batch``.
 
 Numbers: the core computes in float64. float32 and float64 tensors are accepted and the result
 has ``a_rl``'s dtype and device. CUDA tensors are copied to the host for the solve and the
 result is copied back (a device-to-host and a host-to-device copy per call, each way).
 
-The forward pass keeps a copy of the rows it solved (states, FSA states, ``a_rl``), so a
-backward pass after the monitors have moved on still differentiates the step taken. Each
-backward pass solves the rows again (about as long as the forward pass) rather than keeping
-solver state between the two calls.
+The forward pass keeps the Jacobians of the rows it solved, so a backward pass after the
+monitors have moved on still differentiates the step taken.
 
 This module imports torch; ``import tlshield`` does not import it.
 """
@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from tlshield._core import FilterBatch, MonitorBatch, Shield
+from tlshield._core import MonitorBatch, Shield
 
 __all__ = ["ShieldFunction", "ShieldLayer"]
 
@@ -49,8 +49,9 @@ def _qs(qs: Any) -> NDArray[np.int64]:
 
 
 class ShieldFunction(torch.autograd.Function):
-    """``safe = ShieldFunction.apply(a_rl, states, layer, qs, drift)``: the autograd function
-    behind :class:`ShieldLayer` (``states`` a float tensor, or None for monitors' rows)."""
+    """``safe = ShieldFunction.apply(a_rl, states, layer, qs, host_states, drift)``: the
+    autograd function behind :class:`ShieldLayer` (``states`` a float tensor, or None for
+    monitors' rows; ``host_states`` their float64 host copy)."""
 
     @staticmethod
     def forward(  # type: ignore[override]
@@ -63,27 +64,33 @@ class ShieldFunction(torch.autograd.Function):
         drift: NDArray[np.float64] | None,
     ) -> torch.Tensor:
         a = _host(a_rl, "a_rl")
-        out = layer.shield.filter_batch(host_states, qs, a, drift)
-        layer.last = out
-        ctx.layer = layer
-        ctx.rows = (host_states, qs, a, drift)
-        return torch.from_numpy(np.ascontiguousarray(out.action)).to(a_rl.device, a_rl.dtype)
+        want_states = states is not None and states.requires_grad
+        if a_rl.requires_grad or want_states:
+            action, jac_a, jac_s, flags = layer.shield.jacobian_batch(
+                host_states, qs, a, drift, state_grad=want_states
+            )
+            layer.last_flags = flags
+            ctx.jacobians = (jac_a, jac_s)
+        else:
+            action = layer.shield.filter_batch(host_states, qs, a, drift).action
+            ctx.jacobians = None
+        return torch.from_numpy(action).to(a_rl.device, a_rl.dtype)
 
     @staticmethod
     def backward(  # type: ignore[override]
         ctx: Any, grad: torch.Tensor
     ) -> tuple[torch.Tensor | None, ...]:
-        layer: ShieldLayer = ctx.layer
-        host_states, qs, a, drift = ctx.rows
-        want_states = bool(ctx.needs_input_grad[1])
-        ga, gs, flags = layer.shield.vjp_batch(
-            host_states, qs, a, _host(grad, "grad"), drift, state_grad=want_states
-        )
-        layer.last_flags = flags
-        a_rl_grad = torch.from_numpy(ga).to(grad.device, grad.dtype)
+        jac_a, jac_s = ctx.jacobians
+        # dL/da_rl_j = sum_k dL/da_k * da_k/da_rl_j, per row (and likewise for the states).
+        g = grad.detach().to("cpu", torch.float64).unsqueeze(1)
+        a_rl_grad = None
+        if ctx.needs_input_grad[0]:
+            a_rl_grad = torch.bmm(g, torch.from_numpy(jac_a)).squeeze(1).to(grad.device, grad.dtype)
         states_grad = None
-        if want_states and gs is not None:
-            states_grad = torch.from_numpy(gs).to(grad.device, grad.dtype)
+        if ctx.needs_input_grad[1] and jac_s is not None:
+            states_grad = (
+                torch.bmm(g, torch.from_numpy(jac_s)).squeeze(1).to(grad.device, grad.dtype)
+            )
         return a_rl_grad, states_grad, None, None, None, None
 
 
@@ -92,8 +99,8 @@ class ShieldLayer(torch.nn.Module):
     ``qs`` ``(B,)``, ``a_rl`` ``(B, m)``) or ``layer(monitors, a_rl)`` with a
     :class:`tlshield.MonitorBatch`, returning the safe actions ``(B, m)``.
 
-    After a call, ``layer.last`` holds the forward pass's ``FilterBatch`` (status, corrections)
-    and, after a backward pass, ``layer.last_flags`` the per-row ``tlshield.GradFlag`` bits.
+    After a forward pass that computed gradients, ``layer.last_flags`` holds the per-row
+    ``tlshield.GradFlag`` bits (0: an exact two-sided gradient of a step solved as posed).
     """
 
     def __init__(self, shield: Shield) -> None:
@@ -101,9 +108,7 @@ class ShieldLayer(torch.nn.Module):
         if not isinstance(shield, Shield):
             raise TypeError(f"shield: expected a tlshield.Shield, got {type(shield).__name__}")
         self.shield = shield
-        #: The ``FilterBatch`` of the last forward pass.
-        self.last: FilterBatch | None = None
-        #: The per-row gradient flags of the last backward pass.
+        #: The per-row gradient flags of the last forward pass that computed gradients.
         self.last_flags: NDArray[np.uint8] | None = None
 
     def forward(

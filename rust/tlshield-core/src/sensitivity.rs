@@ -81,7 +81,8 @@ impl QpAdjointSolver {
     /// `dh = dL/dh` (length rows) and `dg = dL/dG` (rows x n, row-major) for `dx = dL/dx` at
     /// the solution `x` with multipliers `z` (`z >= 0`, as [`crate::qp::QpSolution`] gives
     /// them). `implied` names a row the others imply whenever it is tight (see the module
-    /// docs). The slices must have the problem's sizes.
+    /// docs). The slices must have the problem's sizes. [`factor`](Self::factor) then
+    /// [`apply`](Self::apply), for one upstream gradient.
     #[allow(clippy::too_many_arguments)]
     pub fn vjp(
         &mut self,
@@ -93,11 +94,22 @@ impl QpAdjointSolver {
         dh: &mut [f64],
         dg: &mut [f64],
     ) -> Result<Adjoint, Singular> {
+        let adjoint = self.factor(qp, x, z, implied)?;
+        self.apply(qp, x, dx, dh, dg);
+        Ok(adjoint)
+    }
+
+    /// Chooses the active rows at the solution `x` (multipliers `z`) and factors their KKT
+    /// system, for any number of [`apply`](Self::apply) calls.
+    pub fn factor(
+        &mut self,
+        qp: &DenseQp,
+        x: &[f64],
+        z: &[f64],
+        implied: Option<usize>,
+    ) -> Result<Adjoint, Singular> {
         let (n, rows) = (qp.vars(), qp.rows());
-        debug_assert!(x.len() == n && dx.len() == n && z.len() == rows);
-        debug_assert!(dh.len() == rows && dg.len() == rows * n);
-        dh.fill(0.0);
-        dg.fill(0.0);
+        debug_assert!(x.len() == n && z.len() == rows);
         let mut adjoint = Adjoint::default();
         let zmax = z.iter().fold(1.0_f64, |a, &b| a.max(b));
         let ztol = MULTIPLIER_TOL * zmax;
@@ -163,7 +175,7 @@ impl QpAdjointSolver {
                 self.kkt[j * d + n + k] = g;
             }
         }
-        self.factor(d)?;
+        self.factor_kkt(d)?;
         self.sol.clear();
         self.sol.extend(qp.c.iter().map(|c| -c));
         self.sol.extend(self.active.iter().map(|&i| qp.h[i]));
@@ -172,11 +184,21 @@ impl QpAdjointSolver {
         self.multipliers.extend_from_slice(&self.sol[n..]);
         let lmax = self.multipliers.iter().fold(1.0_f64, |a, &b| a.max(b));
         adjoint.degenerate |= self.multipliers.iter().any(|&l| l <= MULTIPLIER_TOL * lmax);
+        Ok(adjoint)
+    }
+
+    /// `dh = dL/dh` and `dg = dL/dG` for `dx = dL/dx` with the factors of the last
+    /// [`factor`](Self::factor) (same problem and solution).
+    pub fn apply(&mut self, qp: &DenseQp, x: &[f64], dx: &[f64], dh: &mut [f64], dg: &mut [f64]) {
+        let n = qp.vars();
+        debug_assert!(dx.len() == n && dh.len() == qp.rows() && dg.len() == qp.rows() * n);
+        dh.fill(0.0);
+        dg.fill(0.0);
+        let d = n + self.active.len();
         self.sol.clear();
         self.sol.extend_from_slice(dx);
         self.sol.resize(d, 0.0);
         self.solve(d);
-
         let (w, omega) = self.sol.split_at(n);
         for (k, &i) in self.active.iter().enumerate() {
             dh[i] = omega[k];
@@ -184,11 +206,10 @@ impl QpAdjointSolver {
                 dg[i * n + j] = -(self.multipliers[k] * w[j] + omega[k] * x[j]);
             }
         }
-        Ok(adjoint)
     }
 
     /// LU factors of the d x d `kkt` with partial pivoting, in place.
-    fn factor(&mut self, d: usize) -> Result<(), Singular> {
+    fn factor_kkt(&mut self, d: usize) -> Result<(), Singular> {
         let a = &mut self.kkt;
         let scale = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if scale == 0.0 && d > 0 {
@@ -222,7 +243,7 @@ impl QpAdjointSolver {
         Ok(())
     }
 
-    /// `sol <- kkt^{-1} sol` with the factors of [`factor`](Self::factor).
+    /// `sol <- kkt^{-1} sol` with the factors of [`factor_kkt`](Self::factor_kkt).
     fn solve(&mut self, d: usize) {
         let a = &self.kkt;
         // The factors are of P K (whole rows were swapped): permute, then L, then U.

@@ -40,23 +40,73 @@ pub const GRAD_DEGENERATE: u8 = 4;
 /// gradient (`da/da_rl` through `a_rl` itself) is returned.
 pub const GRAD_SINGULAR: u8 = 8;
 
-/// Gradients of a batch: `a_rl` `(B, m)`, `states` `(B, n)` (empty when not asked for) and a
-/// flag byte per row (`GRAD_*`).
+/// Gradients of a batch. From [`Shield::vjp_batch`]: `a_rl` `(B, m)`, `states` `(B, n)`
+/// (empty when not asked for). From [`Shield::jacobian_batch`]: the Jacobians, `a_rl`
+/// `(B, m, m)` with `[b, k, j] = da_k / da_rl_j` and `states` `(B, m, n)`, and the actions
+/// `(B, m)`. A flag byte per row (`GRAD_*`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BatchGradient {
-    /// `dL/da_rl`, row-major `(B, m)`.
+    /// `dL/da_rl` `(B, m)`, or the Jacobian `(B, m, m)`; row-major.
     pub a_rl: Vec<f64>,
-    /// `dL/ds`, row-major `(B, n)`, or empty.
+    /// `dL/ds` `(B, n)`, or the Jacobian `(B, m, n)`; row-major; empty when not asked for.
     pub states: Vec<f64>,
+    /// The shielded actions `(B, m)` ([`Shield::jacobian_batch`] only; empty otherwise).
+    pub action: Vec<f64>,
     /// Per row, an OR of `GRAD_*` flags (0: an exact two-sided gradient of a solved step).
     pub flags: Vec<u8>,
 }
 
 impl BatchGradient {
-    fn resize(&mut self, rows: usize, m: usize, n: usize) -> Result<(), InputError> {
-        crate::alloc::try_resize(&mut self.a_rl, "rows", rows * m, 0.0)?;
-        crate::alloc::try_resize(&mut self.states, "rows", rows * n, 0.0)?;
+    fn resize(
+        &mut self,
+        rows: usize,
+        k: usize,
+        m: usize,
+        n: usize,
+        action: bool,
+    ) -> Result<(), InputError> {
+        crate::alloc::try_resize(&mut self.a_rl, "rows", rows * k * m, 0.0)?;
+        crate::alloc::try_resize(&mut self.states, "rows", rows * k * n, 0.0)?;
+        crate::alloc::try_resize(
+            &mut self.action,
+            "rows",
+            if action { rows * m } else { 0 },
+            0.0,
+        )?;
         crate::alloc::try_resize(&mut self.flags, "rows", rows, 0)
+    }
+}
+
+/// The upstream gradients of each row.
+#[derive(Clone, Copy)]
+enum Cotangents<'a> {
+    /// One per row, `(B, m)` row-major (a vector-Jacobian product).
+    Given(&'a [f64]),
+    /// The unit vectors `e_1 .. e_m` (the Jacobian's rows).
+    Identity,
+}
+
+impl<'a> Cotangents<'a> {
+    fn count(self, m: usize) -> usize {
+        match self {
+            Cotangents::Given(_) => 1,
+            Cotangents::Identity => m,
+        }
+    }
+
+    /// Upstream gradient `j` of row `row`, in `buf` when it has to be made.
+    fn get<'b>(self, row: usize, j: usize, m: usize, buf: &'b mut [f64; 16]) -> &'b [f64]
+    where
+        'a: 'b,
+    {
+        match self {
+            Cotangents::Given(v) => &v[row * m..(row + 1) * m],
+            Cotangents::Identity => {
+                buf[..m].fill(0.0);
+                buf[j] = 1.0;
+                &buf[..m]
+            }
+        }
     }
 }
 
@@ -143,20 +193,55 @@ impl Shield {
         out: &mut BatchGradient,
     ) -> Result<(), ShieldError> {
         self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
-        self.check_gradient(grad_action, qs.len(), want_states, dynamics.is_some())?;
-        out.resize(qs.len(), self.m, if want_states { n } else { 0 })?;
+        self.check_gradient(Some(grad_action), qs.len(), want_states, dynamics.is_some())?;
+        out.resize(qs.len(), 1, self.m, if want_states { n } else { 0 }, false)?;
         let rows = BatchRows::States { states, n, qs };
-        self.gradient_rows(rows, a_rl, grad_action, dynamics, drift, out);
+        let cotangents = Cotangents::Given(grad_action);
+        self.gradient_rows(rows, a_rl, cotangents, dynamics, drift, out);
+        Ok(())
+    }
+
+    /// The shielded actions of [`Shield::filter_batch`] and their Jacobians in one pass (one QP
+    /// solve and one factorisation per row): `out.action` `(B, m)`, `out.a_rl` `(B, m, m)` and,
+    /// with `want_states`, `out.states` `(B, m, n)`; `[b, k, .]` is the gradient of action
+    /// component `k`. A layer's backward pass is then a product with the upstream gradient.
+    #[allow(clippy::too_many_arguments)]
+    pub fn jacobian_batch(
+        &self,
+        states: &[f64],
+        n: usize,
+        qs: &[usize],
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+        want_states: bool,
+        out: &mut BatchGradient,
+    ) -> Result<(), ShieldError> {
+        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
+        self.check_gradient(None, qs.len(), want_states, dynamics.is_some())?;
+        let m = self.m;
+        out.resize(qs.len(), m, m, if want_states { n } else { 0 }, true)?;
+        let rows = BatchRows::States { states, n, qs };
+        self.gradient_rows(rows, a_rl, Cotangents::Identity, dynamics, drift, out);
         Ok(())
     }
 
     fn check_gradient(
         &self,
-        grad_action: &[f64],
+        grad_action: Option<&[f64]>,
         rows: usize,
         want_states: bool,
         custom_rows: bool,
     ) -> Result<(), ShieldError> {
+        if self.m > 16 {
+            return Err(ShieldError::Config(format!(
+                "gradients: at most 16 inputs are supported, the shield has {}",
+                self.m
+            )));
+        }
+        let Some(grad_action) = grad_action else {
+            return self.check_state_gradient(want_states, custom_rows);
+        };
         if grad_action.len() != rows * self.m {
             return Err(InputError::Shape {
                 what: "grad_action".into(),
@@ -166,59 +251,88 @@ impl Shield {
             .into());
         }
         check_finite("grad_action", grad_action, self.m)?;
+        self.check_state_gradient(want_states, custom_rows)
+    }
+
+    fn check_state_gradient(
+        &self,
+        want_states: bool,
+        custom_rows: bool,
+    ) -> Result<(), ShieldError> {
         match want_states.then(|| self.state_gradient_refusal(custom_rows)) {
             Some(Some(why)) => Err(ShieldError::Config(why)),
             _ => Ok(()),
         }
     }
 
-    /// The rows of a validated gradient batch, in parallel chunks as [`Shield::filter_batch`].
+    /// The rows of a validated gradient batch, in parallel chunks as [`Shield::filter_batch`]:
+    /// per row, its `cotangents.count(m)` upstream gradients through one factorisation.
     fn gradient_rows(
         &self,
         rows: BatchRows<'_>,
         a_rl: &[f64],
-        grad_action: &[f64],
+        cotangents: Cotangents<'_>,
         dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         out: &mut BatchGradient,
     ) {
         let (m, n, len) = (self.m, rows.state_len(), rows.len());
+        let k = cotangents.count(m);
         let sn = if out.states.is_empty() { 0 } else { n };
+        let with_action = !out.action.is_empty();
         let run = |threads: usize, out: &mut BatchGradient| {
             let chunk = len.div_ceil(threads).max(1);
+            let actions: SmallVec<[Option<&mut [f64]>; 8]> = match with_action {
+                true => out.action.chunks_mut(chunk * m).map(Some).collect(),
+                false => SmallVec::new(),
+            };
+            let states: SmallVec<[Option<&mut [f64]>; 8]> = match sn {
+                0 => SmallVec::new(),
+                _ => out.states.chunks_mut(chunk * k * sn).map(Some).collect(),
+            };
+            let mut actions = actions.into_iter();
+            let mut states = states.into_iter();
             let mut parts: SmallVec<[_; 8]> = out
                 .a_rl
-                .chunks_mut(chunk * m)
+                .chunks_mut(chunk * k * m)
                 .zip(out.flags.chunks_mut(chunk))
                 .enumerate()
-                .map(|(c, (a, f))| (c, a, f))
+                .map(|(c, (ga, f))| {
+                    let act = actions.next().flatten();
+                    let gs = states.next().flatten();
+                    (c, ga, f, act, gs)
+                })
                 .collect();
-            let mut state_parts: SmallVec<[&mut [f64]; 8]> = match sn {
-                0 => SmallVec::new(),
-                _ => out.states.chunks_mut(chunk * sn).collect(),
-            };
-            let mut joined: SmallVec<[_; 8]> = parts
-                .iter_mut()
-                .zip(
-                    state_parts
-                        .iter_mut()
-                        .map(Some)
-                        .chain(std::iter::repeat_with(|| None)),
-                )
-                .collect();
-            joined.par_iter_mut().for_each(|((c, ga, flags), gs)| {
+            parts.par_iter_mut().for_each(|(c, ga, flags, act, gs)| {
                 self.with_workspace(n, |ws| {
+                    let mut unit = [0.0; 16];
                     for i in 0..flags.len() {
                         let row = *c * chunk + i;
                         let (s, q, task) = rows.row(row);
                         let a = &a_rl[row * m..(row + 1) * m];
-                        let v = &grad_action[row * m..(row + 1) * m];
                         let d = drift.map(|d| &d[row * n..(row + 1) * n]);
                         let fg = dynamics.map(|x| x.row(row, n, m));
                         self.step(ws, s, q, a, fg, d, task, Want::Solution);
-                        let gs = gs.as_deref_mut().map(|g| &mut g[i * sn..(i + 1) * sn]);
-                        flags[i] =
-                            self.row_gradient(ws, s, q, a, v, &mut ga[i * m..(i + 1) * m], gs);
+                        if let Some(act) = act.as_deref_mut() {
+                            act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
+                        }
+                        let (mut f, ready) = self.row_factor(ws);
+                        for j in 0..k {
+                            let v = cotangents.get(row, j, m, &mut unit);
+                            let at = (i * k + j) * m;
+                            let ga = &mut ga[at..at + m];
+                            ga.copy_from_slice(v);
+                            let gs = gs.as_deref_mut().map(|g| {
+                                let at = (i * k + j) * sn;
+                                let g = &mut g[at..at + sn];
+                                g.fill(0.0);
+                                g
+                            });
+                            if ready {
+                                f |= self.row_chain(ws, s, q, a, v, ga, gs);
+                            }
+                        }
+                        flags[i] = f;
                     }
                 });
             });
@@ -274,10 +388,45 @@ impl Shield {
         kink
     }
 
-    /// The gradient of the step just taken in `ws`: `dL/da_rl` into `ga`, `dL/ds` into `gs`
-    /// (when asked); returns the row's flags.
+    /// Prepares the gradients of the step just taken in `ws`: the QP's active rows and their
+    /// factors. Returns the row's flags and whether the QP part applies (false: the gradient
+    /// is the identity, as for a failed step or one with nothing to correct).
+    fn row_factor(&self, ws: &mut Workspace) -> (u8, bool) {
+        let Workspace {
+            program,
+            qp,
+            solvers,
+            out,
+            grad: b,
+            ..
+        } = ws;
+        if out.status == Status::Failed {
+            return (GRAD_FAILED, false);
+        }
+        let flags = if out.status == Status::Solved {
+            0
+        } else {
+            GRAD_RELAXED
+        };
+        if program.vars() == 0 {
+            return (flags, false);
+        }
+        // With delta_0 > 0, `d >= 0` is implied by the CLF row and the CLF box (delta_0 is their
+        // bound in closed form): tight with them at a corner of the box, but no kink.
+        let implied = (program.has_goal && program.delta_0 > 0.0).then_some(program.barriers() + 1);
+        let (x, z) = (&solvers.solution.x, &solvers.solution.z);
+        match b.adjoint.factor(qp, x, z, implied) {
+            Err(Singular) => (flags | GRAD_SINGULAR, false),
+            Ok(a) if a.degenerate => (flags | GRAD_DEGENERATE, true),
+            Ok(_) => (flags, true),
+        }
+    }
+
+    /// One upstream gradient `v = dL/da` through the step prepared by [`Shield::row_factor`]:
+    /// `dL/da_rl` into `ga`, `dL/ds` into `gs` (when asked); returns flags it adds (a goal
+    /// that switches within the difference step, a CLF box tie).
     #[allow(clippy::too_many_arguments)]
-    fn row_gradient(
+    fn row_chain(
         &self,
         ws: &mut Workspace,
         s: &[f64],
@@ -287,28 +436,14 @@ impl Shield {
         ga: &mut [f64],
         mut gs: Option<&mut [f64]>,
     ) -> u8 {
-        ga.copy_from_slice(v);
-        if let Some(gs) = gs.as_deref_mut() {
-            gs.fill(0.0);
-        }
         let Workspace {
             program,
             qp,
             solvers,
-            out,
             grad: b,
+            ..
         } = ws;
-        if out.status == Status::Failed {
-            return GRAD_FAILED;
-        }
-        let mut flags = if out.status == Status::Solved {
-            0
-        } else {
-            GRAD_RELAXED
-        };
-        if program.vars() == 0 {
-            return flags;
-        }
+        let mut flags = 0;
         let cfg = &self.params;
         let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
         let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
@@ -324,18 +459,7 @@ impl Shield {
         b.dh.resize(rows, 0.0);
         b.dg.resize(rows * nv, 0.0);
         let x = &solvers.solution.x;
-        // With delta_0 > 0, `d >= 0` is implied by the CLF row and the CLF box (delta_0 is their
-        // bound in closed form): tight with them at a corner of the box, but no kink.
-        let implied = (has_goal && program.delta_0 > 0.0).then_some(barriers + 1);
-        let z = &solvers.solution.z;
-        match b
-            .adjoint
-            .vjp(qp, x, z, &b.dx, implied, &mut b.dh, &mut b.dg)
-        {
-            Err(Singular) => return flags | GRAD_SINGULAR,
-            Ok(a) if a.degenerate => flags |= GRAD_DEGENERATE,
-            Ok(_) => {}
-        }
+        b.adjoint.apply(qp, x, &b.dx, &mut b.dh, &mut b.dg);
         for buf in [&mut b.grad, &mut b.u, &mut b.hu, &mut b.tmp] {
             buf.resize(n, 0.0);
         }
@@ -534,6 +658,53 @@ mod tests {
                 m[i] -= eps;
                 let fd = (value(&sh, &p, q, &a, &v) - value(&sh, &m, q, &a, &v)) / (2.0 * eps);
                 prop_assert!((out.states[i] - fd).abs() < 1e-5 * (1.0 + fd.abs()), "s[{i}]: {} vs {fd}", out.states[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn jacobian_rows_are_the_vjps_of_unit_vectors() {
+        let sh = paper_shield(true, true);
+        let mut states = Vec::new();
+        let mut qs = Vec::new();
+        let mut actions = Vec::new();
+        for k in 0..40 {
+            let t = k as f64;
+            let mut s = vec![0.0; N];
+            s[0] = 0.1 * t + 0.7 * (t * 1.3).sin();
+            s[1] = 0.1 * t - 0.7 * (t * 1.3).sin();
+            s[2] = (t * 0.77).sin() * 3.0;
+            s[3..9].copy_from_slice(&[4.0, 4.0, 4.5, 6.5, 9.0, 9.0]);
+            s[9..13].copy_from_slice(&[20.0, 20.0, 20.0, -20.0]);
+            let q = sh
+                .automaton()
+                .read(&s)
+                .unwrap()
+                .step(sh.automaton().initial());
+            states.extend_from_slice(&s);
+            qs.push(q);
+            actions.extend_from_slice(&[3.0 * (t * 0.3).cos(), 2.0 * (t * 0.5).sin()]);
+        }
+        let mut jac = BatchGradient::default();
+        sh.jacobian_batch(&states, N, &qs, &actions, None, None, true, &mut jac)
+            .unwrap();
+        let mut filtered = crate::shield::BatchOutput::default();
+        sh.filter_batch(&states, N, &qs, &actions, None, &mut filtered)
+            .unwrap();
+        assert_eq!(jac.action, filtered.action);
+        for k in 0..2 {
+            let unit: Vec<f64> = (0..40)
+                .flat_map(|_| [f64::from(k == 0), f64::from(k == 1)])
+                .collect();
+            let mut vjp = BatchGradient::default();
+            sh.vjp_batch(&states, N, &qs, &actions, &unit, None, None, true, &mut vjp)
+                .unwrap();
+            assert_eq!(vjp.flags, jac.flags);
+            for b in 0..40 {
+                let row = (b * 2 + k) * 2;
+                assert_eq!(&jac.a_rl[row..row + 2], &vjp.a_rl[b * 2..b * 2 + 2]);
+                let row = (b * 2 + k) * N;
+                assert_eq!(&jac.states[row..row + N], &vjp.states[b * N..(b + 1) * N]);
             }
         }
     }
