@@ -128,6 +128,8 @@ pub(super) struct Buffers {
     /// the goals at `s +- step`.
     de: Vec<f64>,
     centres: Vec<usize>,
+    /// The CLF goal's Jacobian over `centres` (goal length x centres), per row.
+    goal_jac: Vec<f64>,
     shifted: Vec<f64>,
     plus: Vec<f64>,
     minus: Vec<f64>,
@@ -317,6 +319,12 @@ impl Shield {
                             act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
                         }
                         let (mut f, ready) = self.row_factor(ws);
+                        if ready && sn > 0 && ws.program.has_goal {
+                            let Workspace { program, grad, .. } = &mut *ws;
+                            if self.goal_jacobian(s, q, &program.goal, grad) {
+                                f |= GRAD_DEGENERATE;
+                            }
+                        }
                         for j in 0..k {
                             let v = cotangents.get(row, j, m, &mut unit);
                             let at = (i * k + j) * m;
@@ -329,7 +337,7 @@ impl Shield {
                                 g
                             });
                             if ready {
-                                f |= self.row_chain(ws, s, q, a, v, ga, gs);
+                                f |= self.row_chain(ws, s, a, v, ga, gs);
                             }
                         }
                         flags[i] = f;
@@ -344,46 +352,59 @@ impl Shield {
         }
     }
 
-    /// Adds `-sum_k de_k dgoal_k/ds_c` to `gs` for every centre dimension `c`, by central
-    /// differences of the goal (exact for a ball's centre, which is linear in the state).
-    /// Returns true when the goal changes its choice within the step (a kink: skipped).
-    fn goal_motion(
-        &self,
-        s: &[f64],
-        q: usize,
-        goal: &[f64],
-        b: &mut Buffers,
-        gs: &mut [f64],
-    ) -> bool {
+    /// The CLF goal's Jacobian over the centre dimensions (`b.goal_jac`, goal length x
+    /// `b.centres`), once per row. A goal that is a moving ball's centre moves with it
+    /// (exact); any other goal is differentiated by central differences of the automaton's
+    /// goal. Returns true when the goal changes its choice within the step (a kink).
+    fn goal_jacobian(&self, s: &[f64], q: usize, goal: &[f64], b: &mut Buffers) -> bool {
         b.centres.clear();
         for p in self.automaton.spec().predicates() {
             centre_dims(p, &mut b.centres);
         }
+        let (g, c) = (goal.len(), b.centres.len());
+        b.goal_jac.clear();
+        b.goal_jac.resize(g * c, 0.0);
+        if c == 0 {
+            return false;
+        }
+        // The centre of a ball read from the state: goal_k = s[dims_k].
+        for p in self.automaton.spec().predicates() {
+            if let Predicate::Ball(ball) = p {
+                if let Center::Dims(dims) = ball.center() {
+                    if dims.len() == g && dims.iter().zip(goal).all(|(&d, &x)| s[d] == x) {
+                        for (k, d) in dims.iter().enumerate() {
+                            let ci = b.centres.iter().position(|x| x == d).expect("collected");
+                            b.goal_jac[k * c + ci] = 1.0;
+                        }
+                        return false;
+                    }
+                }
+            }
+        }
         let mut kink = false;
-        for ci in 0..b.centres.len() {
-            let c = b.centres[ci];
-            let h = GOAL_STEP * (1.0 + s[c].abs());
+        for ci in 0..c {
+            let dim = b.centres[ci];
+            let h = GOAL_STEP * (1.0 + s[dim].abs());
             for (sign, into) in [(1.0, &mut b.plus), (-1.0, &mut b.minus)] {
                 b.shifted.clear();
                 b.shifted.extend_from_slice(s);
-                b.shifted[c] += sign * h;
+                b.shifted[dim] += sign * h;
                 if !self.automaton.read_validated(&b.shifted).goal(q, into) {
                     into.clear();
                 }
             }
-            if b.plus.len() != goal.len() || b.minus.len() != goal.len() {
+            if b.plus.len() != g || b.minus.len() != g {
                 kink = true;
                 continue;
             }
-            let mut dl = 0.0;
-            for (((&p, &g), &mm), &de) in b.plus.iter().zip(goal).zip(&b.minus).zip(&b.de) {
+            for (k, &x) in goal.iter().enumerate() {
+                let (p, mm) = (b.plus[k], b.minus[k]);
                 // A switch of goal within the step shows as a curvature far above rounding.
-                if (p - 2.0 * g + mm).abs() > 1e-4 * h.max((p - mm).abs()) {
+                if (p - 2.0 * x + mm).abs() > 1e-4 * h.max((p - mm).abs()) {
                     kink = true;
                 }
-                dl += de * (p - mm) / (2.0 * h);
+                b.goal_jac[k * c + ci] = (p - mm) / (2.0 * h);
             }
-            gs[c] -= dl;
         }
         kink
     }
@@ -430,7 +451,6 @@ impl Shield {
         &self,
         ws: &mut Workspace,
         s: &[f64],
-        q: usize,
         a_rl: &[f64],
         v: &[f64],
         ga: &mut [f64],
@@ -569,8 +589,12 @@ impl Shield {
                         2.0 * (v_weight * b.u[p] + lf_weight * program.f[p] + dot(gp, &b.beta)),
                     );
                 }
-                if self.goal_motion(s, q, &program.goal, b, gs) {
-                    flags |= GRAD_DEGENERATE;
+                // The goal's own motion (centres read from the state): e = s[pos] - goal(s).
+                let c = b.centres.len();
+                for (ci, &dim) in b.centres.iter().enumerate() {
+                    gs[dim] -= (0..b.de.len())
+                        .map(|k| b.de[k] * b.goal_jac[k * c + ci])
+                        .sum::<f64>();
                 }
             }
             next += 2;
