@@ -175,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     actions = np.array([a for _, a in steps])
     qs = np.array([aut.step(s, aut.initial) for s in states])
     solved = shield.filter_batch(states, qs, actions).status == tlshield.Status.SOLVED
-    has_goal = np.array([aut.goal(s, int(q)) is not None for s, q in zip(states, qs)])
+    has_goal = np.array([aut.goal(s, int(q)) is not None for s, q in zip(states, qs, strict=True)])
     keep = solved & has_goal
     states, actions, qs = states[keep], actions[keep], qs[keep]
     assert len(states) >= largest, len(states)

@@ -178,26 +178,30 @@ def run(seed: int, method: str, args: argparse.Namespace) -> dict[str, Any]:
 
 def ppo_rows(folder: Path) -> list[dict[str, Any]]:
     """Per seed of a ``tlshield reproduce --configs rl_cbf`` folder: kept and last success,
-    the last update's mean correction, env steps and wall time."""
+    the last update's mean correction, env steps, wall time and the validation curve."""
+    import csv
+
     rows = []
-    for run in sorted(folder.glob("runs/rl_cbf/seed_*")) or sorted(folder.glob("**/rl_cbf*seed*")):
+    for run in sorted(folder.glob("rl_cbf_s*")):
         record = json.loads((run / "run.json").read_text())
         kept = json.loads((run / "evaluation.json").read_text())
-        last_file = run / "last_evaluation.json"
-        last = json.loads(last_file.read_text()) if last_file.exists() else None
-        metrics = (
-            [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
-            if (run / "metrics.jsonl").exists()
-            else []
-        )
+        last = json.loads((run / "last_evaluation.json").read_text())
+        with open(run / "metrics.csv") as f:
+            metrics = list(csv.DictReader(f))
+        curve = [
+            (int(m["timesteps"]), float(m["validation_success"]))
+            for m in metrics
+            if m.get("validation_success") not in (None, "")
+        ]
         rows.append(
             {
                 "seed": record["seed"],
                 "kept": kept["success_rate"],
-                "last": None if last is None else last["success_rate"],
-                "mean_correction": metrics[-1].get("mean_correction") if metrics else None,
-                "env_steps": record.get("timesteps"),
-                "wall_s": record.get("wall_s"),
+                "last": last["success_rate"],
+                "mean_correction": float(metrics[-1]["mean_correction"]),
+                "env_steps": int(metrics[-1]["timesteps"]),
+                "wall_s": float(record["wall_time"]),
+                "curve": curve,
             }
         )
     return rows
@@ -235,24 +239,25 @@ def main(argv: list[str] | None = None) -> int:
         )
     )
     lines = [
-        f"At {commit}: `scripts/learning_through_shield.py --seeds {' '.join(map(str, args.seeds))}`"
-        f" (DAgger, {args.iterations} iterations of {args.envs} x {args.horizon} steps).",
+        f"At {commit}: `python scripts/learning_through_shield.py --seeds "
+        f"{' '.join(map(str, args.seeds))}` (DAgger, {args.iterations} iterations of "
+        f"{args.envs} envs x {args.horizon} steps; {args.trials} evaluation episodes, reset seeds "
+        f"10000-{10000 + args.trials - 1}, deployed under rl_cbf).",
         "",
-        "| method | seed | eval success (last policy) | kept / last (PPO) | collisions | mean correction | env steps | wall (s) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| method | seed | eval success (kept / last) | collisions | mean correction "
+        "| env steps | wall (s) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results:
         lines.append(
-            f"| {r['method']} | {r['seed']} | {r['success']:.2f} | - | {r['collisions']} "
-            f"| {r['mean_correction']:.3f} | {r['env_steps']:,} | {r['wall_s']:.0f} |"
+            f"| {r['method']} | {r['seed']} | {r['success']:.2f} (no selection) "
+            f"| {r['collisions']} | {r['mean_correction']:.3f} | {r['env_steps']:,} "
+            f"| {r['wall_s']:.0f} |"
         )
     for r in ppo:
-        last = "-" if r["last"] is None else f"{r['last']:.2f}"
-        corr = "-" if r["mean_correction"] is None else f"{r['mean_correction']:.3f}"
-        steps = "-" if r["env_steps"] is None else f"{r['env_steps']:,}"
-        wall = "-" if r["wall_s"] is None else f"{r['wall_s']:.0f}"
         lines.append(
-            f"| PPO default (rl_cbf) | {r['seed']} | - | {r['kept']:.2f} / {last} | - | {corr} | {steps} | {wall} |"
+            f"| PPO default (rl_cbf) | {r['seed']} | {r['kept']:.2f} / {r['last']:.2f} | - "
+            f"| {r['mean_correction']:.3f} | {r['env_steps']:,} | {r['wall_s']:.0f} |"
         )
     (args.out / "through_shield.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
@@ -269,12 +274,15 @@ def main(argv: list[str] | None = None) -> int:
         ys = [c["validation_success"] for c in r["curve"]]
         label = f"{r['method']}" if r["seed"] == args.seeds[0] else None
         ax.plot(xs, ys, marker="o", ms=3, color=colours[r["method"]], alpha=0.8, label=label)
+    for r in ppo:
+        xs, ys = zip(*r["curve"], strict=True) if r["curve"] else ((), ())
+        label = "PPO default (rl_cbf)" if r is ppo[0] else None
+        ax.plot(xs, ys, color="tab:gray", alpha=0.8, label=label)
+    ax.set_xscale("log")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("validation success (20 episodes)")
-    ax.set_title(
-        f"Channel-v0, deployed under rl_cbf: imitation through the shield (seeds {', '.join(map(str, args.seeds))})",
-        fontsize=9,
-    )
+    seeds = ", ".join(map(str, args.seeds))
+    ax.set_title(f"Channel-v0 under rl_cbf, seeds {seeds} (validation episodes)", fontsize=9)
     ax.set_ylim(-0.05, 1.05)
     ax.legend()
     ax.grid(alpha=0.3)
