@@ -13,11 +13,12 @@ deployed under the CBF alone (``rl_cbf``: safety guaranteed at deployment, no CL
 Each run: iteration 0 rolls out the expert, later iterations the student; every visited state is
 labelled with the expert's action and added to the data set, and the student is trained on all
 of it. The table's executed-action error is the mean squared distance between each student's
-deployed action (its ``a_rl`` through the CBF) and the expert's, over all the data gathered,
-the same measure for both. After every iteration the student runs 20 validation episodes (reset seeds
-``tlshield.seeds.validation_seed``). The policy of the last iteration is evaluated (no checkpoint
-selection) on the 100 evaluation episodes PPO's runs are evaluated on (reset seeds ``EVAL_SEED +
-i``, ``tlshield.evaluation.rollouts``). Training resets use ``tlshield.seeds.train_seed``.
+deployed action (its ``a_rl`` through the CBF) and the expert's, over all the data gathered, the
+same measure for both. After every iteration the student runs 20 validation episodes (reset
+seeds ``tlshield.seeds.validation_seed``). The policy of the last iteration is evaluated (no
+checkpoint selection) on the 100 evaluation episodes PPO's runs are evaluated on (reset seeds
+``EVAL_SEED + i``, ``tlshield.evaluation.rollouts``). Training resets use
+``tlshield.seeds.train_seed``.
 
 Run: ``.venv/bin/python scripts/learning_through_shield.py --seeds 0 1 2 --out DIR``
 (``--ppo DIR`` adds a ``tlshield reproduce --configs rl_cbf`` results folder to the table and the
