@@ -198,10 +198,11 @@ def ppo_rows(folder: Path) -> list[dict[str, Any]]:
         last = json.loads((run / "last_evaluation.json").read_text())
         with open(run / "metrics.csv") as f:
             metrics = list(csv.DictReader(f))
+        # Validation runs every few updates; the other rows hold nan.
         curve = [
             (int(m["timesteps"]), float(m["validation_success"]))
             for m in metrics
-            if m.get("validation_success") not in (None, "")
+            if m.get("validation_success") not in (None, "", "nan")
         ]
         rows.append(
             {
