@@ -45,7 +45,7 @@ docs:
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
 
 ## Benchmarks: criterion, then the Python comparisons (rtamt, argus; ltlf2dfa + mona; cvxpy,
-## clarabel).
+## clarabel; cbfpy; qpth and cvxpylayers).
 bench:
 	@EXTRAS=train,test,bench bash scripts/setup.sh
 	cargo bench -p tlshield-bench
@@ -53,6 +53,7 @@ bench:
 	$(BIN)/python benches/compare_automaton.py --install-mona
 	$(BIN)/python benches/compare_shield.py
 	$(BIN)/python benches/compare_cbfpy.py
+	$(BIN)/python benches/compare_grad.py
 
 ## Formatting and lints (rustfmt, clippy, rustdoc, ruff, stubtest).
 lint:

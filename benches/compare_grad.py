@@ -239,6 +239,26 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return call
 
+    def run_core(n: int) -> Callable[[], np.ndarray]:
+        """The core alone, from numpy: actions and Jacobians, then the product."""
+        s, q, a, v = states[:n], qs[:n], actions[:n], upstream[:n]
+
+        def call() -> np.ndarray:
+            _, jac, _, _ = shield.jacobian_batch(s, q, a, state_grad=False)
+            return np.einsum("bk,bkj->bj", v, jac)
+
+        return call
+
+    def run_torch_floor(n: int) -> Callable[[], None]:
+        """torch's own cost of a call: a trivial differentiable map, forward and backward."""
+        v = torch.from_numpy(upstream[:n])
+
+        def call() -> None:
+            a = torch.tensor(actions[:n], requires_grad=True)
+            ((a * 2.0) * v).sum().backward()
+
+        return call
+
     runners = {"qpth": run_qpth, "cvxpylayers": run_cvxpylayers}
 
     # --- agreement on one batch ----------------------------------------------------------------
@@ -274,6 +294,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for n in batches:
         base = percentiles(run_tlshield(n), budget, 20)
         line = {"B": n, "tlshield": base}
+        line["core"] = percentiles(run_core(n), budget / 2, 20)
+        line["floor"] = percentiles(run_torch_floor(n), budget / 2, 20)
         for name, make in runners.items():
             reps = 5 if n >= 1024 else 10
             line[name] = percentiles(make(n), budget, reps)
@@ -304,6 +326,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"| {qp[0] * 1e3:.1f} / {qp[1] * 1e3:.1f} | {cv[0] * 1e3:.1f} / {cv[1] * 1e3:.1f} "
             f"| {qp[0] / t[0]:,.0f}x / {qp[1] / t[1]:,.0f}x "
             f"| {cv[0] / t[0]:,.0f}x / {cv[1] / t[1]:,.0f}x |"
+        )
+    print()
+    print(
+        "Where tlshield's time goes: the core alone (`jacobian_batch` from numpy and the "
+        "product) and torch's own cost of any differentiable call (a trivial map, forward and "
+        "backward), p50 / p99 in ms:"
+    )
+    print()
+    print("| batch | core alone | torch floor | the layer |")
+    print("|---:|---:|---:|---:|")
+    for line in rows_out:
+        c, f, t = line["core"], line["floor"], line["tlshield"]
+        print(
+            f"| {line['B']:,} | {c[0] * 1e3:.3f} / {c[1] * 1e3:.3f} "
+            f"| {f[0] * 1e3:.3f} / {f[1] * 1e3:.3f} | {t[0] * 1e3:.3f} / {t[1] * 1e3:.3f} |"
         )
     print()
     print(

@@ -19,6 +19,7 @@ MODULES = (
     "tlshield.wrappers",
     "tlshield.vector",
     "tlshield.sb3",
+    "tlshield.torch",
     "tlshield.envs",
     "tlshield.envs.channel",
     "tlshield.envs.channel_task",

@@ -209,6 +209,7 @@ def ppo_rows(folder: Path) -> list[dict[str, Any]]:
                 "seed": record["seed"],
                 "kept": kept["success_rate"],
                 "last": last["success_rate"],
+                "collisions": kept["collisions"],
                 "mean_correction": float(metrics[-1]["mean_correction"]),
                 "env_steps": int(metrics[-1]["timesteps"]),
                 "wall_s": float(record["wall_time"]),
@@ -267,7 +268,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     for r in ppo:
         lines.append(
-            f"| PPO default (rl_cbf) | {r['seed']} | {r['kept']:.2f} / {r['last']:.2f} | - "
+            f"| PPO default (rl_cbf) | {r['seed']} | {r['kept']:.2f} / {r['last']:.2f} "
+            f"| {r['collisions']} "
             f"| {r['mean_correction']:.3f} | - | {r['env_steps']:,} | {r['wall_s']:.0f} |"
         )
     (args.out / "through_shield.md").write_text("\n".join(lines) + "\n")

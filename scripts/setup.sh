@@ -20,3 +20,9 @@ fi
 echo "==> installing tlshield[$EXTRAS] into $VENV (builds the Rust extension)"
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
 "$VENV/bin/python" -m pip install --quiet --editable ".[$EXTRAS]"
+# qpth (a baseline of benches/compare_grad.py) pins numpy<2 in its metadata although it runs on
+# numpy 2; installed without dependencies (torch and numpy come with the train extra) so that
+# it does not downgrade numpy.
+if [[ ",$EXTRAS," == *",bench,"* ]]; then
+    "$VENV/bin/python" -m pip install --quiet --no-deps "qpth==0.0.18"
+fi

@@ -32,12 +32,22 @@ __all__ = ["ShieldFunction", "ShieldLayer"]
 
 
 def _host(t: torch.Tensor | NDArray[Any] | Any, name: str) -> NDArray[np.float64]:
-    """A float64 host copy of a tensor (or an array as given)."""
+    """Float64 host values of a tensor (a view when it already is one), or an array as given."""
     if isinstance(t, torch.Tensor):
-        if not (t.is_floating_point()):
+        if not t.is_floating_point():
             raise TypeError(f"{name}: expected a floating-point tensor, got {t.dtype}")
-        return t.detach().to("cpu", torch.float64).numpy()
+        if t.dtype != torch.float64 or t.device.type != "cpu":
+            t = t.detach().to("cpu", torch.float64)
+        return t.detach().numpy()
     return np.asarray(t, dtype=np.float64)
+
+
+def _like(values: NDArray[np.float64], like: torch.Tensor) -> torch.Tensor:
+    """``values`` as a tensor with ``like``'s dtype and device (no copy when they match)."""
+    out = torch.from_numpy(values)
+    if like.dtype != torch.float64 or like.device.type != "cpu":
+        out = out.to(like.device, like.dtype)
+    return out
 
 
 def _qs(qs: Any) -> NDArray[np.int64]:
@@ -74,7 +84,7 @@ class ShieldFunction(torch.autograd.Function):
         else:
             action = layer.shield.filter_batch(host_states, qs, a, drift).action
             ctx.jacobians = None
-        return torch.from_numpy(action).to(a_rl.device, a_rl.dtype)
+        return _like(action, a_rl)
 
     @staticmethod
     def backward(  # type: ignore[override]
@@ -82,15 +92,13 @@ class ShieldFunction(torch.autograd.Function):
     ) -> tuple[torch.Tensor | None, ...]:
         jac_a, jac_s = ctx.jacobians
         # dL/da_rl_j = sum_k dL/da_k * da_k/da_rl_j, per row (and likewise for the states).
-        g = grad.detach().to("cpu", torch.float64).unsqueeze(1)
+        g = _host(grad, "grad")
         a_rl_grad = None
         if ctx.needs_input_grad[0]:
-            a_rl_grad = torch.bmm(g, torch.from_numpy(jac_a)).squeeze(1).to(grad.device, grad.dtype)
+            a_rl_grad = _like(np.einsum("bk,bkj->bj", g, jac_a), grad)
         states_grad = None
         if ctx.needs_input_grad[1] and jac_s is not None:
-            states_grad = (
-                torch.bmm(g, torch.from_numpy(jac_s)).squeeze(1).to(grad.device, grad.dtype)
-            )
+            states_grad = _like(np.einsum("bk,bkj->bj", g, jac_s), grad)
         return a_rl_grad, states_grad, None, None, None, None
 
 
