@@ -45,3 +45,19 @@ pub fn install<R: Send>(op: impl FnOnce() -> R + Send) -> R {
         None => op(),
     }
 }
+
+/// Runs `op` with a scope of this process's pool in which the calling thread works too: tasks
+/// spawned on the scope run on the pool's threads while `op` goes on with its own share on the
+/// caller's (nothing is handed off and waited for, which costs a thread wake-up when the
+/// caller has been doing other work, as a PyTorch layer's caller has). `None`: no pool, serial.
+pub fn in_place_scope<'scope, R>(op: impl FnOnce(Option<&rayon::Scope<'scope>>) -> R) -> R {
+    match pool() {
+        Some(pool) => pool.in_place_scope(|scope| op(Some(scope))),
+        None => op(None),
+    }
+}
+
+/// Threads of this process's pool (1 without one).
+pub fn threads() -> usize {
+    pool().map_or(1, |pool| pool.current_num_threads())
+}
