@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 from compare_robustness import package_version
-from compare_shield import make_steps
+from compare_shield import make_shield, make_steps
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tests.shield_reference import MAX_BARRIERS, Params, Structure, Task, build_rows
@@ -134,23 +134,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import tlshield
     from tests.shield_reference import CvxpyShield
-    from tlshield.envs.channel import channel_task_spec
     from tlshield.torch import ShieldLayer
 
     torch.set_num_threads(2)
     warnings.filterwarnings("ignore", category=UserWarning)
     warnings.filterwarnings("ignore", category=DeprecationWarning)
     params, task = Params(), Task()
-    shield = tlshield.Shield(
-        channel_task_spec(),
-        tlshield.Unicycle(task.eps),
-        alpha=params.alpha,
-        c3=params.c3,
-        k=params.k,
-        cbf_bounds=params.cbf,
-        clf_bounds=params.clf,
-        margin=params.margin,
-    )
+    shield = make_shield()
     aut = shield.automaton
     structure = Structure(aut)
     layer = ShieldLayer(shield)

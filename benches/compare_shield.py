@@ -25,6 +25,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from compare_robustness import measure, package_version
@@ -61,6 +62,25 @@ def make_steps(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.nd
         s[9:] = 20.0, 20.0, 20.0, -20.0
         steps.append((s, rng.uniform([-4.0, -6.0], [4.0, 6.0])))
     return steps
+
+
+def make_shield(solver: str = "auto") -> Any:
+    """The paper's task shield with the reference parameters (tests/shield_reference.Params)."""
+    import tlshield
+    from tlshield.envs.channel import channel_task_spec
+
+    params, task = Params(), Task()
+    return tlshield.Shield(
+        channel_task_spec(),
+        tlshield.Unicycle(task.eps),
+        alpha=params.alpha,
+        c3=params.c3,
+        k=params.k,
+        cbf_bounds=params.cbf,
+        clf_bounds=params.clf,
+        margin=params.margin,
+        solver=solver,
+    )
 
 
 def step_percentiles(
@@ -104,23 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     budget = 0.6 if args.quick else 4.0
 
     import tlshield
-    from tlshield.envs.channel import channel_task_spec
 
     params, task = Params(), Task()
-
-    def make_shield(solver: str = "auto") -> tlshield.Shield:
-        return tlshield.Shield(
-            channel_task_spec(),
-            tlshield.Unicycle(task.eps),
-            alpha=params.alpha,
-            c3=params.c3,
-            k=params.k,
-            cbf_bounds=params.cbf,
-            clf_bounds=params.clf,
-            margin=params.margin,
-            solver=solver,
-        )
-
     shield = make_shield()
     aut = shield.automaton
     structure = Structure(aut)
