@@ -998,7 +998,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(256))]
+        #![proptest_config(crate::tests_support::seeded(256))]
 
         /// Random co-safe formulas over up to 10 atoms: the diagrams give exactly the language
         /// of letter-by-letter progression.
