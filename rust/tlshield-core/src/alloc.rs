@@ -75,7 +75,11 @@ mod tests {
     #[test]
     fn a_failed_resize_leaves_the_vector_as_it_was() {
         let mut v = vec![1.0f64; 3];
-        assert!(try_resize(&mut v, "rows", usize::MAX / 16, 0.0).is_err());
+        crate::tests_support::assert_error(
+            try_resize(&mut v, "rows", usize::MAX / 16, 0.0),
+            "TooLarge",
+            "rows",
+        );
         assert_eq!(v, vec![1.0; 3]);
         try_resize(&mut v, "rows", 5, 2.0).unwrap();
         assert_eq!(v, vec![1.0, 1.0, 1.0, 2.0, 2.0]);

@@ -285,10 +285,26 @@ mod tests {
 
     #[test]
     fn bad_structures() {
-        assert!(CustomModel::new(0, 1, &[], &[]).is_err());
-        assert!(CustomModel::new(2, 0, &[0], &[]).is_err());
-        assert!(CustomModel::new(2, 1, &[2], &[]).is_err());
-        assert!(CustomModel::new(2, 1, &[], &[0]).is_err());
+        crate::tests_support::assert_error(
+            CustomModel::new(0, 1, &[], &[]),
+            "Value",
+            "ControlAffine state_dim, inputs",
+        );
+        crate::tests_support::assert_error(
+            CustomModel::new(2, 0, &[0], &[]),
+            "Value",
+            "ControlAffine state_dim, inputs",
+        );
+        crate::tests_support::assert_error(
+            CustomModel::new(2, 1, &[2], &[]),
+            "Value",
+            "ControlAffine actuated",
+        );
+        crate::tests_support::assert_error(
+            CustomModel::new(2, 1, &[], &[0]),
+            "Value",
+            "ControlAffine g",
+        );
         let nan = CustomModel::probe::<InputError>(2, 1, &[0.0, 0.0], |_, f, _, _| {
             f[0] = f64::NAN;
             Ok(())

@@ -624,20 +624,76 @@ mod tests {
 
     #[test]
     fn bad_models() {
-        assert!(Dynamics::unicycle(0.0, 0, 1, 2).is_err());
-        assert!(Dynamics::unicycle(0.1, 0, 0, 2).is_err());
-        assert!(Dynamics::single_integrator(vec![]).is_err());
-        assert!(Dynamics::single_integrator(vec![1, 1]).is_err());
-        assert!(Dynamics::double_integrator(vec![0, 1], vec![2]).is_err());
-        assert!(Dynamics::double_integrator(vec![0, 1], vec![1, 2]).is_err());
-        assert!(Dynamics::acceleration_unicycle(0, 1, 2, 2).is_err());
-        assert!(Dynamics::kinematic_bicycle(0.0, 0, 1, 2, 3).is_err());
-        assert!(Dynamics::kinematic_bicycle(f64::NAN, 0, 1, 2, 3).is_err());
-        assert!(Dynamics::kinematic_bicycle(0.5, 0, 1, 1, 3).is_err());
-        assert!(Dynamics::thrust_turn(0.0, 1.0, 1.0, [0, 1, 2, 3, 4]).is_err());
-        assert!(Dynamics::thrust_turn(1.0, f64::INFINITY, 1.0, [0, 1, 2, 3, 4]).is_err());
-        assert!(Dynamics::thrust_turn(1.0, 1.0, -0.1, [0, 1, 2, 3, 4]).is_err());
-        assert!(Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 3]).is_err());
+        crate::tests_support::assert_error(
+            Dynamics::unicycle(0.0, 0, 1, 2),
+            "Value",
+            "Unicycle eps",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::unicycle(0.1, 0, 0, 2),
+            "Shape",
+            "Unicycle dimensions",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::single_integrator(vec![]),
+            "Value",
+            "SingleIntegrator pos",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::single_integrator(vec![1, 1]),
+            "Value",
+            "SingleIntegrator pos",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::double_integrator(vec![0, 1], vec![2]),
+            "Shape",
+            "DoubleIntegrator pos, vel",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::double_integrator(vec![0, 1], vec![1, 2]),
+            "Shape",
+            "DoubleIntegrator pos + vel",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::acceleration_unicycle(0, 1, 2, 2),
+            "Shape",
+            "AccelerationUnicycle x, y, theta, v",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::kinematic_bicycle(0.0, 0, 1, 2, 3),
+            "Value",
+            "KinematicBicycle wheelbase",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::kinematic_bicycle(f64::NAN, 0, 1, 2, 3),
+            "Value",
+            "KinematicBicycle wheelbase",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::kinematic_bicycle(0.5, 0, 1, 1, 3),
+            "Shape",
+            "KinematicBicycle x, y, theta, v",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::thrust_turn(0.0, 1.0, 1.0, [0, 1, 2, 3, 4]),
+            "Value",
+            "ThrustTurn thrust",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::thrust_turn(1.0, f64::INFINITY, 1.0, [0, 1, 2, 3, 4]),
+            "Value",
+            "ThrustTurn turn",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::thrust_turn(1.0, 1.0, -0.1, [0, 1, 2, 3, 4]),
+            "Value",
+            "ThrustTurn drag",
+        );
+        crate::tests_support::assert_error(
+            Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 3]),
+            "Shape",
+            "ThrustTurn x, y, theta, vx, vy",
+        );
         assert!(Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 4]).is_ok());
     }
 

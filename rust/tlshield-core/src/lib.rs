@@ -64,6 +64,28 @@ pub use spec::Spec;
 pub(crate) mod tests_support {
     use proptest::test_runner::{Config, RngSeed};
 
+    /// Asserts that `r` is an error whose `Debug` form contains `kind` (the variant, e.g.
+    /// `"Value"` or `"Input(Shape"`) and whose message contains `names` (the argument it
+    /// names): an error test says which error and where, not just that there was one.
+    #[track_caller]
+    pub fn assert_error<T: std::fmt::Debug, E: std::fmt::Debug + std::fmt::Display>(
+        r: Result<T, E>,
+        kind: &str,
+        names: &str,
+    ) {
+        match r {
+            Ok(v) => panic!("expected a {kind} error naming {names:?}, got Ok({v:?})"),
+            Err(e) => {
+                let (debug, text) = (format!("{e:?}"), e.to_string());
+                assert!(debug.contains(kind), "expected a {kind} error, got {debug}");
+                assert!(
+                    text.contains(names),
+                    "expected the error to name {names:?}: {text}"
+                );
+            }
+        }
+    }
+
     /// Property-test settings with a fixed seed: the same cases on every run and machine.
     pub fn seeded(cases: u32) -> Config {
         Config {

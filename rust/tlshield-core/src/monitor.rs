@@ -523,15 +523,27 @@ mod tests {
             monitor.advance(&[0.0; 13]).unwrap_err(),
             AutomatonError::NotReset
         );
-        assert!(monitor.reset(&[0.0; 12]).is_err());
-        assert!(monitor.reset(&[f64::NAN; 13]).is_err());
-        for (c_r, trap_penalty) in [(0.0, -1.0), (f64::NAN, -1.0), (1.0, f64::INFINITY)] {
+        crate::tests_support::assert_error(monitor.reset(&[0.0; 12]), "Input(Shape", "s0 length");
+        crate::tests_support::assert_error(
+            monitor.reset(&[f64::NAN; 13]),
+            "Input(NonFinite",
+            "s0[0]",
+        );
+        for (c_r, trap_penalty, kind, names) in [
+            (0.0, -1.0, "Input(Value", "c_r"),
+            (f64::NAN, -1.0, "Input(Value", "c_r"),
+            (1.0, f64::INFINITY, "Input(NonFinite", "trap_penalty"),
+        ] {
             let bad = Monitor::new(aut.clone(), TaskReward::Paper { c_r, trap_penalty });
-            assert!(bad.is_err(), "c_r {c_r}, trap_penalty {trap_penalty}");
+            crate::tests_support::assert_error(bad, kind, names);
         }
         // Another automaton, even one of the same task and size, is refused.
         let other = task();
         let foreign = ProgressReward::new(&other, &ProgressParams::default()).unwrap();
-        assert!(Monitor::new(aut, TaskReward::Progress(foreign, other)).is_err());
+        crate::tests_support::assert_error(
+            Monitor::new(aut, TaskReward::Progress(foreign, other)),
+            "Input(Value",
+            "progress",
+        );
     }
 }

@@ -224,8 +224,10 @@ mod tests {
             let step = world.step([0.0, 0.0], &mut monitor, None, true).unwrap();
             assert_eq!(step.truncated, t == 5);
         }
-        assert!(world
-            .step([f64::NAN, 0.0], &mut monitor, None, true)
-            .is_err());
+        crate::tests_support::assert_error(
+            world.step([f64::NAN, 0.0], &mut monitor, None, true),
+            "Input(NonFinite",
+            "action[0]",
+        );
     }
 }

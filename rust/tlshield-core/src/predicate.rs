@@ -522,14 +522,46 @@ mod tests {
 
     #[test]
     fn invalid_predicates_are_rejected() {
-        assert!(Predicate::ball(vec![0], -1.0, Center::Fixed(vec![0.0])).is_err());
-        assert!(Predicate::ball(vec![0], 1.0, Center::Fixed(vec![0.0, 1.0])).is_err());
-        assert!(Predicate::ball(vec![0, 0], 1.0, Center::Fixed(vec![0.0, 1.0])).is_err());
-        assert!(Predicate::ball(vec![0], 1.0, Center::Dims(vec![0])).is_err());
-        assert!(Predicate::ball(vec![], 1.0, Center::Fixed(vec![])).is_err());
-        assert!(Predicate::halfspace(vec![], 0.0).is_err());
-        assert!(Predicate::halfspace(vec![f64::NAN], 0.0).is_err());
-        assert!(Predicate::halfspace(vec![1.0], f64::INFINITY).is_err());
+        crate::tests_support::assert_error(
+            Predicate::ball(vec![0], -1.0, Center::Fixed(vec![0.0])),
+            "InvalidPredicate",
+            "Ball radius",
+        );
+        crate::tests_support::assert_error(
+            Predicate::ball(vec![0], 1.0, Center::Fixed(vec![0.0, 1.0])),
+            "InvalidPredicate",
+            "Ball centre",
+        );
+        crate::tests_support::assert_error(
+            Predicate::ball(vec![0, 0], 1.0, Center::Fixed(vec![0.0, 1.0])),
+            "InvalidPredicate",
+            "Ball pos",
+        );
+        crate::tests_support::assert_error(
+            Predicate::ball(vec![0], 1.0, Center::Dims(vec![0])),
+            "InvalidPredicate",
+            "Ball center_dims",
+        );
+        crate::tests_support::assert_error(
+            Predicate::ball(vec![], 1.0, Center::Fixed(vec![])),
+            "InvalidPredicate",
+            "Ball pos",
+        );
+        crate::tests_support::assert_error(
+            Predicate::halfspace(vec![], 0.0),
+            "InvalidPredicate",
+            "Halfspace w",
+        );
+        crate::tests_support::assert_error(
+            Predicate::halfspace(vec![f64::NAN], 0.0),
+            "InvalidPredicate",
+            "Halfspace w[0]",
+        );
+        crate::tests_support::assert_error(
+            Predicate::halfspace(vec![1.0], f64::INFINITY),
+            "InvalidPredicate",
+            "Halfspace b[0]",
+        );
     }
 
     #[test]
@@ -539,6 +571,6 @@ mod tests {
         assert!(err.contains("at least 6") && err.contains("got 3"), "{err}");
         let h = Predicate::halfspace(vec![1.0; 4], 0.0).unwrap();
         assert!(h.check_dim(4).is_ok());
-        assert!(h.check_dim(5).is_err());
+        crate::tests_support::assert_error(h.check_dim(5), "Shape", "state length");
     }
 }

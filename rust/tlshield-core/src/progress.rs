@@ -455,50 +455,86 @@ mod tests {
     #[test]
     fn bad_parameters_are_errors() {
         let aut = channel_like();
-        for p in [
-            ProgressParams {
-                gamma: 0.0,
-                ..Default::default()
-            },
-            ProgressParams {
-                gamma: 1.5,
-                ..Default::default()
-            },
-            ProgressParams {
-                scale: 0.0,
-                ..Default::default()
-            },
-            ProgressParams {
-                bonus: Some(-1.0),
-                ..Default::default()
-            },
-            ProgressParams {
-                bonus: Some(1.0),
-                ..Default::default()
-            },
-            ProgressParams {
-                horizon: 0,
-                ..Default::default()
-            },
-            ProgressParams {
-                step_cost: Some(f64::NAN),
-                ..Default::default()
-            },
-            ProgressParams {
-                c_r: 0.0,
-                ..Default::default()
-            },
-            ProgressParams {
-                exclusive: vec![1 << 9],
-                ..Default::default()
-            },
+        // Each bad parameter is an input error that names it.
+        for (p, names) in [
+            (
+                ProgressParams {
+                    gamma: 0.0,
+                    ..Default::default()
+                },
+                "gamma",
+            ),
+            (
+                ProgressParams {
+                    gamma: 1.5,
+                    ..Default::default()
+                },
+                "gamma",
+            ),
+            (
+                ProgressParams {
+                    scale: 0.0,
+                    ..Default::default()
+                },
+                "scale",
+            ),
+            (
+                ProgressParams {
+                    bonus: Some(-1.0),
+                    ..Default::default()
+                },
+                "bonus",
+            ),
+            (
+                ProgressParams {
+                    bonus: Some(1.0),
+                    ..Default::default()
+                },
+                "bonus",
+            ),
+            (
+                ProgressParams {
+                    horizon: 0,
+                    ..Default::default()
+                },
+                "horizon",
+            ),
+            (
+                ProgressParams {
+                    step_cost: Some(f64::NAN),
+                    ..Default::default()
+                },
+                "step_cost",
+            ),
+            (
+                ProgressParams {
+                    c_r: 0.0,
+                    ..Default::default()
+                },
+                "c_r",
+            ),
+            (
+                ProgressParams {
+                    exclusive: vec![1 << 9],
+                    ..Default::default()
+                },
+                "exclusive",
+            ),
         ] {
-            assert!(ProgressReward::new(&aut, &p).is_err(), "{p:?}");
+            crate::tests_support::assert_error(ProgressReward::new(&aut, &p), "Input(Value", names);
         }
         let r = ProgressReward::new(&aut, &ProgressParams::default()).unwrap();
-        assert!(r.advance(&aut, 0, f64::NAN, &[0.0]).is_err());
-        assert!(r.advance(&aut, 99, 0.0, &[0.0]).is_err());
-        assert!(r.advance(&aut, 0, 0.0, &[f64::INFINITY]).is_err());
+        crate::tests_support::assert_error(
+            r.advance(&aut, 0, f64::NAN, &[0.0]),
+            "Input(NonFinite",
+            "phi",
+        );
+        crate::tests_support::assert_error(r.advance(&aut, 99, 0.0, &[0.0]), "UnknownState", "q");
+        crate::tests_support::assert_error(
+            r.advance(&aut, 0, 0.0, &[f64::INFINITY]),
+            "Input(NonFinite",
+            "s[0]",
+        );
     }
 
     /// Rewards and FSA states of a trajectory (rows of 3), the episode starting from Phi = 0.

@@ -682,8 +682,12 @@ mod tests {
 
     #[test]
     fn bad_trajectories_are_errors() {
-        assert!(Trajectory::new(&[], 1).is_err());
-        assert!(Trajectory::new(&[1.0, 2.0, 3.0], 2).is_err());
+        crate::tests_support::assert_error(Trajectory::new(&[], 1), "Shape", "trajectory");
+        crate::tests_support::assert_error(
+            Trajectory::new(&[1.0, 2.0, 3.0], 2),
+            "Shape",
+            "trajectory",
+        );
         let err = Trajectory::new(&[1.0, 2.0, f64::NAN, 0.0], 2).unwrap_err();
         assert_eq!(
             err.to_string(),
@@ -699,7 +703,11 @@ mod tests {
             err.to_string(),
             "trajs[1, 0, 1] is inf (all values must be finite)"
         );
-        assert!(TrajectoryBatch::new(&[0.0; 5], 2, 1, 2).is_err());
+        crate::tests_support::assert_error(
+            TrajectoryBatch::new(&[0.0; 5], 2, 1, 2),
+            "Shape",
+            "trajs",
+        );
         let spec = running_example();
         let err = spec
             .robustness(Trajectory::new(&[0.0], 1).unwrap())

@@ -298,9 +298,10 @@ mod tests {
         let err = spec.check_state_len(2).unwrap_err().to_string();
         assert!(err.contains("a formula alone"), "{err}");
         let traj = Trajectory::new(&[0.0, 1.0], 1).unwrap();
-        assert!(spec.robustness(traj).is_err() && spec.satisfied(traj).is_err());
+        crate::tests_support::assert_error(spec.robustness(traj), "Value", "spec");
+        crate::tests_support::assert_error(spec.satisfied(traj), "Value", "spec");
         assert!(Spec::from_formula("true").unwrap().is_bound());
-        assert!(Spec::from_formula("G a").is_err());
+        crate::tests_support::assert_error(Spec::from_formula("G a"), "NotCoSafe", "column 1");
     }
 
     #[test]
@@ -321,7 +322,7 @@ mod tests {
         ));
         let spec = Spec::new("F a", [("a", ball), ("unused", hs3)]).unwrap();
         assert_eq!(spec.atoms(), ["a"]);
-        assert!(spec.check_state_len(1).is_err());
+        crate::tests_support::assert_error(spec.check_state_len(1), "Shape", "state length");
         assert!(spec.check_state_len(2).is_ok());
     }
 }

@@ -485,9 +485,21 @@ mod tests {
             Err(AutomatonError::TrapReward(1))
         ));
         assert_eq!(aut.reward(1, &[2.0, 0.0], 2.0, Some(-7.0)).unwrap(), -7.0);
-        assert!(aut.reward(0, &[2.0, 0.0], 0.0, None).is_err());
-        assert!(aut.reward(9, &[2.0, 0.0], 1.0, None).is_err());
-        assert!(aut.reward(0, &[f64::NAN, 0.0], 1.0, None).is_err());
+        crate::tests_support::assert_error(
+            aut.reward(0, &[2.0, 0.0], 0.0, None),
+            "Input(Value",
+            "c_r",
+        );
+        crate::tests_support::assert_error(
+            aut.reward(9, &[2.0, 0.0], 1.0, None),
+            "UnknownState",
+            "q",
+        );
+        crate::tests_support::assert_error(
+            aut.reward(0, &[f64::NAN, 0.0], 1.0, None),
+            "Input(NonFinite",
+            "s[0]",
+        );
     }
 
     #[test]
@@ -528,7 +540,11 @@ mod tests {
             assert_eq!(reward, aut.reward(q, &s, 2.0, None).unwrap());
             assert_eq!(safe, aut.safe_set(next, &s, false).unwrap());
         }
-        assert!(aut.advance(1, &[0.0, 0.0], 2.0, None, &mut safe).is_err());
+        crate::tests_support::assert_error(
+            aut.advance(1, &[0.0, 0.0], 2.0, None, &mut safe),
+            "TrapReward",
+            "trap",
+        );
         assert_eq!(
             aut.advance(1, &[0.0, 0.0], 2.0, Some(-3.0), &mut safe)
                 .unwrap(),
@@ -547,8 +563,10 @@ mod tests {
         );
         assert_eq!(alone.trap_cnf(0).unwrap(), task.trap_cnf(0).unwrap());
         let s = [0.0; 13];
-        assert!(alone.read(&s).is_err() && alone.step(0, &s).is_err());
-        assert!(alone.safe_set(0, &s, false).is_err() && alone.goal(0, &s).is_err());
+        crate::tests_support::assert_error(alone.read(&s), "Value", "spec");
+        crate::tests_support::assert_error(alone.step(0, &s), "Input(Value", "spec");
+        crate::tests_support::assert_error(alone.safe_set(0, &s, false), "Input(Value", "spec");
+        crate::tests_support::assert_error(alone.goal(0, &s), "Input(Value", "spec");
     }
 
     #[test]

@@ -181,7 +181,7 @@ fn a_light_barrier_gives_way_first_when_relaxed() {
     );
     let mut bad = params(SolverChoice::Auto);
     bad.barriers = vec![Barrier::inside("away", away).with_slack_weight(0.0)];
-    assert!(Shield::new(task(), None, bad).is_err());
+    crate::tests_support::assert_error(Shield::new(task(), None, bad), "Config", "slack");
 }
 
 #[test]
@@ -239,15 +239,23 @@ fn drift_adds_to_the_model_and_batches_agree() {
             .unwrap();
         assert_eq!(&out.action[2 * i..2 * i + 2], &single.action[..]);
     }
-    assert!(sh
-        .filter(&s, 0, &[1.0, 1.0], None, Some(&drift[1..]))
-        .is_err());
+    crate::tests_support::assert_error(
+        sh.filter(&s, 0, &[1.0, 1.0], None, Some(&drift[1..])),
+        "Input(Shape",
+        "drift",
+    );
     let mut nan = drift.clone();
     nan[3] = f64::NAN;
-    assert!(sh.filter(&s, 0, &[1.0, 1.0], None, Some(&nan)).is_err());
-    assert!(sh
-        .filter_batch(&states, N, &qs, &a_rl, Some(&drifts[N..]), &mut out)
-        .is_err());
+    crate::tests_support::assert_error(
+        sh.filter(&s, 0, &[1.0, 1.0], None, Some(&nan)),
+        "Input(NonFinite",
+        "drift[3]",
+    );
+    crate::tests_support::assert_error(
+        sh.filter_batch(&states, N, &qs, &a_rl, Some(&drifts[N..]), &mut out),
+        "Input(Shape",
+        "drift",
+    );
 }
 
 #[test]
@@ -298,7 +306,11 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
     };
     assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_ok());
     lopsided.cbf_bounds.lo[0] = -4.9;
-    assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_err());
+    crate::tests_support::assert_error(
+        Shield::new(task(), unicycle(), lopsided.clone()),
+        "Config",
+        "cbf_bounds[0]",
+    );
     // A CLF box without 0 must still leave the sum able to cancel.
     lopsided.cbf_bounds.lo[0] = -5.0;
     lopsided.clf_bounds = Bounds {
@@ -400,58 +412,99 @@ proptest! {
 fn bad_input_is_an_error() {
     let sh = shield(params(SolverChoice::Auto));
     let s = state(1.0, 0.0, 0.0);
-    assert!(sh.filter(&s[..5], 0, &[0.0, 0.0], None, None).is_err());
-    assert!(sh.filter(&s, 9, &[0.0, 0.0], None, None).is_err());
-    assert!(sh.filter(&s, 0, &[0.0], None, None).is_err());
-    assert!(sh.filter(&s, 0, &[f64::NAN, 0.0], None, None).is_err());
+    crate::tests_support::assert_error(
+        sh.filter(&s[..5], 0, &[0.0, 0.0], None, None),
+        "Input(Shape",
+        "state length",
+    );
+    crate::tests_support::assert_error(
+        sh.filter(&s, 9, &[0.0, 0.0], None, None),
+        "Automaton(UnknownState",
+        "q",
+    );
+    crate::tests_support::assert_error(
+        sh.filter(&s, 0, &[0.0], None, None),
+        "Input(Shape",
+        "a_rl length",
+    );
+    crate::tests_support::assert_error(
+        sh.filter(&s, 0, &[f64::NAN, 0.0], None, None),
+        "Input(NonFinite",
+        "a_rl[0]",
+    );
     let mut bad = s.clone();
     bad[4] = f64::INFINITY;
-    assert!(sh.filter(&bad, 0, &[0.0, 0.0], None, None).is_err());
+    crate::tests_support::assert_error(
+        sh.filter(&bad, 0, &[0.0, 0.0], None, None),
+        "Input(NonFinite",
+        "s[4]",
+    );
     let f = vec![0.0; N];
     let g = vec![0.0; N];
-    assert!(sh
-        .filter(&s, 0, &[0.0, 0.0], Some(ControlAffine::new(&f, &g)), None)
-        .is_err());
+    crate::tests_support::assert_error(
+        sh.filter(&s, 0, &[0.0, 0.0], Some(ControlAffine::new(&f, &g)), None),
+        "Input(Shape",
+        "g size",
+    );
     let no_model = Shield::new(task(), None, params(SolverChoice::Auto)).unwrap();
     let err = no_model.filter(&s, 0, &[0.0, 0.0], None, None).unwrap_err();
     assert!(err.to_string().contains("pass f and g"), "{err}");
-    for broken in [
-        ShieldParams {
-            alpha: 0.0,
-            ..params(SolverChoice::Auto)
-        },
-        ShieldParams {
-            k: f64::NAN,
-            ..params(SolverChoice::Auto)
-        },
-        ShieldParams {
-            cbf_bounds: bounds(1.0, -1.0),
-            ..params(SolverChoice::Auto)
-        },
-        ShieldParams {
-            clf_bounds: Bounds {
-                lo: vec![0.0],
-                hi: vec![1.0],
+    // Each broken setting is refused as a Config error that names it.
+    for (broken, names) in [
+        (
+            ShieldParams {
+                alpha: 0.0,
+                ..params(SolverChoice::Auto)
             },
-            ..params(SolverChoice::Auto)
-        },
-        ShieldParams {
-            pos: vec![0, 0],
-            ..params(SolverChoice::Auto)
-        },
-        ShieldParams {
-            pos: vec![0, 1, 2],
-            ..params(SolverChoice::Auto)
-        },
+            "alpha",
+        ),
+        (
+            ShieldParams {
+                k: f64::NAN,
+                ..params(SolverChoice::Auto)
+            },
+            "k =",
+        ),
+        (
+            ShieldParams {
+                cbf_bounds: bounds(1.0, -1.0),
+                ..params(SolverChoice::Auto)
+            },
+            "cbf_bounds[0]",
+        ),
+        (
+            ShieldParams {
+                clf_bounds: Bounds {
+                    lo: vec![0.0],
+                    hi: vec![1.0],
+                },
+                ..params(SolverChoice::Auto)
+            },
+            "clf_bounds",
+        ),
+        (
+            ShieldParams {
+                pos: vec![0, 0],
+                ..params(SolverChoice::Auto)
+            },
+            "pos =",
+        ),
+        (
+            ShieldParams {
+                pos: vec![0, 1, 2],
+                ..params(SolverChoice::Auto)
+            },
+            "pos has 3 dimensions",
+        ),
     ] {
-        assert!(Shield::new(
-            task(),
-            Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap()),
-            broken
-        )
-        .is_err());
+        let model = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
+        crate::tests_support::assert_error(
+            Shield::new(task(), Some(model), broken),
+            "Config",
+            names,
+        );
     }
-    assert!(SolverChoice::parse("osqp").is_err());
+    crate::tests_support::assert_error(SolverChoice::parse("osqp"), "Config", "solver");
 }
 
 #[test]
@@ -490,9 +543,11 @@ fn batch_equals_single_calls() {
         assert_eq!(out.status[i], single.status as u8);
         assert_eq!(out.solver[i], single.solver as u8);
     }
-    assert!(sh
-        .filter_batch(&states, N, &qs[1..], &a_rl, None, &mut out)
-        .is_err());
+    crate::tests_support::assert_error(
+        sh.filter_batch(&states, N, &qs[1..], &a_rl, None, &mut out),
+        "Input(Shape",
+        "states",
+    );
     let mut bad_q = qs.clone();
     bad_q[3] = 99;
     let err = sh
@@ -559,9 +614,11 @@ fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
         .collect();
     let mut steps = Vec::new();
     let mut out = BatchOutput::default();
-    assert!(sh
-        .filter_monitors(&batch, &vec![0.0; 2 * rows], None, &mut out)
-        .is_err());
+    crate::tests_support::assert_error(
+        sh.filter_monitors(&batch, &vec![0.0; 2 * rows], None, &mut out),
+        "Input(Value",
+        "monitors row 0",
+    );
     for t in 0..30 {
         let states: Vec<f64> = (0..rows)
             .flat_map(|_| {
@@ -611,7 +668,11 @@ fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
         .reset(&[0, 0], &vec![0.0; 2 * N], N, &mut steps)
         .unwrap_err();
     assert!(err.to_string().contains("rows[1]"), "{err}");
-    assert!(batch.reset(&[rows], &[0.0; N], N, &mut steps).is_err());
+    crate::tests_support::assert_error(
+        batch.reset(&[rows], &[0.0; N], N, &mut steps),
+        "Input(Value",
+        "rows[0]",
+    );
     assert_eq!(
         before,
         batch.monitors().iter().map(Monitor::q).collect::<Vec<_>>()
@@ -892,6 +953,10 @@ fn a_disturbance_bound_tightens_each_row_by_its_gradient() {
         vec![(1, 0.1), (1, 0.2)],
     ] {
         let p = params.clone().with_disturbance(bad);
-        assert!(Shield::new(automaton.clone(), Some(model.clone()), p).is_err());
+        crate::tests_support::assert_error(
+            Shield::new(automaton.clone(), Some(model.clone()), p),
+            "Config",
+            "disturbance",
+        );
     }
 }
