@@ -186,7 +186,7 @@ def test_bad_state_ids(task: tlshield.Automaton) -> None:
             task.trap_cnf(q)
     with pytest.raises(ValueError, match=r"qs\[1\]: state 9 does not exist"):
         task.step_batch(np.zeros((2, STATE_DIM)), [0, 9])
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="q: expected an integer FSA state"):
         task.step(s, 1.5)  # type: ignore[arg-type]
 
 
@@ -321,7 +321,7 @@ def test_an_automaton_from_a_formula_alone() -> None:
             cbf_bounds=(-1.0, 1.0),
             clf_bounds=(-1.0, 1.0),
         )
-    with pytest.raises(tlshield.SpecError):
+    with pytest.raises(tlshield.SpecError, match="`G` \\(always\\) is not allowed"):
         tlshield.Automaton.from_formula("G a")
 
 

@@ -113,7 +113,7 @@ def test_monitor_misuse_is_a_clear_error():
     with pytest.raises(ValueError, match="another automaton"):
         tlshield.Monitor(aut, other.automaton().progress_reward())
     assert tlshield.Monitor(aut, fresh.automaton().progress_reward()).q == aut.initial
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="automaton"):
         tlshield.Monitor("F a")  # type: ignore[arg-type]
 
 

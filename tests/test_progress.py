@@ -81,9 +81,9 @@ def test_bad_calls_raise() -> None:
     r = automaton().progress_reward()
     with pytest.raises(ValueError, match="phi"), pytest.warns(DeprecationWarning):
         r.advance(0, math.nan, np.zeros(13))  # the first call of r warns
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="state 99 does not exist"):
         r.advance(99, 0.0, np.zeros(13))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="state length: expected 13, got 3"):
         r.potential(np.zeros(3), 0)
     with pytest.raises(ValueError, match="another automaton"):
         other = Spec("F g", {"g": Ball(pos=[0, 1], radius=1.0, center=[0.0, 0.0])}).automaton()

@@ -141,7 +141,7 @@ def test_trusted_old_folders_still_load(run: Path, tmp_path: Path) -> None:
     venv.obs_rms.var = np.array(stats["obs_var"])
     venv.save(str(folder / "vecnormalize.pkl"))
     obs = _observations()
-    with pytest.raises(UntrustedPickleError):
+    with pytest.raises(UntrustedPickleError, match=r"vecnormalize\.pkl, a Python pickle"):
         load_policy(folder)
     np.testing.assert_array_equal(
         load_policy(folder, trust_pickles=True)(obs), load_policy(run)(obs)

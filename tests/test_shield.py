@@ -280,7 +280,7 @@ def test_bad_spec_or_dynamics() -> None:
         )
     with pytest.raises(ValueError, match="eps"):
         tlshield.Unicycle(0.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="SingleIntegrator pos"):
         tlshield.SingleIntegrator([])
 
 
@@ -303,9 +303,9 @@ def test_bad_calls(shield: tlshield.Shield, args: object, fragment: str) -> None
 
 def test_bad_call_types_and_dynamics(shield: tlshield.Shield) -> None:
     s = state(1.0, 0.0, 0.0)
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="s: expected an array-like of numbers"):
         shield.filter(None, 0, [0.0, 0.0])
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="s: expected real numbers"):
         shield.filter(["a"] * 13, 0, [0.0, 0.0])
     f, g = tlshield.Unicycle(0.1).eval(s)
     with pytest.raises(ValueError, match="both f and g"):
@@ -341,7 +341,7 @@ def test_automaton_goal_from_python(shield: tlshield.Shield) -> None:
     assert aut.goal(s, aut.accepting[0]) is None
     with pytest.raises(ValueError, match="state 99"):
         aut.goal(s, 99)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="state length: expected 13, got 4"):
         aut.goal(s[:4], 0)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -196,7 +197,7 @@ def test_bad_predicate_maps(predicates: dict, error: type, fragment: str) -> Non
 
 
 def test_formula_must_be_text() -> None:
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="formula"):
         tlshield.Spec(b"F a", {"a": region(0)})  # type: ignore[arg-type]
 
 
@@ -224,11 +225,11 @@ def test_bad_predicates(make, fragment: str) -> None:
 
 
 def test_bad_predicate_argument_types() -> None:
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="pos: expected a sequence of integer"):
         tlshield.Ball("xy", 1.0, center=[0, 0])  # type: ignore[arg-type]
-    with pytest.raises((TypeError, ValueError)):
+    with pytest.raises(TypeError, match="w: expected real numbers"):
         tlshield.Halfspace(["a", "b"], 1.0)
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="'b'"):
         tlshield.Halfspace([1.0], "b")  # type: ignore[arg-type]
 
 
@@ -258,7 +259,7 @@ def test_bad_trajectories(traj: np.ndarray, fragment: str) -> None:
     with pytest.raises(ValueError) as info:
         spec.robustness(traj)
     assert fragment in str(info.value)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=re.escape(fragment)):
         spec.satisfied(traj)
 
 
@@ -274,7 +275,7 @@ def test_bad_batches_and_states() -> None:
         spec.robustness_batch(np.zeros((2, 5, 4)))
     with pytest.raises(ValueError, match="expected 13, got 2"):
         spec.atom_robustness([0.0, 0.0])
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="traj: expected an array-like of numbers"):
         spec.robustness(None)
     with pytest.raises((TypeError, ValueError)):
         spec.robustness([["x"] * STATE_DIM])

@@ -121,7 +121,7 @@ def test_cli_help_and_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path)
         cli.main(["train", "--config", "nope", "--out", str(tmp_path)])
     assert exit_info.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match=r"^2$"):
         cli.main(["train", "--updates", "-3", "--out", str(tmp_path)])
     assert "positive integer" in capsys.readouterr().err
     assert cli.main(["evaluate", str(tmp_path / "missing")]) == 2
