@@ -325,11 +325,9 @@ impl Shield {
                     let mut unit = [0.0; 16];
                     for i in 0..flags.len() {
                         let row = *c * chunk + i;
-                        let (s, q, task) = rows.row(row);
-                        let a = &a_rl[row * m..(row + 1) * m];
-                        let d = drift.map(|d| &d[row * n..(row + 1) * n]);
-                        let fg = dynamics.map(|x| x.row(row, n, m));
-                        self.step(ws, s, q, a, fg, d, task, Want::Solution);
+                        let call = rows.call(row, a_rl, dynamics, drift, m);
+                        let (s, q, a) = (call.s, call.q, call.a_rl);
+                        self.step(ws, call, Want::Solution);
                         if let Some(act) = act.as_deref_mut() {
                             act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
                         }

@@ -1273,7 +1273,7 @@ impl Shield {
     ) -> Result<R, ShieldError> {
         self.check_call(c.s, c.q, c.a_rl, c.fg, c.drift)?;
         Ok(self.with_workspace(c.s.len(), |ws| {
-            self.step(ws, c.s, c.q, c.a_rl, c.fg, c.drift, c.task, want);
+            self.step(ws, c, want);
             take(ws)
         }))
     }
@@ -1501,11 +1501,8 @@ impl Shield {
             self.with_workspace(n, |ws| {
                 for i in 0..part.delta.len() {
                     let row = c * chunk + i;
-                    let (s, q, task) = rows.row(row);
-                    let a = &a_rl[row * m..(row + 1) * m];
-                    let d = drift.map(|d| &d[row * n..(row + 1) * n]);
-                    let fg = dynamics.map(|x| x.row(row, n, m));
-                    self.step(ws, s, q, a, fg, d, task, Want::Solution);
+                    let call = rows.call(row, a_rl, dynamics, drift, m);
+                    self.step(ws, call, Want::Solution);
                     part.write(i, m, &ws.out);
                 }
             });
@@ -1514,18 +1511,8 @@ impl Shield {
 
     /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
     /// only the problem is wanted.
-    #[allow(clippy::too_many_arguments)]
-    fn step(
-        &self,
-        ws: &mut Workspace,
-        s: &[f64],
-        q: usize,
-        a_rl: &[f64],
-        fg: Option<ControlAffine<'_>>,
-        drift: Option<&[f64]>,
-        task: Option<&Monitor>,
-        want: Want,
-    ) {
+    fn step(&self, ws: &mut Workspace, call: Call<'_>, want: Want) {
+        let a_rl = call.a_rl;
         let record = want == Want::Recorded;
         let cfg = &self.params;
         ws.out.barriers.clear();
@@ -1534,12 +1521,7 @@ impl Shield {
             &self.orders,
             &self.automaton,
             self.dynamics.as_ref(),
-            s,
-            q,
-            a_rl,
-            fg,
-            drift,
-            task,
+            call,
             record.then_some(&mut ws.out.barriers),
         );
         let program = &ws.program;
@@ -1634,6 +1616,28 @@ impl<'a> BatchRows<'a> {
         match self {
             BatchRows::States { n, .. } => *n,
             BatchRows::Monitors(monitors) => monitors[0].state().len(),
+        }
+    }
+
+    /// The call of row `i`: its state, FSA state, monitor (if any), RL action, dynamics and
+    /// drift.
+    fn call(
+        &self,
+        i: usize,
+        a_rl: &'a [f64],
+        dynamics: Option<BatchDynamics<'a>>,
+        drift: Option<&'a [f64]>,
+        m: usize,
+    ) -> Call<'a> {
+        let (s, q, task) = self.row(i);
+        let n = s.len();
+        Call {
+            s,
+            q,
+            a_rl: &a_rl[i * m..(i + 1) * m],
+            fg: dynamics.map(|d| d.row(i, n, m)),
+            drift: drift.map(|d| &d[i * n..(i + 1) * n]),
+            task,
         }
     }
 

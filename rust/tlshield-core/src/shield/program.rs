@@ -17,8 +17,8 @@
 //! once they have grown to the problem's size.
 
 use super::order::Orders;
-use super::{BarrierSource, ControlAffine, ShieldParams};
-use crate::automaton::Automaton;
+use super::{BarrierSource, Call, ControlAffine, ShieldParams};
+use crate::automaton::{Automaton, Reading};
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::linalg::dot;
@@ -54,6 +54,18 @@ pub(super) struct Program {
     /// there is a goal).
     pub(super) cbf_vars: usize,
     pub(super) clf_vars: usize,
+}
+
+/// What the rows of one call are built from: the parameters, the model (or the call's own `f`,
+/// `g`), the state, the FSA state and the RL action.
+#[derive(Clone, Copy)]
+struct Site<'a> {
+    cfg: &'a ShieldParams,
+    model: Option<&'a Dynamics>,
+    fg: Option<ControlAffine<'a>>,
+    s: &'a [f64],
+    q: usize,
+    a_rl: &'a [f64],
 }
 
 /// `out = J_f(s) u` (or `J_f(s)^T u` when `transpose`): from the Jacobian passed with this
@@ -146,23 +158,26 @@ impl Program {
         }
     }
 
-    /// Builds every row of Eq. 5D2 at `(s, q)` for `a_rl`. `barriers_out` receives each
-    /// enforced barrier and its value (the single-step path records them).
-    #[allow(clippy::too_many_arguments)]
+    /// Builds every row of Eq. 5D2 for the call's `(s, q, a_rl)`: the barrier rows, then the
+    /// CLF row. `barriers_out` receives each enforced barrier and its value (the single-step
+    /// path records them).
     pub(super) fn rows(
         &mut self,
         cfg: &ShieldParams,
         orders: &Orders,
         automaton: &Automaton,
         model: Option<&Dynamics>,
-        s: &[f64],
-        q: usize,
-        a_rl: &[f64],
-        fg: Option<ControlAffine<'_>>,
-        drift: Option<&[f64]>,
-        task: Option<&Monitor>,
-        mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
+        call: Call<'_>,
+        barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
     ) {
+        let Call {
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+            task,
+        } = call;
         let m = a_rl.len();
         self.load_dynamics(s, m, fg, model, drift);
         self.lg.clear();
@@ -175,92 +190,141 @@ impl Program {
             None => automaton.read_validated(s),
         };
 
-        // Barriers (the user's, then the safe set of Eq. 5C1): value h, the row's L (m values)
-        // and right-hand side r + L . a_rl (see the module docs).
+        let at = Site {
+            cfg,
+            model,
+            fg,
+            s,
+            q,
+            a_rl,
+        };
         if cfg.use_cbf {
-            let spec = automaton.spec();
-            if cfg.preserve_progress {
-                reading.progress_safe_set(q, &mut self.safe);
-            } else {
-                reading.safe_set(q, &mut self.safe);
-            }
-            let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
-                let sign = if b.positive { 1.0 } else { -1.0 };
-                let h = b.value(s);
-                let second = orders.barriers[i];
-                (
-                    BarrierSource::User(i),
-                    &b.predicate,
-                    sign,
-                    h,
-                    b.slack_weight,
-                    second,
-                )
-            });
-            let kept = self.safe.iter().map(|&(lit, h)| {
-                let sign = if lit.positive { 1.0 } else { -1.0 };
-                let predicate = &spec.predicates()[lit.atom];
-                let second = orders.atoms[lit.atom];
-                (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, second)
-            });
-            for (source, predicate, sign, h, weight, second) in user.chain(kept) {
-                self.weights.push(weight);
-                predicate.gradient_into(s, &mut self.grad);
-                self.grad.iter_mut().for_each(|v| *v *= sign);
-                let lf = dot(&self.grad, &self.f);
-                let psi = cfg.alpha * (h - cfg.margin);
-                // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
-                let (coefficients, second_r) = match second {
-                    true => {
-                        predicate.hessian_times(s, &self.f, &mut self.hf);
-                        self.hf.iter_mut().for_each(|v| *v *= sign);
-                        jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
-                        jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
-                        let lf_psi =
-                            dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + cfg.alpha * lf;
-                        // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
-                        for (a, b) in self.hf.iter_mut().zip(&self.jt) {
-                            *a += b;
-                        }
-                        let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
-                        (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
+            self.barrier_rows(at, orders, automaton, &reading, barriers_out);
+        }
+        self.clf_row(at, orders.clf, task, &reading);
+        self.cbf_vars = if cfg.use_cbf { m } else { 0 };
+        self.clf_vars = if self.has_goal { m } else { 0 };
+    }
+
+    /// The barrier rows (the user's barriers, then the safe set of Eq. 5C1): value h, the
+    /// row's L (m values) and right-hand side r + L . a_rl (see the module docs).
+    fn barrier_rows(
+        &mut self,
+        at: Site<'_>,
+        orders: &Orders,
+        automaton: &Automaton,
+        reading: &Reading<'_>,
+        mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
+    ) {
+        let Site {
+            cfg,
+            model,
+            fg,
+            s,
+            q,
+            a_rl,
+        } = at;
+        let m = a_rl.len();
+        let spec = automaton.spec();
+        if cfg.preserve_progress {
+            reading.progress_safe_set(q, &mut self.safe);
+        } else {
+            reading.safe_set(q, &mut self.safe);
+        }
+        let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
+            let sign = if b.positive { 1.0 } else { -1.0 };
+            let h = b.value(s);
+            let second = orders.barriers[i];
+            (
+                BarrierSource::User(i),
+                &b.predicate,
+                sign,
+                h,
+                b.slack_weight,
+                second,
+            )
+        });
+        let kept = self.safe.iter().map(|&(lit, h)| {
+            let sign = if lit.positive { 1.0 } else { -1.0 };
+            let predicate = &spec.predicates()[lit.atom];
+            let second = orders.atoms[lit.atom];
+            (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, second)
+        });
+        for (source, predicate, sign, h, weight, second) in user.chain(kept) {
+            self.weights.push(weight);
+            predicate.gradient_into(s, &mut self.grad);
+            self.grad.iter_mut().for_each(|v| *v *= sign);
+            let lf = dot(&self.grad, &self.f);
+            let psi = cfg.alpha * (h - cfg.margin);
+            // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
+            let (coefficients, second_r) = match second {
+                true => {
+                    predicate.hessian_times(s, &self.f, &mut self.hf);
+                    self.hf.iter_mut().for_each(|v| *v *= sign);
+                    jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
+                    jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
+                    let lf_psi =
+                        dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + cfg.alpha * lf;
+                    // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
+                    for (a, b) in self.hf.iter_mut().zip(&self.jt) {
+                        *a += b;
                     }
-                    false => (&self.grad, None),
-                };
-                // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
-                // order) or H f + J_f^T grad h + alpha grad h (second order).
-                let robust: f64 = cfg
-                    .disturbance
-                    .iter()
-                    .map(|&(d, w)| {
-                        let c = match second_r {
-                            Some(_) => coefficients[d] + cfg.alpha * self.grad[d],
-                            None => coefficients[d],
-                        };
-                        c.abs() * w
-                    })
-                    .sum();
-                let mut lg_a = 0.0;
-                for (j, a) in a_rl.iter().enumerate() {
-                    let lg = (0..s.len())
-                        .map(|k| coefficients[k] * self.g[k * m + j])
-                        .sum::<f64>();
-                    lg_a += lg * a;
-                    self.lg.push(lg);
+                    let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
+                    (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
                 }
-                self.rhs.push(
-                    match second_r {
-                        Some(r) => r + lg_a,
-                        // In this order (Lf h + Lg h . a_rl first), bit for bit as before HOCBF rows.
-                        None => lf + lg_a + psi,
-                    } - robust,
-                );
-                if let Some(out) = barriers_out.as_deref_mut() {
-                    out.push((source, h));
-                }
+                false => (&self.grad, None),
+            };
+            // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
+            // order) or H f + J_f^T grad h + alpha grad h (second order).
+            let robust: f64 = cfg
+                .disturbance
+                .iter()
+                .map(|&(d, w)| {
+                    let c = match second_r {
+                        Some(_) => coefficients[d] + cfg.alpha * self.grad[d],
+                        None => coefficients[d],
+                    };
+                    c.abs() * w
+                })
+                .sum();
+            let mut lg_a = 0.0;
+            for (j, a) in a_rl.iter().enumerate() {
+                let lg = (0..s.len())
+                    .map(|k| coefficients[k] * self.g[k * m + j])
+                    .sum::<f64>();
+                lg_a += lg * a;
+                self.lg.push(lg);
+            }
+            self.rhs.push(
+                match second_r {
+                    Some(r) => r + lg_a,
+                    // In this order (Lf h + Lg h . a_rl first), bit for bit as before HOCBF rows.
+                    None => lf + lg_a + psi,
+                } - robust,
+            );
+            if let Some(out) = barriers_out.as_deref_mut() {
+                out.push((source, h));
             }
         }
+    }
 
+    /// The CLF row of Eq. 5B1 towards the goal, and `delta_0`.
+    fn clf_row(
+        &mut self,
+        at: Site<'_>,
+        second_order: bool,
+        task: Option<&Monitor>,
+        reading: &Reading<'_>,
+    ) {
+        let Site {
+            cfg,
+            model,
+            fg,
+            s,
+            q,
+            a_rl,
+        } = at;
+        let m = a_rl.len();
         // CLF row (Eq. 5B1's goal): V = |e|^2 with e = s[pos] - goal, or, when no input moves
         // pos directly (second order), e = f[pos] + k (s[pos] - goal) (drive the velocity
         // towards k times the remaining distance);
@@ -280,7 +344,7 @@ impl Program {
         self.clf_lg.resize(m, 0.0);
         if self.has_goal {
             let (mut v, mut lf) = (0.0, 0.0);
-            match orders.clf {
+            match second_order {
                 true => {
                     // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
                     let k = cfg.clf_gain;
@@ -325,8 +389,6 @@ impl Program {
                 .sum::<f64>();
             self.delta_0 = (best - self.clf_rhs).max(0.0);
         }
-        self.cbf_vars = if cfg.use_cbf { m } else { 0 };
-        self.clf_vars = if self.has_goal { m } else { 0 };
     }
 
     /// Writes the QP of the last [`Program::rows`] into `qp`; `relaxed` adds a slack

@@ -786,7 +786,15 @@ proptest! {
         prop_assert_eq!(a.status, b.status);
         let gap = a.action.iter().zip(&b.action).fold(0.0f64, |m, (p, r)| m.max((p - r).abs()));
         auto.with_workspace(N, |ws| {
-            auto.step(ws, &s, q, &a_rl, None, None, None, Want::Solution);
+            let call = Call {
+                s: &s,
+                q,
+                a_rl: &a_rl,
+                fg: None,
+                drift: None,
+                task: None,
+            };
+            auto.step(ws, call, Want::Solution);
             let (qp, ours) = (&ws.qp, &ws.solvers.solution);
             let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);
