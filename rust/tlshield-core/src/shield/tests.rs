@@ -1,6 +1,7 @@
 //! Unit tests of the shield (kept apart so that the module reads as the shield).
 
 use super::*;
+use crate::cnf::Literal;
 use crate::predicate::Center;
 use crate::qp::{kkt_residual, ClarabelQp};
 use proptest::prelude::*;

@@ -1,0 +1,305 @@
+//! The shield's parameters: [`ShieldParams`] and its builder, the user's [`Barrier`]s, the
+//! [`Bounds`] of the corrections and the [`SolverChoice`].
+
+use crate::predicate::Predicate;
+
+use super::ShieldError;
+
+/// A user barrier: `h = rho(predicate)` (`positive`) or `h = -rho(predicate)` (keep out of
+/// the predicate's region, e.g. a moving obstacle's disc), kept above the margin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Barrier {
+    /// Its name in results.
+    pub name: String,
+    /// The predicate whose robustness (or its negation) is the barrier.
+    pub predicate: Predicate,
+    /// `false`: the barrier is the predicate's negation.
+    pub positive: bool,
+    /// Scales this row's slack cost when the QP has to be relaxed (safe-set rows: 1). A
+    /// barrier with a smaller weight gives way first: e.g. a moving obstacle's row rather
+    /// than the task's channel.
+    pub slack_weight: f64,
+}
+
+impl Barrier {
+    /// `h = rho(predicate)`.
+    pub fn inside(name: impl Into<String>, predicate: Predicate) -> Self {
+        Barrier {
+            name: name.into(),
+            predicate,
+            positive: true,
+            slack_weight: 1.0,
+        }
+    }
+
+    /// `h = -rho(predicate)`: stay out of the predicate's region.
+    pub fn outside(name: impl Into<String>, predicate: Predicate) -> Self {
+        Barrier {
+            name: name.into(),
+            predicate,
+            positive: false,
+            slack_weight: 1.0,
+        }
+    }
+
+    /// The barrier's value `h(s)` (the predicate's robustness, negated for an `outside`
+    /// barrier): the barrier holds while it is > 0.
+    pub fn value(&self, s: &[f64]) -> f64 {
+        let h = self.predicate.value(s);
+        if self.positive {
+            h
+        } else {
+            -h
+        }
+    }
+
+    /// The same barrier with slack weight `weight` (see [`Barrier::slack_weight`]).
+    pub fn with_slack_weight(self, weight: f64) -> Self {
+        Barrier {
+            slack_weight: weight,
+            ..self
+        }
+    }
+}
+
+/// Which QP solver the shield uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolverChoice {
+    /// The active-set path for small problems, Clarabel when it cannot certify a solution.
+    Auto,
+    /// Clarabel only.
+    Clarabel,
+    /// The active-set path only (a problem it cannot solve counts as infeasible).
+    ActiveSet,
+}
+
+impl SolverChoice {
+    /// The name [`SolverChoice::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::Auto => "auto",
+            SolverChoice::Clarabel => "clarabel",
+            SolverChoice::ActiveSet => "active_set",
+        }
+    }
+
+    /// Parses `"auto"`, `"clarabel"` or `"active_set"`.
+    pub fn parse(name: &str) -> Result<Self, ShieldError> {
+        match name {
+            "auto" => Ok(SolverChoice::Auto),
+            "clarabel" => Ok(SolverChoice::Clarabel),
+            "active_set" => Ok(SolverChoice::ActiveSet),
+            other => Err(ShieldError::Config(format!(
+                "solver = {other:?}: expected \"auto\", \"clarabel\" or \"active_set\""
+            ))),
+        }
+    }
+}
+
+/// Lower and upper bounds per input (length m, finite, `lo <= hi`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bounds {
+    /// Lower bounds.
+    pub lo: Vec<f64>,
+    /// Upper bounds.
+    pub hi: Vec<f64>,
+}
+
+impl Bounds {
+    /// Checks lengths, finiteness and order; `what` names the argument in the message.
+    pub(super) fn check(&self, what: &str, m: usize) -> Result<(), ShieldError> {
+        if self.lo.len() != m || self.hi.len() != m {
+            return Err(ShieldError::Config(format!(
+                "{what}: expected (lo, hi) with {m} values each (one per input), got {} and {}",
+                self.lo.len(),
+                self.hi.len()
+            )));
+        }
+        for (i, (lo, hi)) in self.lo.iter().zip(&self.hi).enumerate() {
+            if !(lo.is_finite() && hi.is_finite()) {
+                return Err(ShieldError::Config(format!(
+                    "{what}[{i}] = ({lo}, {hi}): bounds must be finite"
+                )));
+            }
+            if lo > hi {
+                return Err(ShieldError::Config(format!(
+                    "{what}[{i}] = ({lo}, {hi}): lower bound above upper bound"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The 0.1 name of [`ShieldParams`] ("config" now means only a configuration of the case
+/// study: rl, rl_cbf, rl_clf, rl_cbf_clf).
+#[deprecated(since = "0.2.0", note = "renamed `ShieldParams`")]
+pub type ShieldConfig = ShieldParams;
+
+/// The shield's parameters (names as in the paper).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShieldParams {
+    /// CBF class-K gain: `dh/dt + alpha h >= 0` (> 0). For a second-order (HOCBF) row it is
+    /// the first gain: `psi_1 = dh/dt + alpha h`.
+    pub alpha: f64,
+    /// The HOCBF's second gain: `dpsi_1/dt + alpha2 psi_1 >= 0` (> 0), required when a barrier
+    /// has relative degree 2 under the model (see `shield/order.rs`).
+    pub alpha2: Option<f64>,
+    /// CLF decay rate: `dV/dt + c3 V <= delta` (> 0).
+    pub c3: f64,
+    /// Linear cost on the CLF relaxation `delta` (> 0; an exact penalty once it exceeds the
+    /// CLF row's multiplier).
+    pub k: f64,
+    /// Box on `a_cbf`.
+    pub cbf_bounds: Bounds,
+    /// Box on `a_clf`.
+    pub clf_bounds: Bounds,
+    /// Optional limits on the applied action `a_rl + a_cbf + a_clf`.
+    pub action_bounds: Option<Bounds>,
+    /// The range of the RL action, if known. With the CBF on, [`Shield::new`](super::Shield::new) checks that the
+    /// CBF box can cancel every RL action in it plus every CLF correction (so applying no
+    /// action, e.g. stopping, stays feasible and the barrier rows never need slack for want of
+    /// authority), and each call refuses an `a_rl` outside it.
+    pub rl_bounds: Option<Bounds>,
+    /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
+    pub barriers: Vec<Barrier>,
+    /// State dimensions the CLF drives to the goal.
+    pub pos: Vec<usize>,
+    /// Gain `k` of the second-order CLF `V = |dp/dt + k (p - goal)|^2`, used when no input
+    /// moves `pos` directly (acceleration-level models) (> 0).
+    pub clf_gain: f64,
+    /// Whether the CBF part (barriers, safe set, `a_cbf`) is on.
+    pub use_cbf: bool,
+    /// Whether the CLF part (`a_clf`, `delta`) is on.
+    pub use_clf: bool,
+    /// Which solver.
+    pub solver: SolverChoice,
+    /// Cost per unit of barrier slack in the relaxed problem (> 0).
+    pub slack_penalty: f64,
+    /// Barrier rows enforce `h - margin` (>= 0): the CBF alone keeps `h >= 0`, but an atom
+    /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
+    /// to `h = 0` exactly and count as a violation. Small ([`ShieldParams::DEFAULT_MARGIN`]).
+    pub margin: f64,
+    /// Whether the safe set also keeps the state out of guards that set the task back (the
+    /// progress-preserving safe set, [`crate::Reading::progress_safe_set`]; beyond the paper).
+    /// The same as Eq. 5C1's safe set where the trap is the only setback. On by default.
+    pub preserve_progress: bool,
+    /// Bounds on the model's error, `(d, w_d)`: the plant's `ds_d/dt` may differ from the
+    /// model's `f_d + (g a)_d` by up to `w_d` (>= 0) in state dimension `d`; every unlisted
+    /// dimension is exact. Each barrier row asks for `sum_d |dB/ds_d| w_d` more than the
+    /// nominal condition (`B` is `h` for a first-order row, `psi_1` for a second-order one),
+    /// so it holds for every error within the bounds (a robust CBF; DESIGN.md: "Plants the
+    /// shield only approximates"). Empty by default: the model is the plant.
+    pub disturbance: Vec<(usize, f64)>,
+}
+
+impl ShieldParams {
+    /// Default cost per unit of barrier slack in the relaxed problem.
+    pub const DEFAULT_SLACK_PENALTY: f64 = 1e6;
+    /// Default barrier margin: `h` is kept above this, so atoms (`rho > 0`) stay true.
+    pub const DEFAULT_MARGIN: f64 = 1e-6;
+    /// Default CLF dimensions: the position is `s[0], s[1]`.
+    pub const DEFAULT_POS: [usize; 2] = [0, 1];
+    /// Default gain of the second-order CLF.
+    pub const DEFAULT_CLF_GAIN: f64 = 1.0;
+
+    /// The gains and boxes every shield needs; everything else at its default: no actuator
+    /// limits, no user barriers, the CLF on [`ShieldParams::DEFAULT_POS`], both CBF and CLF on,
+    /// [`SolverChoice::Auto`], [`ShieldParams::DEFAULT_SLACK_PENALTY`] and
+    /// [`ShieldParams::DEFAULT_MARGIN`]. Validated by [`Shield::new`](super::Shield::new).
+    pub fn new(alpha: f64, c3: f64, k: f64, cbf_bounds: Bounds, clf_bounds: Bounds) -> Self {
+        ShieldParams {
+            alpha,
+            alpha2: None,
+            c3,
+            k,
+            cbf_bounds,
+            clf_bounds,
+            action_bounds: None,
+            rl_bounds: None,
+            barriers: Vec::new(),
+            pos: Self::DEFAULT_POS.to_vec(),
+            clf_gain: Self::DEFAULT_CLF_GAIN,
+            use_cbf: true,
+            use_clf: true,
+            solver: SolverChoice::Auto,
+            slack_penalty: Self::DEFAULT_SLACK_PENALTY,
+            margin: Self::DEFAULT_MARGIN,
+            preserve_progress: true,
+            disturbance: Vec::new(),
+        }
+    }
+
+    /// Bounds on the model's error per state dimension (see [`ShieldParams::disturbance`]).
+    pub fn with_disturbance(mut self, disturbance: Vec<(usize, f64)>) -> Self {
+        self.disturbance = disturbance;
+        self
+    }
+
+    /// Limits on the applied action `a_rl + a_cbf + a_clf`.
+    pub fn with_action_bounds(mut self, bounds: Option<Bounds>) -> Self {
+        self.action_bounds = bounds;
+        self
+    }
+
+    /// The range of the RL action (see [`ShieldParams::rl_bounds`]).
+    pub fn with_rl_bounds(mut self, bounds: Option<Bounds>) -> Self {
+        self.rl_bounds = bounds;
+        self
+    }
+
+    /// The user's barriers.
+    pub fn with_barriers(mut self, barriers: Vec<Barrier>) -> Self {
+        self.barriers = barriers;
+        self
+    }
+
+    /// The state dimensions the CLF drives to the goal.
+    pub fn with_pos(mut self, pos: Vec<usize>) -> Self {
+        self.pos = pos;
+        self
+    }
+
+    /// Which parts are on (the paper's configurations).
+    pub fn with_parts(mut self, use_cbf: bool, use_clf: bool) -> Self {
+        self.use_cbf = use_cbf;
+        self.use_clf = use_clf;
+        self
+    }
+
+    /// The QP solver.
+    pub fn with_solver(mut self, solver: SolverChoice) -> Self {
+        self.solver = solver;
+        self
+    }
+
+    /// Cost per unit of barrier slack in the relaxed problem.
+    pub fn with_slack_penalty(mut self, slack_penalty: f64) -> Self {
+        self.slack_penalty = slack_penalty;
+        self
+    }
+
+    /// The barrier margin.
+    pub fn with_margin(mut self, margin: f64) -> Self {
+        self.margin = margin;
+        self
+    }
+
+    /// Whether the safe set preserves progress (see [`ShieldParams::preserve_progress`]).
+    pub fn with_preserve_progress(mut self, on: bool) -> Self {
+        self.preserve_progress = on;
+        self
+    }
+
+    /// The HOCBF's second gain (needed for barriers of relative degree 2).
+    pub fn with_alpha2(mut self, alpha2: Option<f64>) -> Self {
+        self.alpha2 = alpha2;
+        self
+    }
+
+    /// The gain of the second-order CLF.
+    pub fn with_clf_gain(mut self, clf_gain: f64) -> Self {
+        self.clf_gain = clf_gain;
+        self
+    }
+}
