@@ -22,7 +22,7 @@ s[3:9] = [2.0, 2.0, 4.0, 3.5, 8.0, 8.0]
 task, rng, steps = monitor.reset(s), np.random.default_rng(0), 0
 while not (task.accepted or task.trapped) and steps < 500:
     a_rl = rng.normal(0.0, 0.1, size=2)  # your policy
-    out = shield.filter(monitor, a_rl)  # call 1: the CLF-CBF QP at (s, q)
+    out = shield.filter_monitor(monitor, a_rl)  # call 1: the CLF-CBF QP at (s, q)
     (v, w), dt = out.action, 0.1  # your plant: a unicycle, one Euler step
     s[:3] += dt * np.array([v * np.cos(s[2]), v * np.sin(s[2]), w])
     task, steps = monitor.advance(s), steps + 1  # call 2: q, reward, accepted, trapped, goal

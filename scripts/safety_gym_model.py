@@ -140,7 +140,7 @@ def compare_models(episodes: int, d: float) -> None:
             for _ in range(1000):
                 action = hazard_attacker(env, obs)
                 if reference:
-                    out = shield.filter(monitor, env.shield_input(action))
+                    out = shield.filter_monitor(monitor, env.shield_input(action))
                     action = np.array([POINT.saturation * out.action[0], out.action[1]])
                     relaxed += out.status != Status.SOLVED
                 obs, _, term, trunc, info = env.step(action)

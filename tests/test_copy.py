@@ -133,7 +133,9 @@ def test_a_monitor_copied_mid_episode_continues_bit_for_bit(how: str, reward: st
         # The shield reads a copied monitor as it reads the original (one automaton).
         assert all(
             map(
-                _same, _filtered(shield.filter(twin, a_rl)), _filtered(shield.filter(monitor, a_rl))
+                _same,
+                _filtered(shield.filter_monitor(twin, a_rl)),
+                _filtered(shield.filter_monitor(monitor, a_rl)),
             )
         )
         assert all(map(_same, _task_step(twin.advance(s)), _task_step(monitor.advance(s))))
@@ -151,7 +153,7 @@ def test_a_monitor_batch_copied_mid_episode_continues_bit_for_bit(how: str) -> N
     assert len(twin) == 3 and twin.q.tolist() == batch.q.tolist()
     for states in trajs[15:]:
         a_rl = np.full((3, 2), 0.3)
-        x, y = shield.filter_batch(twin, a_rl), shield.filter_batch(batch, a_rl)
+        x, y = shield.filter_monitors(twin, a_rl), shield.filter_monitors(batch, a_rl)
         assert _same(x.action, y.action) and _same(x.status, y.status)
         u, v = twin.advance(states), batch.advance(states)
         assert all(

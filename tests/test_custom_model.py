@@ -111,11 +111,11 @@ def test_a_custom_model_gives_the_built_in_models_actions(
     # The monitor paths too.
     monitors = tlshield.MonitorBatch(b.automaton, 300)
     monitors.reset(xs)
-    by_monitor = b.filter_batch(monitors, a_rl)
+    by_monitor = b.filter_monitors(monitors, a_rl)
     np.testing.assert_allclose(by_monitor.action, batch_a.action, rtol=0, atol=1e-9)
     one = tlshield.Monitor(b.automaton)
     one.reset(xs[0])
-    np.testing.assert_allclose(b.filter(one, a_rl[0]).action, batch_a.action[0], atol=1e-9)
+    np.testing.assert_allclose(b.filter_monitor(one, a_rl[0]).action, batch_a.action[0], atol=1e-9)
 
 
 @pytest.mark.parametrize("model_name", ["custom", "built-in"])

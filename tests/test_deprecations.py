@@ -58,3 +58,29 @@ def test_a_0_1_record_reads_its_old_names_silently(recwarn: pytest.WarningsRecor
     object.__setattr__(run, "record", {"env": {"K": 55.0, "cbf_margin": 0.002}})
     assert (run.env.shield.k, run.env.shield.margin) == (55.0, 0.002)
     assert not [w for w in recwarn if issubclass(w.category, DeprecationWarning)]
+
+
+def test_monitor_overloads_warn_and_equal_the_named_methods() -> None:
+    """``filter(monitor, a_rl)`` and ``filter_batch(monitors, a_rl)`` (0.2's overloads by
+    argument type) warn and give what ``filter_monitor`` and ``filter_monitors`` give."""
+    import numpy as np
+
+    import tlshield
+    from tests.fixtures import task_shield
+
+    shield = task_shield()
+    s = np.zeros(13)
+    s[3:9] = [4.0, 4.0, 4.5, 6.5, 9.0, 9.0]
+    monitor = tlshield.Monitor(shield.automaton)
+    monitor.reset(s)
+    a_rl = np.array([1.0, -2.0])
+    with pytest.warns(DeprecationWarning, match="use Shield.filter_monitor"):
+        old = shield.filter(monitor, a_rl)
+    assert old.action.tolist() == shield.filter_monitor(monitor, a_rl).action.tolist()
+    batch = tlshield.MonitorBatch(shield.automaton, 2)
+    batch.reset(np.stack([s, s]))
+    actions = np.stack([a_rl, -a_rl])
+    with pytest.warns(DeprecationWarning, match="use Shield.filter_monitors"):
+        old_batch = shield.filter_batch(batch, actions)
+    new_batch = shield.filter_monitors(batch, actions)
+    assert old_batch.action.tolist() == new_batch.action.tolist()

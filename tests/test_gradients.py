@@ -134,6 +134,8 @@ def test_vjp_matches_finite_differences_on_channel_v0() -> None:
         np.testing.assert_allclose(ga[ok, j], fd[ok], atol=1e-5, rtol=1e-5, err_msg=f"a[{j}]")
 
 
+# cvxpylayers 1.0.4 warns about its own numpy 2 arrays on every solve.
+@pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")
 def test_vjp_equals_cvxpylayers_to_1e_6() -> None:
     """The same QPs through cvxpylayers (rows in torch, derivatives by autograd and diffcp):
     both gradients agree to 1e-6 on every covered, unflagged row that cvxpylayers itself solves

@@ -265,6 +265,16 @@ CASES: dict[str, Case] = {
         {"s": S, "q": Q, "a_rl": A_RL[5], "f": F, "g": G, "drift": DRIFT[5]},
     ),
     "Shield.barrier_values": Case(_shield, "barrier_values", {"s": S}),
+    "Shield.filter_monitor": Case(
+        _shield,
+        "filter_monitor",
+        {"monitor": _started_monitor(), "a_rl": A_RL[0], "f": F, "g": G, "drift": DRIFT[0]},
+    ),
+    "Shield.filter_monitors": Case(
+        _shield,
+        "filter_monitors",
+        {"monitors": _started_batch(), "a_rl": A_RL[:4], "drift": DRIFT[:4]},
+    ),
     "Shield.filter_batch": Case(
         _shield, "filter_batch", {"states": STATES, "qs": QS, "a_rl": A_RL, "drift": DRIFT}
     ),

@@ -1,5 +1,5 @@
 """The task monitor: one call per step gives what the separate automaton calls give, and
-``Shield.filter(monitor, a_rl)`` equals ``Shield.filter(s, q, a_rl)`` on the same step."""
+``Shield.filter_monitor(monitor, a_rl)`` equals ``Shield.filter(s, q, a_rl)`` on the same step."""
 
 import re
 from pathlib import Path
@@ -62,7 +62,7 @@ def test_monitor_equals_the_separate_calls(reward):
             np.testing.assert_array_equal(monitor.state, s)
             np.testing.assert_array_equal(got.atom_robustness, aut.spec.atom_robustness(s))
             a = rng.uniform([-1.0, -2.0], [1.0, 2.0])
-            via_monitor, direct = shield.filter(monitor, a), shield.filter(s, q_next, a)
+            via_monitor, direct = shield.filter_monitor(monitor, a), shield.filter(s, q_next, a)
             np.testing.assert_array_equal(via_monitor.action, direct.action)
             assert via_monitor.delta == direct.delta
             assert via_monitor.barriers == direct.barriers
@@ -80,7 +80,7 @@ def test_monitor_misuse_is_a_clear_error():
     with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
         monitor.advance(np.zeros(13))
     with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
-        shield.filter(monitor, np.zeros(2))
+        shield.filter_monitor(monitor, np.zeros(2))
     with pytest.raises(ValueError, match="s0"):
         monitor.reset(np.zeros(12))
     with pytest.raises(ValueError, match="NaN"):
@@ -91,20 +91,20 @@ def test_monitor_misuse_is_a_clear_error():
     with pytest.raises(TypeError, match="missing the RL action"):
         shield.filter(np.zeros(13), 0)
     with pytest.raises(ValueError, match="a_rl"):
-        shield.filter(monitor, np.zeros(3))
+        shield.filter_monitor(monitor, np.zeros(3))
     # An equal spec shares its automaton (copies and pickles rely on it); another task's
     # automaton is refused.
     fresh = channel_task_spec.__wrapped__()
     same = tlshield.Monitor(fresh.automaton())
     same.reset(np.zeros(13))
-    assert shield.filter(same, np.zeros(2)).action.tolist() == (
-        shield.filter(monitor, np.zeros(2)).action.tolist()
+    assert shield.filter_monitor(same, np.zeros(2)).action.tolist() == (
+        shield.filter_monitor(monitor, np.zeros(2)).action.tolist()
     )
     other = tlshield.Spec("F g1 & F g3", {k: fresh.predicates[k] for k in ("g1", "g3")})
     foreign = tlshield.Monitor(other.automaton())
     foreign.reset(np.zeros(13))
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
-        shield.filter(foreign, np.zeros(2))
+        shield.filter_monitor(foreign, np.zeros(2))
     with pytest.raises(ValueError, match="c_r"):
         tlshield.Monitor(aut, c_r=0.0)
     with pytest.raises(ValueError, match="trap_penalty"):
@@ -122,22 +122,24 @@ def test_the_monitor_form_reads_any_layout_of_a_rl():
     monitor = tlshield.Monitor(shield.automaton)
     monitor.reset(_episode(np.random.default_rng(0), 2)[0])
     a = np.array([0.7, -1.5])
-    want = shield.filter(monitor, a).action
+    want = shield.filter_monitor(monitor, a).action
     big = np.zeros(4)
     big[::2] = a
     read_only = a.copy()
     read_only.flags.writeable = False
     for layout in (a[::-1].copy()[::-1], big[::2], read_only, a.tolist()):
-        np.testing.assert_array_equal(shield.filter(monitor, layout).action, want)
+        np.testing.assert_array_equal(shield.filter_monitor(monitor, layout).action, want)
     single = a.astype(np.float32)
     np.testing.assert_array_equal(
-        shield.filter(monitor, single).action, shield.filter(monitor, single.astype(float)).action
+        shield.filter_monitor(monitor, single).action,
+        shield.filter_monitor(monitor, single.astype(float)).action,
     )
     np.testing.assert_array_equal(
-        shield.filter(monitor, np.array([1, -2])).action, shield.filter(monitor, [1.0, -2.0]).action
+        shield.filter_monitor(monitor, np.array([1, -2])).action,
+        shield.filter_monitor(monitor, [1.0, -2.0]).action,
     )
     with pytest.raises(TypeError, match="a_rl"):
-        shield.filter(monitor, np.array([1 + 1j, 0]))
+        shield.filter_monitor(monitor, np.array([1 + 1j, 0]))
 
 
 def test_the_readme_loop_runs():
@@ -150,7 +152,7 @@ def test_the_readme_loop_runs():
 
     page = Path(__file__).resolve().parent.parent / "docs" / "guides" / "own-loop.md"
     blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
-    (loop,) = [b for b in blocks if "shield.filter(monitor" in b]
+    (loop,) = [b for b in blocks if "shield.filter_monitor(monitor" in b]
 
     class StateOnly(gym.ObservationWrapper):
         def observation(self, obs):
@@ -209,13 +211,13 @@ def test_monitor_batch_equals_single_monitors_and_the_state_batch(rows):
         np.testing.assert_array_equal(got.trapped, [w.trapped for w in want])
         np.testing.assert_array_equal(batch.q, got.q)
         a = rng.uniform([-1.0, -2.0], [1.0, 2.0], size=(rows, 2))
-        via_monitors = shield.filter_batch(batch, a)
+        via_monitors = shield.filter_monitors(batch, a)
         via_states = shield.filter_batch(states, got.q, a)
         np.testing.assert_array_equal(via_monitors.action, via_states.action)
         np.testing.assert_array_equal(via_monitors.status, via_states.status)
         for i in (0, rows - 1):
             np.testing.assert_array_equal(
-                via_monitors.action[i], shield.filter(singles[i], a[i]).action
+                via_monitors.action[i], shield.filter_monitor(singles[i], a[i]).action
             )
     # Restarting some rows: the others go on.
     again = batch.reset(episodes[[3, 1], 0], rows=[3, 1])
@@ -229,7 +231,7 @@ def test_monitor_batch_misuse_is_a_clear_error():
     with pytest.raises(ValueError, match="row 0"):
         batch.advance(states)
     with pytest.raises(ValueError, match="monitors row 0"):
-        shield.filter_batch(batch, np.zeros((3, 2)))
+        shield.filter_monitors(batch, np.zeros((3, 2)))
     batch.reset(states)
     with pytest.raises(ValueError, match="states"):
         batch.advance(np.zeros((2, 13)))
@@ -246,7 +248,7 @@ def test_monitor_batch_misuse_is_a_clear_error():
     with pytest.raises(TypeError, match="rows"):
         batch.reset(np.zeros((1, 13)), rows=[0.5])
     with pytest.raises(ValueError, match="a_rl"):
-        shield.filter_batch(batch, np.zeros((2, 2)))
+        shield.filter_monitors(batch, np.zeros((2, 2)))
     with pytest.raises(TypeError, match="RL actions second"):
         shield.filter_batch(batch, np.zeros((3, 2)), np.zeros((3, 2)))
     with pytest.raises(TypeError, match="missing the RL actions"):
@@ -261,4 +263,4 @@ def test_monitor_batch_misuse_is_a_clear_error():
     other = tlshield.MonitorBatch(other_spec.automaton(), 3)
     other.reset(states)
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
-        shield.filter_batch(other, np.zeros((3, 2)))
+        shield.filter_monitors(other, np.zeros((3, 2)))

@@ -68,7 +68,7 @@ def test_a_start_inside_a_hazard_of_the_formula_is_driven_out_and_kept_out(polic
                 a_rl = np.clip(a_rl, -4.0, 4.0)
             else:
                 a_rl = rng.uniform(-4.0, 4.0, 2)
-            s = model.step(s, shield.filter(monitor, a_rl).action, 0.01)
+            s = model.step(s, shield.filter_monitor(monitor, a_rl).action, 0.01)
             monitor.advance(s)
             inside = any(np.linalg.norm(s[:2] - c) <= r for c, r in HAZARDS.values())
             if not inside and out_at is None:

@@ -55,7 +55,7 @@ CALLS = {
     "Shield.filter_batch(states (N, 13), qs, a_rl)": (
         "shield.filter_batch(B(N, 13), B(N, dtype=int), B(N, 2))"
     ),
-    "Shield.filter_batch(monitors, a_rl (N, 2))": "shield.filter_batch(batch, B(N, 2))",
+    "Shield.filter_monitors(monitors, a_rl (N, 2))": "shield.filter_monitors(batch, B(N, 2))",
     "Shield.filter(s (N,), q, a_rl)": "shield.filter(B(N), 0, np.zeros(2))",
     "Shield.filter(..., f (N,), g (N, 2))": (
         "shield.filter(np.zeros(13), 0, np.zeros(2), f=B(N), g=B(N, 2))"
@@ -191,7 +191,7 @@ def test_every_batch_call_takes_zero_rows() -> None:
     for step in (empty.reset(np.zeros((0, 13))), empty.advance(np.zeros((0, 13)))):
         assert len(step) == 0
         assert step.q.shape == step.reward.shape == step.accepted.shape == (0,)
-    assert shield.filter_batch(empty, np.zeros((0, 2))).action.shape == (0, 2)
+    assert shield.filter_monitors(empty, np.zeros((0, 2))).action.shape == (0, 2)
     rows = tlshield.MonitorBatch(aut, 2)
     rows.reset(np.zeros((2, 13)))
     assert len(rows.reset(np.zeros((0, 13)), rows=[])) == 0

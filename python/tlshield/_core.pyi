@@ -1,7 +1,7 @@
 """Type stubs for the compiled module ``tlshield._core`` (hand-written; keep in sync)."""
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, Literal, TypeAlias, final, overload
+from typing import Any, Literal, TypeAlias, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -216,7 +216,7 @@ class TaskStep:
 class Monitor:
     """The task automaton along one episode: ``q``, the last reading of the atoms and the task
     reward's state; ``reset(s0)`` and ``advance(s_next)`` give a ``TaskStep`` in one call, and
-    ``Shield.filter(monitor, a_rl)`` reuses the reading."""
+    ``Shield.filter_monitor(monitor, a_rl)`` reuses the reading."""
 
     def __new__(
         cls,
@@ -258,7 +258,7 @@ class TaskBatch:
 @final
 class MonitorBatch:
     """``num`` task monitors of one automaton, stepped together (the batch twin of
-    ``Monitor``); ``Shield.filter_batch(monitors, a_rl)`` reuses the rows' readings."""
+    ``Monitor``); ``Shield.filter_monitors(monitors, a_rl)`` reuses the rows' readings."""
 
     def __new__(
         cls,
@@ -641,38 +641,39 @@ class Shield:
         goal)|^2`` (None: 1); ``disturbance`` bounds the model's error per
         state dimension, ``{d: w_d}`` (the plant's ``ds_d/dt`` may differ from the model's by
         up to ``w_d``): each barrier row then holds for every such error (a robust CBF)."""
-    @overload
-    def filter(
-        self,
-        s: Monitor,
-        q: ArrayLike,
-        a_rl: None = None,
-        f: ArrayLike | None = None,
-        g: ArrayLike | None = None,
-        drift: ArrayLike | None = None,
-    ) -> FilterResult: ...
-    @overload
     def filter(
         self,
         s: ArrayLike,
         q: int,
+        a_rl: ArrayLike | None = None,
+        f: ArrayLike | None = None,
+        g: ArrayLike | None = None,
+        drift: ArrayLike | None = None,
+    ) -> FilterResult:
+        """One shield step at ``(s, q)`` for ``a_rl`` (required; ``filter(monitor, a_rl)`` is
+        the deprecated spelling of ``filter_monitor``)."""
+    def filter_monitor(
+        self,
+        monitor: Monitor,
         a_rl: ArrayLike,
         f: ArrayLike | None = None,
         g: ArrayLike | None = None,
         drift: ArrayLike | None = None,
-    ) -> FilterResult: ...
-    @overload
+    ) -> FilterResult:
+        """One shield step at the monitor's last state and FSA state."""
     def filter_batch(
         self,
-        states: MonitorBatch,
+        states: ArrayLike,
         qs: ArrayLike,
-        a_rl: None = None,
+        a_rl: ArrayLike | None = None,
         drift: ArrayLike | None = None,
-    ) -> FilterBatch: ...
-    @overload
-    def filter_batch(
-        self, states: ArrayLike, qs: ArrayLike, a_rl: ArrayLike, drift: ArrayLike | None = None
-    ) -> FilterBatch: ...
+    ) -> FilterBatch:
+        """A batch of steps (``a_rl`` required; ``filter_batch(monitors, a_rl)`` is the
+        deprecated spelling of ``filter_monitors``)."""
+    def filter_monitors(
+        self, monitors: MonitorBatch, a_rl: ArrayLike, drift: ArrayLike | None = None
+    ) -> FilterBatch:
+        """A batch of steps at the monitors' last states and FSA states."""
     def vjp_batch(
         self,
         states: ArrayLike,

@@ -350,7 +350,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         applied = action
         u_rl = self.shield_input(action)
         if self.shield is not None:
-            result = self.shield.filter(self.monitor, u_rl)
+            result = self.shield.filter_monitor(self.monitor, u_rl)
             u = result.action
             applied = np.array([POINT.saturation * u[0], u[1]])
         obs, reward, cost, terminated, truncated, info = self._env.step(applied)

@@ -16,7 +16,7 @@ use crate::progress::PyProgressReward;
 /// The task automaton along one episode: it holds the FSA state ``q``, the last reading of the
 /// atoms and the task reward's state. ``reset(s0)`` starts an episode and ``advance(s_next)``
 /// moves it on; each returns a ``TaskStep`` (``q``, ``reward``, ``accepted``, ``trapped``,
-/// ``goal``) from one reading of the atoms, which ``Shield.filter(monitor, a_rl)`` reuses.
+/// ``goal``) from one reading of the atoms, which ``Shield.filter_monitor(monitor, a_rl)`` reuses.
 /// With ``progress`` (a ``ProgressReward`` of ``automaton``) the reward is the progress-aware
 /// one; without it the paper's Eq. 5A1 with weight ``c_r``, ``trap_penalty`` in the trap.
 #[pyclass(name = "Monitor", module = "tlshield._core")]
@@ -200,7 +200,7 @@ impl PyTaskStep {
 /// for vector environments): each row's monitor holds its FSA state, so nothing is recovered
 /// from observations. ``reset(states, rows=None)`` starts the episodes of ``rows`` (all by
 /// default) and ``advance(states)`` moves every row on; both return a ``TaskBatch``, and
-/// ``Shield.filter_batch(monitors, a_rl)`` reuses the rows' readings. Large batches run in
+/// ``Shield.filter_monitors(monitors, a_rl)`` reuses the rows' readings. Large batches run in
 /// parallel with the GIL released.
 #[pyclass(name = "MonitorBatch", module = "tlshield._core")]
 pub struct PyMonitorBatch {

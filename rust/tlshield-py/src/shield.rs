@@ -494,12 +494,11 @@ impl PyShield {
     }
 
     /// One shield step: state ``s`` (n,), FSA state ``q`` (the state after reading ``s``),
-    /// RL action ``a_rl`` (m,). Or ``filter(monitor, a_rl)``: at a ``Monitor``'s last state
-    /// and FSA state, reusing its reading of the atoms and its CLF goal (the per-step path:
-    /// ``monitor.advance(s_next)``, then ``shield.filter(monitor, a_rl)``). ``f`` (n,) and
-    /// ``g`` (n, m) override the dynamics model. ``drift`` (n,) is added to ``f``: the motion
-    /// measured for this step of state dimensions the agent does not control (e.g. moving
-    /// obstacles read by ``center_dims``).
+    /// RL action ``a_rl`` (m,). ``f`` (n,) and ``g`` (n, m) override the dynamics model.
+    /// ``drift`` (n,) is added to ``f``: the motion measured for this step of state dimensions
+    /// the agent does not control (e.g. moving obstacles read by ``center_dims``). At a
+    /// ``Monitor``'s state, use ``filter_monitor`` (``filter(monitor, a_rl)`` is its deprecated
+    /// spelling).
     #[pyo3(signature = (s, q, a_rl=None, f=None, g=None, drift=None))]
     #[allow(clippy::too_many_arguments)]
     fn filter(
@@ -512,36 +511,109 @@ impl PyShield {
         g: Option<&Bound<'_, PyAny>>,
         drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
-        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
-        let drift = drift.as_deref();
-        let action = |a: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
-            Ok(FloatArray::extract(a, "a_rl", 1, "(m,)")?.values().to_vec())
-        };
-        let out = if let Ok(monitor) = s.cast::<PyMonitor>() {
+        if let Ok(monitor) = s.cast::<PyMonitor>() {
             if a_rl.is_some() {
                 return Err(PyTypeError::new_err(
                     "filter(monitor, a_rl): the monitor holds the state and the FSA state; pass \
-                     the RL action second",
+                     the RL action second (better: filter_monitor(monitor, a_rl))",
                 ));
             }
-            let a_rl = action(q)?;
-            let monitor = monitor.borrow();
-            let s = monitor.inner.state();
-            self.with_dynamics(py, s, f, g, |fg| {
-                map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
-            })?
-        } else {
-            let a_rl = a_rl.ok_or_else(|| {
-                PyTypeError::new_err("filter(s, q, a_rl): missing the RL action a_rl")
-            })?;
-            let s = vector(s, "s")?;
-            let q = state(q, "q", self.inner.automaton())?;
-            let a_rl = action(a_rl)?;
-            self.with_dynamics(py, &s, f, g, |fg| {
-                map(self.inner.filter(&s, q, &a_rl, fg, drift))
-            })?
-        };
+            crate::errors::deprecated(
+                py,
+                "Shield.filter(monitor, a_rl) is deprecated: use Shield.filter_monitor(monitor, a_rl)",
+            )?;
+            return self.filter_monitor(py, monitor, q, f, g, drift);
+        }
+        let a_rl = a_rl.ok_or_else(|| {
+            PyTypeError::new_err("filter(s, q, a_rl): missing the RL action a_rl")
+        })?;
+        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+        let drift = drift.as_deref();
+        let s = vector(s, "s")?;
+        let q = state(q, "q", self.inner.automaton())?;
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+            .values()
+            .to_vec();
+        let out = self.with_dynamics(py, &s, f, g, |fg| {
+            map(self.inner.filter(&s, q, &a_rl, fg, drift))
+        })?;
         Ok(self.result(py, out))
+    }
+
+    /// One shield step at a ``Monitor``'s last state and FSA state, reusing its reading of the
+    /// atoms and its CLF goal (the per-step path: ``monitor.advance(s_next)``, then
+    /// ``shield.filter_monitor(monitor, a_rl)``). ``a_rl`` (m,); ``f``, ``g`` and ``drift`` as
+    /// in ``filter``.
+    #[pyo3(signature = (monitor, a_rl, f=None, g=None, drift=None))]
+    fn filter_monitor(
+        &self,
+        py: Python<'_>,
+        monitor: &Bound<'_, PyMonitor>,
+        a_rl: &Bound<'_, PyAny>,
+        f: Option<&Bound<'_, PyAny>>,
+        g: Option<&Bound<'_, PyAny>>,
+        drift: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyFilterResult> {
+        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+        let drift = drift.as_deref();
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+            .values()
+            .to_vec();
+        let monitor = monitor.borrow();
+        let s = monitor.inner.state();
+        let out = self.with_dynamics(py, s, f, g, |fg| {
+            map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
+        })?;
+        Ok(self.result(py, out))
+    }
+
+    /// Shields the rows of a ``MonitorBatch`` at their last states and FSA states, reusing each
+    /// row's reading of the atoms and its goal: ``a_rl`` (B, m), ``drift`` (B, n) optional.
+    /// Returns a ``FilterBatch`` (see ``filter_batch``).
+    #[pyo3(signature = (monitors, a_rl, drift=None))]
+    fn filter_monitors<'py>(
+        &self,
+        py: Python<'py>,
+        monitors: &Bound<'py, PyMonitorBatch>,
+        a_rl: &Bound<'py, PyAny>,
+        drift: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<PyFilterBatch> {
+        let monitors = monitors.borrow();
+        let rows = monitors.inner.len();
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
+        let drift = drift
+            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
+            .transpose()?;
+        let m = self.inner.inputs();
+        if a_rl.shape() != [rows, m] {
+            return Err(PyValueError::new_err(format!(
+                "filter_monitors: expected a_rl ({rows}, {m}) for {rows} monitors, got {}",
+                crate::convert::shape_text(a_rl.shape())
+            )));
+        }
+        let (actions, drift_values) = (a_rl.values(), drift.as_ref().map(|d| d.values()));
+        let shield = &self.inner;
+        let mut out = BatchOutput::default();
+        let batch = &monitors.inner;
+        let states: Vec<f64> = match &self.custom {
+            Some(_) => batch
+                .monitors()
+                .iter()
+                .flat_map(|m| m.state())
+                .copied()
+                .collect(),
+            None => Vec::new(),
+        };
+        let evaluated = self.evaluate_rows(py, &states)?;
+        let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+            f,
+            g,
+            jacobian: Some(j),
+        });
+        map(py.detach(|| {
+            shield.filter_monitors_with(batch, actions, dynamics, drift_values, &mut out)
+        }))?;
+        self.batch_result(py, out, rows)
     }
 
     /// Shields a batch: ``states`` (B, n), ``qs`` (B,), ``a_rl`` (B, m), using the dynamics
@@ -549,8 +621,8 @@ impl PyShield {
     /// ``action``, ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,)
     /// ``tlshield.Status`` values and ``solver`` (B,) ``tlshield.Solver`` values (uint8).
     /// ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
-    /// Or ``filter_batch(monitors, a_rl, drift=None)``: at the rows of a ``MonitorBatch``,
-    /// reusing each row's reading of the atoms and its goal.
+    /// At the rows of a ``MonitorBatch``, use ``filter_monitors`` (``filter_batch(monitors,
+    /// a_rl)`` is its deprecated spelling).
     #[pyo3(signature = (states, qs, a_rl=None, drift=None))]
     fn filter_batch<'py>(
         &self,
@@ -564,45 +636,15 @@ impl PyShield {
             if a_rl.is_some() {
                 return Err(PyTypeError::new_err(
                     "filter_batch(monitors, a_rl): the monitors hold the states and the FSA \
-                     states; pass the RL actions second",
+                     states; pass the RL actions second (better: filter_monitors(monitors, a_rl))",
                 ));
             }
-            let monitors = monitors.borrow();
-            let rows = monitors.inner.len();
-            let a_rl = FloatArray::extract(qs, "a_rl", 2, "(B, m)")?;
-            let drift = drift
-                .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
-                .transpose()?;
-            let m = self.inner.inputs();
-            if a_rl.shape() != [rows, m] {
-                return Err(PyValueError::new_err(format!(
-                    "filter_batch: expected a_rl ({rows}, {m}) for {rows} monitors, got {}",
-                    crate::convert::shape_text(a_rl.shape())
-                )));
-            }
-            let (actions, drift_values) = (a_rl.values(), drift.as_ref().map(|d| d.values()));
-            let shield = &self.inner;
-            let mut out = BatchOutput::default();
-            let batch = &monitors.inner;
-            let states: Vec<f64> = match &self.custom {
-                Some(_) => batch
-                    .monitors()
-                    .iter()
-                    .flat_map(|m| m.state())
-                    .copied()
-                    .collect(),
-                None => Vec::new(),
-            };
-            let evaluated = self.evaluate_rows(py, &states)?;
-            let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
-                f,
-                g,
-                jacobian: Some(j),
-            });
-            map(py.detach(|| {
-                shield.filter_monitors_with(batch, actions, dynamics, drift_values, &mut out)
-            }))?;
-            return self.batch_result(py, out, rows);
+            crate::errors::deprecated(
+                py,
+                "Shield.filter_batch(monitors, a_rl) is deprecated: use \
+                 Shield.filter_monitors(monitors, a_rl)",
+            )?;
+            return self.filter_monitors(py, monitors, qs, drift);
         }
         let a_rl = a_rl.ok_or_else(|| {
             PyTypeError::new_err("filter_batch(states, qs, a_rl): missing the RL actions a_rl")
