@@ -38,9 +38,9 @@ fn automaton(c: &mut Criterion) {
             let s = rows[k % rows.len()];
             k += 1;
             let q = if k % 2 == 0 { 0 } else { 3 };
-            let next = aut.step(q, black_box(s)).unwrap();
-            let reward = aut.reward(q, s, 1.0, None).unwrap();
-            let kept = aut.safe_set(q, s, false).unwrap();
+            let next = aut.step(black_box(s), q).unwrap();
+            let reward = aut.reward(s, q, 1.0, None).unwrap();
+            let kept = aut.safe_set(s, q, false).unwrap();
             (next, reward, kept.len())
         })
     });

@@ -22,7 +22,7 @@ class FsaTracker:
     adds what the Gymnasium wrappers need (the one-hot FSA state).
 
     The FSA reads every state: ``reset(s_0)`` sets ``q_0 = step(initial, s_0)`` and
-    ``advance(s')`` moves to ``step(q, s')`` and returns the reward of that transition.
+    ``advance(s')`` moves to ``step(s', q)`` and returns the reward of that transition.
 
     With ``progress`` (a :class:`tlshield.ProgressReward` of the same automaton, from
     ``automaton.progress_reward(...)``) the reward is the progress-aware one: reaching

@@ -132,7 +132,7 @@ impl Monitor {
         self.report(0.0)
     }
 
-    /// Reads `s_next`: moves `q` to `step(q, s_next)` and returns the reward of that transition.
+    /// Reads `s_next`: moves `q` to `step(s_next, q)` and returns the reward of that transition.
     pub fn advance(&mut self, s_next: &[f64]) -> Result<TaskStep, AutomatonError> {
         if !self.started {
             return Err(AutomatonError::NotReset);
@@ -483,17 +483,17 @@ mod tests {
             };
             let mut monitor = Monitor::new(aut.clone(), reward).unwrap();
             let first = monitor.reset(&traj[0]).unwrap();
-            let mut q = aut.step(aut.initial(), &traj[0]).unwrap();
+            let mut q = aut.step(&traj[0], aut.initial()).unwrap();
             prop_assert_eq!(first.q, q);
             prop_assert_eq!(first.reward, 0.0);
             let mut phi = 0.0;
             for s in &traj[1..] {
                 let got = monitor.advance(s).unwrap();
                 let (q_next, r) = if paper {
-                    let r = aut.reward(q, s, 2.0, Some(-50.0)).unwrap();
-                    (aut.step(q, s).unwrap(), r)
+                    let r = aut.reward(s, q, 2.0, Some(-50.0)).unwrap();
+                    (aut.step(s, q).unwrap(), r)
                 } else {
-                    let (q_next, r, phi_next) = progress.advance(&aut, q, phi, s).unwrap();
+                    let (q_next, r, phi_next) = progress.advance(&aut, s, q, phi).unwrap();
                     phi = phi_next;
                     (q_next, r)
                 };
@@ -501,7 +501,7 @@ mod tests {
                 prop_assert_eq!(got.reward.to_bits(), r.to_bits());
                 prop_assert_eq!(got.accepted, aut.is_accepting(q_next));
                 prop_assert_eq!(got.trapped, Some(q_next) == aut.trap());
-                let goal = aut.goal(q_next, s).unwrap();
+                let goal = aut.goal(s, q_next).unwrap();
                 prop_assert_eq!(monitor.goal().map(<[f64]>::to_vec), goal);
                 q = q_next;
             }

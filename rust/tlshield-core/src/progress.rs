@@ -316,13 +316,13 @@ impl ProgressReward {
         }
     }
 
-    /// One step from `(q, phi)` into `s_next` (validated here): `(q_next, reward, phi_next)`.
+    /// One step into `s_next` (validated here) from `(q, phi)`: `(q_next, reward, phi_next)`.
     pub fn advance(
         &self,
         automaton: &Automaton,
+        s_next: &[f64],
         q: usize,
         phi: f64,
-        s_next: &[f64],
     ) -> Result<(usize, f64, f64), AutomatonError> {
         let q = automaton.check_state("q", q)?;
         if self.ranks.len() != automaton.num_states() {
@@ -445,7 +445,7 @@ mod tests {
         )
         .unwrap();
         let aut = Automaton::build(&spec).unwrap();
-        let q0 = aut.step(aut.initial(), &[7.5]).unwrap();
+        let q0 = aut.step(&[7.5], aut.initial()).unwrap();
         let reading = aut.read(&[7.5]).unwrap();
         // Eq. 5A1 follows the nearer goal b (0.5 - 1.5); the reachable signal follows a.
         assert!((reading.reward(q0, 1.0) + 1.0).abs() < 1e-12);
@@ -525,13 +525,13 @@ mod tests {
         }
         let r = ProgressReward::new(&aut, &ProgressParams::default()).unwrap();
         crate::tests_support::assert_error(
-            r.advance(&aut, 0, f64::NAN, &[0.0]),
+            r.advance(&aut, &[0.0], 0, f64::NAN),
             "Input(NonFinite",
             "phi",
         );
-        crate::tests_support::assert_error(r.advance(&aut, 99, 0.0, &[0.0]), "UnknownState", "q");
+        crate::tests_support::assert_error(r.advance(&aut, &[0.0], 99, 0.0), "UnknownState", "q");
         crate::tests_support::assert_error(
-            r.advance(&aut, 0, 0.0, &[f64::INFINITY]),
+            r.advance(&aut, &[f64::INFINITY], 0, 0.0),
             "Input(NonFinite",
             "s[0]",
         );
@@ -543,11 +543,11 @@ mod tests {
         r: &ProgressReward,
         data: &[f64],
     ) -> (Vec<f64>, Vec<usize>, Vec<f64>) {
-        let q0 = aut.step(aut.initial(), &data[..3]).unwrap();
+        let q0 = aut.step(&data[..3], aut.initial()).unwrap();
         let (mut q, mut phi) = (q0, 0.0);
         let (mut rewards, mut qs, mut phis) = (vec![], vec![q0], vec![]);
         for s in data.chunks(3).skip(1) {
-            let (qn, rew, pn) = r.advance(aut, q, phi, s).unwrap();
+            let (qn, rew, pn) = r.advance(aut, s, q, phi).unwrap();
             rewards.push(rew);
             qs.push(qn);
             phis.push(pn);
@@ -641,9 +641,9 @@ mod tests {
             let params = ProgressParams { gamma, scale: 2.0, ..Default::default() };
             let r = ProgressReward::new(&aut, &params).unwrap();
             let states: Vec<&[f64]> = data.chunks(3).collect();
-            let (mut q, mut phi) = (aut.step(aut.initial(), states[0]).unwrap(), 0.0);
+            let (mut q, mut phi) = (aut.step(states[0], aut.initial()).unwrap(), 0.0);
             for s in &states[1..] {
-                let (qn, rew, pn) = r.advance(&aut, q, phi, s).unwrap();
+                let (qn, rew, pn) = r.advance(&aut, s, q, phi).unwrap();
                 let rank = |q: usize| r.ranks()[q];
                 if let (Some(a), Some(b)) = (rank(q), rank(qn)) {
                     if b < a && !aut.is_accepting(qn) {
@@ -669,12 +669,12 @@ mod tests {
                 }
             }
             // (c) two next states that stay in q are ordered as Eq. 5A1 orders them.
-            let q = aut.step(aut.initial(), states[0]).unwrap();
+            let q = aut.step(states[0], aut.initial()).unwrap();
             if !aut.is_accepting(q) && Some(q) != aut.trap() {
                 let mut stay = vec![];
                 for s in &states[1..] {
-                    if aut.step(q, s).unwrap() == q {
-                        let (_, rew, _) = r.advance(&aut, q, -0.5, s).unwrap();
+                    if aut.step(s, q).unwrap() == q {
+                        let (_, rew, _) = r.advance(&aut, s, q, -0.5).unwrap();
                         let sigma = aut.read(s).unwrap().reachable_reward(q, 1.0);
                         stay.push((sigma.min(0.0), rew));
                     }
@@ -702,10 +702,10 @@ mod tests {
         };
         let r = ProgressReward::new(&aut, &params).unwrap();
         let run = |path: &[f64]| {
-            let (mut q, mut phi) = (aut.step(aut.initial(), &path[..1]).unwrap(), 0.0);
+            let (mut q, mut phi) = (aut.step(&path[..1], aut.initial()).unwrap(), 0.0);
             let mut rewards = vec![];
             for s in &path[1..] {
-                let (qn, rew, pn) = r.advance(&aut, q, phi, &[*s]).unwrap();
+                let (qn, rew, pn) = r.advance(&aut, &[*s], q, phi).unwrap();
                 rewards.push(rew);
                 if aut.is_accepting(qn) {
                     break;

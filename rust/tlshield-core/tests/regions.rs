@@ -55,7 +55,7 @@ fn holds(aut: &Automaton, name: &str, s: &[f64]) -> bool {
 fn run(aut: &Automaton, states: &[[f64; 2]]) -> usize {
     states
         .iter()
-        .fold(aut.initial(), |q, s| aut.step(q, s).unwrap())
+        .fold(aut.initial(), |q, s| aut.step(s, q).unwrap())
 }
 
 #[test]
@@ -66,13 +66,13 @@ fn formula_2_as_written_goes_to_magenta_after_orange_and_keeps_out_of_red() {
     assert_ne!(q, aut.initial());
     let s = [-1.53, -0.5];
     // The goal is inside magenta (the edge back to the start, via red, sets the task back).
-    let goal = aut.goal(q, &s).unwrap().expect("a goal");
+    let goal = aut.goal(&s, q).unwrap().expect("a goal");
     assert!(holds(&aut, "magenta", &goal), "{goal:?}");
     assert!(!holds(&aut, "red", &goal) || holds(&aut, "magenta", &goal));
     // The trap-only safe set is empty (red only sets the task back) ...
-    assert!(aut.safe_set(q, &s, false).unwrap().is_empty());
+    assert!(aut.safe_set(&s, q, false).unwrap().is_empty());
     // ... the progress-preserving one keeps !red.
-    let kept = aut.safe_set(q, &s, true).unwrap();
+    let kept = aut.safe_set(&s, q, true).unwrap();
     let red = aut.spec().atoms().iter().position(|a| a == "red").unwrap();
     assert!(
         kept.iter().any(|(l, h)| *l
@@ -93,7 +93,7 @@ fn conjunction_goals_lie_inside_the_intersection_and_empty_cubes_are_skipped() {
     // The mean of blue's and aqua's centres lies outside aqua; the deepest point is inside both.
     let aut = automaton("F(aqua & blue)");
     let s = [-1.9, 1.9];
-    let goal = aut.goal(aut.initial(), &s).unwrap().unwrap();
+    let goal = aut.goal(&s, aut.initial()).unwrap().unwrap();
     assert!(
         holds(&aut, "aqua", &goal) && holds(&aut, "blue", &goal),
         "{goal:?}"
@@ -102,7 +102,7 @@ fn conjunction_goals_lie_inside_the_intersection_and_empty_cubes_are_skipped() {
     // from anywhere (the second green disc, nearer to some starts, is never the goal).
     let aut = automaton("F(green & blue)");
     for s in [[1.9, -0.75], [-1.9, 1.9], [0.0, -1.9]] {
-        let goal = aut.goal(aut.initial(), &s).unwrap().unwrap();
+        let goal = aut.goal(&s, aut.initial()).unwrap().unwrap();
         assert!(
             holds(&aut, "green", &goal) && holds(&aut, "blue", &goal),
             "{s:?}: {goal:?}"

@@ -185,7 +185,7 @@ impl PyAutomaton {
     /// The state after reading state vector ``s`` from state ``q``.
     fn step(&self, s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>) -> PyResult<usize> {
         let q = self.state_after(s, q, "s")?;
-        map(self.inner.step(q, &vector(s, "s")?))
+        map(self.inner.step(&vector(s, "s")?, q))
     }
 
     /// Steps many automata at once: ``states`` (B, n), ``qs`` (B,) ints -> (B,) next states.
@@ -249,7 +249,7 @@ impl PyAutomaton {
         let q = self.state_after(s_next, q, "s_next")?;
         map(self
             .inner
-            .reward(q, &vector(s_next, "s_next")?, c_r, trap_penalty))
+            .reward(&vector(s_next, "s_next")?, q, c_r, trap_penalty))
     }
 
     /// The CNF of the negated trap guard of ``q``: clauses of literals (``"c1"``, ``"!g3"``),
@@ -313,13 +313,13 @@ impl PyAutomaton {
         preserve_progress: bool,
     ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
         let q = self.state_after(s, q, "s")?;
-        let kept = map(self.inner.safe_set(q, &vector(s, "s")?, preserve_progress))?;
+        let kept = map(self.inner.safe_set(&vector(s, "s")?, q, preserve_progress))?;
         Ok(self.kept(py, &kept))
     }
 
     /// One step of the loop from a single evaluation of the atoms at ``s_next``:
-    /// ``(q_next, reward, safe_set)`` with ``q_next = step(q, s_next)``,
-    /// ``reward = reward(q, s_next, c_r, trap_penalty)`` and
+    /// ``(q_next, reward, safe_set)`` with ``q_next = step(s_next, q)``,
+    /// ``reward = reward(s_next, q, c_r, trap_penalty)`` and
     /// ``safe_set = safe_set(q_next, s_next)`` (the constraints for the next action).
     ///
     /// Deprecated (a ``DeprecationWarning`` on the first call of each automaton object):
@@ -345,7 +345,7 @@ impl PyAutomaton {
         let (next, reward) =
             map(self
                 .inner
-                .advance(q, &vector(s_next, "s_next")?, c_r, trap_penalty, &mut kept))?;
+                .advance(&vector(s_next, "s_next")?, q, c_r, trap_penalty, &mut kept))?;
         Ok((next, reward, self.kept(py, &kept)))
     }
 
@@ -360,7 +360,7 @@ impl PyAutomaton {
         q: &Bound<'_, PyAny>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
         let q = self.state_after(s, q, "s")?;
-        Ok(map(self.inner.goal(q, &vector(s, "s")?))?.map(|g| g.into_pyarray(py)))
+        Ok(map(self.inner.goal(&vector(s, "s")?, q))?.map(|g| g.into_pyarray(py)))
     }
 
     /// The progress-aware task reward of this automaton (see ``ProgressReward``): ``gamma``

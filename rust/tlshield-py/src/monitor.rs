@@ -70,13 +70,13 @@ impl PyMonitor {
         map(self.inner.restore(&state))
     }
 
-    /// Starts an episode at ``s0``: ``q = automaton.step(automaton.initial, s0)``, reward 0.
+    /// Starts an episode at ``s0``: ``q = automaton.step(s0, automaton.initial)``, reward 0.
     fn reset(&mut self, s0: &Bound<'_, PyAny>) -> PyResult<PyTaskStep> {
         let step = map(self.inner.reset(&vector(s0, "s0")?))?;
         Ok(self.report(step))
     }
 
-    /// Reads ``s_next``: moves ``q`` to ``automaton.step(q, s_next)`` and returns that
+    /// Reads ``s_next``: moves ``q`` to ``automaton.step(s_next, q)`` and returns that
     /// transition's reward, acceptance, the trap and the CLF goal at ``(s_next, q)``.
     fn advance(&mut self, s_next: &Bound<'_, PyAny>) -> PyResult<PyTaskStep> {
         let step = map(self.inner.advance(&vector(s_next, "s_next")?))?;

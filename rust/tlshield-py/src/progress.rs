@@ -132,7 +132,7 @@ impl PyProgressReward {
         let q = state(q, "q", &self.automaton)?;
         map(self
             .inner
-            .advance(&self.automaton, q, phi, &vector(s_next, "s_next")?))
+            .advance(&self.automaton, &vector(s_next, "s_next")?, q, phi))
     }
 
     fn __repr__(&self) -> String {

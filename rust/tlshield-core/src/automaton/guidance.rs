@@ -198,8 +198,8 @@ impl Automaton {
     /// ([`Reading::reward`]), `trap_penalty` in the trap (an error when it is `None`).
     pub fn reward(
         &self,
-        q: usize,
         s_next: &[f64],
+        q: usize,
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> Result<f64, AutomatonError> {
@@ -213,12 +213,12 @@ impl Automaton {
     }
 
     /// One step of the FSA-augmented loop from one reading of `s_next`: the next state
-    /// `q' = step(q, s_next)`, the reward of Eq. 5A1 for leaving `q` ([`Automaton::reward`]),
+    /// `q' = step(s_next, q)`, the reward of Eq. 5A1 for leaving `q` ([`Automaton::reward`]),
     /// and the safe set at `(s_next, q')` written into `safe` ([`Reading::safe_set`]).
     pub fn advance(
         &self,
-        q: usize,
         s_next: &[f64],
+        q: usize,
         c_r: f64,
         trap_penalty: Option<f64>,
         safe: &mut Vec<(Literal, f64)>,
@@ -241,8 +241,8 @@ impl Automaton {
     /// checked.
     pub fn safe_set(
         &self,
-        q: usize,
         s: &[f64],
+        q: usize,
         preserve_progress: bool,
     ) -> Result<Vec<(Literal, f64)>, AutomatonError> {
         self.check_state("q", q)?;
@@ -257,7 +257,7 @@ impl Automaton {
     }
 
     /// The CLF goal of Eq. 5B1 at `(s, q)` ([`Reading::goal`]), checked; `None` without one.
-    pub fn goal(&self, q: usize, s: &[f64]) -> Result<Option<Vec<f64>>, AutomatonError> {
+    pub fn goal(&self, s: &[f64], q: usize) -> Result<Option<Vec<f64>>, AutomatonError> {
         self.check_state("q", q)?;
         let mut goal = Vec::new();
         Ok(self.read(s)?.goal(q, &mut goal).then_some(goal))

@@ -255,8 +255,9 @@ impl Automaton {
         Reading { aut: self, s, rho }
     }
 
-    /// The successor of `q` after reading state `s` (validated).
-    pub fn step(&self, q: usize, s: &[f64]) -> Result<usize, AutomatonError> {
+    /// The successor of `q` after reading state `s` (validated). State first, as everywhere in
+    /// the API: `(s, q)`.
+    pub fn step(&self, s: &[f64], q: usize) -> Result<usize, AutomatonError> {
         self.check_state("q", q)?;
         Ok(self.read(s)?.step(q))
     }
@@ -442,8 +443,8 @@ mod tests {
         assert_eq!(aut.recovery_cnf(), aut.trap_cnf(0).unwrap());
         let s = [0.5, 0.0];
         for progress in [false, true] {
-            let in_trap = aut.safe_set(trap, &s, progress).unwrap();
-            assert_eq!(in_trap, aut.safe_set(0, &s, progress).unwrap());
+            let in_trap = aut.safe_set(&s, trap, progress).unwrap();
+            assert_eq!(in_trap, aut.safe_set(&s, 0, progress).unwrap());
         }
         // A formula without a trap keeps nothing.
         let spec = Spec::new(
@@ -458,13 +459,13 @@ mod tests {
     fn running_example_safe_set_is_the_papers() {
         // Between a and b, far from c: the kept literals are !a and !b (paper: C(s, q0)).
         let aut = running_example();
-        let kept = aut.safe_set(0, &[2.0, 0.0], false).unwrap();
+        let kept = aut.safe_set(&[2.0, 0.0], 0, false).unwrap();
         let lit = |atom, positive| Literal { atom, positive };
         assert_eq!(kept, vec![(lit(0, false), 1.0), (lit(1, false), 1.0)]);
         // Inside a the first clause keeps !a (the best literal, though violated: -0.5 > -6.5).
-        let kept = aut.safe_set(0, &[0.5, 0.0], false).unwrap();
+        let kept = aut.safe_set(&[0.5, 0.0], 0, false).unwrap();
         assert_eq!(kept, vec![(lit(0, false), -0.5), (lit(1, false), 2.5)]);
-        assert!(aut.safe_set(2, &[2.0, 0.0], false).unwrap().is_empty());
+        assert!(aut.safe_set(&[2.0, 0.0], 2, false).unwrap().is_empty());
     }
 
     #[test]
@@ -472,31 +473,31 @@ mod tests {
         let aut = running_example();
         // s' = (2, 0): rho(a) = rho(b) = -1, rho(c) = -5. D_q0 = (!a&!b&c) | (a&c) | (b&c) = -5;
         // negated trap guard (!a|c)&(!b|c) = 1, times c_r = 2 -> 2; reward = min(-5, 2).
-        assert_eq!(aut.reward(0, &[2.0, 0.0], 2.0, None).unwrap(), -5.0);
+        assert_eq!(aut.reward(&[2.0, 0.0], 0, 2.0, None).unwrap(), -5.0);
         // s' = (0.5, 0), inside a: rho(a) = 0.5, rho(b) = -2.5, rho(c) = -6.5.
         // D_q0 = -6.5; CNF = min(max(-0.5, -6.5), max(2.5, -6.5)) = -0.5 -> c_r * -0.5 = -1.
-        assert_eq!(aut.reward(0, &[0.5, 0.0], 2.0, None).unwrap(), -6.5);
-        assert_eq!(aut.reward(0, &[0.5, 0.0], 20.0, None).unwrap(), -10.0);
+        assert_eq!(aut.reward(&[0.5, 0.0], 0, 2.0, None).unwrap(), -6.5);
+        assert_eq!(aut.reward(&[0.5, 0.0], 0, 20.0, None).unwrap(), -10.0);
         // q2 has no trap edge: the reward is rho(a | b) = max(-1, -1).
-        assert_eq!(aut.reward(2, &[2.0, 0.0], 2.0, None).unwrap(), -1.0);
-        assert_eq!(aut.reward(3, &[2.0, 0.0], 2.0, None).unwrap(), 0.0);
+        assert_eq!(aut.reward(&[2.0, 0.0], 2, 2.0, None).unwrap(), -1.0);
+        assert_eq!(aut.reward(&[2.0, 0.0], 3, 2.0, None).unwrap(), 0.0);
         assert!(matches!(
-            aut.reward(1, &[2.0, 0.0], 2.0, None),
+            aut.reward(&[2.0, 0.0], 1, 2.0, None),
             Err(AutomatonError::TrapReward(1))
         ));
-        assert_eq!(aut.reward(1, &[2.0, 0.0], 2.0, Some(-7.0)).unwrap(), -7.0);
+        assert_eq!(aut.reward(&[2.0, 0.0], 1, 2.0, Some(-7.0)).unwrap(), -7.0);
         crate::tests_support::assert_error(
-            aut.reward(0, &[2.0, 0.0], 0.0, None),
+            aut.reward(&[2.0, 0.0], 0, 0.0, None),
             "Input(Value",
             "c_r",
         );
         crate::tests_support::assert_error(
-            aut.reward(9, &[2.0, 0.0], 1.0, None),
+            aut.reward(&[2.0, 0.0], 9, 1.0, None),
             "UnknownState",
             "q",
         );
         crate::tests_support::assert_error(
-            aut.reward(0, &[f64::NAN, 0.0], 1.0, None),
+            aut.reward(&[f64::NAN, 0.0], 0, 1.0, None),
             "Input(NonFinite",
             "s[0]",
         );
@@ -508,20 +509,20 @@ mod tests {
         // At q0 the edge to q2 (reach c) is the only one that does not risk the trap first;
         // D_q0's best cube decides: from x = 2 the cube !a & !b & c scores min(1, 1, -5) = -5,
         // a & c and b & c score -5 too; the first best (to q2, cube !a & !b & c) wins -> c.
-        assert_eq!(aut.goal(0, &[2.0, 0.0]).unwrap(), Some(vec![8.0, 0.0]));
+        assert_eq!(aut.goal(&[2.0, 0.0], 0).unwrap(), Some(vec![8.0, 0.0]));
         // At q2 (after c): a or b, whichever is closer.
-        assert_eq!(aut.goal(2, &[3.0, 0.0]).unwrap(), Some(vec![4.0, 0.0]));
-        assert_eq!(aut.goal(2, &[1.0, 0.0]).unwrap(), Some(vec![0.0, 0.0]));
+        assert_eq!(aut.goal(&[3.0, 0.0], 2).unwrap(), Some(vec![4.0, 0.0]));
+        assert_eq!(aut.goal(&[1.0, 0.0], 2).unwrap(), Some(vec![0.0, 0.0]));
         // Accepting and trap states have no goal.
-        assert_eq!(aut.goal(3, &[1.0, 0.0]).unwrap(), None);
-        assert_eq!(aut.goal(1, &[1.0, 0.0]).unwrap(), None);
+        assert_eq!(aut.goal(&[1.0, 0.0], 3).unwrap(), None);
+        assert_eq!(aut.goal(&[1.0, 0.0], 1).unwrap(), None);
         // A cube with two positive balls aims at the mean of their centres.
         let task = task();
         let mut s = [0.0; 13];
         s[..2].copy_from_slice(&[1.1, 1.0]);
         s[3..9].copy_from_slice(&[1.0, 1.0, 5.0, 4.0, 1.2, 1.0]);
         // Inside both g1 and g3 (they overlap): the cube g1 & g3 (to acceptance) is the best.
-        let goal = task.goal(0, &s).unwrap().unwrap();
+        let goal = task.goal(&s, 0).unwrap().unwrap();
         assert!((goal[0] - 1.1).abs() < 1e-12 && (goal[1] - 1.0).abs() < 1e-12);
     }
 
@@ -535,18 +536,18 @@ mod tests {
             (2, [4.5, 0.0]),
             (0, [0.5, 0.0]),
         ] {
-            let (next, reward) = aut.advance(q, &s, 2.0, None, &mut safe).unwrap();
-            assert_eq!(next, aut.step(q, &s).unwrap());
-            assert_eq!(reward, aut.reward(q, &s, 2.0, None).unwrap());
-            assert_eq!(safe, aut.safe_set(next, &s, false).unwrap());
+            let (next, reward) = aut.advance(&s, q, 2.0, None, &mut safe).unwrap();
+            assert_eq!(next, aut.step(&s, q).unwrap());
+            assert_eq!(reward, aut.reward(&s, q, 2.0, None).unwrap());
+            assert_eq!(safe, aut.safe_set(&s, next, false).unwrap());
         }
         crate::tests_support::assert_error(
-            aut.advance(1, &[0.0, 0.0], 2.0, None, &mut safe),
+            aut.advance(&[0.0, 0.0], 1, 2.0, None, &mut safe),
             "TrapReward",
             "trap",
         );
         assert_eq!(
-            aut.advance(1, &[0.0, 0.0], 2.0, Some(-3.0), &mut safe)
+            aut.advance(&[0.0, 0.0], 1, 2.0, Some(-3.0), &mut safe)
                 .unwrap(),
             (1, -3.0)
         );
@@ -564,9 +565,9 @@ mod tests {
         assert_eq!(alone.trap_cnf(0).unwrap(), task.trap_cnf(0).unwrap());
         let s = [0.0; 13];
         crate::tests_support::assert_error(alone.read(&s), "Value", "spec");
-        crate::tests_support::assert_error(alone.step(0, &s), "Input(Value", "spec");
-        crate::tests_support::assert_error(alone.safe_set(0, &s, false), "Input(Value", "spec");
-        crate::tests_support::assert_error(alone.goal(0, &s), "Input(Value", "spec");
+        crate::tests_support::assert_error(alone.step(&s, 0), "Input(Value", "spec");
+        crate::tests_support::assert_error(alone.safe_set(&s, 0, false), "Input(Value", "spec");
+        crate::tests_support::assert_error(alone.goal(&s, 0), "Input(Value", "spec");
     }
 
     #[test]
@@ -577,11 +578,11 @@ mod tests {
         // hold: the goal is g2's centre.
         let mut s = vec![0.0; crate::fixtures::STATE_DIM];
         s[3..9].copy_from_slice(&[4.0, 0.0, 4.0, 4.0, 9.0, 9.0]);
-        let q = aut.step(aut.initial(), &s).unwrap();
-        assert_eq!(aut.goal(q, &s).unwrap(), Some(vec![4.0, 4.0]));
+        let q = aut.step(&s, aut.initial()).unwrap();
+        assert_eq!(aut.goal(&s, q).unwrap(), Some(vec![4.0, 4.0]));
         // With g1 inside the channel too, the nearer one wins.
         s[3..5].copy_from_slice(&[2.0, 1.0]);
-        assert_eq!(aut.goal(q, &s).unwrap(), Some(vec![2.0, 1.0]));
+        assert_eq!(aut.goal(&s, q).unwrap(), Some(vec![2.0, 1.0]));
     }
 
     #[test]
@@ -617,7 +618,7 @@ mod tests {
         let mut s = [0.0; 13];
         s[1] = 1.4;
         s[3..9].copy_from_slice(&[3.0, 3.0, 5.0, 4.0, 8.0, 8.0]);
-        let kept = aut.safe_set(0, &s, false).unwrap();
+        let kept = aut.safe_set(&s, 0, false).unwrap();
         let names: Vec<_> = kept
             .iter()
             .map(|(l, _)| (aut.spec().atoms()[l.atom].as_str(), l.positive))
