@@ -587,196 +587,28 @@ impl Automaton {
                 max: MAX_ATOMS,
             });
         }
-
-        // 1. Explore the residuals reachable by progression, each state's successors as one
-        //    diagram (leaves: residual ids). A residual holds on the empty rest of a trace iff
-        //    it is `true` (every obligation needs a state). Successors are numbered in the
-        //    order ascending letters first reach them.
-        let obligations = Obligations::new(spec.formula())?;
-        let start: Dnf = obligations.simplify(
-            obligations
-                .unfold(spec.formula())
-                .unwrap_or_else(|| smallvec![obligations.id(spec.formula())]),
-        );
-        let mut symbolic = Symbolic::new(&obligations, stop);
-        let mut raw = Builder::new(stop);
-        let mut ids: FastMap<Dnf, u32> = FastMap::default();
-        ids.insert(start.clone(), 0);
-        let mut residuals = vec![start];
-        let mut raw_masks: Vec<u32> = Vec::new();
-        let mut raw_roots: Vec<NodeId> = Vec::new();
-        let mut next = 0;
-        while next < residuals.len() {
-            tick(1)?;
-            let current = residuals[next].clone();
-            raw_masks.push(obligations.residual_mask(&current));
-            let root = symbolic.successor(&current)?;
-            let mut state_of: FastMap<u32, u32> = FastMap::default();
-            for (x, _) in symbolic.diagrams.diagram().first_letters(root) {
-                let succ = &symbolic.leaves.dnfs[x as usize];
-                let id = match ids.get(succ) {
-                    Some(&id) => id,
-                    None => {
-                        if residuals.len() == MAX_STATES {
-                            return Err(AutomatonError::TooLarge {
-                                what: "states",
-                                size: residuals.len() + 1,
-                                max: MAX_STATES,
-                            });
-                        }
-                        ids.insert(succ.clone(), residuals.len() as u32);
-                        residuals.push(succ.clone());
-                        residuals.len() as u32 - 1
-                    }
-                };
-                state_of.insert(x, id);
-            }
-            let root = symbolic.diagrams.diagram().transplant(
-                root,
-                &mut raw,
-                &|x| state_of[&x],
-                &mut FastMap::default(),
-            )?;
-            raw_roots.push(root);
-            next += 1;
-        }
-        drop(symbolic);
-        let accepting_raw: Vec<bool> = residuals.iter().map(|r| r.contains(&TRUE)).collect();
-
-        // 2. Minimise (Moore refinement on the diagrams), then number states breadth-first
-        //    from the start, successors in the order ascending letters first reach them.
-        let block = minimise(&raw, &raw_roots, &accepting_raw, &mut tick)?;
-        let raw = raw.freeze();
-        let blocks = block.iter().max().map_or(0, |m| m + 1);
-        let mut representative = vec![usize::MAX; blocks];
-        for (q, &b) in block.iter().enumerate().rev() {
-            representative[b] = q;
-        }
-        let mut order = vec![usize::MAX; blocks];
-        let mut queue = VecDeque::from([block[0]]);
-        order[block[0]] = 0;
-        let mut count = 1;
-        let mut visit = Vec::with_capacity(blocks);
-        while let Some(b) = queue.pop_front() {
-            tick(1)?;
-            visit.push(b);
-            for (r, _) in raw.first_letters(raw_roots[representative[b]]) {
-                let nb = block[r as usize];
-                if order[nb] == usize::MAX {
-                    order[nb] = count;
-                    count += 1;
-                    queue.push_back(nb);
-                }
-            }
-        }
-        let num_states = count;
-        let mut built = Builder::new(stop);
-        let mut memo = FastMap::default();
-        let relabel = |r: u32| order[block[r as usize]] as u32;
-        let mut roots = Vec::with_capacity(num_states);
-        let mut accepting = vec![false; num_states];
-        let mut mask_of = vec![0u32; num_states];
-        for &b in &visit {
-            let q = representative[b];
-            roots.push(raw.transplant(raw_roots[q], &mut built, &relabel, &mut memo)?);
-            accepting[order[b]] = accepting_raw[q];
-            mask_of[order[b]] = raw_masks[q];
-        }
-        drop(raw);
-        let diagram = built.freeze();
-        let successors: Vec<Vec<usize>> = roots
-            .iter()
-            .map(|&root| {
-                let mut out: Vec<usize> = diagram
-                    .first_letters(root)
-                    .into_iter()
-                    .map(|(d, _)| d as usize)
-                    .collect();
-                out.sort_unstable();
-                out
-            })
-            .collect();
-
-        // 3. The trap: the state from which no accepting state is reachable (at most one
-        //    after minimisation).
-        let mut reaches = accepting.clone();
-        loop {
-            let mut changed = false;
-            for q in 0..num_states {
-                if !reaches[q] && successors[q].iter().any(|&d| reaches[d]) {
-                    reaches[q] = true;
-                    changed = true;
-                }
-            }
-            if !changed {
-                break;
-            }
-        }
-        let trap = reaches.iter().position(|r| !r);
-
-        // 4. Guards, read off each state's diagram: its paths to a target are disjoint cubes
-        //    over the atoms the state's residual reads (`mask`).
-        let mut edges = Vec::new();
-        let mut by_dst: Vec<Vec<Cube>> = vec![Vec::new(); num_states];
-        let mut cubes_read = 0usize;
-        for src in 0..num_states {
-            by_dst.iter_mut().for_each(Vec::clear);
-            diagram.paths(roots[src], &mut |cube, d| {
-                if cubes_read <= MAX_GUARD_CUBES {
-                    by_dst[d as usize].push(cube);
-                    cubes_read += 1;
-                }
-            });
-            if cubes_read > MAX_GUARD_CUBES {
-                return Err(AutomatonError::TooLarge {
-                    what: "guard cubes",
-                    size: cubes_read,
-                    max: MAX_GUARD_CUBES,
-                });
-            }
-            for (dst, cubes) in by_dst.iter().enumerate() {
-                if cubes.is_empty() {
-                    continue;
-                }
-                tick(cubes.len())?;
-                let guard = if mask_of[src].count_ones() <= EXACT_GUARD_ATOMS {
-                    cnf::minimise_within_until(&minterms(cubes, mask_of[src]), mask_of[src], stop)
-                        .ok_or(AutomatonError::Interrupted)?
-                } else {
-                    primes(&diagram, roots[src], cubes, dst as u32)
-                };
-                edges.push(Edge { src, dst, guard });
-            }
-        }
-        let mut progress_cubes = vec![Vec::new(); num_states];
-        let mut trap_guard = vec![Vec::new(); num_states];
-        for e in &edges {
-            if Some(e.dst) == trap && e.src != e.dst {
-                trap_guard[e.src] = e.guard.clone();
-            } else if e.dst != e.src && Some(e.dst) != trap {
-                progress_cubes[e.src].extend_from_slice(&e.guard);
-            }
-        }
+        let explored = explore(spec, stop, &mut tick)?;
+        let Minimal {
+            diagram,
+            roots,
+            accepting,
+            mask_of,
+            successors,
+        } = minimal(explored, stop, &mut tick)?;
+        let trap = trap_of(&accepting, &successors);
+        let edges = guards(&diagram, &roots, &mask_of, stop, &mut tick)?;
+        let (progress_cubes, trap_guard) = split_guards(&edges, trap, roots.len());
         let trap_cnf: Vec<_> = trap_guard
             .iter()
             .map(|g| regions::dedup_cnf(cnf::complement_cnf(g)))
             .collect();
         let recovery_cnf = regions::recovery_cnf(&trap_cnf);
-
-        // 5. A table for one-lookup steps, when small.
         let letters = 1usize << n;
-        let table = if num_states.saturating_mul(letters) <= DENSE_MAX {
-            (0..num_states)
-                .flat_map(|q| (0..letters).map(move |v| (q, v)))
-                .map(|(q, v)| diagram.eval(roots[q], v))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let table = step_table(&diagram, &roots, letters);
 
-        // 6. The map's part (regions.rs): ranks over admissible letters, goals, the avoid CNF.
+        // The map's part (regions.rs): ranks over admissible letters, goals, the avoid CNF.
         let pairs = regions::pairs(spec);
-        let ranks = regions::ranks(num_states, &accepting, &edges, |v| {
+        let ranks = regions::ranks(roots.len(), &accepting, &edges, |v| {
             regions::admissible_letter(spec, &pairs, v)
         });
         let goal_alternatives = edges
@@ -788,7 +620,7 @@ impl Automaton {
                     .collect()
             })
             .collect();
-        let avoid_cnf = regions::avoid_cnf(num_states, &edges, &ranks, &trap_cnf);
+        let avoid_cnf = regions::avoid_cnf(roots.len(), &edges, &ranks, &trap_cnf);
         Ok(Automaton {
             spec: spec.clone(),
             letters,
@@ -808,6 +640,262 @@ impl Automaton {
             goal_alternatives,
             avoid_cnf,
         })
+    }
+}
+
+/// A build's progress callback: counts work and asks the caller's `stop` now and then.
+type Tick<'a> = dyn FnMut(usize) -> Result<(), AutomatonError> + 'a;
+
+/// The residuals reachable by progression before minimisation: each state's successors as
+/// one diagram (leaves: residual ids), the atoms each residual reads and whether it accepts.
+struct Explored<'s> {
+    raw: Builder<'s>,
+    roots: Vec<NodeId>,
+    masks: Vec<u32>,
+    accepting: Vec<bool>,
+}
+
+/// Phase 1: explores the residuals reachable by progression. A residual holds on the empty
+/// rest of a trace iff it is `true` (every obligation needs a state). Successors are numbered
+/// in the order ascending letters first reach them.
+fn explore<'s>(
+    spec: &Spec,
+    stop: &'s dyn Fn() -> bool,
+    tick: &mut Tick<'_>,
+) -> Result<Explored<'s>, AutomatonError> {
+    let obligations = Obligations::new(spec.formula())?;
+    let start: Dnf = obligations.simplify(
+        obligations
+            .unfold(spec.formula())
+            .unwrap_or_else(|| smallvec![obligations.id(spec.formula())]),
+    );
+    let mut symbolic = Symbolic::new(&obligations, stop);
+    let mut raw = Builder::new(stop);
+    let mut ids: FastMap<Dnf, u32> = FastMap::default();
+    ids.insert(start.clone(), 0);
+    let mut residuals = vec![start];
+    let mut masks: Vec<u32> = Vec::new();
+    let mut roots: Vec<NodeId> = Vec::new();
+    let mut next = 0;
+    while next < residuals.len() {
+        tick(1)?;
+        let current = residuals[next].clone();
+        masks.push(obligations.residual_mask(&current));
+        let root = symbolic.successor(&current)?;
+        let mut state_of: FastMap<u32, u32> = FastMap::default();
+        for (x, _) in symbolic.diagrams.diagram().first_letters(root) {
+            let succ = &symbolic.leaves.dnfs[x as usize];
+            let id = match ids.get(succ) {
+                Some(&id) => id,
+                None => {
+                    if residuals.len() == MAX_STATES {
+                        return Err(AutomatonError::TooLarge {
+                            what: "states",
+                            size: residuals.len() + 1,
+                            max: MAX_STATES,
+                        });
+                    }
+                    ids.insert(succ.clone(), residuals.len() as u32);
+                    residuals.push(succ.clone());
+                    residuals.len() as u32 - 1
+                }
+            };
+            state_of.insert(x, id);
+        }
+        let root = symbolic.diagrams.diagram().transplant(
+            root,
+            &mut raw,
+            &|x| state_of[&x],
+            &mut FastMap::default(),
+        )?;
+        roots.push(root);
+        next += 1;
+    }
+    drop(symbolic);
+    let accepting = residuals.iter().map(|r| r.contains(&TRUE)).collect();
+    Ok(Explored {
+        raw,
+        roots,
+        masks,
+        accepting,
+    })
+}
+
+/// The minimal automaton's transition diagram, per state its root, acceptance, atom mask and
+/// sorted successors.
+struct Minimal {
+    diagram: Diagram,
+    roots: Vec<NodeId>,
+    accepting: Vec<bool>,
+    mask_of: Vec<u32>,
+    successors: Vec<Vec<usize>>,
+}
+
+/// Phase 2: minimises (Moore refinement on the diagrams), then numbers states breadth-first
+/// from the start, successors in the order ascending letters first reach them.
+fn minimal(
+    explored: Explored<'_>,
+    stop: &dyn Fn() -> bool,
+    tick: &mut Tick<'_>,
+) -> Result<Minimal, AutomatonError> {
+    let Explored {
+        raw,
+        roots: raw_roots,
+        masks: raw_masks,
+        accepting: accepting_raw,
+    } = explored;
+    let block = minimise(&raw, &raw_roots, &accepting_raw, tick)?;
+    let raw = raw.freeze();
+    let blocks = block.iter().max().map_or(0, |m| m + 1);
+    let mut representative = vec![usize::MAX; blocks];
+    for (q, &b) in block.iter().enumerate().rev() {
+        representative[b] = q;
+    }
+    let mut order = vec![usize::MAX; blocks];
+    let mut queue = VecDeque::from([block[0]]);
+    order[block[0]] = 0;
+    let mut count = 1;
+    let mut visit = Vec::with_capacity(blocks);
+    while let Some(b) = queue.pop_front() {
+        tick(1)?;
+        visit.push(b);
+        for (r, _) in raw.first_letters(raw_roots[representative[b]]) {
+            let nb = block[r as usize];
+            if order[nb] == usize::MAX {
+                order[nb] = count;
+                count += 1;
+                queue.push_back(nb);
+            }
+        }
+    }
+    let num_states = count;
+    let mut built = Builder::new(stop);
+    let mut memo = FastMap::default();
+    let relabel = |r: u32| order[block[r as usize]] as u32;
+    let mut roots = Vec::with_capacity(num_states);
+    let mut accepting = vec![false; num_states];
+    let mut mask_of = vec![0u32; num_states];
+    for &b in &visit {
+        let q = representative[b];
+        roots.push(raw.transplant(raw_roots[q], &mut built, &relabel, &mut memo)?);
+        accepting[order[b]] = accepting_raw[q];
+        mask_of[order[b]] = raw_masks[q];
+    }
+    drop(raw);
+    let diagram = built.freeze();
+    let successors: Vec<Vec<usize>> = roots
+        .iter()
+        .map(|&root| {
+            let mut out: Vec<usize> = diagram
+                .first_letters(root)
+                .into_iter()
+                .map(|(d, _)| d as usize)
+                .collect();
+            out.sort_unstable();
+            out
+        })
+        .collect();
+    Ok(Minimal {
+        diagram,
+        roots,
+        accepting,
+        mask_of,
+        successors,
+    })
+}
+
+/// Phase 3: the trap, the state from which no accepting state is reachable (at most one
+/// after minimisation).
+fn trap_of(accepting: &[bool], successors: &[Vec<usize>]) -> Option<usize> {
+    let mut reaches = accepting.to_vec();
+    loop {
+        let mut changed = false;
+        for q in 0..reaches.len() {
+            if !reaches[q] && successors[q].iter().any(|&d| reaches[d]) {
+                reaches[q] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    reaches.iter().position(|r| !r)
+}
+
+/// Phase 4: the guards, read off each state's diagram: its paths to a target are disjoint
+/// cubes over the atoms the state's residual reads (`mask_of`).
+fn guards(
+    diagram: &Diagram,
+    roots: &[NodeId],
+    mask_of: &[u32],
+    stop: &dyn Fn() -> bool,
+    tick: &mut Tick<'_>,
+) -> Result<Vec<Edge>, AutomatonError> {
+    let num_states = roots.len();
+    let mut edges = Vec::new();
+    let mut by_dst: Vec<Vec<Cube>> = vec![Vec::new(); num_states];
+    let mut cubes_read = 0usize;
+    for src in 0..num_states {
+        by_dst.iter_mut().for_each(Vec::clear);
+        diagram.paths(roots[src], &mut |cube, d| {
+            if cubes_read <= MAX_GUARD_CUBES {
+                by_dst[d as usize].push(cube);
+                cubes_read += 1;
+            }
+        });
+        if cubes_read > MAX_GUARD_CUBES {
+            return Err(AutomatonError::TooLarge {
+                what: "guard cubes",
+                size: cubes_read,
+                max: MAX_GUARD_CUBES,
+            });
+        }
+        for (dst, cubes) in by_dst.iter().enumerate() {
+            if cubes.is_empty() {
+                continue;
+            }
+            tick(cubes.len())?;
+            let guard = if mask_of[src].count_ones() <= EXACT_GUARD_ATOMS {
+                cnf::minimise_within_until(&minterms(cubes, mask_of[src]), mask_of[src], stop)
+                    .ok_or(AutomatonError::Interrupted)?
+            } else {
+                primes(diagram, roots[src], cubes, dst as u32)
+            };
+            edges.push(Edge { src, dst, guard });
+        }
+    }
+    Ok(edges)
+}
+
+/// Per state, the cubes of its edges to other non-trap states (progress) and its guard into
+/// the trap.
+fn split_guards(
+    edges: &[Edge],
+    trap: Option<usize>,
+    num_states: usize,
+) -> (Vec<Vec<Cube>>, Vec<Vec<Cube>>) {
+    let mut progress_cubes = vec![Vec::new(); num_states];
+    let mut trap_guard = vec![Vec::new(); num_states];
+    for e in edges {
+        if Some(e.dst) == trap && e.src != e.dst {
+            trap_guard[e.src] = e.guard.clone();
+        } else if e.dst != e.src && Some(e.dst) != trap {
+            progress_cubes[e.src].extend_from_slice(&e.guard);
+        }
+    }
+    (progress_cubes, trap_guard)
+}
+
+/// Phase 5: a table for one-lookup steps, when small (empty otherwise).
+fn step_table(diagram: &Diagram, roots: &[NodeId], letters: usize) -> Vec<u32> {
+    if roots.len().saturating_mul(letters) <= DENSE_MAX {
+        (0..roots.len())
+            .flat_map(|q| (0..letters).map(move |v| (q, v)))
+            .map(|(q, v)| diagram.eval(roots[q], v))
+            .collect()
+    } else {
+        Vec::new()
     }
 }
 
