@@ -77,12 +77,7 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
                 Err(_) => (value, 1.0),
             };
             let predicate = predicate_of(&format!("barriers[{name:?}]"), &value)?;
-            let barrier = if name.starts_with('!') {
-                Barrier::outside(name, predicate)
-            } else {
-                Barrier::inside(name, predicate)
-            };
-            out.push(barrier.with_slack_weight(weight));
+            out.push(Barrier::named(name, predicate).with_slack_weight(weight));
         }
         return Ok(out);
     }
@@ -95,7 +90,7 @@ fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
     for (i, item) in iter.enumerate() {
         let item = item?;
         out.push(Barrier::inside(
-            format!("h{i}"),
+            Barrier::default_name(i),
             predicate_of(&format!("barriers[{i}]"), &item)?,
         ));
     }
@@ -823,7 +818,7 @@ impl PyShield {
         let pair = |b: &Bounds| (b.lo.clone(), b.hi.clone());
         let barriers = PyDict::new(py);
         for b in &p.barriers {
-            if b.positive == b.name.starts_with('!') {
+            if !b.named_for_its_side() {
                 return Err(PyValueError::new_err(format!(
                     "barrier {:?}: a name starting with '!' must mean 'outside' to be pickled",
                     b.name

@@ -56,7 +56,7 @@ use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
 #[allow(deprecated)]
 pub use params::ShieldConfig;
-pub use params::{Barrier, Bounds, ShieldParams, SolverChoice};
+pub use params::{Barrier, Bounds, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
 use workspace::Workspace;
 
 /// Batches smaller than this are shielded on the calling thread.
