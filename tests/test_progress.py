@@ -69,7 +69,7 @@ def test_potential_and_advance_agree() -> None:
         ({"horizon": 0}, "horizon"),
         ({"horizon": -5}, "horizon"),
         ({"step_cost": math.nan}, "step_cost"),
-        ({"exclusive": [["g1", "nope"]]}, 'unknown atom "nope"'),
+        ({"exclusive": [["g1", "nope"]]}, 'exclusive names "nope", which is not an atom'),
     ],
 )
 def test_bad_parameters_raise(kwargs: dict, match: str) -> None:

@@ -152,15 +152,14 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         automaton = self.spec_tl.automaton()
         progress = None
         if cfg.task.reward == "progress":
-            # Goal discs never overlap (the draw keeps them apart), so one state cannot count as
-            # reaching two goals: g3 is two transitions away from the start, not one.
+            # The spec declares the goals exclusive (the draw keeps the discs apart), so one
+            # state cannot count as reaching two goals: g3 is two transitions from the start.
             progress = automaton.progress_reward(
                 gamma=cfg.task.gamma,
                 horizon=cfg.task.horizon,
                 scale=cfg.task.progress_scale,
                 bonus=cfg.task.bonus,
                 c_r=cfg.task.c_r,
-                exclusive=[["g1", "g2", "g3"]],
             )
         self.tracker = FsaTracker(automaton, cfg.task.c_r, cfg.trap_penalty, progress)
         lo, hi = cfg.agent.arena

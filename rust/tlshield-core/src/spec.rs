@@ -95,20 +95,8 @@ impl Spec {
         G::Item: IntoIterator<Item = S>,
         S: AsRef<str>,
     {
-        let mut masks = Vec::new();
-        for group in groups {
-            let mut mask = 0u32;
-            for name in group {
-                let name = name.as_ref();
-                let Some(i) = self.atoms.iter().position(|a| a == name) else {
-                    return Err(SpecError::InvalidPredicate(format!(
-                        "exclusive names {name:?}, which is not an atom of the formula (atoms: \
-                         {})",
-                        self.atoms.join(", ")
-                    )));
-                };
-                mask |= 1 << i;
-            }
+        let masks = self.atom_masks(groups)?;
+        for &mask in &masks {
             if self.is_bound() {
                 let members: Vec<usize> = (0..self.atoms.len())
                     .filter(|i| mask >> i & 1 == 1)
@@ -126,10 +114,36 @@ impl Spec {
                     }
                 }
             }
-            masks.push(mask);
         }
         self.exclusive = masks;
         Ok(self)
+    }
+
+    /// Groups of atom names as bitmasks over the atoms (bit `i`: atom `i`); an unknown name is
+    /// an error that lists the atoms.
+    pub fn atom_masks<G, S>(&self, groups: G) -> Result<Vec<u32>, SpecError>
+    where
+        G: IntoIterator,
+        G::Item: IntoIterator<Item = S>,
+        S: AsRef<str>,
+    {
+        let mut masks = Vec::new();
+        for group in groups {
+            let mut mask = 0u32;
+            for name in group {
+                let name = name.as_ref();
+                let Some(i) = self.atoms.iter().position(|a| a == name) else {
+                    return Err(SpecError::InvalidPredicate(format!(
+                        "exclusive names {name:?}, which is not an atom of the formula (atoms: \
+                         {})",
+                        self.atoms.join(", ")
+                    )));
+                };
+                mask |= 1 << i;
+            }
+            masks.push(mask);
+        }
+        Ok(masks)
     }
 
     /// The declared exclusive groups as bitmasks over the atoms (bit `i`: atom `i`).

@@ -367,7 +367,8 @@ impl PyAutomaton {
     /// the training discount, ``horizon`` the episode length (the default ``bonus`` is sized
     /// so that finishing within it out-earns not finishing), ``scale`` the Eq. 5A1 value at
     /// which the within-state shaping is halfway down its band, ``exclusive`` groups of atoms
-    /// that never hold together.
+    /// that never hold together beyond those the spec declares (``Spec(..., exclusive=...)``),
+    /// which always apply.
     #[pyo3(signature = (*, gamma=0.99, horizon=200, scale=1.0, step_cost=None, bonus=None, c_r=1.0, exclusive=None))]
     #[allow(clippy::too_many_arguments)]
     fn progress_reward(

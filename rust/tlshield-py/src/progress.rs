@@ -3,7 +3,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use tlshield_core::{Automaton, ProgressParams, ProgressReward};
 
@@ -37,20 +36,7 @@ impl PyProgressReward {
         params: ProgressParams,
         exclusive: &[Vec<String>],
     ) -> PyResult<Self> {
-        let atoms = automaton.spec().atoms();
-        let mut groups = Vec::with_capacity(exclusive.len());
-        for group in exclusive {
-            let mut mask = 0u32;
-            for name in group {
-                let Some(i) = atoms.iter().position(|a| a == name) else {
-                    return Err(PyValueError::new_err(format!(
-                        "exclusive: unknown atom {name:?}; the automaton's atoms are {atoms:?}"
-                    )));
-                };
-                mask |= 1 << i;
-            }
-            groups.push(mask);
-        }
+        let groups = map(automaton.spec().atom_masks(exclusive))?;
         let params = ProgressParams {
             exclusive: groups,
             ..params
