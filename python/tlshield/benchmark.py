@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from tlshield.envs.params import FULL
 from tlshield.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
 
 #: The columns of ``flatworld.csv``.
@@ -78,7 +79,7 @@ PUBLISHED: dict[str, dict[int, tuple[float, float | None]]] = {
 }
 
 #: Defaults of the command.
-DEFAULT_CONFIGS = ("rl_cbf_clf", "rl")
+DEFAULT_CONFIGS = (FULL, "rl")
 DEFAULT_SEEDS = (1, 2, 3)
 DEFAULT_EPISODES = 500
 DEFAULT_STEPS = 600_000
@@ -288,7 +289,7 @@ def flatworld(
                 folder = runs / f"{name}-f{k}-s{s}"
                 if not (folder / "result.json").exists():
                     t0 = time.perf_counter()
-                    result = run_episodes(f, "rl_cbf_clf", policy, s, episodes)
+                    result = run_episodes(f, FULL, policy, s, episodes)
                     counts = {"train_violations": 0, "train_steps": 0}
                     _write(
                         folder,

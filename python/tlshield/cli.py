@@ -17,6 +17,7 @@ from gymnasium import error as gym_error
 from tlshield._core import Automaton, SpecError
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
+from tlshield.envs.params import FULL
 from tlshield.envs.safety_gym import MissingStack
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
@@ -129,7 +130,7 @@ def _settings(args: argparse.Namespace, env_id: str = ENV_ID) -> dict[str, objec
         chosen, named = settings.load(args.settings)
     chosen.update(settings.parse_assignments(args.set or [], env_id))
     if getattr(args, "config", "") is None:
-        args.config = named or "rl_cbf_clf"
+        args.config = named or FULL
     return {
         "clf_schedule": args.clf_schedule,
         "clf_final_scale": args.clf_final_scale,
@@ -435,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
     tune = sub.add_parser(
         "tune", help="search the task, shield and PPO settings (Ray Tune, Optuna, ASHA)"
     )
-    tune.add_argument("--config", choices=sorted(CONFIGS), default="rl_cbf_clf")
+    tune.add_argument("--config", choices=sorted(CONFIGS), default=FULL)
     tune.add_argument("--samples", type=_positive, default=32, help="samples (default 32)")
     tune.add_argument("--updates", type=_positive, default=300, help="PPO updates per sample")
     tune.add_argument("--out", default="results_tune", help="folder (default: results_tune)")
@@ -506,15 +507,15 @@ def _benchmark(args: argparse.Namespace) -> int:
         return _benchmark_safety_gym(args)
     if args.envs:
         raise ValueError("--envs: the flatworld benchmark has one env; use --formulas")
-    from tlshield.benchmark import flatworld
+    from tlshield import benchmark
 
-    out = flatworld(
+    out = benchmark.flatworld(
         args.out or "results_flatworld",
         formulas=args.formulas,
-        configs=args.configs or ["rl_cbf_clf", "rl"],
-        seeds=args.seeds or [1, 2, 3],
-        episodes=args.episodes or 500,
-        steps=args.steps or 600_000,
+        configs=args.configs or list(benchmark.DEFAULT_CONFIGS),
+        seeds=args.seeds or list(benchmark.DEFAULT_SEEDS),
+        episodes=args.episodes or benchmark.DEFAULT_EPISODES,
+        steps=args.steps or benchmark.DEFAULT_STEPS,
         address=args.address,
         workers=args.workers,
         progress=not args.quiet,

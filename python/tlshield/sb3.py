@@ -12,6 +12,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from tlshield._core import Shield
 from tlshield.copying import IndependentCopies
+from tlshield.envs.params import FULL
 from tlshield.vector import ActionFn, batch_infos, rl_actions, split_states
 
 
@@ -136,7 +137,7 @@ class WorldVecEnv(IndependentCopies, VecEnv):  # type: ignore[misc]
 class ChannelVecEnv(WorldVecEnv):  # type: ignore[misc]
     """``num_envs`` Channel-v0 envs as one SB3 ``VecEnv`` (see :class:`WorldVecEnv`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         from tlshield.vector import ChannelBatch
 
         super().__init__(ChannelBatch(num_envs, config, **kwargs))
@@ -145,13 +146,13 @@ class ChannelVecEnv(WorldVecEnv):  # type: ignore[misc]
 class PointMassVecEnv(WorldVecEnv):  # type: ignore[misc]
     """``num_envs`` PointMass-v0 envs as one SB3 ``VecEnv`` (see :class:`WorldVecEnv`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         from tlshield.vector import PointMassBatch
 
         super().__init__(PointMassBatch(num_envs, config, **kwargs))
 
 
-def make_vec_env(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
+def make_vec_env(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
     """An SB3 ``VecEnv`` of ``num_envs`` copies of a bundled ``env_id`` stepped in one core
     call (Channel-v0, PointMass-v0); None for any other env (use SB3's ``DummyVecEnv``)."""
     from tlshield.envs import ENV_ID, POINT_MASS_ID

@@ -49,7 +49,7 @@ from tlshield.envs import (
     make,
 )
 from tlshield.envs.channel import CONFIGS
-from tlshield.envs.params import as_flat
+from tlshield.envs.params import FULL, as_flat
 from tlshield.evaluation import evaluate
 from tlshield.presets import PRESETS, SCHEDULES
 from tlshield.runs import RUN_FILE, is_finished, load_run
@@ -430,7 +430,7 @@ def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
 def ablation(
     out: str | Path,
     *,
-    config: str = "rl_cbf_clf",
+    config: str = FULL,
     seeds: tuple[int, ...] = (0, 1),
     updates: int = 300,
     trials: int = 100,

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
+from tlshield.envs.params import FULL
 from tlshield.presets import PRESETS, SCHEDULES
 from tlshield.seeds import MAX_TRIALS, TUNE_SEED
 from tlshield.settings import split
@@ -197,7 +198,7 @@ def _trial(params: dict[str, Any], *, config: str, updates: int, seed: int, tria
 def tune(
     out: str | Path,
     *,
-    config: str = "rl_cbf_clf",
+    config: str = FULL,
     samples: int = 32,
     updates: int = 300,
     search: Sequence[str] | None = None,

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from tlshield._core import FilterBatch, Shield, WorldsStep, step_worlds
 from tlshield.codes import Solver, Status
 from tlshield.copying import IndependentCopies
+from tlshield.envs.params import FULL
 
 #: Maps the policy's actions ``(N, m)`` to the RL actions in the shield's units.
 ActionFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -207,7 +208,7 @@ class ChannelBatch(WorldBatch):
     """``num_envs`` :class:`tlshield.envs.ChannelEnv` stepped in one core call (see
     :class:`WorldBatch`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         from tlshield.envs.channel import ChannelEnv
 
         _check_count(num_envs)
@@ -218,7 +219,7 @@ class PointMassBatch(WorldBatch):
     """``num_envs`` :class:`tlshield.envs.point_mass.PointMassEnv` stepped in one core call
     (see :class:`WorldBatch`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         from tlshield.envs.point_mass import PointMassEnv
 
         _check_count(num_envs)
@@ -313,7 +314,7 @@ class ChannelVectorEnv(WorldVectorEnv):
     """``tlshield/Channel-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
     :class:`WorldVectorEnv`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         super().__init__(ChannelBatch(num_envs, config, **kwargs))
 
 
@@ -321,11 +322,11 @@ class PointMassVectorEnv(WorldVectorEnv):
     """``tlshield/PointMass-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
     :class:`WorldVectorEnv`)."""
 
-    def __init__(self, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> None:
+    def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
         super().__init__(PointMassBatch(num_envs, config, **kwargs))
 
 
-def make(env_id: str, num_envs: int, config: str = "rl_cbf_clf", **kwargs: Any) -> Any:
+def make(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
     """A Gymnasium vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
     ``tlshield/Channel-v0`` or ``tlshield/PointMass-v0`` (FlatWorld-v0, written in Python as a
     user's env would be, has no core world: use Gymnasium's ``SyncVectorEnv``). For

@@ -41,7 +41,7 @@ from tlshield.envs.channel_task import (
     task_spec,
 )
 from tlshield.envs.layout import GOAL_DIMS, STATE_DIM, THETA, X, Y
-from tlshield.envs.params import build, renamed_class
+from tlshield.envs.params import FULL, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Length of the relative observation before the one-hot FSA state.
@@ -123,7 +123,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
 
     def __init__(
         self,
-        config: str = "rl_cbf_clf",
+        config: str = FULL,
         evaluation: bool = False,
         render_mode: str | None = None,
         shield_in_env: bool = True,
@@ -142,9 +142,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         cfg = self.cfg
         self.spec_tl = task_spec(cfg)
         self._channel_atoms = (self.spec_tl.atoms.index("c1"), self.spec_tl.atoms.index("c2"))
-        shield_config = config
-        if evaluation and not CONFIGS[config][0]:
-            shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+        shield_config = shielded_config(config, evaluation)
         #: The plant; the shield is built on the same model.
         self.model = channel_model(cfg)
         self.shield = channel_shield(cfg, shield_config, self.spec_tl)

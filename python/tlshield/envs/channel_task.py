@@ -28,7 +28,7 @@ import numpy as np
 
 from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
 from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
-from tlshield.envs.params import CONFIGS
+from tlshield.envs.params import CONFIGS, FULL
 
 #: Observation layouts (see :mod:`tlshield.envs.channel`).
 OBSERVATIONS = ("relative", "paper")
@@ -282,7 +282,7 @@ class ChannelParams:
             )
         # The shield's own checks, with these settings (the CBF box must cancel every RL plus
         # CLF action): refused here, where the setting is given, not at the first episode.
-        channel_shield(self, "rl_cbf_clf")
+        channel_shield(self, FULL)
 
     def _get(self, name: str) -> Any:
         part, name_in_part = FLAT[name]

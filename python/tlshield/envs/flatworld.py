@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, build, renamed_class
+from tlshield.envs.params import CONFIGS, FULL, build, renamed_class, shielded_config
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -232,7 +232,7 @@ class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float
 
 def make_flatworld(
     formula: str = FORMULAS[0],
-    config: str = "rl_cbf_clf",
+    config: str = FULL,
     evaluation: bool = False,
     render_mode: str | None = None,
     **overrides: Any,
@@ -259,9 +259,7 @@ def make_flatworld(
         terminate_on_trap=True,
         failure_on_termination=True,
     )
-    shield_config = config
-    if evaluation and not CONFIGS[config][0]:
-        shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+    shield_config = shielded_config(config, evaluation)
     shield = flatworld_shield(cfg, shield_config, spec)
     if shield is not None:
         env = Shielded(env, shield)

@@ -16,6 +16,22 @@ CONFIGS = {
     "rl_clf": (False, True),
     "rl_cbf_clf": (True, True),
 }
+#: The configuration with every part on: the tlshield default and the paper's method.
+FULL = "rl_cbf_clf"
+
+
+def shielded_config(config: str, evaluation: bool) -> str:
+    """The shield an environment builds for ``config``: the paper's evaluation rule turns the
+    CBF on in every configuration (``rl`` -> ``rl_cbf``, ``rl_clf`` -> ``rl_cbf_clf``); in
+    training it is ``config`` itself."""
+    if config not in CONFIGS:
+        raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+    cbf, clf = CONFIGS[config]
+    if evaluation and not cbf:
+        return FULL if clf else "rl_cbf"
+    return config
+
+
 #: Parameters renamed in 0.2 (old -> new): one lower-case name per concept, ``margin`` as the
 #: shield calls it.
 RENAMED = {"K": "k", "cbf_margin": "margin"}

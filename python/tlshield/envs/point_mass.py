@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Automaton, Ball, DoubleIntegrator, PointMassWorld, Shield, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, build, renamed_class
+from tlshield.envs.params import CONFIGS, FULL, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Visit a, then b; stay out of both obstacles until b.
@@ -179,9 +179,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
     SHIELD_INFO_ALWAYS: ClassVar[bool] = False
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
-    def __init__(
-        self, config: str = "rl_cbf_clf", evaluation: bool = False, **overrides: Any
-    ) -> None:
+    def __init__(self, config: str = FULL, evaluation: bool = False, **overrides: Any) -> None:
         if config not in CONFIGS:
             raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
         cfg = build(PointMassParams, overrides, "PointMass-v0")
@@ -196,9 +194,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
             exclusive=[["a", "b", "o1", "o2"]],
         )
         self.tracker = FsaTracker(automaton, 1.0, -100.0, progress)
-        shield_config = config
-        if evaluation and not CONFIGS[config][0]:
-            shield_config = "rl_cbf_clf" if CONFIGS[config][1] else "rl_cbf"
+        shield_config = shielded_config(config, evaluation)
         self.shield = point_mass_shield(cfg, shield_config, automaton)
         self._world = PointMassWorld(
             dt=cfg.dt,
@@ -273,9 +269,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
         return out.observation, out.reward, out.terminated, out.truncated, info
 
 
-def make_point_mass(
-    config: str = "rl_cbf_clf", evaluation: bool = False, **overrides: Any
-) -> gym.Env:
+def make_point_mass(config: str = FULL, evaluation: bool = False, **overrides: Any) -> gym.Env:
     """``gymnasium.make("tlshield/PointMass-v0", config=..., evaluation=..., **overrides)``.
 
     ``config`` picks the shield ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf"); ``evaluation=True``

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Automaton, Ball, Monitor, Shield, Spec, ThrustTurn
-from tlshield.envs.params import CONFIGS, build
+from tlshield.envs.params import CONFIGS, FULL, build
 from tlshield.tracking import shield_info
 
 #: The versions the adapter was written and tested against (it patches exactly these).
@@ -218,7 +218,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     def __init__(
         self,
         task: str = "SafetyPointGoal1-v0",
-        config: str = "rl_cbf_clf",
+        config: str = FULL,
         evaluation: bool = False,
         **overrides: Any,
     ) -> None:
@@ -376,7 +376,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
 
 def make_safety_goal(
-    task: str, config: str = "rl_cbf_clf", evaluation: bool = False, **overrides: Any
+    task: str, config: str = FULL, evaluation: bool = False, **overrides: Any
 ) -> gym.Env:
     """``gymnasium.make("tlshield/SafetyPointGoal1-v0", config=..., evaluation=..., ...)``."""
     return SafetyGoalEnv(task, config, evaluation, **overrides)
