@@ -54,6 +54,21 @@ def test_the_api_table_is_up_to_date() -> None:
     )
 
 
+def test_the_layout_map_is_the_tree() -> None:
+    """docs/design.md's file map is generated from the tree (scripts/layout_map.py): a file
+    added, moved or re-documented without regenerating it fails here."""
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "layout_map.py"), "--check"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
 def test_every_tlshield_name_the_docs_and_the_help_give_resolves() -> None:
     """A dotted ``tlshield.x.y`` name in the README, the docs, the examples or the package's
     own text (docstrings, error messages, the command line's help) imports: a user who copies

@@ -1,4 +1,4 @@
-//! Unit tests of the shield (kept apart so that the module reads as the shield).
+//! Unit tests of the active-set solver (kept apart so that the module reads as the solver).
 
 use super::*;
 use crate::qp::{kkt_residual, ClarabelQp};
