@@ -27,14 +27,14 @@ def towards(env: ChannelEnv, target: np.ndarray) -> np.ndarray:
     s = env.state
     d = target - s[X : Y + 1]
     v = d / max(float(np.linalg.norm(d)), 1e-9) * 2.0
-    th, eps = s[THETA], env.cfg.agent.eps
+    th, eps = s[THETA], env.params.agent.eps
     a = np.array(
         [
             math.cos(th) * v[0] + math.sin(th) * v[1],
             (-math.sin(th) * v[0] + math.cos(th) * v[1]) / eps,
         ]
     )
-    lo, hi = (np.asarray(b) for b in env.cfg.agent.rl_bounds)
+    lo, hi = (np.asarray(b) for b in env.params.agent.rl_bounds)
     return np.clip((a - (hi + lo) / 2) / ((hi - lo) / 2), -1.0, 1.0)
 
 

@@ -18,21 +18,21 @@ def towards(env: ChannelEnv, target: np.ndarray, speed: float = 1.0) -> np.ndarr
     s = env.state
     d = np.asarray(target, dtype=float) - s[X : Y + 1]
     dist = float(np.linalg.norm(d))
-    vel = d / max(dist, 1e-9) * min(speed, dist / env.cfg.agent.dt)
-    th, eps = s[THETA], env.cfg.agent.eps
+    vel = d / max(dist, 1e-9) * min(speed, dist / env.params.agent.dt)
+    th, eps = s[THETA], env.params.agent.eps
     a = np.array(
         [
             math.cos(th) * vel[0] + math.sin(th) * vel[1],
             (-math.sin(th) * vel[0] + math.cos(th) * vel[1]) / eps,
         ]
     )
-    lo, hi = (np.asarray(b, dtype=float) for b in env.cfg.agent.rl_bounds)
+    lo, hi = (np.asarray(b, dtype=float) for b in env.params.agent.rl_bounds)
     return np.clip((a - (hi + lo) / 2) / ((hi - lo) / 2), -1.0, 1.0)
 
 
 def first_goal(env: ChannelEnv) -> np.ndarray:
     """The nearer of g1/g2 that lies inside the channel."""
-    s, cfg = env.state, env.cfg
+    s, cfg = env.state, env.params
     inside = []
     for a, b in GOAL_DIMS[:2]:
         g = s[a : b + 1]
@@ -55,7 +55,7 @@ def park(env: ChannelEnv) -> np.ndarray:
     """Stops 5 cm outside the first goal."""
     g, p = first_goal(env), env.state[X : Y + 1]
     d = g - p
-    stop = env.cfg.task.goal_radius + 0.05
+    stop = env.params.task.goal_radius + 0.05
     if np.linalg.norm(d) <= stop:
         return towards(env, p, speed=0.0)
     return towards(env, g - d / np.linalg.norm(d) * stop)
@@ -66,10 +66,10 @@ def discounted_return(
 ) -> tuple[float, bool, int]:
     """``(discounted return, success, collision steps)`` of one episode, discounted with the
     environment's training discount unless ``gamma`` is given."""
-    gamma = env.cfg.task.gamma if gamma is None else gamma
+    gamma = env.params.task.gamma if gamma is None else gamma
     env.reset(seed=seed)
     total, discount, collisions, info = 0.0, 1.0, 0, {"success": False}
-    for _ in range(env.cfg.task.horizon):
+    for _ in range(env.params.task.horizon):
         _, reward, terminated, truncated, info = env.step(policy(env))
         total += discount * reward
         discount *= gamma

@@ -61,7 +61,7 @@ def test_channel_plant_is_the_shields_model() -> None:
     clamp and the angle wrap (the obstacles move on their own)."""
     env = gym.make("tlshield/Channel-v0", config="rl_cbf_clf").unwrapped
     model = env.model
-    cfg = env.cfg
+    cfg = env.params
     rng = np.random.default_rng(1)
     checked = 0
     for episode in range(5):

@@ -20,10 +20,12 @@ from tlshield.runs import Run
 def test_renamed_parameters_warn_and_still_apply(env_id: str) -> None:
     with pytest.warns(DeprecationWarning, match="'K' is now called 'k'"):
         env = gym.make(env_id, K=123.0)
-    assert as_flat(env.unwrapped.cfg)["k"] == 123.0
+    assert as_flat(env.unwrapped.params)["k"] == 123.0
     with pytest.warns(DeprecationWarning, match="'cbf_margin' is now called 'margin'"):
         env = gym.make(env_id, cbf_margin=0.05)
-    assert as_flat(env.unwrapped.cfg)["margin"] == 0.05
+    assert as_flat(env.unwrapped.params)["margin"] == 0.05
+    with pytest.warns(DeprecationWarning, match="env.cfg is deprecated: use env.params"):
+        assert env.unwrapped.cfg is env.unwrapped.params
     with pytest.raises(TypeError, match="'K' and 'k' given"):
         gym.make(env_id, K=1.0, k=2.0)
 

@@ -163,12 +163,14 @@ def test_goal_draws() -> None:
     channel occur, and the CLF never prefers one (its cube with the channel cannot hold, so the
     rank-aware goal passes it over; before issue 22 it did in some episodes)."""
     env = ChannelEnv()
-    w = env.cfg.task.half_width
+    w = env.params.task.half_width
     n, outside, clf_outside = 500, 0, 0
     for seed in range(n):
         _, info = env.reset(seed=seed)
         centres = [env.state[a : b + 1] for a, b in GOAL_DIMS]
-        inside = [abs(c[0] - c[1]) < w - env.cfg.task.goal_radius * math.sqrt(2) for c in centres]
+        inside = [
+            abs(c[0] - c[1]) < w - env.params.task.goal_radius * math.sqrt(2) for c in centres
+        ]
         assert inside[2] and (inside[0] or inside[1])
         outside += info["goal_outside_channel"]
         clf_outside += info["clf_goal_outside"]
@@ -182,7 +184,7 @@ def test_goal_draws() -> None:
 
 def test_overrides_and_bad_input() -> None:
     env = gym.make(ENV_ID, config="rl_clf", k=1e3, dt=0.05, horizon=10, c_r=2.0)
-    assert env.unwrapped.cfg.task.horizon == 10 and env.unwrapped.cfg.shield.k == 1e3
+    assert env.unwrapped.params.task.horizon == 10 and env.unwrapped.params.shield.k == 1e3
     env.reset(seed=0)
     steps = 0
     while True:
@@ -408,7 +410,7 @@ def test_obstacle_velocity_is_measured_and_passed_to_the_shield() -> None:
     env.reset(seed=3)
     before = env.state[9:13].copy()
     env.step(np.zeros(2))
-    np.testing.assert_allclose(env.drift[9:13], (env.state[9:13] - before) / env.cfg.agent.dt)
+    np.testing.assert_allclose(env.drift[9:13], (env.state[9:13] - before) / env.params.agent.dt)
     assert env.drift[:9].tolist() == [0.0] * 9
     out = env.shield.filter(env.state, env.tracker.q, np.zeros(2), drift=env.drift)
     assert {"!o1", "!o2"} <= {name for name, _ in out.barriers}
@@ -439,7 +441,7 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
     from tests import channel_reference as ref
 
     env = ChannelEnv(config=config)
-    cfg = env.cfg
+    cfg = env.params
     rng = np.random.default_rng(2)
     steps = 0
     for episode in range(6):

@@ -148,7 +148,7 @@ def test_barging_through_an_obstacle_never_out_earns_going_around(seed: int) -> 
         waypoint = min((middle + 0.7 * side, middle - 0.7 * side), key=lambda w: abs(w[1] - w[0]))
         detour = [waypoint, g] if way == "around" else [g]
         total, discount, collisions = 0.0, 1.0, 0
-        for _ in range(env.cfg.horizon):
+        for _ in range(env.params.horizon):
             if env.tracker.q == env.tracker.automaton.initial:
                 while len(detour) > 1 and np.linalg.norm(env.state[:2] - detour[0]) < 0.15:
                     detour.pop(0)

@@ -87,7 +87,7 @@ def test_channel_starts_outside_the_channel_return_and_stay() -> None:
         env = gym.make("tlshield/Channel-v0", config="rl_cbf", start_spread=4.0)
         env.reset(seed=episode)
         u = env.unwrapped
-        width = u.cfg.task.half_width
+        width = u.params.task.half_width
 
         def out() -> bool:
             return bool(abs(u.state[X] - u.state[Y]) >= width)  # noqa: B023
@@ -97,7 +97,7 @@ def test_channel_starts_outside_the_channel_return_and_stay() -> None:
         starts_outside += 1
         rng = np.random.default_rng(episode)
         back = False
-        for _ in range(u.cfg.horizon):
+        for _ in range(u.params.horizon):
             _, _, terminated, truncated, _ = env.step(rng.uniform(-1.0, 1.0, 2))
             if not out():
                 back = True

@@ -40,7 +40,7 @@ class TrainingRun:
     inner: Any
     env_id: str
     config: str
-    cfg: Any  # the environment's parameters (None for a user's env)
+    params: Any  # the environment's parameters (None for a user's env)
     seed: int
     updates: int
     overrides: dict[str, Any]
@@ -143,10 +143,10 @@ def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
     }
 
 
-def scaled_clf(cfg: ChannelParams, scale: float) -> ChannelParams:
-    """``cfg`` with its CLF box scaled by ``scale``."""
-    (lo_v, lo_w), (hi_v, hi_w) = cfg.shield.clf_bounds
-    return cfg.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
+def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
+    """``params`` with its CLF box scaled by ``scale``."""
+    (lo_v, lo_w), (hi_v, hi_w) = params.shield.clf_bounds
+    return params.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
 
 
 class TrainingCallback(BaseCallback):  # type: ignore[misc]
@@ -192,7 +192,7 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
         )
         if CONFIGS[run.config][1] and run.clf_schedule != "fixed":
             run.inner.set_attr(
-                "shield", channel_shield(scaled_clf(run.cfg, self.scale), run.config)
+                "shield", channel_shield(scaled_clf(run.params, self.scale), run.config)
             )
 
     def _on_step(self) -> bool:

@@ -72,9 +72,9 @@ def _check_run_args(
 
 
 def _env_params(venv: Any) -> Any:
-    """The first sub-environment's parameters (``cfg``), or None (a user's environment)."""
+    """The first sub-environment's parameters (``params``), or None (a user's environment)."""
     try:
-        return venv.env_method("get_wrapper_attr", "cfg", indices=[0])[0]
+        return venv.env_method("get_wrapper_attr", "params", indices=[0])[0]
     except AttributeError:
         return None
 
@@ -148,9 +148,9 @@ def train(
     venv = VecNormalize(
         inner, norm_obs=True, norm_reward=settings.norm_reward, gamma=settings.ppo["gamma"]
     )
-    cfg = _env_params(inner)
+    params = _env_params(inner)
     schedule = (clf_schedule, clf_final_scale)
-    record = _run_record(env, config, seed, updates, preset, schedule, settings, cfg, overrides)
+    record = _run_record(env, config, seed, updates, preset, schedule, settings, params, overrides)
     record["imports"] = imports
     (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
     model = _ppo(settings, venv, seed)
@@ -162,7 +162,7 @@ def train(
         inner=inner,
         env_id=env,
         config=config,
-        cfg=cfg,
+        params=params,
         seed=seed,
         updates=updates,
         overrides=overrides,
@@ -239,7 +239,7 @@ def _run_record(
     preset: str,
     schedule: tuple[str, float],
     settings: PpoSettings,
-    cfg: Any,
+    params: Any,
     overrides: dict[str, Any],
 ) -> dict[str, Any]:
     """The run's ``run.json``: what it ran with (:mod:`tlshield.runs` reads it back)."""
@@ -262,7 +262,7 @@ def _run_record(
             "net_arch": settings.net_arch,
             "activation": "ReLU",
         },
-        "env": as_flat(cfg),
+        "env": as_flat(params),
         "overrides": overrides,
         "interrupted": False,
         "finished": False,

@@ -95,9 +95,9 @@ def to_settings(params: dict[str, Any], config: str) -> dict[str, Any]:
     scales become boxes, the rest is as sampled."""
     out = {k: v for k, v in params.items() if k not in ("clf_bounds", "cbf_bounds")}
     if "clf_bounds" in params or "cbf_bounds" in params:
-        cfg = ChannelParams()
+        env_params = ChannelParams()
         cbf, clf = CONFIGS[config]
-        clf_hi = [b * params.get("clf_bounds", 1.0) for b in cfg.shield.clf_bounds[1]]
+        clf_hi = [b * params.get("clf_bounds", 1.0) for b in env_params.shield.clf_bounds[1]]
         if clf:
             out["clf_bounds"] = [[-b for b in clf_hi], clf_hi]
         if cbf:
@@ -105,7 +105,10 @@ def to_settings(params: dict[str, Any], config: str) -> dict[str, Any]:
             cbf_hi = [
                 max(b * scale, r + (c if clf else 0.0))
                 for b, r, c in zip(
-                    cfg.shield.cbf_bounds[1], cfg.agent.rl_bounds[1], clf_hi, strict=True
+                    env_params.shield.cbf_bounds[1],
+                    env_params.agent.rl_bounds[1],
+                    clf_hi,
+                    strict=True,
                 )
             ]
             out["cbf_bounds"] = [[-b for b in cbf_hi], cbf_hi]

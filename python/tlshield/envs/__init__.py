@@ -92,7 +92,7 @@ def env_horizon(env: Any) -> int | None:
     """The episode length of an environment: its parameters' ``horizon``, else its registered
     ``max_episode_steps`` (None when it says neither)."""
     try:
-        return int(env.get_wrapper_attr("cfg").horizon)
+        return int(env.get_wrapper_attr("params").horizon)
     except AttributeError:
         spec = getattr(env, "spec", None)
         return getattr(spec, "max_episode_steps", None)

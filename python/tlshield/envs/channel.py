@@ -41,7 +41,7 @@ from tlshield.envs.channel_task import (
     task_spec,
 )
 from tlshield.envs.layout import GOAL_DIMS, STATE_DIM, THETA, X, Y
-from tlshield.envs.params import FULL, build, renamed_class, shielded_config
+from tlshield.envs.params import FULL, ParamsAlias, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Length of the relative observation before the one-hot FSA state.
@@ -49,7 +49,7 @@ RELATIVE_DIM = 20
 SQRT2 = math.sqrt(2.0)
 
 
-class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """``tlshield/Channel-v0``: the paper's case study (Li & Belta, Sec. VI) as one Gymnasium
     environment.
 
@@ -135,38 +135,38 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             raise ValueError(
                 f"render_mode = {render_mode!r}: expected 'rgb_array', 'human' or None"
             )
-        self.cfg = build(ChannelParams, overrides, "Channel-v0")
+        self.params = build(ChannelParams, overrides, "Channel-v0")
         self.config = config
         self.evaluation = evaluation
         self.render_mode = render_mode
-        cfg = self.cfg
-        self.spec_tl = task_spec(cfg)
+        params = self.params
+        self.spec_tl = task_spec(params)
         self._channel_atoms = (self.spec_tl.atoms.index("c1"), self.spec_tl.atoms.index("c2"))
         shield_config = shielded_config(config, evaluation)
         #: The plant; the shield is built on the same model.
-        self.model = channel_model(cfg)
-        self.shield = channel_shield(cfg, shield_config, self.spec_tl)
+        self.model = channel_model(params)
+        self.shield = channel_shield(params, shield_config, self.spec_tl)
         self.shield_in_env = shield_in_env
         automaton = self.spec_tl.automaton()
         progress = None
-        if cfg.task.reward == "progress":
+        if params.task.reward == "progress":
             # The spec declares the goals exclusive (the draw keeps the discs apart), so one
             # state cannot count as reaching two goals: g3 is two transitions from the start.
             progress = automaton.progress_reward(
-                gamma=cfg.task.gamma,
-                horizon=cfg.task.horizon,
-                scale=cfg.task.progress_scale,
-                bonus=cfg.task.bonus,
-                c_r=cfg.task.c_r,
+                gamma=params.task.gamma,
+                horizon=params.task.horizon,
+                scale=params.task.progress_scale,
+                bonus=params.task.bonus,
+                c_r=params.task.c_r,
             )
-        self.tracker = FsaTracker(automaton, cfg.task.c_r, cfg.trap_penalty, progress)
-        lo, hi = cfg.agent.arena
+        self.tracker = FsaTracker(automaton, params.task.c_r, params.trap_penalty, progress)
+        lo, hi = params.agent.arena
         margin = (
-            max(cfg.task.outside_goal_v[1], max(cfg.obstacles.obstacle_amplitude))
-            + cfg.task.goal_radius
+            max(params.task.outside_goal_v[1], max(params.obstacles.obstacle_amplitude))
+            + params.task.goal_radius
         )
         k = automaton.num_states
-        if cfg.observation.kind == "paper":
+        if params.observation.kind == "paper":
             obs_lo = np.full(STATE_DIM, lo - margin)
             obs_hi = np.full(STATE_DIM, hi + margin)
             obs_lo[THETA], obs_hi[THETA] = -math.pi, math.pi
@@ -180,25 +180,25 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             dtype=np.float64,
         )
         # The policy acts in [-1, 1]^2 (what SB3 expects); a_rl = centre + action * half range.
-        rl_lo, rl_hi = (np.asarray(b, dtype=np.float64) for b in cfg.agent.rl_bounds)
+        rl_lo, rl_hi = (np.asarray(b, dtype=np.float64) for b in params.agent.rl_bounds)
         self._rl_centre, self._rl_half = (rl_hi + rl_lo) / 2, (rl_hi - rl_lo) / 2
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
         #: The world the core steps: plant, obstacles, shield call, monitor, reward terms and
         #: observation in one call (this class draws the episodes and builds ``info``).
         self._world = ChannelWorld(
             self.model,
-            dt=cfg.agent.dt,
-            horizon=cfg.task.horizon,
-            arena=cfg.agent.arena,
-            half_width=cfg.task.half_width,
-            obstacle_radius=cfg.obstacles.obstacle_radius,
-            safe_distance=cfg.obstacles.safe_distance,
-            w=cfg.obstacles.w,
-            collision_penalty=cfg.obstacles.collision_penalty,
-            intervention_penalty=cfg.shield.intervention_penalty,
-            relative=cfg.observation.kind == "relative",
-            rl_bounds=cfg.agent.rl_bounds,
-            obstacle_drift=cfg.shield.obstacle_drift,
+            dt=params.agent.dt,
+            horizon=params.task.horizon,
+            arena=params.agent.arena,
+            half_width=params.task.half_width,
+            obstacle_radius=params.obstacles.obstacle_radius,
+            safe_distance=params.obstacles.safe_distance,
+            w=params.obstacles.w,
+            collision_penalty=params.obstacles.collision_penalty,
+            intervention_penalty=params.shield.intervention_penalty,
+            relative=params.observation.kind == "relative",
+            rl_bounds=params.agent.rl_bounds,
+            obstacle_drift=params.shield.obstacle_drift,
             evaluation=evaluation,
             channel_atoms=self._channel_atoms,
         )
@@ -231,19 +231,19 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
     def _draw_goals(self) -> tuple[NDArray[np.float64], bool]:
         """g3 and one of g1/g2 inside the channel; the other outside with the configured
         probability. Returns the (3, 2) centres and whether one lies outside."""
-        cfg, rng = self.cfg, self.np_random
-        inside_v = cfg.task.half_width / SQRT2 - cfg.task.goal_radius
-        outside = bool(rng.random() < cfg.task.outside_goal_probability)
+        params, rng = self.params, self.np_random
+        inside_v = params.task.half_width / SQRT2 - params.task.goal_radius
+        outside = bool(rng.random() < params.task.outside_goal_probability)
         k = int(rng.integers(2))
         while True:
-            us = rng.uniform(*cfg.task.near_goal_u, size=2)
+            us = rng.uniform(*params.task.near_goal_u, size=2)
             vs = rng.uniform(-inside_v, inside_v, size=2)
             if outside:
-                vs[k] = rng.choice([-1.0, 1.0]) * rng.uniform(*cfg.task.outside_goal_v)
+                vs[k] = rng.choice([-1.0, 1.0]) * rng.uniform(*params.task.outside_goal_v)
             near = np.array([self._xy(u, v) for u, v in zip(us, vs, strict=True)])
-            if np.linalg.norm(near[0] - near[1]) >= 2 * cfg.task.goal_radius + 0.2:
+            if np.linalg.norm(near[0] - near[1]) >= 2 * params.task.goal_radius + 0.2:
                 break
-        far = self._xy(rng.uniform(*cfg.task.far_goal_u), rng.uniform(-inside_v, inside_v))
+        far = self._xy(rng.uniform(*params.task.far_goal_u), rng.uniform(-inside_v, inside_v))
         return np.vstack([near, far]), outside
 
     def _measure(self) -> dict[str, Any]:
@@ -266,13 +266,13 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float64], dict[str, Any]]:
         super().reset(seed=seed)
-        cfg, rng = self.cfg, self.np_random
+        params, rng = self.params, self.np_random
         goals, outside = self._draw_goals()
         for i in range(2):
             self._obstacles[i] = (
-                rng.uniform(*cfg.obstacles.obstacle_u),
-                rng.uniform(*cfg.obstacles.obstacle_amplitude),
-                rng.uniform(*cfg.obstacles.obstacle_frequency),
+                rng.uniform(*params.obstacles.obstacle_u),
+                rng.uniform(*params.obstacles.obstacle_amplitude),
+                rng.uniform(*params.obstacles.obstacle_frequency),
                 rng.uniform(0.0, 2 * math.pi),
             )
         if options and "obstacles" in options:
@@ -287,10 +287,12 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             self._obstacles[:] = paths
         s = np.zeros(STATE_DIM)
         s[X], s[Y] = self._xy(
-            rng.uniform(-cfg.agent.start_spread, cfg.agent.start_spread),
-            rng.uniform(-cfg.agent.start_spread, cfg.agent.start_spread),
+            rng.uniform(-params.agent.start_spread, params.agent.start_spread),
+            rng.uniform(-params.agent.start_spread, params.agent.start_spread),
         )
-        s[THETA] = math.pi / 4 + rng.uniform(-cfg.agent.start_heading, cfg.agent.start_heading)
+        s[THETA] = math.pi / 4 + rng.uniform(
+            -params.agent.start_heading, params.agent.start_heading
+        )
         for k, (a, b) in enumerate(GOAL_DIMS):
             s[a], s[b] = goals[k]
         # The world places the obstacles on their paths and measures their velocity over the
@@ -307,7 +309,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             "goal_outside_channel": outside,
             # Whether the goal the CLF heads for first lies outside the channel.
             "clf_goal_outside": bool(
-                goal is not None and abs(goal[1] - goal[0]) > cfg.task.half_width
+                goal is not None and abs(goal[1] - goal[0]) > params.task.half_width
             ),
             **self._measure(),
         }
@@ -352,11 +354,11 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         from tlshield.envs.render import ChannelRenderer, Scene
 
         if self._renderer is None:
-            lo, hi = self.cfg.agent.arena
+            lo, hi = self.params.agent.arena
             scene = Scene(
-                half_width=self.cfg.task.half_width,
-                goal_radius=self.cfg.task.goal_radius,
-                obstacle_radius=self.cfg.obstacles.obstacle_radius,
+                half_width=self.params.task.half_width,
+                goal_radius=self.params.task.goal_radius,
+                obstacle_radius=self.params.obstacles.obstacle_radius,
                 arena=(lo, hi, lo, hi),
             )
             self._renderer = ChannelRenderer(scene)

@@ -340,10 +340,10 @@ def channel_task_spec(
     return Spec(TASK_WITH_OBSTACLES, {**goals, **channel, **obstacles}, exclusive=exclusive)
 
 
-def task_spec(cfg: ChannelParams) -> Spec:
+def task_spec(params: ChannelParams) -> Spec:
     """The task spec a configuration runs with."""
-    radius = cfg.obstacles.obstacle_radius if cfg.shield.obstacles_in_task else None
-    return channel_task_spec(cfg.task.half_width, cfg.task.goal_radius, radius)
+    radius = params.obstacles.obstacle_radius if params.shield.obstacles_in_task else None
+    return channel_task_spec(params.task.half_width, params.task.goal_radius, radius)
 
 
 #: The paper's settings (its reward and 13-value observation, no moving-obstacle barrier).
@@ -363,42 +363,42 @@ PAPER_ENV = {
 OBSTACLE_SLACK_WEIGHT = 1e-3
 
 
-def obstacle_barriers(cfg: ChannelParams) -> dict[str, tuple[Ball, float]]:
+def obstacle_barriers(params: ChannelParams) -> dict[str, tuple[Ball, float]]:
     """The moving-obstacle barriers: keep the reference point out of a disc of
     ``barrier_radius`` around each obstacle centre (read from the state)."""
     return {
         f"!o{k + 1}": (
-            Ball(pos=[X, Y], radius=cfg.shield.barrier_radius, center_dims=list(dims)),
+            Ball(pos=[X, Y], radius=params.shield.barrier_radius, center_dims=list(dims)),
             OBSTACLE_SLACK_WEIGHT,
         )
         for k, dims in enumerate(OBSTACLE_DIMS)
     }
 
 
-def channel_model(cfg: ChannelParams) -> Unicycle:
+def channel_model(params: ChannelParams) -> Unicycle:
     """The unicycle reference point of the case study (Eq. 6A2): the environment's plant and
     the shield's model."""
-    return Unicycle(cfg.agent.eps, X, Y, THETA)
+    return Unicycle(params.agent.eps, X, Y, THETA)
 
 
-def channel_shield(cfg: ChannelParams, config: str, spec: Spec | None = None) -> Shield | None:
+def channel_shield(params: ChannelParams, config: str, spec: Spec | None = None) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``)."""
     use_cbf, use_clf = CONFIGS[config]
     if not (use_cbf or use_clf):
         return None
     return Shield(
-        spec or task_spec(cfg),
-        channel_model(cfg),
-        alpha=cfg.shield.alpha,
-        c3=cfg.shield.c3,
-        k=cfg.shield.k,
-        cbf_bounds=cfg.shield.cbf_bounds,
-        clf_bounds=cfg.shield.clf_bounds,
-        rl_bounds=cfg.agent.rl_bounds,
+        spec or task_spec(params),
+        channel_model(params),
+        alpha=params.shield.alpha,
+        c3=params.shield.c3,
+        k=params.shield.k,
+        cbf_bounds=params.shield.cbf_bounds,
+        clf_bounds=params.shield.clf_bounds,
+        rl_bounds=params.agent.rl_bounds,
         use_cbf=use_cbf,
         use_clf=use_clf,
-        margin=cfg.shield.margin,
-        barriers=obstacle_barriers(cfg) if cfg.shield.obstacle_barrier else None,
+        margin=params.shield.margin,
+        barriers=obstacle_barriers(params) if params.shield.obstacle_barrier else None,
     )
 
 

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, build, renamed_class, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, ParamsAlias, build, renamed_class, shielded_config
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -134,7 +134,7 @@ def wall_barriers(size: float) -> dict[str, Halfspace]:
     }
 
 
-def flatworld_shield(cfg: FlatWorldParams, config: str, spec: Spec) -> Shield | None:
+def flatworld_shield(params: FlatWorldParams, config: str, spec: Spec) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``): the safe set and the walls as
     barriers, the CLF towards the next region, the applied action in ``[-1, 1]^2``."""
     use_cbf, use_clf = CONFIGS[config]
@@ -143,22 +143,22 @@ def flatworld_shield(cfg: FlatWorldParams, config: str, spec: Spec) -> Shield | 
     return Shield(
         spec,
         SingleIntegrator(pos=list(POS)),
-        alpha=cfg.alpha,
-        c3=cfg.c3,
-        k=cfg.k,
+        alpha=params.alpha,
+        c3=params.c3,
+        k=params.k,
         cbf_bounds=(-2.0, 2.0),
-        clf_bounds=(-cfg.clf_bound, cfg.clf_bound),
+        clf_bounds=(-params.clf_bound, params.clf_bound),
         action_bounds=(-1.0, 1.0),
         rl_bounds=(-1.0, 1.0),
-        barriers=wall_barriers(cfg.size),
-        margin=cfg.margin,
+        barriers=wall_barriers(params.size),
+        margin=params.margin,
         use_cbf=use_cbf,
         use_clf=use_clf,
-        preserve_progress=bool(cfg.preserve_progress),
+        preserve_progress=bool(params.preserve_progress),
     )
 
 
-class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class FlatWorld(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """The physics alone: a point in a square with coloured discs, no task.
 
     Observation: the position ``[x, y]``. Action: ``u`` in ``[-1, 1]^2`` (clipped); each step
@@ -170,11 +170,13 @@ class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, cfg: FlatWorldParams | None = None, render_mode: str | None = None) -> None:
-        self.cfg = cfg or FlatWorldParams()
+    def __init__(
+        self, params: FlatWorldParams | None = None, render_mode: str | None = None
+    ) -> None:
+        self.params = params or FlatWorldParams()
         self.model = SingleIntegrator(pos=list(POS))
         # The farthest a step can leave the square: the last observation of an exit.
-        s = self.cfg.size + self.cfg.step_size * math.sqrt(2.0)
+        s = self.params.size + self.params.step_size * math.sqrt(2.0)
         self.observation_space = gym.spaces.Box(-s, s, shape=(2,), dtype=np.float64)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
         self.render_mode = render_mode
@@ -183,7 +185,7 @@ class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float
         self._t = 0
 
     def _measure(self, exited: bool) -> dict[str, Any]:
-        s, (x, y) = self.cfg.size, self.state
+        s, (x, y) = self.params.size, self.state
         h = {"x<size": s - x, "x>-size": x + s, "y<size": s - y, "y>-size": y + s}
         return {
             "constraints": h,
@@ -197,7 +199,7 @@ class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float64], dict[str, Any]]:
         super().reset(seed=seed)
-        s = self.cfg.size
+        s = self.params.size
         while True:  # uniform in the square, outside every disc (rejection sampling)
             p = self.np_random.uniform(-s, s, size=2)
             if all(math.dist(p, c) >= r for c, r, _ in CIRCLES):
@@ -214,20 +216,20 @@ class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action {a} is not finite")
         self.state = np.asarray(
-            self.model.step(self.state, np.clip(a, -1.0, 1.0), self.cfg.step_size)
+            self.model.step(self.state, np.clip(a, -1.0, 1.0), self.params.step_size)
         )
         self.path.append(self.state.copy())
         self._t += 1
-        exited = bool(np.any(np.abs(self.state) > self.cfg.size))
+        exited = bool(np.any(np.abs(self.state) > self.params.size))
         info = {**self._measure(exited), "action": a}
-        return self.state.copy(), 0.0, exited, self._t >= self.cfg.horizon, info
+        return self.state.copy(), 0.0, exited, self._t >= self.params.horizon, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode != "rgb_array":
             return None
         from tlshield.plots.flatworld import draw_paths
 
-        return draw_paths([np.asarray(self.path)], CIRCLES, size=self.cfg.size)
+        return draw_paths([np.asarray(self.path)], CIRCLES, size=self.params.size)
 
 
 def make_flatworld(
@@ -248,19 +250,19 @@ def make_flatworld(
     """
     if config not in CONFIGS:
         raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
-    cfg = build(FlatWorldParams, overrides, "FlatWorld-v0")
+    params = build(FlatWorldParams, overrides, "FlatWorld-v0")
     spec = flatworld_spec(formula)
     env: gym.Env = FsaAugmented(
-        FlatWorld(cfg, render_mode=render_mode),
+        FlatWorld(params, render_mode=render_mode),
         spec,
-        gamma=cfg.gamma,
-        horizon=cfg.horizon,
-        scale=cfg.progress_scale,
+        gamma=params.gamma,
+        horizon=params.horizon,
+        scale=params.progress_scale,
         terminate_on_trap=True,
         failure_on_termination=True,
     )
     shield_config = shielded_config(config, evaluation)
-    shield = flatworld_shield(cfg, shield_config, spec)
+    shield = flatworld_shield(params, shield_config, spec)
     if shield is not None:
         env = Shielded(env, shield)
     return env

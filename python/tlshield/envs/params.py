@@ -16,6 +16,25 @@ CONFIGS = {
     "rl_clf": (False, True),
     "rl_cbf_clf": (True, True),
 }
+
+
+class ParamsAlias:
+    """``env.cfg``, the 0.2 name of an environment's ``env.params``: still readable, with a
+    ``DeprecationWarning`` (removed in 0.3)."""
+
+    params: Any
+
+    @property
+    def cfg(self) -> Any:
+        warnings.warn(
+            "env.cfg is deprecated: use env.params (an environment's constants are its "
+            "parameters; 'config' is the shield configuration)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.params
+
+
 #: The configuration with every part on: the tlshield default and the paper's method.
 FULL = "rl_cbf_clf"
 

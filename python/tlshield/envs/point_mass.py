@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Automaton, Ball, DoubleIntegrator, PointMassWorld, Shield, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, build, renamed_class, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, ParamsAlias, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Visit a, then b; stay out of both obstacles until b.
@@ -116,11 +116,11 @@ class PointMassParams:
 
 
 @functools.lru_cache(maxsize=64)
-def point_mass_spec(cfg: PointMassParams | None = None) -> Spec:
+def point_mass_spec(params: PointMassParams | None = None) -> Spec:
     """The task spec over the state ``[x, y, vx, vy]``, one per parameters (cached, so that
     every environment, shield and monitor of the task shares one automaton: a batch's shield
     reads every env's monitor)."""
-    cfg = cfg or PointMassParams()
+    params = params or PointMassParams()
 
     def disc(centre: tuple[float, float], radius: float) -> Ball:
         return Ball(pos=list(POS), radius=radius, center=list(centre))
@@ -128,40 +128,44 @@ def point_mass_spec(cfg: PointMassParams | None = None) -> Spec:
     return Spec(
         TASK,
         {
-            "a": disc(cfg.goal_a, cfg.goal_radius),
-            "b": disc(cfg.goal_b, cfg.goal_radius),
-            "o1": disc(cfg.obstacle_1, cfg.obstacle_radius),
-            "o2": disc(cfg.obstacle_2, cfg.obstacle_radius),
+            "a": disc(params.goal_a, params.goal_radius),
+            "b": disc(params.goal_b, params.goal_radius),
+            "o1": disc(params.obstacle_1, params.obstacle_radius),
+            "o2": disc(params.obstacle_2, params.obstacle_radius),
         },
     )
 
 
-def point_mass_shield(cfg: PointMassParams, config: str, spec: Spec | Automaton) -> Shield | None:
+def point_mass_shield(
+    params: PointMassParams, config: str, spec: Spec | Automaton
+) -> Shield | None:
     """The shield of a configuration (None for ``"rl"``): HOCBF rows for the obstacles and the
     goals' literals, the second-order CLF, the applied action kept in the acceleration box."""
     use_cbf, use_clf = CONFIGS[config]
     if not (use_cbf or use_clf):
         return None
-    accel = cfg.max_accel
+    accel = params.max_accel
     return Shield(
         spec,
         DoubleIntegrator(pos=list(POS), vel=list(VEL)),
-        alpha=cfg.alpha,
-        alpha2=cfg.alpha2,
-        c3=cfg.c3,
-        k=cfg.k,
+        alpha=params.alpha,
+        alpha2=params.alpha2,
+        c3=params.c3,
+        k=params.k,
         cbf_bounds=(-2 * accel, 2 * accel),
-        clf_bounds=(-cfg.clf_bound, cfg.clf_bound),
+        clf_bounds=(-params.clf_bound, params.clf_bound),
         action_bounds=(-accel, accel),
         rl_bounds=(-accel, accel),
-        clf_gain=cfg.clf_gain,
-        margin=cfg.margin,
+        clf_gain=params.clf_gain,
+        margin=params.margin,
         use_cbf=use_cbf,
         use_clf=use_clf,
     )
 
 
-class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class PointMassEnv(
+    IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]
+):
     """``tlshield/PointMass-v0`` (see the module docs and :func:`make_point_mass`).
 
     Observation: ``[x, y, vx, vy]`` then the one-hot automaton state. Action: the acceleration
@@ -182,30 +186,30 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
     def __init__(self, config: str = FULL, evaluation: bool = False, **overrides: Any) -> None:
         if config not in CONFIGS:
             raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
-        cfg = build(PointMassParams, overrides, "PointMass-v0")
-        self.cfg = cfg
+        params = build(PointMassParams, overrides, "PointMass-v0")
+        self.params = params
         self.config = config
-        spec = point_mass_spec(cfg)
+        spec = point_mass_spec(params)
         automaton = spec.automaton()
         progress = automaton.progress_reward(
-            gamma=cfg.gamma,
-            horizon=cfg.horizon,
-            scale=cfg.progress_scale,
+            gamma=params.gamma,
+            horizon=params.horizon,
+            scale=params.progress_scale,
             exclusive=[["a", "b", "o1", "o2"]],
         )
         self.tracker = FsaTracker(automaton, 1.0, -100.0, progress)
         shield_config = shielded_config(config, evaluation)
-        self.shield = point_mass_shield(cfg, shield_config, automaton)
+        self.shield = point_mass_shield(params, shield_config, automaton)
         self._world = PointMassWorld(
-            dt=cfg.dt,
-            horizon=cfg.horizon,
-            room=cfg.room,
-            max_accel=cfg.max_accel,
-            obstacles=(cfg.obstacle_1, cfg.obstacle_2),
-            obstacle_radius=cfg.obstacle_radius,
-            collision_penalty=cfg.collision_penalty,
+            dt=params.dt,
+            horizon=params.horizon,
+            room=params.room,
+            max_accel=params.max_accel,
+            obstacles=(params.obstacle_1, params.obstacle_2),
+            obstacle_radius=params.obstacle_radius,
+            collision_penalty=params.collision_penalty,
         )
-        lo, hi = cfg.room
+        lo, hi = params.room
         span = hi - lo
         k = automaton.num_states
         self.observation_space = gym.spaces.Box(
@@ -213,7 +217,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
             np.concatenate([[hi, hi, span, span], np.ones(k)]),
             dtype=np.float64,
         )
-        a = cfg.max_accel
+        a = params.max_accel
         self.action_space = gym.spaces.Box(-a, a, shape=(2,), dtype=np.float64)
 
     @property
@@ -238,8 +242,8 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float64], dict[str, Any]]:
         super().reset(seed=seed)
-        spread = self.cfg.start_spread
-        p = np.asarray(self.cfg.start) + self.np_random.uniform(-spread, spread, size=2)
+        spread = self.params.start_spread
+        p = np.asarray(self.params.start) + self.np_random.uniform(-spread, spread, size=2)
         s = np.array([p[0], p[1], 0.0, 0.0])
         self._world.reset(s)
         q = self.tracker.reset(s)

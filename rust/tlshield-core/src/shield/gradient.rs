@@ -495,13 +495,13 @@ impl Shield {
             ..
         } = ws;
         let mut flags = 0;
-        let cfg = &self.params;
+        let params = &self.params;
         let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
         let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
         let barriers = program.barriers();
         b.dx.clear();
         b.dx.resize(nv, 0.0);
-        if cfg.use_cbf {
+        if params.use_cbf {
             b.dx[..m].copy_from_slice(v);
         }
         if has_goal {
@@ -518,7 +518,8 @@ impl Shield {
 
         // Barrier rows: h_b = r_b + L_b . a_rl, G_b = -L_b on the a_cbf and a_clf columns.
         let sources =
-            cfg.barriers
+            params
+                .barriers
                 .iter()
                 .map(|bar| (&bar.predicate, bar.positive))
                 .chain(program.safe.iter().map(|&(lit, _)| {
@@ -530,7 +531,7 @@ impl Shield {
             for j in 0..m {
                 ga[j] += alpha * lg[j];
                 let mut d = 0.0;
-                if cfg.use_cbf {
+                if params.use_cbf {
                     d += b.dg[row * nv + j];
                 }
                 if has_goal {
@@ -553,13 +554,13 @@ impl Shield {
                 let gk = &program.g[k * m..(k + 1) * m];
                 b.u[k] = alpha * program.f[k] + dot(gk, &b.beta);
             }
-            for &(d, w) in &cfg.disturbance {
+            for &(d, w) in &params.disturbance {
                 b.u[d] -= alpha * w * b.grad[d].signum() * f64::from(b.grad[d] != 0.0);
             }
             predicate.hessian_times(s, &b.u, &mut b.hu);
             model.jacobian_f_transpose_times(s, &b.grad, &mut b.tmp);
             for (k, g) in gs.iter_mut().enumerate() {
-                *g += sign * b.hu[k] + alpha * (b.tmp[k] + cfg.alpha * b.grad[k]);
+                *g += sign * b.hu[k] + alpha * (b.tmp[k] + params.alpha * b.grad[k]);
             }
             model.input_jacobian_contract(s, &b.grad, &b.beta, &mut b.tmp);
             gs.iter_mut().zip(&b.tmp).for_each(|(g, t)| *g += t);
@@ -575,7 +576,7 @@ impl Shield {
             let start = barriers * nv + cbf_vars;
             b.beta.copy_from_slice(&b.dg[start..start + m]);
             if program.delta_0 > 0.0 {
-                let box_ = cfg.clf_bounds.lo.iter().zip(&cfg.clf_bounds.hi);
+                let box_ = params.clf_bounds.lo.iter().zip(&params.clf_bounds.hi);
                 for ((beta, &l), (&lo, &hi)) in b.beta.iter_mut().zip(l).zip(box_) {
                     if l == 0.0 && lo != hi {
                         flags |= GRAD_DEGENERATE;
@@ -588,7 +589,7 @@ impl Shield {
                     ga[j] -= alpha * l[j];
                 }
                 lf_weight = -alpha;
-                v_weight = -alpha * cfg.c3;
+                v_weight = -alpha * params.c3;
             }
             if let Some(gs) = gs {
                 // V = |e|^2, Lf V = 2 e . f[pos], Lg V_j = 2 e . g[pos, j], e = s[pos] - goal.
@@ -597,14 +598,14 @@ impl Shield {
                     .as_ref()
                     .expect("checked: state gradients need a model");
                 b.u.fill(0.0);
-                for (&p, &c) in cfg.pos.iter().zip(&program.goal) {
+                for (&p, &c) in params.pos.iter().zip(&program.goal) {
                     b.u[p] = s[p] - c;
                 }
                 model.jacobian_f_transpose_times(s, &b.u, &mut b.tmp);
                 gs.iter_mut()
                     .zip(&b.tmp)
                     .for_each(|(g, t)| *g += 2.0 * lf_weight * t);
-                for &p in &cfg.pos {
+                for &p in &params.pos {
                     let gp = &program.g[p * m..(p + 1) * m];
                     gs[p] +=
                         2.0 * (v_weight * b.u[p] + lf_weight * program.f[p] + dot(gp, &b.beta));
@@ -614,7 +615,7 @@ impl Shield {
                 // dL/de_k, then the goal's own motion when ball centres are read from the
                 // state: e = s[pos] - goal(s).
                 b.de.clear();
-                for &p in &cfg.pos {
+                for &p in &params.pos {
                     let gp = &program.g[p * m..(p + 1) * m];
                     b.de.push(
                         2.0 * (v_weight * b.u[p] + lf_weight * program.f[p] + dot(gp, &b.beta)),
@@ -632,8 +633,8 @@ impl Shield {
         }
 
         // Actuator limits: h = hi - a_rl (upper rows), then a_rl - lo (lower rows).
-        if cfg.action_bounds.is_some() {
-            next += 2 * m * (usize::from(cfg.use_cbf) + usize::from(has_goal));
+        if params.action_bounds.is_some() {
+            next += 2 * m * (usize::from(params.use_cbf) + usize::from(has_goal));
             for (k, sign) in [1.0, -1.0].into_iter().enumerate() {
                 let rows = &b.dh[next + k * m..next + (k + 1) * m];
                 ga.iter_mut().zip(rows).for_each(|(g, d)| *g -= sign * d);

@@ -926,10 +926,10 @@ impl Shield {
     fn step(&self, ws: &mut Workspace, call: Call<'_>, want: Want) {
         let a_rl = call.a_rl;
         let record = want == Want::Recorded;
-        let cfg = &self.params;
+        let params = &self.params;
         ws.out.barriers.clear();
         ws.program.rows(
-            cfg,
+            params,
             &self.orders,
             &self.automaton,
             self.dynamics.as_ref(),
@@ -960,12 +960,12 @@ impl Shield {
             return;
         }
 
-        program.assemble(cfg, a_rl, &mut ws.qp, false);
+        program.assemble(params, a_rl, &mut ws.qp, false);
         if want == Want::Problem {
             return;
         }
         let mut status = Status::Solved;
-        let mut by = ws.solvers.solve(cfg.solver, &ws.qp);
+        let mut by = ws.solvers.solve(params.solver, &ws.qp);
         let mut checked = ws.solvers.solution.status == QpStatus::Solved
             && within_tolerance(&ws.qp, &ws.solvers.solution.x);
         if !checked && barriers > 0 {
@@ -974,8 +974,8 @@ impl Shield {
             } else {
                 Status::Relaxed
             };
-            program.assemble(cfg, a_rl, &mut ws.qp, true);
-            by = ws.solvers.solve(cfg.solver, &ws.qp);
+            program.assemble(params, a_rl, &mut ws.qp, true);
+            by = ws.solvers.solve(params.solver, &ws.qp);
             checked = ws.solvers.solution.status == QpStatus::Solved
                 && within_tolerance(&ws.qp, &ws.solvers.solution.x);
         }
@@ -985,7 +985,7 @@ impl Shield {
             out.status = Status::Failed;
             return;
         }
-        if cfg.use_cbf {
+        if params.use_cbf {
             out.a_cbf.copy_from_slice(&x[..m]);
         }
         if has_goal {

@@ -60,7 +60,7 @@ pub(super) struct Program {
 /// `g`), the state, the FSA state and the RL action.
 #[derive(Clone, Copy)]
 struct Site<'a> {
-    cfg: &'a ShieldParams,
+    params: &'a ShieldParams,
     model: Option<&'a Dynamics>,
     fg: Option<ControlAffine<'a>>,
     s: &'a [f64],
@@ -163,7 +163,7 @@ impl Program {
     /// path records them).
     pub(super) fn rows(
         &mut self,
-        cfg: &ShieldParams,
+        params: &ShieldParams,
         orders: &Orders,
         automaton: &Automaton,
         model: Option<&Dynamics>,
@@ -191,18 +191,18 @@ impl Program {
         };
 
         let at = Site {
-            cfg,
+            params,
             model,
             fg,
             s,
             q,
             a_rl,
         };
-        if cfg.use_cbf {
+        if params.use_cbf {
             self.barrier_rows(at, orders, automaton, &reading, barriers_out);
         }
         self.clf_row(at, orders.clf, task, &reading);
-        self.cbf_vars = if cfg.use_cbf { m } else { 0 };
+        self.cbf_vars = if params.use_cbf { m } else { 0 };
         self.clf_vars = if self.has_goal { m } else { 0 };
     }
 
@@ -217,7 +217,7 @@ impl Program {
         mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
     ) {
         let Site {
-            cfg,
+            params,
             model,
             fg,
             s,
@@ -226,12 +226,12 @@ impl Program {
         } = at;
         let m = a_rl.len();
         let spec = automaton.spec();
-        if cfg.preserve_progress {
+        if params.preserve_progress {
             reading.progress_safe_set(q, &mut self.safe);
         } else {
             reading.safe_set(q, &mut self.safe);
         }
-        let user = cfg.barriers.iter().enumerate().map(|(i, b)| {
+        let user = params.barriers.iter().enumerate().map(|(i, b)| {
             let sign = if b.positive { 1.0 } else { -1.0 };
             let h = b.value(s);
             let second = orders.barriers[i];
@@ -255,7 +255,7 @@ impl Program {
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
             let lf = dot(&self.grad, &self.f);
-            let psi = cfg.alpha * (h - cfg.margin);
+            let psi = params.alpha * (h - params.margin);
             // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
             let (coefficients, second_r) = match second {
                 true => {
@@ -264,24 +264,24 @@ impl Program {
                     jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
                     jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
                     let lf_psi =
-                        dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + cfg.alpha * lf;
+                        dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + params.alpha * lf;
                     // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
                     for (a, b) in self.hf.iter_mut().zip(&self.jt) {
                         *a += b;
                     }
-                    let alpha2 = cfg.alpha2.expect("Orders requires alpha2");
+                    let alpha2 = params.alpha2.expect("Orders requires alpha2");
                     (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
                 }
                 false => (&self.grad, None),
             };
             // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
             // order) or H f + J_f^T grad h + alpha grad h (second order).
-            let robust: f64 = cfg
+            let robust: f64 = params
                 .disturbance
                 .iter()
                 .map(|&(d, w)| {
                     let c = match second_r {
-                        Some(_) => coefficients[d] + cfg.alpha * self.grad[d],
+                        Some(_) => coefficients[d] + params.alpha * self.grad[d],
                         None => coefficients[d],
                     };
                     c.abs() * w
@@ -317,7 +317,7 @@ impl Program {
         reading: &Reading<'_>,
     ) {
         let Site {
-            cfg,
+            params,
             model,
             fg,
             s,
@@ -329,7 +329,7 @@ impl Program {
         // pos directly (second order), e = f[pos] + k (s[pos] - goal) (drive the velocity
         // towards k times the remaining distance);
         // Lg V . a_clf - delta <= -(Lf V + Lg V . a_rl + c3 V).
-        self.has_goal = cfg.use_clf
+        self.has_goal = params.use_clf
             && match task {
                 Some(monitor) => monitor.goal().is_some_and(|g| {
                     self.goal.clear();
@@ -347,10 +347,10 @@ impl Program {
             match second_order {
                 true => {
                     // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
-                    let k = cfg.clf_gain;
+                    let k = params.clf_gain;
                     jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
                     self.hf.fill(0.0); // e placed at the pos dimensions
-                    for (&p, &c) in cfg.pos.iter().zip(&self.goal) {
+                    for (&p, &c) in params.pos.iter().zip(&self.goal) {
                         let e = self.f[p] + k * (s[p] - c);
                         self.hf[p] = e;
                         v += e * e;
@@ -365,7 +365,7 @@ impl Program {
                     }
                 }
                 false => {
-                    for (&k, &c) in cfg.pos.iter().zip(&self.goal) {
+                    for (&k, &c) in params.pos.iter().zip(&self.goal) {
                         let e = s[k] - c;
                         v += e * e;
                         lf += 2.0 * e * self.f[k];
@@ -375,15 +375,15 @@ impl Program {
                     }
                 }
             }
-            self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + cfg.c3 * v);
+            self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + params.c3 * v);
             // The CLF bounds give delta a lower bound in closed form; solving for the excess
             // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
             // of the order of |a|^2 instead of K * delta. The solution is the same.
-            let best = cfg
+            let best = params
                 .clf_bounds
                 .lo
                 .iter()
-                .zip(&cfg.clf_bounds.hi)
+                .zip(&params.clf_bounds.hi)
                 .zip(&self.clf_lg)
                 .map(|((lo, hi), l)| (l * lo).min(l * hi))
                 .sum::<f64>();
@@ -395,7 +395,7 @@ impl Program {
     /// `sigma_i >= 0` (cost `slack_penalty * weight_i`) to every barrier row.
     pub(super) fn assemble(
         &self,
-        cfg: &ShieldParams,
+        params: &ShieldParams,
         a_rl: &[f64],
         qp: &mut DenseQp,
         relaxed: bool,
@@ -412,10 +412,10 @@ impl Program {
         qp.c.clear();
         qp.c.resize(nv, 0.0);
         if has_goal {
-            qp.c[delta] = cfg.k;
+            qp.c[delta] = params.k;
         }
         for (c, w) in qp.c[vars..].iter_mut().zip(&self.weights) {
-            *c = cfg.slack_penalty * w;
+            *c = params.slack_penalty * w;
         }
         qp.g.clear();
         qp.h.clear();
@@ -423,7 +423,7 @@ impl Program {
             let r = push_row(qp, nv, self.rhs[b]);
             for j in 0..m {
                 let l = self.lg[b * m + j];
-                if cfg.use_cbf {
+                if params.use_cbf {
                     r[j] = -l;
                 }
                 if has_goal {
@@ -441,8 +441,8 @@ impl Program {
             push_row(qp, nv, 0.0)[delta] = -1.0;
         }
         let groups = [
-            (cfg.use_cbf, 0, &cfg.cbf_bounds),
-            (has_goal, cbf_vars, &cfg.clf_bounds),
+            (params.use_cbf, 0, &params.cbf_bounds),
+            (has_goal, cbf_vars, &params.clf_bounds),
         ];
         for (on, offset, bounds) in groups {
             for j in (0..m).filter(|_| on) {
@@ -450,11 +450,11 @@ impl Program {
                 push_row(qp, nv, -bounds.lo[j])[offset + j] = -1.0;
             }
         }
-        if let Some(bounds) = &cfg.action_bounds {
+        if let Some(bounds) = &params.action_bounds {
             for (sign, limit) in [(1.0, &bounds.hi), (-1.0, &bounds.lo)] {
                 for j in 0..m {
                     let r = push_row(qp, nv, sign * (limit[j] - a_rl[j]));
-                    if cfg.use_cbf {
+                    if params.use_cbf {
                         r[j] = sign;
                     }
                     if has_goal {
