@@ -294,6 +294,9 @@ CASES: dict[str, Case] = {
         {"states": STATES[:4], "rows": np.array([2, 0, 3, 1])},
     ),
     "MonitorBatch.advance": Case(_started_batch, "advance", {"states": STATES[4:8]}),
+    "ChannelWorld.rl_action": Case(
+        lambda: ChannelEnv(config="rl")._world, "rl_action", {"action": A_RL[:6] / 2}
+    ),
     "ChannelWorld.reset": Case(
         _world_reset,
         "__call__",

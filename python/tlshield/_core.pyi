@@ -1,7 +1,7 @@
 """Type stubs for the compiled module ``tlshield._core`` (hand-written; keep in sync)."""
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, Literal, TypeAlias, final
+from typing import Any, ClassVar, Literal, TypeAlias, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -320,6 +320,17 @@ class ChannelWorld:
     task monitor, reward terms and observation in one call (``tlshield/Channel-v0`` is a
     Gymnasium shell around it)."""
 
+    STATE_DIM: ClassVar[int]
+    RELATIVE_DIM: ClassVar[int]
+    X: ClassVar[int]
+    Y: ClassVar[int]
+    THETA: ClassVar[int]
+    GOAL_DIMS: ClassVar[list[tuple[int, int]]]
+    OBSTACLE_DIMS: ClassVar[list[tuple[int, int]]]
+    @staticmethod
+    def xy(u: float, v: float) -> tuple[float, float]: ...
+    def rl_action(self, action: ArrayLike) -> NDArray[np.float64]:
+        """Policy actions ``(N, 2)`` in ``[-1, 1]`` scaled to the RL box."""
     def __new__(
         cls,
         model: Unicycle,

@@ -40,12 +40,11 @@ from tlshield.envs.channel_task import (
     obstacle_barriers,
     task_spec,
 )
-from tlshield.envs.layout import GOAL_DIMS, STATE_DIM, THETA, X, Y
+from tlshield.envs.layout import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, THETA, X, Y
 from tlshield.envs.params import FULL, ParamsAlias, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Length of the relative observation before the one-hot FSA state.
-RELATIVE_DIM = 20
 SQRT2 = math.sqrt(2.0)
 
 
@@ -179,9 +178,8 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
             np.concatenate([obs_hi, np.ones(k)]),
             dtype=np.float64,
         )
-        # The policy acts in [-1, 1]^2 (what SB3 expects); a_rl = centre + action * half range.
-        rl_lo, rl_hi = (np.asarray(b, dtype=np.float64) for b in params.agent.rl_bounds)
-        self._rl_centre, self._rl_half = (rl_hi + rl_lo) / 2, (rl_hi - rl_lo) / 2
+        # The policy acts in [-1, 1]^2 (what SB3 expects); the world scales it to the RL box
+        # (rl_action).
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
         #: The world the core steps: plant, obstacles, shield call, monitor, reward terms and
         #: observation in one call (this class draws the episodes and builds ``info``).
@@ -226,7 +224,7 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
 
     @staticmethod
     def _xy(u: float, v: float) -> tuple[float, float]:
-        return (u - v) / SQRT2, (u + v) / SQRT2
+        return ChannelWorld.xy(u, v)
 
     def _draw_goals(self) -> tuple[NDArray[np.float64], bool]:
         """g3 and one of g1/g2 inside the channel; the other outside with the configured
@@ -258,7 +256,8 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
     def rl_action(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """The RL action ``(a_v, a_theta)`` in physical units of policy actions in
         ``[-1, 1]^2`` (clipped); works on one action or a batch ``(N, 2)``."""
-        return self._rl_centre + np.clip(action, -1.0, 1.0) * self._rl_half
+        a = np.asarray(action, dtype=np.float64)
+        return self._world.rl_action(a.reshape(-1, 2)).reshape(a.shape)
 
     # --- Gymnasium API ------------------------------------------------------------------------
 

@@ -20,11 +20,23 @@ use crate::world::{Measure, ShieldStep, World, WorldStep};
 pub const STATE_DIM: usize = 13;
 /// Length of the relative observation, before the one-hot FSA state.
 pub const RELATIVE_DIM: usize = 20;
-const X: usize = 0;
-const Y: usize = 1;
-const THETA: usize = 2;
+/// Index of the reference point's x.
+pub const X: usize = 0;
+/// Index of the reference point's y.
+pub const Y: usize = 1;
+/// Index of the heading.
+pub const THETA: usize = 2;
 const GOALS: usize = 3;
 const OBSTACLES: usize = 9;
+/// The (x, y) indices of the goals g1, g2, g3.
+pub const GOAL_DIMS: [[usize; 2]; 3] = [
+    [GOALS, GOALS + 1],
+    [GOALS + 2, GOALS + 3],
+    [GOALS + 4, GOALS + 5],
+];
+/// The (x, y) indices of the obstacles o1, o2.
+pub const OBSTACLE_DIMS: [[usize; 2]; 2] =
+    [[OBSTACLES, OBSTACLES + 1], [OBSTACLES + 2, OBSTACLES + 3]];
 
 /// The constants a step reads (the Python `ChannelParams` holds and checks them all).
 #[derive(Debug, Clone)]
@@ -57,6 +69,15 @@ pub struct ChannelParams {
     pub evaluation: bool,
     /// Spec atom indices of the channel constraints c1, c2.
     pub channel_atoms: [usize; 2],
+}
+
+impl ChannelParams {
+    /// The RL action in physical units of a policy action in `[-1, 1]^2` (clipped): the
+    /// centre of the RL box plus the action times its half-width.
+    pub fn rl_action(&self, action: [f64; 2]) -> [f64; 2] {
+        let (lo, hi) = self.rl_bounds;
+        [0, 1].map(|i| (hi[i] + lo[i]) / 2.0 + action[i].clamp(-1.0, 1.0) * ((hi[i] - lo[i]) / 2.0))
+    }
 }
 
 /// One obstacle's path: centre at channel coordinates `(u, amplitude sin(frequency t + phase))`.
@@ -213,14 +234,7 @@ impl ChannelWorld {
             }
             .into());
         }
-        let a_rl = if scale {
-            let (lo, hi) = p.rl_bounds;
-            [0, 1].map(|i| {
-                (hi[i] + lo[i]) / 2.0 + action[i].clamp(-1.0, 1.0) * ((hi[i] - lo[i]) / 2.0)
-            })
-        } else {
-            action
-        };
+        let a_rl = if scale { p.rl_action(action) } else { action };
         let filtered = match shield {
             Some(shield) => {
                 let drift = p.obstacle_drift.then_some(&self.drift[..]);

@@ -1,11 +1,13 @@
 //! `ChannelWorld`: the case study's world stepped in the core (core `channel`; one step gives a
 //! `WorldStep`, and `step_worlds` steps many: both in `world`).
 
-use numpy::{IntoPyArray, PyArray1};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use tlshield_core::channel::{ChannelParams, ChannelState, ChannelWorld, Obstacle, STATE_DIM};
+use tlshield_core::channel::{
+    self, ChannelParams, ChannelState, ChannelWorld, Obstacle, STATE_DIM,
+};
 
 use crate::convert::{sequence, FloatArray};
 use crate::dynamics::PyUnicycle;
@@ -41,6 +43,71 @@ impl PyChannelWorld {
 
 #[pymethods]
 impl PyChannelWorld {
+    /// Length of the state vector (the core's `channel::STATE_DIM`).
+    #[classattr]
+    const STATE_DIM: usize = channel::STATE_DIM;
+    /// Length of the relative observation before the one-hot FSA state.
+    #[classattr]
+    const RELATIVE_DIM: usize = channel::RELATIVE_DIM;
+    /// Index of the reference point's x.
+    #[classattr]
+    const X: usize = channel::X;
+    /// Index of the reference point's y.
+    #[classattr]
+    const Y: usize = channel::Y;
+    /// Index of the heading.
+    #[classattr]
+    const THETA: usize = channel::THETA;
+
+    /// The (x, y) indices of the goals g1, g2, g3.
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn GOAL_DIMS() -> Vec<(usize, usize)> {
+        channel::GOAL_DIMS.iter().map(|d| (d[0], d[1])).collect()
+    }
+
+    /// The (x, y) indices of the obstacles o1, o2.
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn OBSTACLE_DIMS() -> Vec<(usize, usize)> {
+        channel::OBSTACLE_DIMS
+            .iter()
+            .map(|d| (d[0], d[1]))
+            .collect()
+    }
+
+    /// Channel coordinates ``(u, v)`` to ``(x, y)`` (the core's own).
+    #[staticmethod]
+    fn xy(u: f64, v: f64) -> (f64, f64) {
+        let [x, y] = channel::xy(u, v);
+        (x, y)
+    }
+
+    /// The RL actions in physical units of policy actions ``(N, 2)`` in ``[-1, 1]^2``
+    /// (clipped), scaled exactly as a step scales them.
+    fn rl_action<'py>(
+        &self,
+        py: Python<'py>,
+        action: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let p = self.inner.params();
+        let a = FloatArray::extract(action, "action", 2, "(N, 2)")?;
+        if a.shape()[1] != 2 {
+            return Err(PyValueError::new_err(format!(
+                "action: expected (N, 2), got {}",
+                crate::convert::shape_text(a.shape())
+            )));
+        }
+        let out: Vec<f64> = a
+            .values()
+            .chunks(2)
+            .flat_map(|c| p.rl_action([c[0], c[1]]))
+            .collect();
+        numpy::ndarray::Array2::from_shape_vec((a.shape()[0], 2), out)
+            .map(|array| array.into_pyarray(py))
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
     #[new]
     #[pyo3(signature = (
         model, *, dt, horizon, arena, half_width, obstacle_radius, safe_distance, w,
