@@ -22,6 +22,8 @@ def _restore(
 ) -> Any:
     """Rebuilds a pickled tlshield object (refuses a pickle of another version)."""
 
+DEFAULT_C_R: float
+DEFAULT_TRAP_PENALTY: float
 GRAD_RELAXED: int
 GRAD_FAILED: int
 GRAD_DEGENERATE: int

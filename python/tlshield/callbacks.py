@@ -22,7 +22,7 @@ from tlshield.codes import Status
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.evaluation import rollouts
 from tlshield.measures import step_violation
-from tlshield.presets import clf_scale
+from tlshield.presets import DEFAULT_SCHEDULE, clf_scale
 from tlshield.runs import METRIC_COLUMNS
 from tlshield.saved import save_normalization
 from tlshield.seeds import validation_seed
@@ -190,7 +190,7 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
         self.scale = clf_scale(
             run.clf_schedule, self.update / max(run.updates - 1, 1), run.clf_final_scale
         )
-        if CONFIGS[run.config][1] and run.clf_schedule != "fixed":
+        if CONFIGS[run.config][1] and run.clf_schedule != DEFAULT_SCHEDULE:
             run.inner.set_attr(
                 "shield", channel_shield(scaled_clf(run.params, self.scale), run.config)
             )

@@ -280,19 +280,20 @@ def _add_preset(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_schedule(parser: argparse.ArgumentParser) -> None:
-    from tlshield.presets import SCHEDULES
+    from tlshield.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, SCHEDULES
 
     parser.add_argument(
         "--clf-schedule",
         choices=SCHEDULES,
-        default=SCHEDULES[0],
-        help="shrink the CLF bounds as training progresses (default: fixed)",
+        default=DEFAULT_SCHEDULE,
+        help=f"shrink the CLF bounds as training progresses (default: {DEFAULT_SCHEDULE})",
     )
     parser.add_argument(
         "--clf-final-scale",
         type=float,
-        default=0.2,
-        help="CLF bound scale at the end of training for a shrinking schedule (default 0.2)",
+        default=DEFAULT_FINAL_SCALE,
+        help="CLF bound scale at the end of training for a shrinking schedule "
+        f"(default {DEFAULT_FINAL_SCALE})",
     )
 
 

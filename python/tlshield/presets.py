@@ -64,6 +64,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 #: The CLF-bound schedules of :func:`clf_scale` (the CLI and the tuner offer these).
 SCHEDULES = ("fixed", "linear", "exponential")
+#: The default schedule: the paper's fixed CLF bounds.
+DEFAULT_SCHEDULE = SCHEDULES[0]
+#: The default CLF bound scale at the end of a shrinking schedule.
+DEFAULT_FINAL_SCALE = 0.2
 
 
 def clf_scale(schedule: str, progress: float, final: float) -> float:

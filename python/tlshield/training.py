@@ -51,7 +51,7 @@ from tlshield.envs import (
 from tlshield.envs.channel import CONFIGS
 from tlshield.envs.params import FULL, as_flat
 from tlshield.evaluation import evaluate
-from tlshield.presets import PRESETS, SCHEDULES
+from tlshield.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, PRESETS, SCHEDULES
 from tlshield.runs import RUN_FILE, is_finished, load_run
 from tlshield.seeds import check_seeds, learner_seed, train_seed
 
@@ -103,8 +103,8 @@ def train(
     updates: int,
     out: str | Path,
     *,
-    clf_schedule: str = "fixed",
-    clf_final_scale: float = 0.2,
+    clf_schedule: str = DEFAULT_SCHEDULE,
+    clf_final_scale: float = DEFAULT_FINAL_SCALE,
     progress: bool = True,
     preset: str = "default",
     ppo: dict[str, Any] | None = None,
@@ -128,7 +128,7 @@ def train(
     imports = list(imports)
     import_modules(imports)
     check_env_id(env)
-    if env != ENV_ID and clf_schedule != "fixed":
+    if env != ENV_ID and clf_schedule != DEFAULT_SCHEDULE:
         raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
     settings = _ppo_settings(preset, ppo)
     # The progress reward is shaped for the discount PPO uses (the bundled environments take
@@ -365,8 +365,8 @@ def reproduce(
         _check_run_args(
             config,
             updates,
-            options.get("clf_schedule", "fixed"),
-            options.get("clf_final_scale", 0.2),
+            options.get("clf_schedule", DEFAULT_SCHEDULE),
+            options.get("clf_final_scale", DEFAULT_FINAL_SCALE),
             options.get("preset", "default"),
         )
     check_seeds(seeds)
@@ -441,7 +441,7 @@ def ablation(
     """The ablation of docs/reproduction.md: each row adds one change to the one before (see
     :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
     Finished rows are kept, so an interrupted ablation resumes."""
-    _check_run_args(config, updates, "fixed", 0.2)
+    _check_run_args(config, updates, DEFAULT_SCHEDULE, DEFAULT_FINAL_SCALE)
     check_seeds(seeds)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)

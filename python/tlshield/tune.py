@@ -32,7 +32,7 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.envs.params import FULL
-from tlshield.presets import PRESETS, SCHEDULES
+from tlshield.presets import DEFAULT_SCHEDULE, PRESETS, SCHEDULES
 from tlshield.seeds import MAX_TRIALS, TUNE_SEED
 from tlshield.settings import split
 
@@ -136,7 +136,8 @@ def _define(names: Sequence[str], trial: Any) -> None:
     """Optuna's define-by-run space over ``names`` (``clf_final_scale`` only with a shrinking
     ``clf_schedule``); a module-level function so that Tune can save the searcher."""
     for name in names:
-        if name == "clf_final_scale" and trial.params.get("clf_schedule", "fixed") == "fixed":
+        schedule = trial.params.get("clf_schedule", DEFAULT_SCHEDULE)
+        if name == "clf_final_scale" and schedule == DEFAULT_SCHEDULE:
             continue
         kind, *args = SPACE[name][1]
         if kind == "float":

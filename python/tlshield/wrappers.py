@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Shield, Spec
+from tlshield._core import DEFAULT_C_R, DEFAULT_TRAP_PENALTY, Shield, Spec
 from tlshield.copying import IndependentCopies
 from tlshield.tracking import REWARDS, FsaTracker, shield_info
 from tlshield.vector import ShieldedVectorEnv
@@ -61,9 +61,9 @@ class FsaAugmented(IndependentCopies, gym.Wrapper):
         spec: Spec,
         state_fn: StateFn = identity_state,
         *,
-        c_r: float = 1.0,
+        c_r: float = DEFAULT_C_R,
         w: float = 0.0,
-        trap_penalty: float = -100.0,
+        trap_penalty: float = DEFAULT_TRAP_PENALTY,
         terminate_on_success: bool = True,
         terminate_on_trap: bool = False,
         failure_on_termination: bool = False,

@@ -21,7 +21,16 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, Ball, DoubleIntegrator, PointMassWorld, Shield, Spec
+from tlshield._core import (
+    DEFAULT_C_R,
+    DEFAULT_TRAP_PENALTY,
+    Automaton,
+    Ball,
+    DoubleIntegrator,
+    PointMassWorld,
+    Shield,
+    Spec,
+)
 from tlshield.copying import IndependentCopies
 from tlshield.envs.params import CONFIGS, FULL, ParamsAlias, build, renamed_class, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
@@ -197,7 +206,7 @@ class PointMassEnv(
             scale=params.progress_scale,
             exclusive=[["a", "b", "o1", "o2"]],
         )
-        self.tracker = FsaTracker(automaton, 1.0, -100.0, progress)
+        self.tracker = FsaTracker(automaton, DEFAULT_C_R, DEFAULT_TRAP_PENALTY, progress)
         shield_config = shielded_config(config, evaluation)
         self.shield = point_mass_shield(params, shield_config, automaton)
         self._world = PointMassWorld(

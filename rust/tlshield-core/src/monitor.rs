@@ -13,6 +13,11 @@ use crate::error::{AutomatonError, InputError};
 use crate::progress::ProgressReward;
 use crate::validate::check_finite;
 
+/// The default weight `c_r` of Eq. 5A1's trap term (the paper's task reward).
+pub const DEFAULT_C_R: f64 = 1.0;
+/// The default reward of a step in the trap (the paper's task reward).
+pub const DEFAULT_TRAP_PENALTY: f64 = -100.0;
+
 /// The task reward a monitor pays.
 #[derive(Debug, Clone)]
 pub enum TaskReward {

@@ -46,6 +46,12 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GRAD_FAILED", tlshield_core::shield::GRAD_FAILED)?;
     m.add("GRAD_DEGENERATE", tlshield_core::shield::GRAD_DEGENERATE)?;
     m.add("GRAD_SINGULAR", tlshield_core::shield::GRAD_SINGULAR)?;
+    // The paper's task-reward defaults (Monitor, and the Python trackers read them).
+    m.add("DEFAULT_C_R", tlshield_core::monitor::DEFAULT_C_R)?;
+    m.add(
+        "DEFAULT_TRAP_PENALTY",
+        tlshield_core::monitor::DEFAULT_TRAP_PENALTY,
+    )?;
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<predicate::PyUnion>()?;

@@ -5,6 +5,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
+use tlshield_core::monitor::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 use tlshield_core::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
 
 use crate::automaton::PyAutomaton;
@@ -30,7 +31,7 @@ pub struct PyMonitor {
 impl PyMonitor {
     #[new]
     #[pyo3(
-        signature = (automaton, progress=None, *, c_r=1.0, trap_penalty=-100.0),
+        signature = (automaton, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY),
         text_signature = "(automaton, progress=None, *, c_r=1.0, trap_penalty=-100.0)"
     )]
     fn new(
@@ -216,7 +217,7 @@ pub struct PyMonitorBatch {
 impl PyMonitorBatch {
     #[new]
     #[pyo3(
-        signature = (automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0),
+        signature = (automaton, num, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY),
         text_signature = "(automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0)"
     )]
     fn new(
