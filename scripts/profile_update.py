@@ -49,7 +49,7 @@ def main() -> None:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from tlshield import settings
-    from tlshield.callbacks import ExecutedActions, TrainingCallback
+    from tlshield.callbacks import ExecutedActions, UpdateLog, Validation
     from tlshield.sb3 import WorldVecEnv
     from tlshield.training import train
 
@@ -57,12 +57,12 @@ def main() -> None:
     timed(WorldVecEnv, "step_wait", "env step (core batch + infos)")
     timed(VecNormalize, "step_wait", "env step + normalisation")
     timed(ActorCriticPolicy, "forward", "policy forward")
-    timed(TrainingCallback, "_on_step", "per-step metrics")
+    timed(UpdateLog, "_on_step", "per-step metrics")
     timed(ExecutedActions, "_on_step", "executed actions")
     timed(ExecutedActions, "_on_rollout_end", "executed actions")
     timed(PPO, "train", "gradient steps (PPO.train)")
-    timed(TrainingCallback, "_validate", "validation")
-    timed(TrainingCallback, "_on_rollout_end", "update end (validation + logging)")
+    timed(Validation, "_validate", "validation")
+    timed(UpdateLog, "_on_rollout_end", "update end (logging)")
     options = settings.split(settings.parse_assignments(args.set))
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
@@ -81,7 +81,7 @@ def main() -> None:
         ("- per-step metrics (callback)", TOTALS["per-step metrics"]),
         ("- executed actions (callback)", TOTALS["executed actions"]),
         ("- validation", TOTALS["validation"]),
-        ("- logging", TOTALS["update end (validation + logging)"] - TOTALS["validation"]),
+        ("- logging", TOTALS["update end (logging)"]),
         ("gradient steps (PPO.train)", TOTALS["gradient steps (PPO.train)"]),
     ]
     parts = sum(seconds for label, seconds in rows[1:-1])

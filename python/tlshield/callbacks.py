@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
@@ -64,7 +64,8 @@ class UpdateMetrics:
 
     def reset_update(self) -> None:
         self.returns: list[float] = []
-        self.min_h = [math.inf, math.inf]
+        #: Per constraint the env reports (``info["constraints"]``), its smallest value.
+        self.min_h: dict[str, float] = {}
         self.min_d = math.inf
         self.violations: int | None = None  # None: nothing in the infos measured one
         self.trap_entries = self.successes = 0
@@ -75,9 +76,8 @@ class UpdateMetrics:
         self.discounted += self.discount * rewards
         self.discount *= self.gamma
         for i, info in enumerate(infos):
-            h = info.get("constraints", {})  # Channel-v0's c1, c2 (other envs: not recorded)
-            self.min_h[0] = min(self.min_h[0], h.get("c1", math.inf))
-            self.min_h[1] = min(self.min_h[1], h.get("c2", math.inf))
+            for name, h in info.get("constraints", {}).items():
+                self.min_h[name] = min(self.min_h.get(name, math.inf), h)
             self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
             violation = step_violation(info, bool(self.was_trapped[i]))
             if violation is not None:
@@ -149,41 +149,16 @@ def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
     return params.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
 
 
-class TrainingCallback(BaseCallback):  # type: ignore[misc]
-    """Collects the metrics of every step; per update, applies the CLF schedule, validates,
-    writes a ``metrics.csv`` row (and TensorBoard) and calls ``run.on_update``."""
+class ClfSchedule(BaseCallback):  # type: ignore[misc]
+    """The CLF-bound schedule: before each rollout, the CLF box of the training environments'
+    shield is scaled as :func:`tlshield.presets.clf_scale` says for the progress so far."""
 
     def __init__(self, run: TrainingRun) -> None:
-        from tqdm.auto import tqdm
-
         super().__init__()
         self.run = run
         self.update = 0
+        #: The scale of the rollout under way.
         self.scale = 1.0
-        self.best = -1.0
-        self.metrics = UpdateMetrics(run.inner.num_envs, run.model.gamma)
-        run.model.set_logger(configure(str(run.folder / "tb"), ["tensorboard"]))
-        self.csv_file = (run.folder / "metrics.csv").open("w", newline="")
-        self.writer = csv.DictWriter(self.csv_file, fieldnames=METRIC_COLUMNS)
-        self.writer.writeheader()
-        self.csv_file.flush()
-        self.start = time.perf_counter()
-        self.bar = tqdm(
-            total=run.updates,
-            desc=f"{run.config} seed {run.seed}",
-            unit="update",
-            disable=not run.progress,
-            leave=False,
-        )
-
-    def elapsed(self) -> float:
-        """Seconds since the run started."""
-        return time.perf_counter() - self.start
-
-    def close(self) -> None:
-        """Closes the metrics file and the progress bar (the run is over)."""
-        self.bar.close()
-        self.csv_file.close()
 
     def _on_rollout_start(self) -> None:
         run = self.run
@@ -196,13 +171,32 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
             )
 
     def _on_step(self) -> bool:
-        raw = self.run.venv.get_original_reward()  # metrics in raw units, not normalised
-        self.metrics.step(raw, self.locals["dones"], self.locals["infos"])
         return True
 
+    def _on_rollout_end(self) -> None:
+        self.update += 1
+
+
+class Validation(BaseCallback):  # type: ignore[misc]
+    """Every ``validate_every`` updates, the validation success of the deterministic policy;
+    the best so far (ties: the later) is saved as the run's kept model."""
+
+    def __init__(self, run: TrainingRun) -> None:
+        super().__init__()
+        self.run = run
+        self.update = 0
+        self.best = -1.0
+        #: This update's validation success (NaN when it did not validate).
+        self.last = math.nan
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.update += 1
+        self.last = self._validate()
+
     def _validate(self) -> float:
-        """Every ``validate_every`` updates: validation success of the deterministic policy;
-        the best so far (ties: the later) is saved as the run's model."""
         run = self.run
         if not run.validate_every or self.update % run.validate_every:
             return math.nan
@@ -222,6 +216,55 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
             run.record["kept"] = {"update": self.update, "validation_success": success}
         return success
 
+
+class UpdateLog(BaseCallback):  # type: ignore[misc]
+    """Collects the metrics of every step; per update, writes a ``metrics.csv`` row (and
+    TensorBoard), calls ``run.on_update`` and moves the progress bar. It reads the update's CLF
+    scale and validation from the callbacks that own them."""
+
+    def __init__(self, run: TrainingRun, schedule: ClfSchedule, validation: Validation) -> None:
+        super().__init__()
+        self.run = run
+        self.schedule, self.validation = schedule, validation
+        self.update = 0
+        self.start = time.perf_counter()
+        self.csv_file: Any = None
+        self.bar: Any = None
+
+    def _init_callback(self) -> None:
+        from tqdm.auto import tqdm
+
+        run = self.run
+        self.metrics = UpdateMetrics(run.inner.num_envs, run.model.gamma)
+        run.model.set_logger(configure(str(run.folder / "tb"), ["tensorboard"]))
+        self.csv_file = (run.folder / "metrics.csv").open("w", newline="")
+        self.writer = csv.DictWriter(self.csv_file, fieldnames=METRIC_COLUMNS)
+        self.writer.writeheader()
+        self.csv_file.flush()
+        self.bar = tqdm(
+            total=run.updates,
+            desc=f"{run.config} seed {run.seed}",
+            unit="update",
+            disable=not run.progress,
+            leave=False,
+        )
+
+    def elapsed(self) -> float:
+        """Seconds since the run started."""
+        return time.perf_counter() - self.start
+
+    def close(self) -> None:
+        """Closes the metrics file and the progress bar (the run is over)."""
+        if self.bar is not None:
+            self.bar.close()
+        if self.csv_file is not None:
+            self.csv_file.close()
+
+    def _on_step(self) -> bool:
+        raw = self.run.venv.get_original_reward()  # metrics in raw units, not normalised
+        self.metrics.step(raw, self.locals["dones"], self.locals["infos"])
+        return True
+
     def _on_rollout_end(self) -> None:
         self.update += 1
         metrics = self.metrics
@@ -233,16 +276,16 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
             "return_mean": float(np.mean(returns)) if returns else math.nan,
             "return_std": float(np.std(returns)) if returns else math.nan,
             # Not measured (an env without these keys): NaN, never a value that looks safe.
-            "min_h_c1": _measured(metrics.min_h[0]),
-            "min_h_c2": _measured(metrics.min_h[1]),
+            "min_h_c1": _measured(metrics.min_h.get("c1", math.inf)),
+            "min_h_c2": _measured(metrics.min_h.get("c2", math.inf)),
             "min_obstacle_distance": _measured(metrics.min_d),
             "violations": math.nan if metrics.violations is None else metrics.violations,
             "trap_entries": metrics.trap_entries,
             "successes": metrics.successes,
             "relaxed": metrics.relaxed,
             "failed": metrics.failed,
-            "clf_scale": self.scale,
-            "validation_success": self._validate(),
+            "clf_scale": self.schedule.scale,
+            "validation_success": self.validation.last,
             "wall_time": self.elapsed(),
             **diagnostics(self.model, metrics),
         }
@@ -257,6 +300,25 @@ class TrainingCallback(BaseCallback):  # type: ignore[misc]
         self.bar.update(1)
         viol = metrics_text(row["violations"])
         self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=viol)
+
+
+class TrainingCallback(CallbackList):  # type: ignore[misc]
+    """One run's callbacks composed as SB3 composes them: the CLF schedule, validation with
+    the kept checkpoint, then the update log (which reads both)."""
+
+    def __init__(self, run: TrainingRun) -> None:
+        self.schedule = ClfSchedule(run)
+        self.validation = Validation(run)
+        self.log = UpdateLog(run, self.schedule, self.validation)
+        super().__init__([self.schedule, self.validation, self.log])
+
+    def elapsed(self) -> float:
+        """Seconds since the run started."""
+        return self.log.elapsed()
+
+    def close(self) -> None:
+        """Closes the metrics file and the progress bar (the run is over)."""
+        self.log.close()
 
 
 class ExecutedActions(BaseCallback):  # type: ignore[misc]
