@@ -697,6 +697,18 @@ mod tests {
         assert!(Dynamics::thrust_turn(1.0, 1.0, 0.0, [0, 1, 2, 3, 4]).is_ok());
     }
 
+    /// Every built-in model over a five-value state, with dimensions permuted.
+    fn models_over_five() -> [Dynamics; 6] {
+        [
+            Dynamics::single_integrator(vec![1, 4]).unwrap(),
+            Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
+            Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
+            Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
+            Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
+            Dynamics::thrust_turn(2.8, 3.2, 1.9, [3, 1, 4, 0, 2]).unwrap(),
+        ]
+    }
+
     proptest::proptest! {
         #![proptest_config(crate::tests_support::seeded(300))]
 
@@ -708,13 +720,7 @@ mod tests {
             u in proptest::collection::vec(-2.0..2.0f64, 5),
             w in proptest::collection::vec(-2.0..2.0f64, 5),
         ) {
-            for model in [
-                Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
-                Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
-                Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
-                Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
-                Dynamics::thrust_turn(2.8, 3.2, 1.9, [3, 1, 4, 0, 2]).unwrap(),
-            ] {
+            for model in models_over_five() {
                 let m = model.inputs();
                 let f_at = |x: &[f64]| {
                     let (mut f, mut g) = (vec![0.0; 5], vec![0.0; 5 * m]);
@@ -758,14 +764,7 @@ mod tests {
             u in proptest::collection::vec(-2.0..2.0f64, 5),
             v in proptest::collection::vec(-2.0..2.0f64, 2),
         ) {
-            for model in [
-                Dynamics::single_integrator(vec![1, 4]).unwrap(),
-                Dynamics::double_integrator(vec![0, 1], vec![3, 2]).unwrap(),
-                Dynamics::acceleration_unicycle(4, 1, 2, 0).unwrap(),
-                Dynamics::unicycle(0.1, 0, 1, 2).unwrap(),
-                Dynamics::kinematic_bicycle(0.5, 3, 1, 4, 0).unwrap(),
-                Dynamics::thrust_turn(2.8, 3.2, 1.9, [3, 1, 4, 0, 2]).unwrap(),
-            ] {
+            for model in models_over_five() {
                 let m = model.inputs();
                 let ugv = |x: &[f64]| {
                     let (mut f, mut g) = (vec![0.0; 5], vec![0.0; 5 * m]);
