@@ -1,7 +1,8 @@
 """A fingerprint of what the bundled environments and training produce: hashes of seeded random
 rollouts of Channel-v0 (every configuration and observation), FlatWorld-v0 and PointMass-v0
-(and SafetyPointGoal1-v0 where ``make safety-gym`` installed it), and of a 12-update training
-run (metrics, kept and last policy weights). Run it in two checkouts (or with two PYTHONPATHs)
+(and SafetyPointGoal1-v0 where ``make safety-gym`` installed it), of a 12-update training
+run (metrics, kept and last policy weights) and of one FlatWorld benchmark job (its result row
+and evaluation paths). Run it in two checkouts (or with two PYTHONPATHs)
 to show that a refactor left every number as it was:
 
     python scripts/fingerprint.py > before.txt   # in the old checkout
@@ -72,6 +73,22 @@ def training() -> str:
         return _digest([json.dumps(rows), *weights, json.dumps(kept)])
 
 
+def flatworld_training() -> str:
+    """One FlatWorld benchmark job (2 PPO updates, 20 stochastic evaluation episodes): its
+    result row (wall time left out) and the evaluation paths."""
+    from tlshield.benchmark import job
+    from tlshield.envs.flatworld import FORMULAS
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "job"
+        job(FORMULAS[1], 2, "rl_cbf_clf", 1, 4096, 20, folder)
+        row = json.loads((folder / "result.json").read_text())
+        row.pop("wall_time")
+        with np.load(folder / "paths.npz") as data:
+            paths = [data[k].tobytes().hex() for k in sorted(data.files)]
+        return _digest([json.dumps(row, sort_keys=True), *paths])
+
+
 def main() -> None:
     from tlshield.envs.channel import CONFIGS
 
@@ -94,6 +111,7 @@ def main() -> None:
             env = safety_gym.SafetyGoalEnv("SafetyPointGoal1-v0", config)
             print(f"SafetyPointGoal1-v0 {config}: {rollout(env)}")
     print(f"train rl_cbf_clf seed 0, 12 updates: {training()}")
+    print(f"FlatWorld benchmark job, formula 2, seed 1, 4096 steps: {flatworld_training()}")
 
 
 if __name__ == "__main__":
