@@ -20,8 +20,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from tlshield.cluster import run_counted
 from tlshield.report import seeds_table
-from tlshield.training import _run_jobs, is_finished, run_job
+from tlshield.training import is_finished, run_job
 
 #: Candidate settings (as ``--set NAME=VALUE``), each complete over the default preset. Issue
 #: 21's: the old default was SB3's Gaussian with normalised rewards and a learning rate of
@@ -141,7 +142,7 @@ def main() -> None:
                 done = (folder / "last_evaluation.json").is_file()
                 if not (done and is_finished(folder, updates)):
                     jobs[folder] = partial(run_job, config, seed, updates, args.trials, options)
-    _run_jobs(jobs, args.workers, None, True)
+    run_counted(jobs, None, args.workers, True)
     text = table(root, args.variants, args.configs, args.seeds)
     (root / "candidates.md").write_text(text + "\n")
     print(text)

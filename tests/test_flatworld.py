@@ -252,3 +252,59 @@ def test_benchmark_pipeline_on_a_formula_outside_the_table(tmp_path: Path) -> No
     table = (out / "flatworld.md").read_text()
     assert "trains one agent per formula" in table and "(published)" not in table
     assert (out / "flatworld_paths.png").stat().st_size > 0
+
+
+def test_benchmark_job_trains_through_the_pipeline_as_plain_sb3_would(tmp_path: Path) -> None:
+    """One training pipeline (issue 36): a benchmark job trains through
+    ``training.prepare``/``learn`` with the ``flatworld`` preset. Plain SB3 with the preset's
+    settings, seeds and a callback of its own counting failures must give the same weights and
+    the same training counts; the job's folder is a run folder that ``load_policy`` reads back
+    (raw observations, Tanh networks)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tlshield.benchmark import PRESET, job
+    from tlshield.presets import PRESETS
+    from tlshield.saved import load_policy
+    from tlshield.seeds import learner_seed, train_seed
+
+    seed, steps = 1, 4096
+    folder = tmp_path / "job"
+    job(F2, 2, "rl", seed, steps, 4, folder)  # unshielded: it leaves the square in training
+    result = json.loads((folder / "result.json").read_text())
+    record = json.loads((folder / "run.json").read_text())
+    assert record["preset"] == PRESET and record["env_id"] == ID and record["finished"]
+
+    spec = PRESETS[PRESET]
+    failures = 0
+
+    class Count(BaseCallback):  # type: ignore[misc]
+        def _on_step(self) -> bool:
+            nonlocal failures
+            for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+                failures += int(done) * (int(info["trap"]) + int(info["box_exit"]))
+            return True
+
+    torch.set_num_threads(1)
+    make = lambda: gym.make(ID, formula=F2, config="rl", gamma=spec["ppo"]["gamma"])  # noqa: E731
+    venv = DummyVecEnv([make] * spec["n_envs"])
+    venv.seed(train_seed(seed))
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        seed=learner_seed(seed),
+        device="cpu",
+        policy_kwargs={"net_arch": [64, 64]},  # SB3's Tanh: the preset names it
+        **spec["ppo"],
+    )
+    model.learn(total_timesteps=steps, callback=Count())
+    assert failures > 0, "the reference should leave the square at least once"
+    assert result["train_violations"] == failures
+    assert result["train_steps"] == model.num_timesteps == steps
+    kept = load_policy(folder)
+    xy = np.random.default_rng(0).uniform(-2.0, 2.0, size=(16, 2))
+    n_q = venv.observation_space.shape[0] - 2  # then the automaton state, one-hot
+    obs = np.hstack([xy, np.eye(n_q)[np.arange(16) % n_q]])
+    np.testing.assert_array_equal(kept(obs), model.predict(obs, deterministic=True)[0])

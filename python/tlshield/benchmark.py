@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs.params import FULL
-from tlshield.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
+from tlshield.presets import PRESETS
+from tlshield.seeds import check_block, check_seeds, eval_block_seed
 
 #: The columns of ``flatworld.csv``.
 COLUMNS = (
@@ -84,18 +85,11 @@ DEFAULT_SEEDS = (1, 2, 3)
 DEFAULT_EPISODES = 500
 DEFAULT_STEPS = 600_000
 
-#: PPO settings (SB3 names) shared by every formula: no per-formula settings.
-PPO = {
-    "n_steps": 256,
-    "batch_size": 256,
-    "n_epochs": 10,
-    "learning_rate": 3e-4,
-    "gamma": 0.99,
-    "gae_lambda": 0.95,
-    "ent_coef": 0.0,
-    "clip_range": 0.2,
-}
-N_ENVS = 8
+#: The PPO preset every formula trains with (:data:`tlshield.presets.PRESETS`): no
+#: per-formula settings.
+PRESET = "flatworld"
+#: The discount of that preset (the progress reward is sized for it).
+GAMMA = PRESETS[PRESET]["ppo"]["gamma"]
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
@@ -108,7 +102,7 @@ def _make(formula: str, config: str, evaluation: bool, **overrides: Any) -> Any:
         formula=formula,
         config=config,
         evaluation=evaluation,
-        gamma=PPO["gamma"],
+        gamma=GAMMA,
         disable_env_checker=True,
         **overrides,
     )
@@ -179,53 +173,51 @@ def random_policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return rng.uniform(-1.0, 1.0, size=(len(obs), 2))
 
 
-def train_agent(formula: str, config: str, seed: int, steps: int) -> tuple[Any, dict[str, int]]:
-    """PPO on one formula and configuration; returns the model and the training counts
-    (trap entries plus box exits, and steps)."""
-    import torch
-    from stable_baselines3 import PPO as SB3PPO
-    from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.vec_env import DummyVecEnv
+def updates_for(steps: int) -> int:
+    """PPO updates of the preset that cover ``steps`` environment steps (rounded up, as SB3's
+    ``learn(total_timesteps=steps)`` does)."""
+    spec = PRESETS[PRESET]
+    return math.ceil(steps / (spec["n_envs"] * spec["ppo"]["n_steps"]))
 
-    torch.set_num_threads(1)
-    venv = DummyVecEnv([partial(_make, formula, config, False)] * N_ENVS)
-    venv.seed(train_seed(seed))
-    counts = {"train_violations": 0, "train_steps": 0}
 
-    class Count(BaseCallback):
-        def _on_step(self) -> bool:
-            for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
-                if done:
-                    counts["train_violations"] += int(info["trap"]) + int(info["box_exit"])
-            return True
-
-    model = SB3PPO(
-        "MlpPolicy",
-        venv,
-        seed=learner_seed(seed),
-        device="cpu",
-        verbose=0,
-        policy_kwargs={"net_arch": [64, 64]},
-        **PPO,
-    )
-    model.learn(total_timesteps=steps, callback=Count())
-    counts["train_steps"] = int(model.num_timesteps)
-    venv.close()
-    return model, counts
+def training_counts(folder: Path) -> dict[str, int]:
+    """A finished training run's counts from its ``metrics.csv``: failures (trap entries plus
+    box exits, FlatWorld's ``info["violation"]``) and environment steps."""
+    with (folder / "metrics.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    failures = sum(int(float(r["trap_entries"])) + int(float(r["violations"])) for r in rows)
+    return {"train_violations": failures, "train_steps": int(rows[-1]["timesteps"])}
 
 
 def job(
     formula: str, k: int, config: str, seed: int, steps: int, episodes: int, folder: Path
 ) -> None:
-    """One (config, formula, seed): train, evaluate, write ``result.json`` and ``paths.npz``
-    into ``folder`` (a Ray task)."""
+    """One (config, formula, seed): train through :func:`tlshield.training.prepare` and
+    :func:`~tlshield.training.learn` into ``folder`` (a run folder: ``run.json``,
+    ``metrics.csv``, the model), evaluate the trained policy, and write ``result.json`` and
+    ``paths.npz`` beside them (a Ray task)."""
+    from tlshield.envs import FLATWORLD_ID
+    from tlshield.training import learn, prepare
+
     start = time.perf_counter()
-    model, counts = train_agent(formula, config, seed, steps)
+    run = prepare(
+        config,
+        seed,
+        updates_for(steps),
+        folder,
+        progress=False,
+        preset=PRESET,
+        env=FLATWORLD_ID,
+        formula=formula,
+    )
+    learn(run)
+    model = run.model
 
     def policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return model.predict(obs, deterministic=False)[0]
 
     result = run_episodes(formula, config, policy, seed, episodes)
+    counts = training_counts(folder)
     _write(
         folder, f"tlshield-{config}", formula, k, seed, result, counts, time.perf_counter() - start
     )

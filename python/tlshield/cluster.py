@@ -152,20 +152,24 @@ def run_counted(
     workers: int | None = None,
     progress: bool = True,
 ) -> None:
-    """:func:`run` inside a :func:`session`, printing ``done/total folder`` as each job
-    arrives when ``progress`` (the benchmarks' loop); nothing to do when ``jobs`` is empty."""
+    """:func:`run` inside a :func:`session`, with a progress bar of runs (on stderr, when
+    ``progress``) that names the last one gathered: the one dispatch loop of every sweep
+    (reproduction, ablation, benchmarks). Nothing to do when ``jobs`` is empty."""
     if not jobs:
         return
-    done = 0
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(jobs), desc="runs", unit="run", disable=not progress, leave=False)
 
     def tick(folder: Path) -> None:
-        nonlocal done
-        done += 1
-        if progress:
-            print(f"  {done}/{len(jobs)} {folder.name}", flush=True)
+        bar.update(1)
+        bar.set_postfix_str(folder.name)
 
-    with session(address, workers):
-        run(jobs, on_done=tick)
+    try:
+        with session(address, workers):
+            run(jobs, on_done=tick)
+    finally:
+        bar.close()
 
 
 def run_in_tempdir(job: Job, name: str) -> bytes:

@@ -6,7 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
-#: PPO settings by preset: environments, SB3 PPO keywords and the networks.
+#: PPO settings by preset: environments, SB3 PPO keywords and the networks, and tlshield's own
+#: keys (read by :func:`tlshield.training.train`): ``policy`` (:data:`tlshield.policies.POLICIES`,
+#: default ``"gaussian"``), ``activation`` (``"ReLU"`` or ``"Tanh"``, default ``"ReLU"``),
+#: ``norm_obs`` / ``norm_reward`` (running normalisation, default on), ``lr_schedule``,
+#: ``learn_from`` and the validation keys.
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
         "n_envs": 5,
@@ -58,6 +62,26 @@ PRESETS: dict[str, dict[str, Any]] = {
             # success 0.85 -> 0 within 10 updates); 0.1 kept it rising.
             "clip_range": 0.1,
             "ent_coef": 0.0,
+        },
+        "net_arch": {"pi": [64, 64], "vf": [64, 64]},
+    },
+    # The FlatWorld benchmark's settings (tlshield.benchmark), shared by every formula: SB3's
+    # PPO defaults at a DeepLTL-sized batch, with raw observations and rewards (positions in
+    # [-2, 2] and a bounded progress reward need no running statistics).
+    "flatworld": {
+        "n_envs": 8,
+        "activation": "Tanh",
+        "norm_obs": False,
+        "norm_reward": False,
+        "ppo": {
+            "n_steps": 256,
+            "batch_size": 256,
+            "n_epochs": 10,
+            "learning_rate": 3e-4,
+            "gamma": 0.99,
+            "gae_lambda": 0.95,
+            "ent_coef": 0.0,
+            "clip_range": 0.2,
         },
         "net_arch": {"pi": [64, 64], "vf": [64, 64]},
     },

@@ -7,7 +7,8 @@ beside the kept one). ``normalization.json`` is a public format, SB3 ``VecNormal
     {"obs_mean": [...], "obs_var": [...], "epsilon": 1e-8, "clip_obs": 10.0}
 
 and an observation is normalised as ``clip((obs - obs_mean) / sqrt(obs_var + epsilon),
--clip_obs, clip_obs)``.
+-clip_obs, clip_obs)``. A run trained on raw observations (a preset with ``norm_obs: False``)
+also writes ``"norm_obs": false``, and its observations are used as they are.
 
 ``model.zip`` is read without unpickling anything: the policy network is rebuilt from the run's
 ``run.json`` (policy class, layers, activation, initial log std) and the spaces of its
@@ -56,12 +57,18 @@ class UntrustedPickleError(ValueError):
 
 def save_normalization(venv: Any, path: str | Path) -> Path:
     """Writes a ``VecNormalize``'s observation statistics to ``path`` as JSON (module docs)."""
-    record = {
-        "obs_mean": np.asarray(venv.obs_rms.mean, dtype=float).tolist(),
-        "obs_var": np.asarray(venv.obs_rms.var, dtype=float).tolist(),
+    if venv.norm_obs:
+        mean, var = venv.obs_rms.mean, venv.obs_rms.var
+    else:  # raw observations: no statistics were kept
+        mean, var = np.zeros(venv.observation_space.shape), np.ones(venv.observation_space.shape)
+    record: dict[str, Any] = {
+        "obs_mean": np.asarray(mean, dtype=float).tolist(),
+        "obs_var": np.asarray(var, dtype=float).tolist(),
         "epsilon": float(venv.epsilon),
         "clip_obs": float(venv.clip_obs),
     }
+    if not venv.norm_obs:
+        record["norm_obs"] = False
     path = Path(path)
     path.write_text(json.dumps(record, indent=1))
     return path
@@ -87,6 +94,8 @@ def normalizer(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
         raise ValueError(f"{path}: obs_mean and obs_var must be finite vectors of one length")
     if not (np.isfinite(var).all() and (var >= 0).all() and epsilon > 0 and clip > 0):
         raise ValueError(f"{path}: obs_var must be >= 0, epsilon and clip_obs > 0")
+    if record.get("norm_obs", True) is False:
+        return lambda obs: np.asarray(obs, dtype=np.float64)
     scale = np.sqrt(var + epsilon)
 
     def normalize(obs: np.ndarray) -> np.ndarray:
@@ -104,7 +113,8 @@ def _legacy_normalizer(path: Path) -> Callable[[np.ndarray], np.ndarray]:
     return stats.normalize_obs
 
 
-def _activation(name: str) -> Any:
+def activation_class(name: str) -> Any:
+    """The torch activation of ``name`` as run.json records it (``"ReLU"`` or ``"Tanh"``)."""
     import torch
 
     known = {"ReLU": torch.nn.ReLU, "Tanh": torch.nn.Tanh}
@@ -128,7 +138,7 @@ def _policy_network(record: dict[str, Any], model: Path) -> Any:
         env.action_space,
         lr_schedule=lambda _: 0.0,
         net_arch=ppo.get("net_arch"),
-        activation_fn=_activation(str(ppo.get("activation", "ReLU"))),
+        activation_fn=activation_class(str(ppo.get("activation", "ReLU"))),
         log_std_init=float(ppo.get("log_std_init", 0.0)),
         use_sde=bool(ppo.get("use_sde", False)),  # gSDE's noise weights are in the state dict
     )

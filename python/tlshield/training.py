@@ -122,7 +122,45 @@ def train(
     once it is written. ``env`` may be ``"module:Env-v0"`` (``module`` is imported first, as
     ``gymnasium.make`` does); ``imports`` are modules to import before it (where a user's
     environments register themselves). Both are recorded in ``run.json``, so that
-    :func:`tlshield.evaluation.evaluate` finds the environment again."""
+    :func:`tlshield.evaluation.evaluate` finds the environment again.
+    The same as ``learn(prepare(...))``."""
+    run = prepare(
+        config,
+        seed,
+        updates,
+        out,
+        clf_schedule=clf_schedule,
+        clf_final_scale=clf_final_scale,
+        progress=progress,
+        preset=preset,
+        ppo=ppo,
+        env=env,
+        on_update=on_update,
+        imports=imports,
+        **overrides,
+    )
+    return learn(run)
+
+
+def prepare(
+    config: str,
+    seed: int,
+    updates: int,
+    out: str | Path,
+    *,
+    clf_schedule: str = DEFAULT_SCHEDULE,
+    clf_final_scale: float = DEFAULT_FINAL_SCALE,
+    progress: bool = True,
+    preset: str = "default",
+    ppo: dict[str, Any] | None = None,
+    env: str = ENV_ID,
+    on_update: Callable[[dict[str, float]], Any] | None = None,
+    imports: Sequence[str] = (),
+    **overrides: Any,
+) -> Any:
+    """The first half of :func:`train`: checks the arguments, builds the environments and the
+    model and writes ``run.json``; returns the :class:`tlshield.callbacks.TrainingRun` that
+    :func:`learn` trains (its ``model`` stays usable afterwards, as the benchmarks use it)."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     check_seeds((seed,))
     imports = list(imports)
@@ -138,7 +176,7 @@ def train(
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from tlshield.callbacks import TrainingCallback, TrainingRun
+    from tlshield.callbacks import TrainingRun
 
     torch.set_num_threads(1)
     folder = Path(out)
@@ -146,18 +184,20 @@ def train(
     check_task_env(make(env, config, **overrides), settings.ppo["gamma"], env)
     inner = make_vec_env(config, seed, overrides, settings.n_envs, env)
     venv = VecNormalize(
-        inner, norm_obs=True, norm_reward=settings.norm_reward, gamma=settings.ppo["gamma"]
+        inner,
+        norm_obs=settings.norm_obs,
+        norm_reward=settings.norm_reward,
+        gamma=settings.ppo["gamma"],
     )
     params = _env_params(inner)
     schedule = (clf_schedule, clf_final_scale)
     record = _run_record(env, config, seed, updates, preset, schedule, settings, params, overrides)
     record["imports"] = imports
     (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
-    model = _ppo(settings, venv, seed)
-    run = TrainingRun(
+    return TrainingRun(
         folder=folder,
         record=record,
-        model=model,
+        model=_ppo(settings, venv, seed),
         venv=venv,
         inner=inner,
         env_id=env,
@@ -173,15 +213,6 @@ def train(
         on_update=on_update,
         progress=progress,
     )
-    before: list[Any] = []
-    if settings.learn_from != "sampled":
-        from tlshield.callbacks import ExecutedActions
-
-        # First: the rollout holds the executed actions before anything else reads the step.
-        before.append(ExecutedActions(inner, settings.learn_from == "executed_without_clf"))
-    timesteps = updates * settings.n_envs * settings.ppo["n_steps"]
-    _learn(run, timesteps, TrainingCallback(run), before)
-    return folder
 
 
 #: What PPO's rollout stores as the action taken (setting ``learn_from``): the sampled action
@@ -199,6 +230,8 @@ class PpoSettings:
     net_arch: dict[str, list[int]]
     log_std_init: float
     policy: str
+    activation: str
+    norm_obs: bool
     norm_reward: bool
     lr_schedule: str
     learn_from: str
@@ -209,6 +242,7 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``) are taken out of SB3's
     keywords."""
     from tlshield.policies import policy_class
+    from tlshield.saved import activation_class
 
     spec = PRESETS[preset]
     kwargs = {**spec["ppo"], **(ppo or {})}
@@ -216,6 +250,8 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         log_std_init=float(kwargs.pop("log_std_init", spec.get("log_std_init", 0.0))),
         n_envs=int(kwargs.pop("n_envs", spec["n_envs"])),
         policy=str(kwargs.pop("policy", spec.get("policy", "gaussian"))),
+        activation=str(spec.get("activation", "ReLU")),
+        norm_obs=bool(spec.get("norm_obs", True)),
         norm_reward=bool(kwargs.pop("norm_reward", spec.get("norm_reward", True))),
         learn_from=str(kwargs.pop("learn_from", spec.get("learn_from", "sampled"))),
         ppo=kwargs,
@@ -223,6 +259,7 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         lr_schedule=spec.get("lr_schedule", "constant"),
     )
     policy_class(settings.policy)  # an unknown name fails here, before any environment is built
+    activation_class(settings.activation)
     if settings.learn_from not in LEARN_FROM:
         raise ValueError(f"learn_from = {settings.learn_from!r}: expected one of {LEARN_FROM}")
     if settings.ppo.get("use_sde") and settings.policy != "gaussian":
@@ -260,7 +297,8 @@ def _run_record(
             "norm_reward": settings.norm_reward,
             "learn_from": settings.learn_from,
             "net_arch": settings.net_arch,
-            "activation": "ReLU",
+            "activation": settings.activation,
+            "norm_obs": settings.norm_obs,
         },
         "env": as_flat(params),
         "overrides": overrides,
@@ -271,10 +309,10 @@ def _run_record(
 
 def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
     """The SB3 PPO model of ``settings`` on ``venv`` (CPU, seeded)."""
-    import torch
     from stable_baselines3 import PPO
 
     from tlshield.policies import policy_class
+    from tlshield.saved import activation_class
 
     learning_rate: Any = settings.ppo["learning_rate"]
     if settings.lr_schedule == "linear":
@@ -288,21 +326,29 @@ def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
         verbose=0,
         policy_kwargs={
             "net_arch": settings.net_arch,
-            "activation_fn": torch.nn.ReLU,
+            "activation_fn": activation_class(settings.activation),
             "log_std_init": settings.log_std_init,
         },
         **{**settings.ppo, "learning_rate": learning_rate},
     )
 
 
-def _learn(run: Any, timesteps: int, callback: Any, before: Sequence[Any] = ()) -> None:
-    """Trains (the callbacks ``before`` run ahead of ``callback``, the run's
-    :class:`tlshield.callbacks.TrainingCallback`), then keeps the last policy (and the kept
-    one when validation chose none) and the final ``run.json``, also when interrupted (Ctrl-C
-    is raised again afterwards)."""
+def learn(run: Any) -> Path:
+    """The second half of :func:`train`: trains ``run`` (from :func:`prepare`) for its updates
+    with its callbacks, then keeps the last policy (and the kept one when validation chose
+    none) and the final ``run.json``, also when interrupted (Ctrl-C is raised again
+    afterwards). Returns the run folder."""
+    from tlshield.callbacks import ExecutedActions, TrainingCallback
     from tlshield.saved import save_normalization
 
     model, venv, record, folder = run.model, run.venv, run.record, run.folder
+    before: list[Any] = []
+    learn_from = record["ppo"]["learn_from"]
+    if learn_from != "sampled":
+        # First: the rollout holds the executed actions before anything else reads the step.
+        before.append(ExecutedActions(run.inner, learn_from == "executed_without_clf"))
+    callback = TrainingCallback(run)
+    timesteps = run.updates * run.inner.num_envs * model.n_steps
     try:
         model.learn(total_timesteps=timesteps, callback=[*before, callback])
         record["finished"] = True
@@ -322,12 +368,7 @@ def _learn(run: Any, timesteps: int, callback: Any, before: Sequence[Any] = ()) 
         venv.close()
     if record["interrupted"]:
         raise KeyboardInterrupt
-
-
-def _progress_bar(total: int, desc: str, enabled: bool, unit: str = "update") -> Any:
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, leave=False)
+    return Path(folder)
 
 
 def run_job(
@@ -344,6 +385,43 @@ def run_job(
     return folder
 
 
+def sweep(
+    root: Path,
+    runs: Sequence[tuple[str, str, dict[str, Any]]],
+    seeds: Sequence[int],
+    updates: int,
+    trials: int,
+    workers: int | None = None,
+    address: str | None = None,
+    progress: bool = True,
+) -> None:
+    """Trains and evaluates each run ``(name, config, options)`` on every seed, into
+    ``root/{name}_s{seed}``, as Ray tasks (:func:`tlshield.cluster.run_counted`). Runs that
+    already finished and were evaluated are kept, so an interrupted sweep resumes. Every
+    argument is checked before any job starts."""
+    for _, config, options in runs:
+        _check_run_args(
+            config,
+            updates,
+            options.get("clf_schedule", DEFAULT_SCHEDULE),
+            options.get("clf_final_scale", DEFAULT_FINAL_SCALE),
+            options.get("preset", "default"),
+        )
+    check_seeds(seeds)
+    if not (isinstance(trials, int) and trials > 0):
+        raise ValueError(f"trials = {trials!r}: expected a positive integer")
+    root.mkdir(parents=True, exist_ok=True)
+    jobs = {}
+    for name, config, options in runs:
+        for seed in seeds:
+            folder = root / f"{name}_s{seed}"
+            if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
+                jobs[folder] = partial(run_job, config, seed, updates, trials, options)
+    from tlshield import cluster
+
+    cluster.run_counted(jobs, address, workers, progress)
+
+
 def reproduce(
     out: str | Path,
     *,
@@ -356,53 +434,20 @@ def reproduce(
     progress: bool = True,
     **options: Any,
 ) -> Path:
-    """Trains and evaluates every configuration x seed as Ray tasks (a local Ray with
+    """Trains and evaluates every configuration x seed (:func:`sweep`: a local Ray with
     ``workers`` CPUs, all cores by default, or the cluster at ``address``; see
     :mod:`tlshield.cluster`), then writes the figures (``out/figures``) and the results table
     (``out/results.md``). Runs that already finished and were evaluated (same folder) are
     kept, so an interrupted reproduction resumes."""
-    for config in configs:
-        _check_run_args(
-            config,
-            updates,
-            options.get("clf_schedule", DEFAULT_SCHEDULE),
-            options.get("clf_final_scale", DEFAULT_FINAL_SCALE),
-            options.get("preset", "default"),
-        )
-    check_seeds(seeds)
-    if not (isinstance(trials, int) and trials > 0):
-        raise ValueError(f"trials = {trials!r}: expected a positive integer")
     root = Path(out)
-    root.mkdir(parents=True, exist_ok=True)
-    jobs = {}
-    for config in configs:
-        for seed in seeds:
-            folder = root / f"{config}_s{seed}"
-            if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
-                jobs[folder] = partial(run_job, config, seed, updates, trials, options)
-    _run_jobs(jobs, workers, address, progress)
+    runs = [(config, config, options) for config in configs]
+    sweep(root, runs, seeds, updates, trials, workers, address, progress)
     from tlshield.plots import plot_all
     from tlshield.report import results_table, seeds_table
 
     plot_all(root)
     (root / "results.md").write_text(f"{results_table(root)}\n\n{seeds_table(root)}\n")
     return root
-
-
-def _run_jobs(
-    jobs: dict[Path, Any], workers: int | None, address: str | None, progress: bool
-) -> None:
-    """Runs the jobs as Ray tasks, gathering each run folder as it finishes."""
-    if not jobs:
-        return
-    from tlshield import cluster
-
-    bar = _progress_bar(len(jobs), "runs", progress, unit="run")
-    try:
-        with cluster.session(address, workers):
-            cluster.run(jobs, on_done=lambda _: bar.update(1))
-    finally:
-        bar.close()
 
 
 def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
@@ -441,18 +486,10 @@ def ablation(
     """The ablation of docs/reproduction.md: each row adds one change to the one before (see
     :func:`_ablation_rows`), trained and evaluated on every seed; writes ``out/ablation.md``.
     Finished rows are kept, so an interrupted ablation resumes."""
-    _check_run_args(config, updates, DEFAULT_SCHEDULE, DEFAULT_FINAL_SCALE)
-    check_seeds(seeds)
     root = Path(out)
-    root.mkdir(parents=True, exist_ok=True)
     rows = _ablation_rows()
-    jobs = {}
-    for k, (_, options) in enumerate(rows):
-        for seed in seeds:
-            folder = root / f"row{k}_s{seed}"
-            if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
-                jobs[folder] = partial(run_job, config, seed, updates, trials, options)
-    _run_jobs(jobs, workers, address, progress)
+    named = [(f"row{k}", config, options) for k, (_, options) in enumerate(rows)]
+    sweep(root, named, seeds, updates, trials, workers, address, progress)
     lines = [
         f"| change ({config}, {len(seeds)} seeds x {trials} trials) | eval success per seed "
         "| mean | eval collisions | train violations | train min obstacle distance | relaxed |",
