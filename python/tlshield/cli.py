@@ -270,12 +270,15 @@ def _preset_options(args: argparse.Namespace) -> dict[str, object]:
 
 
 def _add_preset(parser: argparse.ArgumentParser) -> None:
+    from tlshield.presets import PRESETS
+
     parser.add_argument(
         "--preset",
-        choices=("default", "paper"),
+        choices=tuple(PRESETS),
         default="default",
         help="default: tlshield's settings (docs/reproduction.md, the ablation); paper: the "
-        "paper's PPO, reward, observation and obstacles",
+        "paper's PPO, reward, observation and obstacles; flatworld: the FlatWorld benchmark's "
+        "PPO",
     )
 
 
