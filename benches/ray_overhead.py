@@ -1,7 +1,7 @@
 """Wall time of ``tlshield reproduce`` on its embedded local Ray against the home-made
 ``multiprocessing`` pool it replaced, on the same jobs, in one run.
 
-Both run the same (configuration x seed) jobs (:func:`tlshield.training.run_job`: train, then
+Both run the same (configuration x seed) jobs (:func:`tlshield.lab.training.run_job`: train, then
 evaluate) with 2 processes at a time, then write the same figures and results table. The pool
 is the old code path (a spawn ``Pool.imap_unordered``, kept here only as the baseline); Ray
 starts a local instance inside the call, runs each job as a task in a temporary folder and
@@ -32,8 +32,8 @@ TARGET = 1.10
 
 def run_pool(out: Path, jobs: dict[Path, Any], workers: int) -> None:
     """The pre-Ray ``reproduce``: a spawn pool over the jobs, then the figures and table."""
-    from tlshield.plots import plot_all
-    from tlshield.report import results_table
+    from tlshield.lab.plots import plot_all
+    from tlshield.lab.report import results_table
 
     out.mkdir(parents=True)
     with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
@@ -49,7 +49,7 @@ def _apply(item: tuple[Path, Any]) -> Path:
 
 
 def jobs_for(out: Path, configs: Sequence[str], seeds: Sequence[int], updates: int, trials: int):
-    from tlshield.training import run_job
+    from tlshield.lab.training import run_job
 
     return {
         out / f"{c}_s{s}": partial(run_job, c, s, updates, trials, {})
@@ -65,7 +65,7 @@ def metrics(run: Path) -> list[dict[str, str]]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from tlshield.envs.channel import CONFIGS
-    from tlshield.training import reproduce
+    from tlshield.lab.training import reproduce
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configs", nargs="+", default=list(CONFIGS))

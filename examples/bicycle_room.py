@@ -212,7 +212,7 @@ def attacker(state: np.ndarray) -> np.ndarray:
 def attack(config: str, policy: str, episodes: int, seed: int = 0) -> dict[str, int]:
     """Violating steps (measured by tlshield from the barriers' values), trap entries and
     successes of ``episodes`` episodes of the attacker or a random policy."""
-    from tlshield.measures import step_violation
+    from tlshield.lab.measures import step_violation
 
     env = make_room(config, evaluation=config != "rl")
     measure = room_shield()  # without a shield, the barriers are measured as it would

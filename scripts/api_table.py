@@ -25,14 +25,14 @@ MODULES = (
     "tlshield.envs.channel_task",
     "tlshield.envs.point_mass",
     "tlshield.envs.flatworld",
-    "tlshield.presets",
-    "tlshield.seeds",
-    "tlshield.training",
-    "tlshield.evaluation",
-    "tlshield.benchmark",
-    "tlshield.runs",
-    "tlshield.cluster",
-    "tlshield.tune",
+    "tlshield.lab.presets",
+    "tlshield.lab.seeds",
+    "tlshield.lab.training",
+    "tlshield.lab.evaluation",
+    "tlshield.lab.benchmark",
+    "tlshield.lab.runs",
+    "tlshield.lab.cluster",
+    "tlshield.lab.tune",
 )
 OUT = Path(__file__).resolve().parent.parent / "docs" / "api.md"
 

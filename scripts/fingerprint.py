@@ -56,7 +56,10 @@ def rollout(env: gym.Env, steps: int = 1000) -> str:
 
 
 def training() -> str:
-    from tlshield.training import train
+    try:
+        from tlshield.lab.training import train
+    except ImportError:  # a checkout from before tlshield.lab
+        from tlshield.training import train  # type: ignore[no-redef]
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = train("rl_cbf_clf", 0, 12, Path(tmp) / "run", progress=False)
@@ -76,7 +79,10 @@ def training() -> str:
 def flatworld_training() -> str:
     """One FlatWorld benchmark job (2 PPO updates, 20 stochastic evaluation episodes): its
     result row (wall time left out) and the evaluation paths."""
-    from tlshield.benchmark import job
+    try:
+        from tlshield.lab.benchmark import job
+    except ImportError:  # a checkout from before tlshield.lab
+        from tlshield.benchmark import job  # type: ignore[no-redef]
     from tlshield.envs.flatworld import FORMULAS
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import argparse
 
-from tlshield.benchmark import run_episodes, zero_policy
 from tlshield.envs.flatworld import FORMULAS
+from tlshield.lab.benchmark import run_episodes, zero_policy
 
 
 def main() -> None:

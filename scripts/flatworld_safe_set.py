@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from tlshield.envs.flatworld import FORMULAS, flatworld_spec
-from tlshield.seeds import eval_block_seed
+from tlshield.lab.seeds import eval_block_seed
 
 
 def measure(formula: str, preserve: bool, policy: str, seed: int, episodes: int) -> str:

@@ -20,7 +20,15 @@ END = "<!-- end of layout map -->"
 FOLDERS = (
     ("rust/tlshield-core/src", "the Rust core (knows nothing of Python)"),
     ("rust/tlshield-py/src", "the bindings (module tlshield._core): conversions and errors only"),
-    ("python/tlshield", "the Python package"),
+    (
+        "python/tlshield",
+        "the library: what a user's code imports (the lab below is a subfolder of its own)",
+    ),
+    (
+        "python/tlshield/lab",
+        "the lab: the experiment machinery that `make run`, the benchmarks and the studies use "
+        "(the library never imports it)",
+    ),
 )
 
 
@@ -65,10 +73,13 @@ def table() -> str:
         out.append(f"**`{folder}`**: {what}.\n")
         out.append("| file | what it holds |")
         out.append("|---|---|")
+        nested = [ROOT / f for f, _ in FOLDERS if f != folder and f.startswith(folder + "/")]
         files = sorted(
             p
             for p in base.rglob("*")
-            if p.suffix in (".rs", ".py") and "__pycache__" not in p.parts
+            if p.suffix in (".rs", ".py")
+            and "__pycache__" not in p.parts
+            and not any(p.is_relative_to(n) for n in nested)
         )
         for p in files:
             doc = rust_doc(p) if p.suffix == ".rs" else python_doc(p)

@@ -20,9 +20,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from tlshield.cluster import run_counted
-from tlshield.report import seeds_table
-from tlshield.training import is_finished, run_job
+from tlshield.lab.cluster import run_counted
+from tlshield.lab.report import seeds_table
+from tlshield.lab.training import is_finished, run_job
 
 #: Candidate settings (as ``--set NAME=VALUE``), each complete over the default preset. Issue
 #: 21's: the old default was SB3's Gaussian with normalised rewards and a learning rate of
@@ -89,7 +89,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
 
 
 def _options(variant: str) -> dict[str, Any]:
-    from tlshield import settings
+    from tlshield.lab import settings
 
     return settings.split({k: v for k, v in VARIANTS[variant].items() if k != "updates_scale"})
 
@@ -102,7 +102,7 @@ def _updates(variant: str, updates: int) -> int:
 
 def table(root: Path, variants: list[str], configs: list[str], seeds: list[int]) -> str:
     """One table of every variant's runs of ``configs`` and ``seeds``: a variant column, then
-    :func:`tlshield.report.seeds_table`'s columns (kept and last policy side by side)."""
+    :func:`tlshield.lab.report.seeds_table`'s columns (kept and last policy side by side)."""
     lines: list[str] = []
     for variant in variants:
         if not (root / variant).is_dir():

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tlshield.runs import load_run
+from tlshield.lab.runs import load_run
 
 
 def _paths(run: Path, name: str) -> list[np.ndarray]:

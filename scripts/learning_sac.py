@@ -5,12 +5,12 @@ docs/learning.md, measured beside PPO on the same environments, seeds and evalua
         --configs rl_cbf_clf rl_cbf --seeds 0 1 2 --steps 100000
 
 Per (config, seed): SAC trains on ``n_envs`` environments (reset seeds
-:func:`tlshield.seeds.train_seed`, observations normalised as PPO's are), validates the
+:func:`tlshield.lab.seeds.train_seed`, observations normalised as PPO's are), validates the
 deterministic policy every ``--validate-every`` steps on 20 episodes (reset seeds
-:func:`tlshield.seeds.validation_seed`) and keeps the best, then evaluates the kept and the
+:func:`tlshield.lab.seeds.validation_seed`) and keeps the best, then evaluates the kept and the
 last policy on the 100 evaluation trials PPO's runs are evaluated on
-(:data:`tlshield.evaluation.EVAL_SEED`). Prints, and writes to ``OUT/sac.md``, the rows of
-:func:`tlshield.report.seeds_table`'s columns, and the wall time. One run at a time: start two
+(:data:`tlshield.lab.evaluation.EVAL_SEED`). Prints, and writes to ``OUT/sac.md``, the rows of
+:func:`tlshield.lab.report.seeds_table`'s columns, and the wall time. One run at a time: start two
 processes for two cores.
 """
 
@@ -34,10 +34,10 @@ def run(config: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from tlshield.callbacks import UpdateMetrics
-    from tlshield.evaluation import EVAL_SEED, rollouts
-    from tlshield.seeds import validation_seed
-    from tlshield.training import make_vec_env
+    from tlshield.lab.callbacks import UpdateMetrics
+    from tlshield.lab.evaluation import EVAL_SEED, rollouts
+    from tlshield.lab.seeds import validation_seed
+    from tlshield.lab.training import make_vec_env
 
     torch.set_num_threads(1)
     gamma = 0.999

@@ -15,10 +15,10 @@ labelled with the expert's action and added to the data set, and the student is 
 of it. The table's executed-action error is the mean squared distance between each student's
 deployed action (its ``a_rl`` through the CBF) and the expert's, over all the data gathered, the
 same measure for both. After every iteration the student runs 20 validation episodes (reset
-seeds ``tlshield.seeds.validation_seed``). The policy of the last iteration is evaluated (no
+seeds ``tlshield.lab.seeds.validation_seed``). The policy of the last iteration is evaluated (no
 checkpoint selection) on the 100 evaluation episodes PPO's runs are evaluated on (reset seeds
-``EVAL_SEED + i``, ``tlshield.evaluation.rollouts``). Training resets use
-``tlshield.seeds.train_seed``.
+``EVAL_SEED + i``, ``tlshield.lab.evaluation.rollouts``). Training resets use
+``tlshield.lab.seeds.train_seed``.
 
 Run: ``.venv/bin/python scripts/learning_through_shield.py --seeds 0 1 2 --out DIR``
 (``--ppo DIR`` adds a ``tlshield reproduce --configs rl_cbf`` results folder to the table and the
@@ -56,8 +56,8 @@ def run(seed: int, method: str, args: argparse.Namespace) -> dict[str, Any]:
 
     from tlshield.envs.channel import ChannelEnv
     from tlshield.envs.channel_task import ChannelParams, channel_shield
-    from tlshield.evaluation import rollouts
-    from tlshield.seeds import EVAL_SEED, learner_seed, train_seed, validation_seed
+    from tlshield.lab.evaluation import rollouts
+    from tlshield.lab.seeds import EVAL_SEED, learner_seed, train_seed, validation_seed
     from tlshield.torch import ShieldLayer
 
     torch.manual_seed(learner_seed(seed))

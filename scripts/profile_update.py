@@ -48,10 +48,10 @@ def main() -> None:
     from stable_baselines3.common.policies import ActorCriticPolicy
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from tlshield import settings
-    from tlshield.callbacks import ExecutedActions, UpdateLog, Validation
+    from tlshield.lab import settings
+    from tlshield.lab.callbacks import ExecutedActions, UpdateLog, Validation
+    from tlshield.lab.training import train
     from tlshield.sb3 import WorldVecEnv
-    from tlshield.training import train
 
     timed(OnPolicyAlgorithm, "collect_rollouts", "rollout (all)")
     timed(WorldVecEnv, "step_wait", "env step (core batch + infos)")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tlshield.runs import load_results
+from tlshield.lab.runs import load_results
 
 COLORS = ("#7f7f7f", "#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 

@@ -14,8 +14,8 @@ from hypothesis.extra.numpy import arrays
 
 import tlshield
 from tests.shield_reference import literal
-from tlshield.cli import main
 from tlshield.envs.channel import STATE_DIM, channel_task_spec
+from tlshield.lab.cli import main
 
 from .reference import satisfied, to_text
 from .test_properties import REFERENCE_PREDICATES, RUST_PREDICATES, co_safe, values

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from tlshield import cli
-from tlshield.training import train
+from tlshield.lab import cli
+from tlshield.lab.training import train
 
 #: A bad input: what it is, and how to make the argv from a scratch folder and a real run.
 Case = tuple[str, Callable[[Path, Path], list[str]]]
@@ -230,7 +230,7 @@ if __name__ == "__main__":
 
 def test_a_run_folder_of_tlshield_0_1_still_loads(run: Path, tmp_path: Path) -> None:
     """0.1 wrote the record as ``config.json``; it is read where no ``run.json`` is."""
-    from tlshield.runs import RUN_FILE, load_run, read_record
+    from tlshield.lab.runs import RUN_FILE, load_run, read_record
 
     old = tmp_path / "old"
     shutil.copytree(run, old)

@@ -5,15 +5,17 @@ work with a DeprecationWarning; a swapped argument order fails with a hint
 from __future__ import annotations
 
 import importlib
+import sys
 
 import gymnasium as gym
 import pytest
 
 import tlshield.envs
-from tlshield import settings
+from tlshield import _moved
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.params import as_flat
-from tlshield.runs import Run
+from tlshield.lab import settings
+from tlshield.lab.runs import Run
 
 
 @pytest.mark.parametrize("env_id", [ENV_ID, POINT_MASS_ID, FLATWORLD_ID])
@@ -86,3 +88,28 @@ def test_monitor_overloads_warn_and_equal_the_named_methods() -> None:
         old_batch = shield.filter_batch(batch, actions)
     new_batch = shield.filter_monitors(batch, actions)
     assert old_batch.action.tolist() == new_batch.action.tolist()
+
+
+@pytest.mark.parametrize("old", sorted(_moved.MOVED))
+def test_old_module_names_warn_and_are_the_lab_modules(old: str) -> None:
+    """Issue 36: ``tlshield.NAME`` (0.1) is ``tlshield.lab.NAME``, the same module object,
+    with a DeprecationWarning; a submodule of a moved package too, never a second copy."""
+    new = importlib.import_module(f"tlshield.lab.{old}")
+    sys.modules.pop(f"tlshield.{old}", None)
+    with pytest.warns(DeprecationWarning, match=f"tlshield.{old} moved to tlshield.lab.{old}"):
+        module = importlib.import_module(f"tlshield.{old}")
+    assert module is new
+    if old == "plots":
+        sys.modules.pop("tlshield.plots.curves", None)
+        with pytest.warns(DeprecationWarning, match="tlshield.lab.plots.curves"):
+            from tlshield.plots.curves import _plot_learning_curves as old_function
+        from tlshield.lab.plots.curves import _plot_learning_curves as current
+
+        assert old_function is current
+
+
+def test_unmoved_names_are_not_answered_by_the_old_name_finder() -> None:
+    assert _moved.new_name("tlshield.envs.channel") is None
+    assert _moved.new_name("tlshield.wrappers") is None
+    assert _moved.new_name("tlshield_other.training") is None
+    assert _moved.new_name("tlshield.plots.curves") == "tlshield.lab.plots.curves"

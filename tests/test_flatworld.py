@@ -171,7 +171,7 @@ def test_no_reward_loophole_finish_beats_dawdling_beats_leaving() -> None:
 
 
 def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
-    from tlshield.training import train
+    from tlshield.lab.training import train
 
     with pytest.raises(ValueError, match="not a registered Gymnasium id"):
         train("rl", 0, 1, tmp_path / "a", env="nobody/Nothing-v0")
@@ -211,8 +211,8 @@ def test_training_checks_the_task_it_is_given(tmp_path: Path) -> None:
 
 
 def test_train_and_evaluate_flatworld_from_the_cli(tmp_path: Path) -> None:
-    from tlshield import cli
-    from tlshield.evaluation import evaluate
+    from tlshield.lab import cli
+    from tlshield.lab.evaluation import evaluate
 
     out = tmp_path / "fw"
     args = ["train", "--env", ID, "--config", "rl_cbf_clf", "--set", "formula=F(aqua & blue)"]
@@ -225,7 +225,7 @@ def test_train_and_evaluate_flatworld_from_the_cli(tmp_path: Path) -> None:
 
 def test_benchmark_pipeline_on_a_formula_outside_the_table(tmp_path: Path) -> None:
     """Tiny budget: the plumbing (Ray jobs, the CSV, the report), and no violation anywhere."""
-    from tlshield.benchmark import COLUMNS, flatworld
+    from tlshield.lab.benchmark import COLUMNS, flatworld
 
     formula = "F(yellow & F(aqua & blue))"
     out = flatworld(
@@ -265,10 +265,10 @@ def test_benchmark_job_trains_through_the_pipeline_as_plain_sb3_would(tmp_path: 
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from tlshield.benchmark import PRESET, job
-    from tlshield.presets import PRESETS
-    from tlshield.saved import load_policy
-    from tlshield.seeds import learner_seed, train_seed
+    from tlshield.lab.benchmark import PRESET, job
+    from tlshield.lab.presets import PRESETS
+    from tlshield.lab.saved import load_policy
+    from tlshield.lab.seeds import learner_seed, train_seed
 
     seed, steps = 1, 4096
     folder = tmp_path / "job"

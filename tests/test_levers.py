@@ -13,11 +13,11 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
-from tlshield import settings
-from tlshield.callbacks import ExecutedActions
-from tlshield.evaluation import evaluate
+from tlshield.lab import settings
+from tlshield.lab.callbacks import ExecutedActions
+from tlshield.lab.evaluation import evaluate
+from tlshield.lab.training import train
 from tlshield.sb3 import make_vec_env
-from tlshield.training import train
 
 
 class Check(BaseCallback):  # type: ignore[misc]

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from tlshield import measures
+from tlshield.lab import measures
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

@@ -14,12 +14,12 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("stable_baselines3")
 
-from tlshield import plots
-from tlshield.evaluation import evaluate
-from tlshield.plots import FIGURES, plot_all
-from tlshield.report import TABLE_COLUMNS, results_table
-from tlshield.runs import METRIC_COLUMNS, load_results
-from tlshield.training import train
+from tlshield.lab import plots
+from tlshield.lab.evaluation import evaluate
+from tlshield.lab.plots import FIGURES, plot_all
+from tlshield.lab.report import TABLE_COLUMNS, results_table
+from tlshield.lab.runs import METRIC_COLUMNS, load_results
+from tlshield.lab.training import train
 
 CONFIGS = ("rl", "rl_cbf_clf")
 SEEDS = (0, 1)

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from tlshield import cli, cluster, settings
-from tlshield.training import reproduce, train
+from tlshield.lab import cli, cluster, settings
+from tlshield.lab.training import reproduce, train
 
 RAY = str(Path(sys.executable).parent / "ray")
 #: A guard against hangs, not a speed target: far above what each command takes here.
@@ -297,7 +297,7 @@ def test_reproduce_on_a_cluster_through_its_address(
 def test_a_two_sample_tune_writes_settings_that_train_reads(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from tlshield.tune import DEFAULTS, searchable, tune
+    from tlshield.lab.tune import DEFAULTS, searchable, tune
 
     root = tune(tmp_path / "tune", samples=2, updates=3, trials=2, workers=2, progress=False)
     with (root / "trials.csv").open() as f:
@@ -309,7 +309,7 @@ def test_a_two_sample_tune_writes_settings_that_train_reads(
     assert best["config"] == "rl_cbf_clf" and 0.0 <= best["objective"] <= 1.0
     # The first sample is the defaults: a default sample maps back to the default settings.
     from tlshield.envs.channel import ChannelParams
-    from tlshield.tune import to_settings
+    from tlshield.lab.tune import to_settings
 
     as_settings = to_settings(dict(DEFAULTS), "rl_cbf_clf")
     cfg = ChannelParams()

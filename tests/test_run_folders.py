@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import torch
 
-from tlshield import cli
 from tlshield.envs.channel import ChannelEnv
-from tlshield.saved import UntrustedPickleError, load_policy, normalizer
-from tlshield.training import train
+from tlshield.lab import cli
+from tlshield.lab.saved import UntrustedPickleError, load_policy, normalizer
+from tlshield.lab.training import train
 
 
 @pytest.fixture(scope="module")

@@ -23,8 +23,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import tlshield
-from tlshield import cli
 from tlshield.envs import safety_gym as sg
+from tlshield.lab import cli
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # gymnasium's Box casts
 
@@ -187,7 +187,7 @@ def test_disturbance_bounds_tighten_the_rows_and_survive_a_pickle() -> None:
 
 
 def test_the_benchmark_writes_its_table_and_resumes(tmp_path: Path) -> None:
-    from tlshield import benchmark_safety_gym as bench
+    from tlshield.lab import benchmark_safety_gym as bench
 
     def run() -> Path:
         return bench.safety_gym(

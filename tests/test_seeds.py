@@ -1,4 +1,4 @@
-"""Reset seed ranges live in tlshield.seeds: any non-negative run seed works, seeds 0-9 keep the
+"""Reset seed ranges live in tlshield.lab.seeds: any non-negative run seed works, seeds 0-9 keep the
 published tables' reset seeds, and training, validation, evaluation and tuning reset seeds never
 meet."""
 
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tlshield import seeds
-from tlshield.evaluation import evaluate
+from tlshield.lab import seeds
+from tlshield.lab.evaluation import evaluate
 
 RUN_SEEDS = st.integers(min_value=0, max_value=2**80)
 INDEX = st.integers(min_value=0, max_value=seeds.STRIDE - 1)

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tlshield import cli
-from tlshield.evaluation import EVAL_SEED, evaluate
-from tlshield.presets import clf_scale
-from tlshield.runs import METRIC_COLUMNS
-from tlshield.training import train
+from tlshield.lab import cli
+from tlshield.lab.evaluation import EVAL_SEED, evaluate
+from tlshield.lab.presets import clf_scale
+from tlshield.lab.runs import METRIC_COLUMNS
+from tlshield.lab.training import train
 
 
 def read_metrics(run: Path) -> list[dict[str, str]]:
@@ -44,7 +44,7 @@ def test_run_folder_holds_everything(run: Path) -> None:
 
 def test_paper_preset_and_validation(tmp_path: Path) -> None:
     from tlshield.envs.channel import PAPER_ENV
-    from tlshield.presets import PRESETS
+    from tlshield.lab.presets import PRESETS
 
     paper = train("rl_cbf", 1, 1, tmp_path / "p", progress=False, preset="paper", **PAPER_ENV)
     record = json.loads((paper / "run.json").read_text())
@@ -77,7 +77,7 @@ def test_evaluation(run: Path) -> None:
 
 def test_seeded_runs_are_deterministic(tmp_path: Path) -> None:
     # Any non-negative seed: numpy's legacy seeding (inside SB3) takes only 32 bits, so PPO
-    # gets tlshield.seeds.learner_seed.
+    # gets tlshield.lab.seeds.learner_seed.
     a = read_metrics(train("rl_cbf", 2**40, 2, tmp_path / "a", progress=False))
     b = read_metrics(train("rl_cbf", 2**40, 2, tmp_path / "b", progress=False))
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]  # noqa: E731

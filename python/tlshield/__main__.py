@@ -1,5 +1,5 @@
 """``python -m tlshield``: the command line."""
 
-from tlshield.cli import main
+from tlshield.lab.cli import main
 
 raise SystemExit(main())

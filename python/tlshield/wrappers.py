@@ -164,7 +164,7 @@ class Shielded(IndependentCopies, gym.Wrapper):
     in the shield's units (as the vector wrappers' ``action_fn``; default: as it is): the
     wrapped env then receives the shielded action in those units. ``info["shield"]`` carries
     ``a_rl``, ``a_cbf``, ``a_clf``, ``delta`` and ``status``; ``info["barriers"]`` each user
-    barrier's value at the new state (:mod:`tlshield.measures` counts a value below zero as a
+    barrier's value at the new state (:mod:`tlshield.lab.measures` counts a value below zero as a
     violation when the env reports none of its own).
     """
 

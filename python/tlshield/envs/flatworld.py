@@ -227,7 +227,7 @@ class FlatWorld(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDA
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode != "rgb_array":
             return None
-        from tlshield.plots.flatworld import draw_paths
+        from tlshield.envs.flatworld_map import draw_paths
 
         return draw_paths([np.asarray(self.path)], CIRCLES, size=self.params.size)
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 from typing import Any
 
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks, and tlshield's own
-#: keys (read by :func:`tlshield.training.train`): ``policy`` (:data:`tlshield.policies.POLICIES`,
-#: default ``"gaussian"``), ``activation`` (``"ReLU"`` or ``"Tanh"``, default ``"ReLU"``),
-#: ``norm_obs`` / ``norm_reward`` (running normalisation, default on), ``lr_schedule``,
-#: ``learn_from`` and the validation keys.
+#: keys (read by :func:`tlshield.lab.training.train`): ``policy``
+#: (:data:`tlshield.lab.policies.POLICIES`, default ``"gaussian"``), ``activation``
+#: (``"ReLU"`` or ``"Tanh"``, default ``"ReLU"``), ``norm_obs`` / ``norm_reward`` (running
+#: normalisation, default on), ``lr_schedule``, ``learn_from`` and the validation keys.
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {
         "n_envs": 5,
@@ -45,7 +45,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # preset finds it on 3 of 3 (docs/learning.md, issue 34).
         "learn_from": "sampled",
         # Every 10 updates the deterministic policy runs 20 validation episodes (reset seeds
-        # from tlshield.seeds.validation_seed, never used for evaluation); the best checkpoint
+        # from tlshield.lab.seeds.validation_seed, never used for evaluation); the best checkpoint
         # is kept (the policy found the task and lost it again in some runs, measured).
         "validate_every": 10,
         "validation_trials": 20,
@@ -65,7 +65,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         },
         "net_arch": {"pi": [64, 64], "vf": [64, 64]},
     },
-    # The FlatWorld benchmark's settings (tlshield.benchmark), shared by every formula: SB3's
+    # The FlatWorld benchmark's settings (tlshield.lab.benchmark), shared by every formula: SB3's
     # PPO defaults at a DeepLTL-sized batch, with raw observations and rewards (positions in
     # [-2, 2] and a bounded progress reward need no running statistics).
     "flatworld": {

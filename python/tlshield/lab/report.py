@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield import measures
-from tlshield.runs import Run, load_results
+from tlshield.lab import measures
+from tlshield.lab.runs import Run, load_results
 
 __all__ = ["SEED_COLUMNS", "TABLE_COLUMNS", "results_table", "seeds_table"]
 

@@ -6,13 +6,13 @@ that formula and shield configuration, then evaluated on ``episodes`` episodes w
 stochastic policy (as published) and the CBF on in every configuration but ``rl`` (the
 unshielded contrast row). Two rows need no training: the shield with a zero policy
 (``tlshield-zero``) and with a uniformly random one (``tlshield-random``), so a reader sees
-what the shield does alone. Training jobs run as Ray tasks (:mod:`tlshield.cluster`).
+what the shield does alone. Training jobs run as Ray tasks (:mod:`tlshield.lab.cluster`).
 
 The comparison is not like for like, and every table says so: DeepLTL learns one policy for
 all formulas (15M steps, zero-shot) with no map and no model; tlshield trains one agent per
 formula, and its shield knows the discs and the dynamics.
 
-Seeds (:mod:`tlshield.seeds`): training env ``i`` of seed ``s`` resets from ``train_seed(s) +
+Seeds (:mod:`tlshield.lab.seeds`): training env ``i`` of seed ``s`` resets from ``train_seed(s) +
 i``, evaluation episode ``k`` from ``eval_block_seed(s, k)`` and PPO takes ``learner_seed(s)``:
 streams of ``SeedSequence(s)`` in disjoint ranges, the evaluation ones never used for tuning.
 """
@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs.params import FULL
-from tlshield.presets import PRESETS
-from tlshield.seeds import check_block, check_seeds, eval_block_seed
+from tlshield.lab.presets import PRESETS
+from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
 
 #: The columns of ``flatworld.csv``.
 COLUMNS = (
@@ -85,7 +85,7 @@ DEFAULT_SEEDS = (1, 2, 3)
 DEFAULT_EPISODES = 500
 DEFAULT_STEPS = 600_000
 
-#: The PPO preset every formula trains with (:data:`tlshield.presets.PRESETS`): no
+#: The PPO preset every formula trains with (:data:`tlshield.lab.presets.PRESETS`): no
 #: per-formula settings.
 PRESET = "flatworld"
 #: The discount of that preset (the progress reward is sized for it).
@@ -192,12 +192,12 @@ def training_counts(folder: Path) -> dict[str, int]:
 def job(
     formula: str, k: int, config: str, seed: int, steps: int, episodes: int, folder: Path
 ) -> None:
-    """One (config, formula, seed): train through :func:`tlshield.training.prepare` and
-    :func:`~tlshield.training.learn` into ``folder`` (a run folder: ``run.json``,
+    """One (config, formula, seed): train through :func:`tlshield.lab.training.prepare` and
+    :func:`~tlshield.lab.training.learn` into ``folder`` (a run folder: ``run.json``,
     ``metrics.csv``, the model), evaluate the trained policy, and write ``result.json`` and
     ``paths.npz`` beside them (a Ray task)."""
     from tlshield.envs import FLATWORLD_ID
-    from tlshield.training import learn, prepare
+    from tlshield.lab.training import learn, prepare
 
     start = time.perf_counter()
     run = prepare(
@@ -300,7 +300,7 @@ def flatworld(
                 folder = runs / f"{c}-f{k}-s{s}"
                 if not (folder / "result.json").exists():
                     jobs[folder] = partial(job, f, k, c, s, steps, episodes)
-    from tlshield import cluster
+    from tlshield.lab import cluster
 
     cluster.run_counted(jobs, address, workers, progress)
     return write_report(out, formulas)
@@ -381,7 +381,7 @@ def _published_formula(k: int) -> str | None:
 
 def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> None:
     from tlshield.envs.flatworld import CIRCLES
-    from tlshield.plots.flatworld import plot_paths
+    from tlshield.lab.plots.flatworld import plot_paths
 
     panels = []
     for k, f in enumerate(formulas, 1):

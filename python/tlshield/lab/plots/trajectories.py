@@ -12,8 +12,8 @@ import numpy as np
 
 from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS
 from tlshield.envs.render import draw_channel
-from tlshield.plots._style import _MINUS, _color, _env_of, _figure, _label, _no_data, _save
-from tlshield.runs import Run
+from tlshield.lab.plots._style import _MINUS, _color, _env_of, _figure, _label, _no_data, _save
+from tlshield.lab.runs import Run
 
 #: The scene's goal and obstacle styles (not colours of a configuration).
 _GOAL_COLOR = "#9467bd"

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs.channel import channel_task_spec
-from tlshield.plots._style import _AND, _NOT, _OR, DPI, _figure, _save
+from tlshield.lab.plots._style import _AND, _NOT, _OR, DPI, _figure, _save
 
 
 def _pretty_guard(guard: str) -> str:

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield.plots._style import _MINUS, _color, _env_of, _figure, _label, _no_data, _save
-from tlshield.report import seed_stat, trials_note
-from tlshield.runs import Run
+from tlshield.lab.plots._style import _MINUS, _color, _env_of, _figure, _label, _no_data, _save
+from tlshield.lab.report import seed_stat, trials_note
+from tlshield.lab.runs import Run
 
 
 def _nan_mean_std(values: NDArray[np.float64], axis: int = 0) -> tuple[NDArray, NDArray]:

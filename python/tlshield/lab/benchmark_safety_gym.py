@@ -4,11 +4,11 @@
 Per (env, configuration, seed) a PPO agent (Stable-Baselines3's defaults, the same for every
 configuration) is trained on the standard observation of ``tlshield/<env>`` and evaluated with
 its deterministic policy, each configuration as it trained (``rl`` unshielded). Jobs run as
-Ray tasks (:mod:`tlshield.cluster`); a finished job keeps its folder, so an interrupted run
+Ray tasks (:mod:`tlshield.lab.cluster`); a finished job keeps its folder, so an interrupted run
 resumes where it stopped. The shield reads the privileged true state (agent pose and velocity,
 goal, hazards, vases), which the policy never sees; every table says so.
 
-Seeds (:mod:`tlshield.seeds`): training resets from ``train_seed(seed)``, evaluation episode
+Seeds (:mod:`tlshield.lab.seeds`): training resets from ``train_seed(seed)``, evaluation episode
 ``k`` from ``eval_block_seed(seed, k)`` (disjoint, never used for tuning), and PPO takes
 ``learner_seed(seed)``.
 """
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
+from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed, learner_seed, train_seed
 
 #: The default budget per env (PPO steps per agent).
 DEFAULT_STEPS = {"SafetyPointGoal1-v0": 1_000_000, "SafetyPointGoal2-v0": 300_000}
@@ -196,7 +196,7 @@ def safety_gym(
                 folder = runs / f"{e}-{c}-s{s}-{budget}"
                 if not (folder / "result.json").exists():
                     jobs[folder] = partial(train_and_evaluate, e, c, s, budget, episodes)
-    from tlshield import cluster
+    from tlshield.lab import cluster
 
     cluster.run_counted(jobs, address, workers, progress)
     return write_report(out)

@@ -1,14 +1,14 @@
 """PPO on tlshield/Channel-v0 (Stable-Baselines3) with per-update metrics; the reproduction
-and the ablation of docs/reproduction.md (training, then :func:`tlshield.evaluation.evaluate`).
+and the ablation of docs/reproduction.md (training, then :func:`tlshield.lab.evaluation.evaluate`).
 
-A run folder (schema and loaders: :mod:`tlshield.runs`) holds ``run.json`` (what it ran
+A run folder (schema and loaders: :mod:`tlshield.lab.runs`) holds ``run.json`` (what it ran
 with, and which checkpoint was kept), ``metrics.csv`` (one row per update, written as it goes,
 so an interrupted run stays readable; with the learning diagnostics of
-:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`), ``tb/`` (TensorBoard), ``model.zip`` with
+:data:`tlshield.lab.runs.DIAGNOSTIC_COLUMNS`), ``tb/`` (TensorBoard), ``model.zip`` with
 ``normalization.json`` (the kept policy: the best on the validation episodes for the default
 preset, the last one otherwise), ``last_model.zip`` with ``last_normalization.json`` and, after
 evaluation, ``evaluation.json`` and ``trajectories.npz`` (``last_evaluation.json`` for the last
-policy). Nothing in a run folder is a pickle that loading would run (:mod:`tlshield.saved`).
+policy). Nothing in a run folder is a pickle that loading would run (:mod:`tlshield.lab.saved`).
 
 PPO presets (:data:`PRESETS`): ``"paper"`` is the paper's networks and batch (separate policy
 and value MLPs 300-200-100 with ReLU; 5 environments x 200 steps = 5 trajectories of the horizon
@@ -21,9 +21,9 @@ torch thread (deterministic for a seed).
 Observations are normalised by running statistics (SB3 ``VecNormalize``, saved as
 ``normalization.json`` and used by the evaluation); rewards are normalised too unless the preset
 says ``norm_reward: False``; the metrics are in raw units. The policy is one of
-:data:`tlshield.policies.POLICIES` (the preset's ``policy``; PPO setting ``policy``).
+:data:`tlshield.lab.policies.POLICIES` (the preset's ``policy``; PPO setting ``policy``).
 
-Seeds (:mod:`tlshield.seeds`, any non-negative integer): training environments reset from
+Seeds (:mod:`tlshield.lab.seeds`, any non-negative integer): training environments reset from
 ``train_seed(seed) + env index``, validation episodes from ``validation_seed(seed, k)`` and
 evaluation trials from ``EVAL_SEED + k``, in disjoint ranges, so the three never meet; PPO takes
 ``learner_seed(seed)``.
@@ -50,10 +50,10 @@ from tlshield.envs import (
 )
 from tlshield.envs.channel import CONFIGS
 from tlshield.envs.params import FULL, as_flat
-from tlshield.evaluation import evaluate
-from tlshield.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, PRESETS, SCHEDULES
-from tlshield.runs import RUN_FILE, is_finished, load_run
-from tlshield.seeds import check_seeds, learner_seed, train_seed
+from tlshield.lab.evaluation import evaluate
+from tlshield.lab.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, PRESETS, SCHEDULES
+from tlshield.lab.runs import RUN_FILE, is_finished, load_run
+from tlshield.lab.seeds import check_seeds, learner_seed, train_seed
 
 
 def _check_run_args(
@@ -118,11 +118,12 @@ def train(
     parameters by flat name (``ChannelParams``, ``PointMassParams``). Ctrl-C stops cleanly:
     the metrics so far and the model are kept (``run.json`` then says ``"interrupted":
     true``).
-    ``on_update`` is called with each update's metrics row (:data:`tlshield.runs.METRIC_COLUMNS`)
-    once it is written. ``env`` may be ``"module:Env-v0"`` (``module`` is imported first, as
-    ``gymnasium.make`` does); ``imports`` are modules to import before it (where a user's
-    environments register themselves). Both are recorded in ``run.json``, so that
-    :func:`tlshield.evaluation.evaluate` finds the environment again.
+    ``on_update`` is called with each update's metrics row
+    (:data:`tlshield.lab.runs.METRIC_COLUMNS`) once it is written. ``env`` may be
+    ``"module:Env-v0"`` (``module`` is imported first, as ``gymnasium.make`` does);
+    ``imports`` are modules to import before it (where a user's environments register
+    themselves). Both are recorded in ``run.json``, so that
+    :func:`tlshield.lab.evaluation.evaluate` finds the environment again.
     The same as ``learn(prepare(...))``."""
     run = prepare(
         config,
@@ -159,7 +160,7 @@ def prepare(
     **overrides: Any,
 ) -> Any:
     """The first half of :func:`train`: checks the arguments, builds the environments and the
-    model and writes ``run.json``; returns the :class:`tlshield.callbacks.TrainingRun` that
+    model and writes ``run.json``; returns the :class:`tlshield.lab.callbacks.TrainingRun` that
     :func:`learn` trains (its ``model`` stays usable afterwards, as the benchmarks use it)."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     check_seeds((seed,))
@@ -176,7 +177,7 @@ def prepare(
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from tlshield.callbacks import TrainingRun
+    from tlshield.lab.callbacks import TrainingRun
 
     torch.set_num_threads(1)
     folder = Path(out)
@@ -217,7 +218,7 @@ def prepare(
 
 #: What PPO's rollout stores as the action taken (setting ``learn_from``): the sampled action
 #: (SB3's own), the executed one, or the executed one without the CLF's part
-#: (:class:`tlshield.callbacks.ExecutedActions`).
+#: (:class:`tlshield.lab.callbacks.ExecutedActions`).
 LEARN_FROM = ("sampled", "executed", "executed_without_clf")
 
 
@@ -241,8 +242,8 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
     ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``) are taken out of SB3's
     keywords."""
-    from tlshield.policies import policy_class
-    from tlshield.saved import activation_class
+    from tlshield.lab.policies import policy_class
+    from tlshield.lab.saved import activation_class
 
     spec = PRESETS[preset]
     kwargs = {**spec["ppo"], **(ppo or {})}
@@ -279,7 +280,7 @@ def _run_record(
     params: Any,
     overrides: dict[str, Any],
 ) -> dict[str, Any]:
-    """The run's ``run.json``: what it ran with (:mod:`tlshield.runs` reads it back)."""
+    """The run's ``run.json``: what it ran with (:mod:`tlshield.lab.runs` reads it back)."""
     return {
         "env_id": env,
         "config": config,
@@ -311,8 +312,8 @@ def _ppo(settings: PpoSettings, venv: Any, seed: int) -> Any:
     """The SB3 PPO model of ``settings`` on ``venv`` (CPU, seeded)."""
     from stable_baselines3 import PPO
 
-    from tlshield.policies import policy_class
-    from tlshield.saved import activation_class
+    from tlshield.lab.policies import policy_class
+    from tlshield.lab.saved import activation_class
 
     learning_rate: Any = settings.ppo["learning_rate"]
     if settings.lr_schedule == "linear":
@@ -338,8 +339,8 @@ def learn(run: Any) -> Path:
     with its callbacks, then keeps the last policy (and the kept one when validation chose
     none) and the final ``run.json``, also when interrupted (Ctrl-C is raised again
     afterwards). Returns the run folder."""
-    from tlshield.callbacks import ExecutedActions, TrainingCallback
-    from tlshield.saved import save_normalization
+    from tlshield.lab.callbacks import ExecutedActions, TrainingCallback
+    from tlshield.lab.saved import save_normalization
 
     model, venv, record, folder = run.model, run.venv, run.record, run.folder
     before: list[Any] = []
@@ -396,7 +397,7 @@ def sweep(
     progress: bool = True,
 ) -> None:
     """Trains and evaluates each run ``(name, config, options)`` on every seed, into
-    ``root/{name}_s{seed}``, as Ray tasks (:func:`tlshield.cluster.run_counted`). Runs that
+    ``root/{name}_s{seed}``, as Ray tasks (:func:`tlshield.lab.cluster.run_counted`). Runs that
     already finished and were evaluated are kept, so an interrupted sweep resumes. Every
     argument is checked before any job starts."""
     for _, config, options in runs:
@@ -417,7 +418,7 @@ def sweep(
             folder = root / f"{name}_s{seed}"
             if not ((folder / "evaluation.json").is_file() and is_finished(folder, updates)):
                 jobs[folder] = partial(run_job, config, seed, updates, trials, options)
-    from tlshield import cluster
+    from tlshield.lab import cluster
 
     cluster.run_counted(jobs, address, workers, progress)
 
@@ -436,14 +437,14 @@ def reproduce(
 ) -> Path:
     """Trains and evaluates every configuration x seed (:func:`sweep`: a local Ray with
     ``workers`` CPUs, all cores by default, or the cluster at ``address``; see
-    :mod:`tlshield.cluster`), then writes the figures (``out/figures``) and the results table
+    :mod:`tlshield.lab.cluster`), then writes the figures (``out/figures``) and the results table
     (``out/results.md``). Runs that already finished and were evaluated (same folder) are
     kept, so an interrupted reproduction resumes."""
     root = Path(out)
     runs = [(config, config, options) for config in configs]
     sweep(root, runs, seeds, updates, trials, workers, address, progress)
-    from tlshield.plots import plot_all
-    from tlshield.report import results_table, seeds_table
+    from tlshield.lab.plots import plot_all
+    from tlshield.lab.report import results_table, seeds_table
 
     plot_all(root)
     (root / "results.md").write_text(f"{results_table(root)}\n\n{seeds_table(root)}\n")

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from tlshield.envs import ENV_ID, make
-from tlshield.runs import read_record
+from tlshield.lab.runs import read_record
 
 __all__ = [
     "POLICY_FILES",
@@ -129,7 +129,7 @@ def _policy_network(record: dict[str, Any], model: Path) -> Any:
 
     import torch
 
-    from tlshield.policies import policy_class
+    from tlshield.lab.policies import policy_class
 
     ppo = record.get("ppo", {})
     env = make(record.get("env_id", ENV_ID), record["config"], **record.get("overrides", {}))

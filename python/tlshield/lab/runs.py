@@ -9,7 +9,7 @@ A results folder holds one run folder per configuration and seed (``<config>_s<s
 * ``metrics.csv``: one row per PPO update (:data:`METRIC_COLUMNS`), written as it goes;
 * ``model.zip`` (SB3) with ``normalization.json`` (observation statistics: ``obs_mean``,
   ``obs_var``, ``epsilon``, ``clip_obs``), the kept policy, and ``last_model.zip`` with
-  ``last_normalization.json``, the last one; read without unpickling (:mod:`tlshield.saved`);
+  ``last_normalization.json``, the last one; read without unpickling (:mod:`tlshield.lab.saved`);
 * after evaluation, ``evaluation.json`` (totals and one record per trial: reset seed, success,
   collision, steps, violating steps) and ``trajectories.npz`` (each trial's start state, agent
   path and obstacle paths), and ``last_evaluation.json`` / ``last_trajectories.npz`` for the
@@ -113,7 +113,7 @@ class Run:
     config: str
     #: Training seed.
     seed: int
-    #: metrics.csv by column (:data:`tlshield.runs.METRIC_COLUMNS`), one value per update;
+    #: metrics.csv by column (:data:`tlshield.lab.runs.METRIC_COLUMNS`), one value per update;
     #: every array is empty when the run has no complete row yet.
     metrics: dict[str, NDArray[np.float64]]
     #: evaluation.json, or None when the run was not evaluated.

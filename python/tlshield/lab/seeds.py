@@ -15,7 +15,7 @@ block of ``STRIDE`` consecutive reset seeds (environment ``i``, episode ``k``):
   training ``[FLOOR, 2**30)``, validation ``[2**30 + FLOOR, 2**31)``, evaluation blocks
   ``[2**31 + FLOOR, 3 * 2**30)``.
 
-The evaluation trials every run shares (:func:`tlshield.evaluation.evaluate`) reset from
+The evaluation trials every run shares (:func:`tlshield.lab.evaluation.evaluate`) reset from
 ``EVAL_SEED + k`` (10,000+), and ``tlshield tune`` evaluates its samples on ``TUNE_SEED + k``
 (30,000+). No training or validation reset seed is ever an evaluation or tuning one. Two run
 seeds' blocks of one stream may overlap (odds about ``STRIDE / 2**30`` for drawn blocks): two

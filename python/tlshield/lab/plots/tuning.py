@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tlshield.plots._style import _figure, _save
+from tlshield.lab.plots._style import _figure, _save
 
 
 def plot_trials(

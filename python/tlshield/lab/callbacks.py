@@ -1,7 +1,7 @@
 """The training loop's callbacks, in the style of SB3's own ``callbacks.py``: per-step metrics,
 the CLF-bound schedule, validation (the kept checkpoint) and one ``metrics.csv`` row per update;
 and, as an option, learning from the executed action (:class:`ExecutedActions`).
-Importing this module loads SB3 (and torch); :func:`tlshield.training.train` does so when it
+Importing this module loads SB3 (and torch); :func:`tlshield.lab.training.train` does so when it
 trains."""
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
-from tlshield.evaluation import rollouts
-from tlshield.measures import step_violation
-from tlshield.presets import DEFAULT_SCHEDULE, clf_scale
-from tlshield.runs import METRIC_COLUMNS
-from tlshield.saved import save_normalization
-from tlshield.seeds import validation_seed
+from tlshield.lab.evaluation import rollouts
+from tlshield.lab.measures import step_violation
+from tlshield.lab.presets import DEFAULT_SCHEDULE, clf_scale
+from tlshield.lab.runs import METRIC_COLUMNS
+from tlshield.lab.saved import save_normalization
+from tlshield.lab.seeds import validation_seed
 
 
 @dataclass
@@ -109,7 +109,7 @@ def metrics_text(count: float) -> str:
 
 
 def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
-    """The learning diagnostics of one update (:data:`tlshield.runs.DIAGNOSTIC_COLUMNS`): the
+    """The learning diagnostics of one update (:data:`tlshield.lab.runs.DIAGNOSTIC_COLUMNS`): the
     policy's std per dimension (under gSDE, the root mean square of its noise weights' stds),
     the sampled actions outside the box, the shield's mean
     correction and relaxed rate, and the statistics of PPO's last gradient step (logged by SB3
@@ -151,7 +151,7 @@ def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
 
 class ClfSchedule(BaseCallback):  # type: ignore[misc]
     """The CLF-bound schedule: before each rollout, the CLF box of the training environments'
-    shield is scaled as :func:`tlshield.presets.clf_scale` says for the progress so far."""
+    shield is scaled as :func:`tlshield.lab.presets.clf_scale` says for the progress so far."""
 
     def __init__(self, run: TrainingRun) -> None:
         super().__init__()

@@ -3,9 +3,9 @@ TPE sampler and ASHA early stopping (the paper's future work: take the tuning of
 
 Each sample trains one run of the configuration (training seed ``seed``) and reports after
 every PPO update a ``score``: the best validation success so far (validation reset seeds
-:func:`tlshield.seeds.validation_seed`), or -1 once a shielded run violated the channel. ASHA
+:func:`tlshield.lab.seeds.validation_seed`), or -1 once a shielded run violated the channel. ASHA
 stops the samples whose score trails at its rungs. A sample that trains to the end is evaluated
-on the tuning seeds (:data:`tlshield.seeds.TUNE_SEED` + trial, disjoint from the training,
+on the tuning seeds (:data:`tlshield.lab.seeds.TUNE_SEED` + trial, disjoint from the training,
 validation and evaluation seeds, so ``tlshield evaluate`` on the chosen settings measures on
 seeds the search never saw); its ``objective`` is the evaluation success rate when no step
 violated the channel (in the evaluation, and in training for configurations with a CBF), else
@@ -32,9 +32,9 @@ from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
 from tlshield.envs.params import FULL
-from tlshield.presets import DEFAULT_SCHEDULE, PRESETS, SCHEDULES
-from tlshield.seeds import MAX_TRIALS, TUNE_SEED
-from tlshield.settings import split
+from tlshield.lab.presets import DEFAULT_SCHEDULE, PRESETS, SCHEDULES
+from tlshield.lab.seeds import MAX_TRIALS, TUNE_SEED
+from tlshield.lab.settings import split
 
 #: The searchable settings: name -> (the configurations' part it needs: "cbf", "clf" or "",
 #: Optuna suggestion: ("float", low, high, log) / ("int", low, high) / ("choice", options)).
@@ -91,7 +91,7 @@ def searchable(config: str) -> tuple[str, ...]:
 
 
 def to_settings(params: dict[str, Any], config: str) -> dict[str, Any]:
-    """Named settings (:mod:`tlshield.settings`) of one sample's parameters: the bound
+    """Named settings (:mod:`tlshield.lab.settings`) of one sample's parameters: the bound
     scales become boxes, the rest is as sampled."""
     out = {k: v for k, v in params.items() if k not in ("clf_bounds", "cbf_bounds")}
     if "clf_bounds" in params or "cbf_bounds" in params:
@@ -154,8 +154,8 @@ def _trial(params: dict[str, Any], *, config: str, updates: int, seed: int, tria
     import torch
     from ray import tune
 
-    from tlshield.evaluation import evaluate
-    from tlshield.training import train
+    from tlshield.lab.evaluation import evaluate
+    from tlshield.lab.training import train
 
     torch.set_num_threads(1)
     shielded = CONFIGS[config][0]
@@ -222,8 +222,8 @@ def tune(
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
-    from tlshield import cluster
-    from tlshield.seeds import check_seeds
+    from tlshield.lab import cluster
+    from tlshield.lab.seeds import check_seeds
 
     names = tuple(search) if search else searchable(config)
     _check(config, names, samples, updates, trials)
@@ -360,7 +360,7 @@ def _write(
     for row in ranked + [r for r in rows if r["objective"] is None]:
         lines.append("| " + " | ".join(_cell(row[c]) for c in columns) + " |")
     (root / "trials.md").write_text("\n".join(lines) + "\n")
-    from tlshield.plots.tuning import plot_trials
+    from tlshield.lab.plots.tuning import plot_trials
 
     plot_trials(rows, names, {n: SPACE[n][1] for n in names}, root / "trials.png")
     feasible = [r for r in ranked if r["objective"] >= 0]

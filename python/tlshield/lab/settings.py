@@ -25,13 +25,13 @@ from typing import Any
 
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.params import flat_names, from_flat, upgrade
-from tlshield.runs import json_tuples
+from tlshield.lab.runs import json_tuples
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
-#: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.policies.
+#: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.lab.policies.
 #: POLICIES`) and whether rewards are normalised). ``use_sde`` (generalized state-dependent
 #: exploration) needs ``policy: "gaussian"``, SB3's own policy; ``learn_from`` chooses the action
-#: PPO learns from (:data:`tlshield.training.LEARN_FROM`).
+#: PPO learns from (:data:`tlshield.lab.training.LEARN_FROM`).
 PPO_NAMES = (
     "learning_rate",
     "ent_coef",
@@ -53,7 +53,7 @@ PPO_NAMES = (
 )
 #: Keywords of a bundled environment's factory besides its parameters (the task).
 TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}
-#: Settings of :func:`tlshield.training.train` itself.
+#: Settings of :func:`tlshield.lab.training.train` itself.
 SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
 
 
@@ -85,7 +85,7 @@ def check_names(names: Any, env_id: str = ENV_ID, where: str = "settings") -> No
 
 
 def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
-    """Keyword arguments of :func:`tlshield.training.train` for ``settings``: the schedule
+    """Keyword arguments of :func:`tlshield.lab.training.train` for ``settings``: the schedule
     settings as themselves, the PPO ones under ``ppo``, the rest as environment overrides.
     Checks the names, and the environment constants by building the environment's config."""
     settings = upgrade(settings, "settings")

@@ -3,7 +3,7 @@ episode ends at the horizon, on success or on collision. All trials run side by 
 batched policy call per step.
 
 Evaluation reset seeds start at ``EVAL_SEED`` (10,000 + trial); the seed ranges of training,
-validation and evaluation live in :mod:`tlshield.seeds`, so the three never meet.
+validation and evaluation live in :mod:`tlshield.lab.seeds`, so the three never meet.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from tlshield import measures
 from tlshield.envs import ENV_ID, env_horizon, import_modules, make
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
-from tlshield.runs import read_record
-from tlshield.seeds import EVAL_SEED, MAX_TRIALS
+from tlshield.lab import measures
+from tlshield.lab.runs import read_record
+from tlshield.lab.seeds import EVAL_SEED, MAX_TRIALS
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
 
@@ -35,7 +35,7 @@ def rollouts(
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
     by side with one batched policy call per step: per-trial outcomes, start states, agent
     paths and obstacle paths (the last three for Channel-v0 only; empty for other envs).
-    Violations and collisions are counted as :mod:`tlshield.measures` says; ``None`` where the
+    Violations and collisions are counted as :mod:`tlshield.lab.measures` says; ``None`` where the
     environment gives nothing to measure them by."""
     # The paper's evaluation rules: the CBF on in every configuration.
     envs = [make(env_id, config, evaluation=True, **overrides) for _ in seeds]
@@ -114,7 +114,7 @@ def evaluate(
     environment is the one its run.json names (``env_id``; Channel-v0 when absent).
     ``which="last"`` evaluates the last policy instead of the kept one and writes
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
-    folder's pickled statistics load (see :mod:`tlshield.saved`)."""
+    folder's pickled statistics load (see :mod:`tlshield.lab.saved`)."""
     if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
         raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")
     if which not in EVALUATION_FILES:
@@ -165,10 +165,10 @@ def saved_policy(
 ) -> Callable[[np.ndarray], np.ndarray]:
     """The trained policy ``which`` (``"kept"`` or ``"last"``) of a run folder
     (deterministic), with its observation statistics, read without running code from the
-    folder (:func:`tlshield.saved.load_policy`)."""
+    folder (:func:`tlshield.lab.saved.load_policy`)."""
     import torch
 
-    from tlshield.saved import load_policy
+    from tlshield.lab.saved import load_policy
 
     torch.set_num_threads(1)
     return load_policy(run, which, trust_pickles=trust_pickles)

@@ -1,5 +1,5 @@
 """Figures of a results folder (``tlshield reproduce`` / ``tlshield plot``; the folder's
-schema is in :mod:`tlshield.runs`, the results table in :mod:`tlshield.report`).
+schema is in :mod:`tlshield.lab.runs`, the results table in :mod:`tlshield.lab.report`).
 
 :func:`plot_all` writes the figures of the paper's case study (Li & Belta, Figs. 6.2.1-6.2.5)
 as 150 dpi PNGs:
@@ -24,16 +24,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tlshield.plots._style import CONFIG_COLORS, CONFIG_LABELS
-from tlshield.plots.automaton import _plot_automaton
-from tlshield.plots.curves import (
+from tlshield.lab.plots._style import CONFIG_COLORS, CONFIG_LABELS
+from tlshield.lab.plots.automaton import _plot_automaton
+from tlshield.lab.plots.curves import (
     _plot_learning_curves,
     _plot_min_constraints,
     _plot_min_obstacle_distance,
     _plot_success_rates,
 )
-from tlshield.plots.trajectories import _plot_trajectories
-from tlshield.runs import load_results
+from tlshield.lab.plots.trajectories import _plot_trajectories
+from tlshield.lab.runs import load_results
 
 __all__ = ["CONFIG_COLORS", "CONFIG_LABELS", "FIGURES", "plot_all"]
 

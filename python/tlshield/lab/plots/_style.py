@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from tlshield.envs.channel import ChannelParams
-from tlshield.runs import Run
+from tlshield.lab.runs import Run
 
 #: The colour of each configuration, the same in every figure.
 CONFIG_COLORS = {

@@ -122,7 +122,7 @@ def _settings(args: argparse.Namespace, env_id: str = ENV_ID) -> dict[str, objec
     """``--settings FILE`` then ``--set NAME=VALUE`` (later wins) as :func:`train` keywords,
     over the preset's and the schedule options'; fills ``args.config`` from the file when the
     command line names none."""
-    from tlshield import settings
+    from tlshield.lab import settings
 
     chosen: dict[str, object] = {}
     named = None
@@ -140,7 +140,7 @@ def _settings(args: argparse.Namespace, env_id: str = ENV_ID) -> dict[str, objec
 
 
 def _train(args: argparse.Namespace) -> int:
-    from tlshield.training import train
+    from tlshield.lab.training import train
 
     import_modules(args.imports)  # before --set is read against the env's parameters
     options = _settings(args, args.env)
@@ -163,7 +163,7 @@ def _train(args: argparse.Namespace) -> int:
 def _evaluate_run(
     run: Path | str, trials: int, which: str = "kept", trust_pickles: bool = False
 ) -> dict[str, object]:
-    from tlshield.evaluation import evaluate
+    from tlshield.lab.evaluation import evaluate
 
     if not Path(run).is_dir():
         what = "not a folder" if Path(run).exists() else "no such folder"
@@ -172,7 +172,7 @@ def _evaluate_run(
 
 
 def _print_evaluation(result: dict[str, object]) -> None:
-    from tlshield.measures import shown
+    from tlshield.lab.measures import shown
 
     collisions, steps = result["collisions"], result["violation_steps"]
     print(
@@ -192,7 +192,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from tlshield.training import reproduce
+    from tlshield.lab.training import reproduce
 
     root = reproduce(
         args.out,
@@ -211,7 +211,7 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 
 def _ablation(args: argparse.Namespace) -> int:
-    from tlshield.training import ablation
+    from tlshield.lab.training import ablation
 
     root = ablation(
         args.out,
@@ -227,7 +227,7 @@ def _ablation(args: argparse.Namespace) -> int:
 
 
 def _tune(args: argparse.Namespace) -> int:
-    from tlshield.tune import tune
+    from tlshield.lab.tune import tune
 
     root = tune(
         args.out,
@@ -248,8 +248,8 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from tlshield.plots import plot_all
-    from tlshield.report import results_table, seeds_table
+    from tlshield.lab.plots import plot_all
+    from tlshield.lab.report import results_table, seeds_table
 
     for path in plot_all(args.results, args.out):
         print(f"wrote {path}")
@@ -270,7 +270,7 @@ def _preset_options(args: argparse.Namespace) -> dict[str, object]:
 
 
 def _add_preset(parser: argparse.ArgumentParser) -> None:
-    from tlshield.presets import PRESETS
+    from tlshield.lab.presets import PRESETS
 
     parser.add_argument(
         "--preset",
@@ -283,7 +283,7 @@ def _add_preset(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_schedule(parser: argparse.ArgumentParser) -> None:
-    from tlshield.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, SCHEDULES
+    from tlshield.lab.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, SCHEDULES
 
     parser.add_argument(
         "--clf-schedule",
@@ -304,7 +304,7 @@ def _add_settings(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--settings",
         metavar="FILE",
-        help="JSON settings, e.g. the best.json of tlshield tune (names: tlshield.settings)",
+        help="JSON settings, e.g. the best.json of tlshield tune (names: tlshield.lab.settings)",
     )
     parser.add_argument(
         "--set",
@@ -511,7 +511,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         return _benchmark_safety_gym(args)
     if args.envs:
         raise ValueError("--envs: the flatworld benchmark has one env; use --formulas")
-    from tlshield import benchmark
+    from tlshield.lab import benchmark
 
     out = benchmark.flatworld(
         args.out or "results_flatworld",
@@ -530,7 +530,7 @@ def _benchmark(args: argparse.Namespace) -> int:
 
 
 def _benchmark_safety_gym(args: argparse.Namespace) -> int:
-    from tlshield import benchmark_safety_gym as sg
+    from tlshield.lab import benchmark_safety_gym as sg
 
     if args.formulas:
         raise ValueError("--formulas: the safety-gym benchmark's task is Safety-Gymnasium's")
