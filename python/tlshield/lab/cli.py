@@ -10,6 +10,7 @@ import sys
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gymnasium import error as gym_error
@@ -200,14 +201,17 @@ def _reproduce(args: argparse.Namespace) -> int:
         seeds=tuple(args.seeds),
         updates=args.updates,
         trials=args.trials,
-        workers=args.workers,
-        address=args.address,
-        progress=not args.quiet,
+        **_ray_options(args),
         **_settings(args),  # type: ignore[arg-type]
     )
     print((root / "results.md").read_text())
     print(f"figures in {root / 'figures'}")
     return 0
+
+
+def _ray_options(args: argparse.Namespace) -> dict[str, Any]:
+    """What every sweep command passes on about Ray and its progress bar."""
+    return {"workers": args.workers, "address": args.address, "progress": not args.quiet}
 
 
 def _ablation(args: argparse.Namespace) -> int:
@@ -218,9 +222,7 @@ def _ablation(args: argparse.Namespace) -> int:
         seeds=tuple(args.seeds),
         updates=args.updates,
         trials=args.trials,
-        workers=args.workers,
-        address=args.address,
-        progress=not args.quiet,
+        **_ray_options(args),
     )
     print((root / "ablation.md").read_text())
     return 0
@@ -237,9 +239,7 @@ def _tune(args: argparse.Namespace) -> int:
         search=args.search,
         seed=args.seed,
         trials=args.trials,
-        workers=args.workers,
-        address=args.address,
-        progress=not args.quiet,
+        **_ray_options(args),
     )
     print((root / "trials.md").read_text())
     print((root / "best.json").read_text())
@@ -520,9 +520,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         seeds=args.seeds or list(benchmark.DEFAULT_SEEDS),
         episodes=args.episodes or benchmark.DEFAULT_EPISODES,
         steps=args.steps or benchmark.DEFAULT_STEPS,
-        address=args.address,
-        workers=args.workers,
-        progress=not args.quiet,
+        **_ray_options(args),
     )
     print((out / "flatworld.md").read_text())
     print(f"wrote {out / 'flatworld.csv'}, {out / 'flatworld.md'}, {out / 'flatworld_paths.png'}")
@@ -541,9 +539,7 @@ def _benchmark_safety_gym(args: argparse.Namespace) -> int:
         seeds=args.seeds or sg.DEFAULT_SEEDS,
         steps=args.steps,
         episodes=args.episodes or sg.DEFAULT_EPISODES,
-        address=args.address,
-        workers=args.workers,
-        progress=not args.quiet,
+        **_ray_options(args),
     )
     print((out / "safety_gym.md").read_text())
     print(f"wrote {out / 'safety_gym.csv'}, {out / 'safety_gym.md'}, {out / 'safety_gym.png'}")

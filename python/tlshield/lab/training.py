@@ -97,50 +97,11 @@ def make_vec_env(
     return venv
 
 
-def train(
-    config: str,
-    seed: int,
-    updates: int,
-    out: str | Path,
-    *,
-    clf_schedule: str = DEFAULT_SCHEDULE,
-    clf_final_scale: float = DEFAULT_FINAL_SCALE,
-    progress: bool = True,
-    preset: str = "default",
-    ppo: dict[str, Any] | None = None,
-    env: str = ENV_ID,
-    on_update: Callable[[dict[str, float]], Any] | None = None,
-    imports: Sequence[str] = (),
-    **overrides: Any,
-) -> Path:
-    """Trains PPO on one configuration of ``env`` (Channel-v0 by default, or
-    ``"tlshield/PointMass-v0"``); returns the run folder. ``overrides`` are the environment's
-    parameters by flat name (``ChannelParams``, ``PointMassParams``). Ctrl-C stops cleanly:
-    the metrics so far and the model are kept (``run.json`` then says ``"interrupted":
-    true``).
-    ``on_update`` is called with each update's metrics row
-    (:data:`tlshield.lab.runs.METRIC_COLUMNS`) once it is written. ``env`` may be
-    ``"module:Env-v0"`` (``module`` is imported first, as ``gymnasium.make`` does);
-    ``imports`` are modules to import before it (where a user's environments register
-    themselves). Both are recorded in ``run.json``, so that
-    :func:`tlshield.lab.evaluation.evaluate` finds the environment again.
-    The same as ``learn(prepare(...))``."""
-    run = prepare(
-        config,
-        seed,
-        updates,
-        out,
-        clf_schedule=clf_schedule,
-        clf_final_scale=clf_final_scale,
-        progress=progress,
-        preset=preset,
-        ppo=ppo,
-        env=env,
-        on_update=on_update,
-        imports=imports,
-        **overrides,
-    )
-    return learn(run)
+def train(config: str, seed: int, updates: int, out: str | Path, **options: Any) -> Path:
+    """Trains PPO on one configuration of an environment (Channel-v0 by default); returns the
+    run folder. ``learn(prepare(config, seed, updates, out, **options))``: the options and the
+    environment's parameters are the keywords of :func:`prepare`."""
+    return learn(prepare(config, seed, updates, out, **options))
 
 
 def prepare(
@@ -161,7 +122,18 @@ def prepare(
 ) -> Any:
     """The first half of :func:`train`: checks the arguments, builds the environments and the
     model and writes ``run.json``; returns the :class:`tlshield.lab.callbacks.TrainingRun` that
-    :func:`learn` trains (its ``model`` stays usable afterwards, as the benchmarks use it)."""
+    :func:`learn` trains (its ``model`` stays usable afterwards, as the benchmarks use it).
+
+    ``env`` is Channel-v0 by default, or ``"tlshield/PointMass-v0"``, FlatWorld-v0 or a user's
+    registered environment; ``overrides`` are the environment's parameters by flat name
+    (``ChannelParams``, ``PointMassParams``). Ctrl-C stops :func:`learn` cleanly: the metrics
+    so far and the model are kept (``run.json`` then says ``"interrupted": true``).
+    ``on_update`` is called with each update's metrics row
+    (:data:`tlshield.lab.runs.METRIC_COLUMNS`) once it is written. ``env`` may be
+    ``"module:Env-v0"`` (``module`` is imported first, as ``gymnasium.make`` does);
+    ``imports`` are modules to import before it (where a user's environments register
+    themselves). Both are recorded in ``run.json``, so that
+    :func:`tlshield.lab.evaluation.evaluate` finds the environment again."""
     _check_run_args(config, updates, clf_schedule, clf_final_scale, preset)
     check_seeds((seed,))
     imports = list(imports)
