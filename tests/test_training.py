@@ -95,6 +95,38 @@ def test_clf_schedules(tmp_path: Path) -> None:
     assert scales == pytest.approx([1.0, 0.6, 0.2])
 
 
+def _largest_clf_push(run: object, steps: int = 40) -> np.ndarray:
+    """The largest |a_clf| per action dimension over a few zero-action steps of the run's
+    training environments (the CLF pushes towards the goal, up to its box)."""
+    inner = run.inner  # type: ignore[attr-defined]
+    inner.reset()
+    largest = np.zeros(2)
+    for _ in range(steps):
+        infos = inner.step(np.zeros((inner.num_envs, 2)))[3]
+        for info in infos:
+            largest = np.maximum(largest, np.abs(info["shield"]["a_clf"]))
+    return largest
+
+
+def test_the_clf_schedule_scales_the_training_environments_box(tmp_path: Path) -> None:
+    """Not only the logged scale: the shield the training environments step with has its CLF
+    box scaled (Channel-v0's rescaler, built by prepare, not the callback)."""
+    from tlshield.envs.channel import ChannelParams
+    from tlshield.lab.training import prepare
+
+    run = prepare("rl_clf", 1, 3, tmp_path / "s", clf_schedule="linear", progress=False)
+    assert run.rescale_clf is not None
+    lo, hi = ChannelParams().shield.clf_bounds
+    box = np.maximum(np.abs(lo), np.abs(hi))
+    full = _largest_clf_push(run)
+    assert np.any(full > 0.3 * box), "the CLF should push harder than the scaled box allows"
+    run.rescale_clf(0.3)
+    scaled = _largest_clf_push(run)
+    assert np.all(scaled <= 0.3 * box + 1e-9) and np.any(scaled > 0.0)
+    fixed = prepare("rl_clf", 1, 3, tmp_path / "f", progress=False)
+    assert fixed.rescale_clf is None  # the paper's fixed bounds: nothing to rescale
+
+
 def test_bad_training_arguments(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="config"):
         train("rl_cbf_clf_x", 0, 1, tmp_path / "bad")
@@ -176,6 +208,13 @@ def test_train_and_evaluate_point_mass_from_the_cli(tmp_path: Path) -> None:
     assert record["env_id"] == "tlshield/PointMass-v0" and record["finished"]
     rows = read_metrics(out)
     assert len(rows) == 1 and int(rows[0]["violations"]) == 0  # the HOCBF holds in training
+    # The constraint columns are the env's own (obstacles o1, o2), measured, not Channel's.
+    from tlshield.lab.runs import load_run, metric_columns
+
+    assert tuple(rows[0]) == metric_columns(("o1", "o2"))
+    assert min(float(rows[0]["min_h_o1"]), float(rows[0]["min_h_o2"])) >= 0.0
+    loaded = load_run(out)
+    assert loaded is not None and loaded.metrics["min_h_o2"].shape == (1,)
     result = evaluate(out, trials=3)
     assert result["trials"] == 3 and len(result["outcomes"]) == 3
     assert result["collisions"] == 0

@@ -19,11 +19,10 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
-from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.lab.evaluation import rollouts
 from tlshield.lab.measures import step_violation
-from tlshield.lab.presets import DEFAULT_SCHEDULE, clf_scale
-from tlshield.lab.runs import METRIC_COLUMNS
+from tlshield.lab.presets import clf_scale
+from tlshield.lab.runs import metric_columns
 from tlshield.lab.saved import save_normalization
 from tlshield.lab.seeds import validation_seed
 
@@ -46,6 +45,9 @@ class TrainingRun:
     overrides: dict[str, Any]
     clf_schedule: str
     clf_final_scale: float
+    #: Applies a CLF-box scale to the training environments' shields (None: nothing to scale;
+    #: :func:`tlshield.lab.training.prepare` builds it for the env that has one).
+    rescale_clf: Callable[[float], Any] | None
     validate_every: int | None
     validation_trials: int
     on_update: Callable[[dict[str, float]], Any] | None
@@ -143,12 +145,6 @@ def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
     }
 
 
-def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
-    """``params`` with its CLF box scaled by ``scale``."""
-    (lo_v, lo_w), (hi_v, hi_w) = params.shield.clf_bounds
-    return params.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
-
-
 class ClfSchedule(BaseCallback):  # type: ignore[misc]
     """The CLF-bound schedule: before each rollout, the CLF box of the training environments'
     shield is scaled as :func:`tlshield.lab.presets.clf_scale` says for the progress so far."""
@@ -165,10 +161,8 @@ class ClfSchedule(BaseCallback):  # type: ignore[misc]
         self.scale = clf_scale(
             run.clf_schedule, self.update / max(run.updates - 1, 1), run.clf_final_scale
         )
-        if CONFIGS[run.config][1] and run.clf_schedule != DEFAULT_SCHEDULE:
-            run.inner.set_attr(
-                "shield", channel_shield(scaled_clf(run.params, self.scale), run.config)
-            )
+        if run.rescale_clf is not None:
+            run.rescale_clf(self.scale)
 
     def _on_step(self) -> bool:
         return True
@@ -220,7 +214,9 @@ class Validation(BaseCallback):  # type: ignore[misc]
 class UpdateLog(BaseCallback):  # type: ignore[misc]
     """Collects the metrics of every step; per update, writes a ``metrics.csv`` row (and
     TensorBoard), calls ``run.on_update`` and moves the progress bar. It reads the update's CLF
-    scale and validation from the callbacks that own them."""
+    scale and validation from the callbacks that own them. The constraint columns
+    (``min_h_<name>``) are the constraints the environment reports at reset
+    (``info["constraints"]``), in its order: names come from the env, none from here."""
 
     def __init__(self, run: TrainingRun, schedule: ClfSchedule, validation: Validation) -> None:
         super().__init__()
@@ -236,9 +232,13 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
 
         run = self.run
         self.metrics = UpdateMetrics(run.inner.num_envs, run.model.gamma)
+        # SB3 resets the environments before it initialises the callbacks.
+        reset_info = (getattr(run.inner, "reset_infos", None) or [{}])[0]
+        self.constraints = [str(name) for name in reset_info.get("constraints", {})]
         run.model.set_logger(configure(str(run.folder / "tb"), ["tensorboard"]))
         self.csv_file = (run.folder / "metrics.csv").open("w", newline="")
-        self.writer = csv.DictWriter(self.csv_file, fieldnames=METRIC_COLUMNS)
+        columns = metric_columns(self.constraints)
+        self.writer = csv.DictWriter(self.csv_file, fieldnames=columns)
         self.writer.writeheader()
         self.csv_file.flush()
         self.bar = tqdm(
@@ -275,9 +275,11 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
             "episodes": len(returns),
             "return_mean": float(np.mean(returns)) if returns else math.nan,
             "return_std": float(np.std(returns)) if returns else math.nan,
-            # Not measured (an env without these keys): NaN, never a value that looks safe.
-            "min_h_c1": _measured(metrics.min_h.get("c1", math.inf)),
-            "min_h_c2": _measured(metrics.min_h.get("c2", math.inf)),
+            # Not measured (no step reported it): NaN, never a value that looks safe.
+            **{
+                f"min_h_{name}": _measured(metrics.min_h.get(name, math.inf))
+                for name in self.constraints
+            },
             "min_obstacle_distance": _measured(metrics.min_d),
             "violations": math.nan if metrics.violations is None else metrics.violations,
             "trap_entries": metrics.trap_entries,

@@ -6,7 +6,9 @@ A results folder holds one run folder per configuration and seed (``<config>_s<s
 * ``run.json`` (:data:`RUN_FILE`): the run's record, what it trained with (configuration,
   seed, preset, environment overrides, PPO settings), whether it finished and which checkpoint
   was kept (``config.json`` in folders written by tlshield 0.1, still read);
-* ``metrics.csv``: one row per PPO update (:data:`METRIC_COLUMNS`), written as it goes;
+* ``metrics.csv``: one row per PPO update (:func:`metric_columns`, with a ``min_h_<name>``
+  column per constraint the environment reports; Channel-v0's are :data:`METRIC_COLUMNS`),
+  written as it goes;
 * ``model.zip`` (SB3) with ``normalization.json`` (observation statistics: ``obs_mean``,
   ``obs_var``, ``epsilon``, ``clip_obs``), the kept policy, and ``last_model.zip`` with
   ``last_normalization.json``, the last one; read without unpickling (:mod:`tlshield.lab.saved`);
@@ -24,6 +26,7 @@ from __future__ import annotations
 import csv
 import json
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +46,7 @@ __all__ = [
     "is_finished",
     "load_results",
     "load_run",
+    "metric_columns",
     "read_record",
     "record_path",
 ]
@@ -81,15 +85,10 @@ DIAGNOSTIC_COLUMNS = (
     "value_loss",
     "entropy_loss",
 )
-#: Columns of metrics.csv, in order.
-METRIC_COLUMNS = (
-    "update",
-    "timesteps",
-    "episodes",
-    "return_mean",
-    "return_std",
-    "min_h_c1",
-    "min_h_c2",
+#: The columns of metrics.csv before the constraint columns.
+_HEAD_COLUMNS = ("update", "timesteps", "episodes", "return_mean", "return_std")
+#: The columns of metrics.csv after the constraint columns.
+_TAIL_COLUMNS = (
     "min_obstacle_distance",
     "violations",
     "trap_entries",
@@ -103,6 +102,17 @@ METRIC_COLUMNS = (
 )
 
 
+def metric_columns(constraints: Sequence[str]) -> tuple[str, ...]:
+    """The columns of metrics.csv, in order, for an environment that reports ``constraints``
+    (the names of its ``info["constraints"]``): one ``min_h_<name>`` column each, the smallest
+    value of that constraint in the update."""
+    return (*_HEAD_COLUMNS, *(f"min_h_{name}" for name in constraints), *_TAIL_COLUMNS)
+
+
+#: The columns of metrics.csv for Channel-v0 (constraints ``c1``, ``c2``), in order.
+METRIC_COLUMNS = metric_columns(("c1", "c2"))
+
+
 @dataclass
 class Run:
     """One run folder of a results folder."""
@@ -113,7 +123,7 @@ class Run:
     config: str
     #: Training seed.
     seed: int
-    #: metrics.csv by column (:data:`tlshield.lab.runs.METRIC_COLUMNS`), one value per update;
+    #: metrics.csv by column (:func:`tlshield.lab.runs.metric_columns`), one value per update;
     #: every array is empty when the run has no complete row yet.
     metrics: dict[str, NDArray[np.float64]]
     #: evaluation.json, or None when the run was not evaluated.
@@ -157,23 +167,30 @@ def _env_params(record: dict[str, Any]) -> ChannelParams:
 
 
 def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:
-    """metrics.csv by column; tolerates a missing or empty file and a last row cut short."""
+    """metrics.csv by column (its own constraint columns; Channel-v0's when it has no header);
+    tolerates a missing or empty file and a last row cut short."""
     rows: list[list[float]] = []
+    columns = METRIC_COLUMNS
     if path.is_file():
         with path.open(newline="") as f:
-            for row in csv.DictReader(f):
+            reader = csv.DictReader(f)
+            header = reader.fieldnames or []
+            if header:
+                constraints = [c[len("min_h_") :] for c in header if c.startswith("min_h_")]
+                columns = metric_columns(constraints)
+            for row in reader:
                 try:
                     # Diagnostic columns came later: older runs read them as NaN.
                     rows.append(
                         [
                             float(row.get(c) or "nan") if c in DIAGNOSTIC_COLUMNS else float(row[c])
-                            for c in METRIC_COLUMNS
+                            for c in columns
                         ]
                     )
                 except (KeyError, TypeError, ValueError):
                     continue  # an incomplete row (the run was stopped while writing it)
-    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(METRIC_COLUMNS))
-    return {c: table[:, i].copy() for i, c in enumerate(METRIC_COLUMNS)}
+    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(columns))
+    return {c: table[:, i].copy() for i, c in enumerate(columns)}
 
 
 def _read_json(path: Path) -> dict[str, Any] | None:

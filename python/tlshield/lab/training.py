@@ -48,7 +48,7 @@ from tlshield.envs import (
     import_modules,
     make,
 )
-from tlshield.envs.channel import CONFIGS
+from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.envs.params import FULL, as_flat
 from tlshield.lab.evaluation import evaluate
 from tlshield.lab.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, PRESETS, SCHEDULES
@@ -181,11 +181,33 @@ def prepare(
         overrides=overrides,
         clf_schedule=clf_schedule,
         clf_final_scale=clf_final_scale,
+        rescale_clf=_clf_rescaler(env, config, clf_schedule, inner, params),
         validate_every=PRESETS[preset].get("validate_every"),
         validation_trials=int(PRESETS[preset].get("validation_trials", 0)),
         on_update=on_update,
         progress=progress,
     )
+
+
+def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
+    """``params`` with its CLF box scaled by ``scale``."""
+    (lo_v, lo_w), (hi_v, hi_w) = params.shield.clf_bounds
+    return params.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
+
+
+def _clf_rescaler(
+    env: str, config: str, clf_schedule: str, inner: Any, params: Any
+) -> Callable[[float], None] | None:
+    """What :class:`tlshield.lab.callbacks.ClfSchedule` calls with each rollout's scale: for
+    Channel-v0 (the one env with a CLF schedule), its shield rebuilt with the CLF box scaled,
+    set on every training environment; None when there is nothing to scale."""
+    if env != ENV_ID or clf_schedule == DEFAULT_SCHEDULE or not CONFIGS[config][1]:
+        return None
+
+    def rescale(scale: float) -> None:
+        inner.set_attr("shield", channel_shield(scaled_clf(params, scale), config))
+
+    return rescale
 
 
 #: What PPO's rollout stores as the action taken (setting ``learn_from``): the sampled action
