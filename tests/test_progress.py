@@ -190,3 +190,29 @@ def test_trap_never_pays_better_than_outside(reward: str) -> None:
                 break
     assert trapped_steps > 0
     assert penalty <= worst
+
+
+def test_progress_defaults_live_once_in_the_core() -> None:
+    """Issue 36: the progress reward's defaults are the core's (tlshield._core.DEFAULT_*),
+    read by Automaton.progress_reward and FsaAugmented alike, not typed again."""
+    import inspect
+
+    from tlshield import _core
+    from tlshield.wrappers import FsaAugmented
+
+    spec = Spec("F a", {"a": Ball([0, 1], 0.5, [1.0, 0.0])})
+    implicit = spec.automaton().progress_reward()
+    explicit = spec.automaton().progress_reward(
+        gamma=_core.DEFAULT_GAMMA,
+        horizon=_core.DEFAULT_HORIZON,
+        scale=_core.DEFAULT_PROGRESS_SCALE,
+        c_r=_core.DEFAULT_C_R,
+    )
+    assert (implicit.bonus, implicit.step_cost) == (explicit.bonus, explicit.step_cost)
+    other = spec.automaton().progress_reward(horizon=_core.DEFAULT_HORIZON + 1)
+    assert other.bonus != implicit.bonus  # the bonus depends on the horizon it defaults
+    defaults = inspect.signature(FsaAugmented).parameters
+    assert defaults["gamma"].default == _core.DEFAULT_GAMMA
+    assert defaults["horizon"].default == _core.DEFAULT_HORIZON
+    assert defaults["scale"].default == _core.DEFAULT_PROGRESS_SCALE
+    assert defaults["c_r"].default == _core.DEFAULT_C_R

@@ -24,6 +24,9 @@ def _restore(
 
 DEFAULT_C_R: float
 DEFAULT_TRAP_PENALTY: float
+DEFAULT_GAMMA: float
+DEFAULT_HORIZON: int
+DEFAULT_PROGRESS_SCALE: float
 GRAD_RELAXED: int
 GRAD_FAILED: int
 GRAD_DEGENERATE: int
@@ -168,12 +171,12 @@ class Automaton:
     def progress_reward(
         self,
         *,
-        gamma: float = 0.99,
-        horizon: int = 200,
-        scale: float = 1.0,
+        gamma: float = ...,
+        horizon: int = ...,
+        scale: float = ...,
         step_cost: float | None = None,
         bonus: float | None = None,
-        c_r: float = 1.0,
+        c_r: float = ...,
         exclusive: Sequence[Sequence[str]] | None = None,
     ) -> ProgressReward: ...
 

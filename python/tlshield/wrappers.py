@@ -22,7 +22,15 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import DEFAULT_C_R, DEFAULT_TRAP_PENALTY, Shield, Spec
+from tlshield._core import (
+    DEFAULT_C_R,
+    DEFAULT_GAMMA,
+    DEFAULT_HORIZON,
+    DEFAULT_PROGRESS_SCALE,
+    DEFAULT_TRAP_PENALTY,
+    Shield,
+    Spec,
+)
 from tlshield.copying import IndependentCopies
 from tlshield.tracking import REWARDS, FsaTracker, shield_info
 from tlshield.vector import ShieldedVectorEnv
@@ -68,9 +76,9 @@ class FsaAugmented(IndependentCopies, gym.Wrapper):
         terminate_on_trap: bool = False,
         failure_on_termination: bool = False,
         reward: str = "progress",
-        gamma: float = 0.99,
-        horizon: int = 200,
-        scale: float = 1.0,
+        gamma: float = DEFAULT_GAMMA,
+        horizon: int = DEFAULT_HORIZON,
+        scale: float = DEFAULT_PROGRESS_SCALE,
         exclusive: Sequence[Sequence[str]] = (),
         **progress: Any,
     ) -> None:

@@ -33,6 +33,13 @@
 use crate::automaton::{Automaton, Reading};
 use crate::error::{AutomatonError, InputError};
 
+/// The default training discount of [`ProgressParams`].
+pub const DEFAULT_GAMMA: f64 = 0.99;
+/// The default episode length of [`ProgressParams`], for the bonus.
+pub const DEFAULT_HORIZON: u32 = 200;
+/// The default robustness scale of [`ProgressParams`].
+pub const DEFAULT_SCALE: f64 = 1.0;
+
 /// Parameters of [`ProgressReward`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProgressParams {
@@ -58,12 +65,12 @@ pub struct ProgressParams {
 impl Default for ProgressParams {
     fn default() -> Self {
         ProgressParams {
-            gamma: 0.99,
-            scale: 1.0,
+            gamma: DEFAULT_GAMMA,
+            scale: DEFAULT_SCALE,
             step_cost: None,
             bonus: None,
-            horizon: 200,
-            c_r: 1.0,
+            horizon: DEFAULT_HORIZON,
+            c_r: crate::monitor::DEFAULT_C_R,
             exclusive: Vec::new(),
         }
     }

@@ -8,7 +8,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::cnf::{dnf_text, Literal};
-use tlshield_core::{Automaton, ProgressParams, Spec, Trajectory};
+use tlshield_core::{progress, Automaton, ProgressParams, Spec, Trajectory};
 
 use crate::convert::{batch_order_hint, order_hint, state, vector, FloatArray};
 use crate::errors::deprecated;
@@ -369,7 +369,16 @@ impl PyAutomaton {
     /// which the within-state shaping is halfway down its band, ``exclusive`` groups of atoms
     /// that never hold together beyond those the spec declares (``Spec(..., exclusive=...)``),
     /// which always apply.
-    #[pyo3(signature = (*, gamma=0.99, horizon=200, scale=1.0, step_cost=None, bonus=None, c_r=1.0, exclusive=None))]
+    #[pyo3(signature = (
+        *,
+        gamma=progress::DEFAULT_GAMMA,
+        horizon=i64::from(progress::DEFAULT_HORIZON),
+        scale=progress::DEFAULT_SCALE,
+        step_cost=None,
+        bonus=None,
+        c_r=tlshield_core::monitor::DEFAULT_C_R,
+        exclusive=None
+    ))]
     #[allow(clippy::too_many_arguments)]
     fn progress_reward(
         &self,

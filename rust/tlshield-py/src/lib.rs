@@ -52,6 +52,13 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "DEFAULT_TRAP_PENALTY",
         tlshield_core::monitor::DEFAULT_TRAP_PENALTY,
     )?;
+    // The progress reward's defaults (Automaton.progress_reward and FsaAugmented read them).
+    m.add("DEFAULT_GAMMA", tlshield_core::progress::DEFAULT_GAMMA)?;
+    m.add("DEFAULT_HORIZON", tlshield_core::progress::DEFAULT_HORIZON)?;
+    m.add(
+        "DEFAULT_PROGRESS_SCALE",
+        tlshield_core::progress::DEFAULT_SCALE,
+    )?;
     m.add_class::<predicate::PyHalfspace>()?;
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<predicate::PyUnion>()?;
