@@ -2,7 +2,9 @@
 published success rates of DeepLTL, GCRL-LTL and LTL2Action.
 
 Per (configuration, formula, seed) a PPO agent is trained on ``tlshield/FlatWorld-v0`` with
-that formula and shield configuration, then evaluated on ``episodes`` episodes with the
+that formula and shield configuration, through the same pipeline as ``tlshield train``
+(:func:`tlshield.lab.training.prepare` and :func:`~tlshield.lab.training.learn`, preset
+:data:`PRESET`), then evaluated on ``episodes`` episodes with the
 stochastic policy (as published) and the CBF on in every configuration but ``rl`` (the
 unshielded contrast row). Two rows need no training: the shield with a zero policy
 (``tlshield-zero``) and with a uniformly random one (``tlshield-random``), so a reader sees
