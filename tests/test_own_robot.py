@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import re
 import subprocess
 import sys
@@ -100,7 +99,9 @@ def test_the_room_trains_and_evaluates_from_the_command_line(tmp_path: Path) -> 
     with (run / "metrics.csv").open() as f:
         row = next(csv.DictReader(f))
     assert float(row["violations"]) == 0.0  # measured from the barriers and the trap
-    assert math.isnan(float(row["min_h_c1"]))  # Channel-v0's constraints: not measured here
+    # The constraint columns are the env's own: this one reports no info["constraints"], so
+    # there are none (no NaN columns under Channel-v0's names, as before issue 36).
+    assert [c for c in row if c.startswith("min_h_")] == []
     done = _cli("evaluate", str(run), "--trials", "3", cwd=EXAMPLES)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "collisions not measured, violation steps 0" in done.stdout
