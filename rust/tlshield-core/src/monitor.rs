@@ -13,10 +13,9 @@ use crate::error::{AutomatonError, InputError};
 use crate::progress::ProgressReward;
 use crate::validate::check_finite;
 
-/// The default weight `c_r` of Eq. 5A1's trap term (the paper's task reward).
-pub const DEFAULT_C_R: f64 = 1.0;
-/// The default reward of a step in the trap (the paper's task reward).
-pub const DEFAULT_TRAP_PENALTY: f64 = -100.0;
+/// The task reward's defaults, owned by Eq. 5A1 (`automaton::guidance`), here too because a
+/// monitor is where most callers meet them.
+pub use crate::automaton::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 
 /// The task reward a monitor pays.
 #[derive(Debug, Clone)]

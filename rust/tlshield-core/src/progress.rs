@@ -70,7 +70,7 @@ impl Default for ProgressParams {
             step_cost: None,
             bonus: None,
             horizon: DEFAULT_HORIZON,
-            c_r: crate::monitor::DEFAULT_C_R,
+            c_r: crate::automaton::DEFAULT_C_R,
             exclusive: Vec::new(),
         }
     }

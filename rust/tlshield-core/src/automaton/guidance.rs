@@ -12,6 +12,11 @@ use crate::error::{AutomatonError, InputError};
 use crate::predicate::{Center, Predicate};
 use crate::region;
 
+/// The default weight `c_r` of Eq. 5A1's trap term (the paper's task reward).
+pub const DEFAULT_C_R: f64 = 1.0;
+/// The default reward of a step in the trap (the paper's task reward).
+pub const DEFAULT_TRAP_PENALTY: f64 = -100.0;
+
 impl Reading<'_> {
     /// The Eq. 5A1 value of being in `q` at this state:
     /// `min(rho(s, D_q), c_r * rho(s, !psi_{q,trap}))`, `rho(s, D_q)` without a trap edge, 0 in
