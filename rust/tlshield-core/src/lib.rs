@@ -36,6 +36,7 @@ pub mod progress;
 pub mod qp;
 pub mod region;
 pub mod robustness;
+pub mod route;
 pub mod sensitivity;
 pub mod shield;
 pub mod slots;

@@ -366,7 +366,7 @@ impl PyShield {
         spec, dynamics, *, alpha, c3, k, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
-        inputs=None, disturbance=None,
+        inputs=None, disturbance=None, route=true, route_clearance=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -392,6 +392,8 @@ impl PyShield {
         preserve_progress: bool,
         inputs: Option<usize>,
         disturbance: Option<&Bound<'_, PyAny>>,
+        route: bool,
+        route_clearance: Option<f64>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let custom = dynamics
@@ -464,6 +466,10 @@ impl PyShield {
         .with_alpha2(alpha2)
         .with_clf_gain(clf_gain.unwrap_or(ShieldParams::DEFAULT_CLF_GAIN))
         .with_preserve_progress(preserve_progress)
+        .with_route(
+            route,
+            route_clearance.unwrap_or(tlshield_core::route::DEFAULT_CLEARANCE),
+        )
         .with_disturbance(
             disturbance
                 .map(disturbance_bounds)
@@ -846,6 +852,8 @@ impl PyShield {
         kwargs.set_item("clf_gain", p.clf_gain)?;
         kwargs.set_item("preserve_progress", p.preserve_progress)?;
         kwargs.set_item("inputs", shield.inputs())?;
+        kwargs.set_item("route", p.route)?;
+        kwargs.set_item("route_clearance", p.route_clearance)?;
         let bounds = PyDict::new(py);
         for &(d, w) in &p.disturbance {
             bounds.set_item(d, w)?;

@@ -240,6 +240,13 @@ impl Shield {
         positive("c3", params.c3)?;
         positive("k", params.k)?;
         positive("slack_penalty", params.slack_penalty)?;
+        if !(params.route_clearance.is_finite() && params.route_clearance >= 0.0) {
+            return Err(ShieldError::Config(format!(
+                "route_clearance = {}: expected a finite number >= 0 (a fraction of each \
+                 obstacle's radius)",
+                params.route_clearance
+            )));
+        }
         if !(params.margin.is_finite() && params.margin > 0.0) {
             return Err(ShieldError::Config(format!(
                 "margin = {}: expected a finite number > 0 (an atom holds only while its \

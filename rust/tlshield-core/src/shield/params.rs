@@ -215,6 +215,14 @@ pub struct ShieldParams {
     /// so it holds for every error within the bounds (a robust CBF; DESIGN.md: "Plants the
     /// shield only approximates"). Empty by default: the model is the plant.
     pub disturbance: Vec<(usize, f64)>,
+    /// Whether the CLF's target is routed around the discs the shield keeps the state out of
+    /// (its avoid literals and user barriers; see [`crate::route`]), instead of pointing
+    /// straight at the goal, where the CLF-CBF QP would park the robot in front of an
+    /// obstacle. On by default; with nothing in the way the target is the goal.
+    pub route: bool,
+    /// How far the router keeps from each disc, relative to its radius (>= 0; default
+    /// [`crate::route::DEFAULT_CLEARANCE`]).
+    pub route_clearance: f64,
 }
 
 impl ShieldParams {
@@ -251,6 +259,8 @@ impl ShieldParams {
             margin: Self::DEFAULT_MARGIN,
             preserve_progress: true,
             disturbance: Vec::new(),
+            route: true,
+            route_clearance: crate::route::DEFAULT_CLEARANCE,
         }
     }
 
@@ -318,6 +328,14 @@ impl ShieldParams {
     /// The HOCBF's second gain (needed for barriers of relative degree 2).
     pub fn with_alpha2(mut self, alpha2: Option<f64>) -> Self {
         self.alpha2 = alpha2;
+        self
+    }
+
+    /// Whether the CLF's target is routed (see [`ShieldParams::route`]), and the router's
+    /// clearance relative to each disc's radius.
+    pub fn with_route(mut self, on: bool, clearance: f64) -> Self {
+        self.route = on;
+        self.route_clearance = clearance;
         self
     }
 

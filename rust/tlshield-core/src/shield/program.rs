@@ -23,7 +23,9 @@ use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::linalg::dot;
 use crate::monitor::Monitor;
+use crate::predicate::{Center, Predicate};
 use crate::qp::DenseQp;
+use crate::route::{Disc, Router};
 
 /// The rows of Eq. 5D2 at one state, and the buffers they are computed in.
 #[derive(Debug, Default)]
@@ -50,6 +52,8 @@ pub(super) struct Program {
     /// The closed-form lower bound of `delta` over the CLF box; the QP solves for
     /// `d = delta - delta_0 >= 0`.
     pub(super) delta_0: f64,
+    /// Routes the CLF's target around the discs to avoid (`crate::route`).
+    router: Router,
     /// Variables of the unrelaxed problem: `a_cbf` (m if the CBF is on), `a_clf` and `d` (if
     /// there is a goal).
     pub(super) cbf_vars: usize,
@@ -92,6 +96,29 @@ fn jacobian_times(
         (None, Some(model)) if transpose => model.jacobian_f_transpose_times(s, u, out),
         (None, Some(model)) => model.jacobian_f_times(s, u, out),
         (None, None) => unreachable!("second-order rows need a model or a Jacobian"),
+    }
+}
+
+/// The discs whose outside `predicate` asks for, as the router sees them: a ball over `pos`
+/// (centre fixed or read from `s`), or each ball of a union; anything else is not routed.
+fn push_discs(router: &mut Router, predicate: &Predicate, pos: &[usize; 2], s: &[f64]) {
+    match predicate {
+        Predicate::Ball(b) if b.pos() == pos => {
+            let center = match b.center() {
+                Center::Fixed(c) => [c[0], c[1]],
+                Center::Dims(d) => [s[d[0]], s[d[1]]],
+            };
+            router.push(Disc {
+                center,
+                radius: b.radius(),
+            });
+        }
+        Predicate::Union(parts) => {
+            for part in parts {
+                push_discs(router, part, pos, s);
+            }
+        }
+        _ => {}
     }
 }
 
@@ -338,6 +365,9 @@ impl Program {
                 }),
                 None => reading.goal(q, &mut self.goal),
             };
+        if self.has_goal && params.route && params.pos.len() == 2 {
+            self.route(params, s, q, reading);
+        }
         self.clf_rhs = 0.0;
         self.delta_0 = 0.0;
         self.clf_lg.clear();
@@ -375,6 +405,9 @@ impl Program {
                     }
                 }
             }
+            if params.route {
+                self.uncredit_blocked_progress(m);
+            }
             self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + params.c3 * v);
             // The CLF bounds give delta a lower bound in closed form; solving for the excess
             // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
@@ -389,6 +422,62 @@ impl Program {
                 .sum::<f64>();
             self.delta_0 = (best - self.clf_rhs).max(0.0);
         }
+    }
+
+    /// Progress the barriers will cancel is not progress: for every barrier row that the RL
+    /// action alone violates (`r + L . a_rl < 0`, so the CBF will cut that action), the part of
+    /// `Lg V` that credits motion into the barrier (`Lg V . L > 0`) is projected out. Without
+    /// this, a push into an obstacle that also points towards the target satisfies the CLF row
+    /// while `a_cbf` cancels it: a parked equilibrium with `delta = 0` (measured with a greedy
+    /// seeker on the unicycle). With it, the CLF must find its decrease along the barrier.
+    fn uncredit_blocked_progress(&mut self, m: usize) {
+        for (row, &rhs) in self.lg.chunks_exact(m).zip(&self.rhs) {
+            if rhs >= 0.0 {
+                continue;
+            }
+            let (along, norm2) = (dot(&self.clf_lg, row), dot(row, row));
+            if along > 0.0 && norm2 > 0.0 {
+                let t = along / norm2;
+                for (l, r) in self.clf_lg.iter_mut().zip(row) {
+                    *l -= t * r;
+                }
+            }
+        }
+    }
+
+    /// Replaces the goal by the router's target around the discs this step keeps the state out
+    /// of: the user's barriers and the safe set's literals that are the outside of a ball (or
+    /// of a union of balls) over the CLF's position (`crate::route`).
+    fn route(&mut self, params: &ShieldParams, s: &[f64], q: usize, reading: &Reading<'_>) {
+        if !params.use_cbf {
+            // The safe set was not needed for rows; the router still avoids what it names.
+            if params.preserve_progress {
+                reading.progress_safe_set(q, &mut self.safe);
+            } else {
+                reading.safe_set(q, &mut self.safe);
+            }
+        }
+        let pos = [params.pos[0], params.pos[1]];
+        let router = &mut self.router;
+        router.clear();
+        let user = params
+            .barriers
+            .iter()
+            .filter(|b| !b.positive)
+            .map(|b| &b.predicate);
+        let predicates = reading.automaton().spec().predicates();
+        let kept = self
+            .safe
+            .iter()
+            .filter(|(lit, _)| !lit.positive)
+            .map(|(lit, _)| &predicates[lit.atom]);
+        for predicate in user.chain(kept) {
+            push_discs(router, predicate, &pos, s);
+        }
+        let p = [s[pos[0]], s[pos[1]]];
+        let goal = [self.goal[0], self.goal[1]];
+        let target = router.target(p, goal, params.route_clearance);
+        self.goal.copy_from_slice(&target);
     }
 
     /// Writes the QP of the last [`Program::rows`] into `qp`; `relaxed` adds a slack

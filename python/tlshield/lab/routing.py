@@ -1,0 +1,254 @@
+"""Scripted scenarios for the shield's guidance: a robot on one side of obstacles, its goal on
+the other (docs/concepts/deadlock.md). They measure whether the shield routes around what it
+keeps the robot out of, or parks in front of it (the CLF-CBF deadlock).
+
+Four layouts (a disc on the line, a disc 5 cm off it, a concave U of three discs, eight random
+discs), three robots (single integrator, the paper's unicycle reference point, a double
+integrator), two encodings (the obstacles in the formula, ``(!o1 & ...) U goal``, or as the
+shield's barriers with ``F goal``) and two drivers (the shield alone, a zero RL action; a greedy
+seeker pushing straight at the goal through CBF+CLF). Every episode is seeded: the start and the
+goal are jittered, and the random layout is drawn, from ``numpy.random.default_rng(seed)``.
+
+``python -m tlshield.lab.routing --episodes 50`` prints the tables, with routing on and off.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from tlshield import (
+    Ball,
+    DoubleIntegrator,
+    Monitor,
+    Shield,
+    SingleIntegrator,
+    Spec,
+    Status,
+    Unicycle,
+)
+
+LAYOUTS = ("line", "off_line", "u_shape", "random8")
+ROBOTS = ("single", "unicycle", "double")
+ENCODINGS = ("formula", "barriers")
+DRIVERS = ("shield", "seeker")
+
+#: Where the robot starts and where its goal is (before the per-episode jitter).
+START = np.array([-2.0, 0.0])
+GOAL = np.array([2.0, 0.0])
+#: The goal region's radius (reached when the reference point is inside it).
+GOAL_RADIUS = 0.2
+DT = 0.05
+#: Steps per episode: 40 s, several times what the straight line takes.
+HORIZON = 800
+#: The speed bound of every robot (m/s) and the unicycle's turn rate bound (rad/s).
+SPEED = 1.0
+TURN = 3.0
+#: The CLF gain by the rule k = clf_bound / d with d = 0.5 m (docs/concepts/shield.md).
+CLF_DISTANCE = 0.5
+
+
+def layout(name: str, rng: np.random.Generator) -> list[tuple[np.ndarray, float]]:
+    """The obstacles (centre, radius) of a layout; the random one is drawn from ``rng``."""
+    if name == "line":
+        return [(np.array([0.0, 0.0]), 0.5)]
+    if name == "off_line":
+        return [(np.array([0.0, 0.05]), 0.5)]
+    if name == "u_shape":
+        # A cup open towards the robot: the goal's direction points into its bottom.
+        return [
+            (np.array([0.0, 0.75]), 0.45),
+            (np.array([0.55, 0.0]), 0.45),
+            (np.array([0.0, -0.75]), 0.45),
+        ]
+    if name == "random8":
+        discs: list[tuple[np.ndarray, float]] = []
+        while len(discs) < 8:
+            c = rng.uniform([-1.2, -1.2], [1.2, 1.2])
+            r = float(rng.uniform(0.2, 0.35))
+            if all(np.linalg.norm(c - o) > r + ro + 0.05 for o, ro in discs):
+                discs.append((c, r))
+        return discs
+    raise ValueError(f"layout: expected one of {LAYOUTS}, got {name!r}")
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A robot: its model (the plant and the shield's model), start state, the shield's
+    keywords and a greedy seeker's action."""
+
+    model: object
+    start: Callable[[np.ndarray], np.ndarray]
+    shield_kwargs: dict
+    seeker: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-12 else np.zeros_like(v)
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def robot(name: str) -> Robot:
+    """One of ``ROBOTS``, with the gains the guides recommend (k = clf_bound / d)."""
+    if name == "single":
+        b = SPEED
+        return Robot(
+            SingleIntegrator([0, 1]),
+            lambda p: p.copy(),
+            dict(alpha=2.0, c3=1.0, k=b / CLF_DISTANCE, cbf_bounds=(-3 * b, 3 * b), clf_bounds=(-b, b)),
+            lambda s, g: 0.5 * SPEED * _unit(g - s[:2]),
+        )
+    if name == "unicycle":
+        lo, hi = (-SPEED, -TURN), (SPEED, TURN)
+
+        def seek(s: np.ndarray, g: np.ndarray) -> np.ndarray:
+            err = _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
+            return np.array([0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN) * 0.5])
+
+        return Robot(
+            Unicycle(eps=0.1),
+            lambda p: np.array([p[0], p[1], 0.0]),
+            dict(
+                alpha=2.0,
+                c3=1.0,
+                # The rule per input, k = bound / (d * gain): the turn rate moves the point
+                # eps = 0.1 ahead at eps * omega, so k = TURN / (CLF_DISTANCE * 0.1).
+                k=TURN / (CLF_DISTANCE * 0.1),
+                cbf_bounds=(tuple(3 * x for x in lo), tuple(3 * x for x in hi)),
+                clf_bounds=(lo, hi),
+            ),
+            seek,
+        )
+    if name == "double":
+        b = SPEED
+
+        def seek_double(s: np.ndarray, g: np.ndarray) -> np.ndarray:
+            return np.clip(1.0 * _unit(g - s[:2]) * 0.5 - 1.0 * s[2:], -0.5 * b, 0.5 * b)
+
+        return Robot(
+            DoubleIntegrator([0, 1], [2, 3]),
+            lambda p: np.array([p[0], p[1], 0.0, 0.0]),
+            dict(
+                alpha=2.0,
+                alpha2=2.0,
+                c3=1.0,
+                k=b / CLF_DISTANCE,
+                clf_gain=1.0,
+                cbf_bounds=(-3 * b, 3 * b),
+                clf_bounds=(-b, b),
+            ),
+            seek_double,
+        )
+    raise ValueError(f"robot: expected one of {ROBOTS}, got {name!r}")
+
+
+def shield_for(
+    robot_name: str, obstacles: list[tuple[np.ndarray, float]], goal: np.ndarray, encoding: str, route: bool
+) -> Shield:
+    """The shield of one episode: obstacles in the formula or as barriers."""
+    r = robot(robot_name)
+    balls = {f"o{i + 1}": Ball(pos=[0, 1], radius=rad, center=list(c)) for i, (c, rad) in enumerate(obstacles)}
+    goal_ball = Ball(pos=[0, 1], radius=GOAL_RADIUS, center=list(goal))
+    if encoding == "formula":
+        avoid = " & ".join(f"!{name}" for name in balls)
+        spec = Spec(f"({avoid}) U goal", {**balls, "goal": goal_ball})
+        barriers = None
+    elif encoding == "barriers":
+        spec = Spec("F goal", {"goal": goal_ball})
+        barriers = {f"!{name}": ball for name, ball in balls.items()}
+    else:
+        raise ValueError(f"encoding: expected one of {ENCODINGS}, got {encoding!r}")
+    return Shield(spec, r.model, barriers=barriers, route=route, **r.shield_kwargs)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """What one episode gave."""
+
+    reached: bool
+    entries: int
+    steps: int
+    relaxed: int
+
+
+def episode(layout_name: str, robot_name: str, encoding: str, driver: str, seed: int, route: bool = True) -> Episode:
+    """One seeded episode (see the module docs)."""
+    rng = np.random.default_rng(seed)
+    start = START + rng.uniform(-0.1, 0.1, 2)
+    goal = GOAL + rng.uniform(-0.1, 0.1, 2)
+    obstacles = layout(layout_name, rng)
+    r = robot(robot_name)
+    shield = shield_for(robot_name, obstacles, goal, encoding, route)
+    monitor = Monitor(shield.automaton)
+    s = r.start(start)
+    monitor.reset(s)
+    m = 2
+    entries = relaxed = 0
+    for t in range(HORIZON):
+        a_rl = np.zeros(m) if driver == "shield" else r.seeker(s, goal)
+        out = shield.filter_monitor(monitor, a_rl)
+        relaxed += out.status != Status.SOLVED
+        s = r.model.step(s, out.action, DT)
+        p = s[:2]
+        entries += any(np.linalg.norm(p - c) < rad for c, rad in obstacles)
+        monitor.advance(s)
+        if np.linalg.norm(p - goal) < GOAL_RADIUS:
+            return Episode(True, entries, t + 1, relaxed)
+    return Episode(False, entries, HORIZON, relaxed)
+
+
+def cell(layout_name: str, robot_name: str, encoding: str, driver: str, episodes: int, route: bool = True) -> dict:
+    """Success rate, obstacle entries and relaxed steps over seeds ``0..episodes-1``."""
+    runs = [episode(layout_name, robot_name, encoding, driver, seed, route) for seed in range(episodes)]
+    return {
+        "success": sum(e.reached for e in runs) / episodes,
+        "entries": sum(e.entries for e in runs),
+        "relaxed": sum(e.relaxed for e in runs),
+    }
+
+
+def table(episodes: int, route: bool) -> str:
+    """The markdown table: one row per robot and driver, one column per layout; each cell
+    ``success formula / barriers`` (entries are counted and reported below the table)."""
+    lines = [
+        "| robot | driver | " + " | ".join(LAYOUTS) + " |",
+        "|---|---|" + "---|" * len(LAYOUTS),
+    ]
+    entries = relaxed = 0
+    for robot_name in ROBOTS:
+        for driver in DRIVERS:
+            cells = []
+            for layout_name in LAYOUTS:
+                parts = []
+                for encoding in ENCODINGS:
+                    c = cell(layout_name, robot_name, encoding, driver, episodes, route)
+                    entries += c["entries"]
+                    relaxed += c["relaxed"]
+                    parts.append(f"{c['success']:.2f}")
+                cells.append(" / ".join(parts))
+            lines.append(f"| {robot_name} | {driver} | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append(f"Obstacle entries: {entries}; relaxed or failed QPs: {relaxed}.")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--route", choices=("on", "off", "both"), default="both")
+    args = parser.parse_args(argv)
+    for route in {"on": [True], "off": [False], "both": [False, True]}[args.route]:
+        print(f"routing {'on' if route else 'off'} ({args.episodes} episodes per cell; success formula / barriers)")
+        print(table(args.episodes, route))
+        print()
+
+
+if __name__ == "__main__":
+    main()
