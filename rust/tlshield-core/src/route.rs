@@ -47,9 +47,6 @@ pub const LOOKAHEAD: f64 = 1.0;
 /// How far into the clearance (a fraction of the inflated radius) a segment from the robot may
 /// cut.
 pub const ROBOT_SLACK: f64 = 0.05;
-/// The extra length, relative to the straight distance to the goal, charged to a path whose
-/// first leg passes right of that line: ties go left, and a way right must be clearly shorter.
-pub const SIDE_BIAS: f64 = 0.1;
 /// The default inflation of each disc, relative to its radius.
 pub const DEFAULT_CLEARANCE: f64 = 0.2;
 
@@ -79,8 +76,32 @@ fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
-    a[0] * b[1] - a[1] * b[0]
+/// A point on the tangent from `p` to the circle at `c` of radius `r` on `side` (+1: passing the
+/// circle counter-clockwise about `c`): the tangent point, or, from on or inside the circle, a
+/// point a unit along the circle's tangent at `p`.
+fn tangent(p: [f64; 2], c: [f64; 2], r: f64, side: f64) -> [f64; 2] {
+    let rim = sub(p, c);
+    let d = norm(rim);
+    if d <= r || d == 0.0 {
+        let d = d.max(f64::MIN_POSITIVE);
+        return [p[0] - side * rim[1] / d, p[1] + side * rim[0] / d];
+    }
+    // The tangent point is at angle +-acos(r / d) from the direction c -> p.
+    let (sin, cos) = (side * (r / d).acos()).sin_cos();
+    let u = [rim[0] / d, rim[1] / d];
+    [
+        c[0] + r * (u[0] * cos - u[1] * sin),
+        c[1] + r * (u[0] * sin + u[1] * cos),
+    ]
+}
+
+/// The point on the tangent from `p` to the circle (`c`, `r`) on `side`, at least `lookahead`
+/// from `p` (past the tangent point when that is nearer).
+fn past_tangent(p: [f64; 2], c: [f64; 2], r: f64, side: f64, lookahead: f64) -> [f64; 2] {
+    let u = sub(tangent(p, c, r, side), p);
+    let len = norm(u).max(f64::MIN_POSITIVE);
+    let to = len.max(lookahead);
+    [p[0] + to * u[0] / len, p[1] + to * u[1] / len]
 }
 
 fn norm(a: [f64; 2]) -> f64 {
@@ -165,22 +186,17 @@ impl Router {
         let corner = 1.0 / (PI / SIDES as f64).cos();
         for (i, d) in self.discs.iter().enumerate() {
             let r = self.inflated[i] * corner;
-            let rim = sub(p, d.center);
-            let near = norm(rim);
-            // A robot within the clearance of a disc stands on its (shrunk) rim, where only the
-            // tangent leaves it without entering: two nodes along the tangent, a lookahead away.
-            let tangents = (near < d.radius * (1.0 + clearance) && near > 0.0).then(|| {
-                let step = LOOKAHEAD * d.radius * (1.0 + clearance) / near;
-                [
-                    [p[0] - rim[1] * step, p[1] + rim[0] * step],
-                    [p[0] + rim[1] * step, p[1] - rim[0] * step],
-                ]
-            });
+            // The two ways past the disc from the robot: along each tangent from it to the
+            // inflated circle, at least a lookahead far (continuous in the robot's position,
+            // so the shortest way does not jump as the robot moves).
+            let lookahead = LOOKAHEAD * d.radius * (1.0 + clearance);
+            let tangents = [1.0, -1.0]
+                .map(|side| past_tangent(p, d.center, self.inflated[i], side, lookahead));
             let corners = (0..SIDES).map(|k| {
                 let angle = 2.0 * PI * k as f64 / SIDES as f64;
                 [d.center[0] + r * angle.cos(), d.center[1] + r * angle.sin()]
             });
-            for v in corners.chain(tangents.into_iter().flatten()) {
+            for v in corners.chain(tangents) {
                 let covered = self
                     .discs
                     .iter()
@@ -193,9 +209,6 @@ impl Router {
             }
         }
         // Dijkstra on the dense visibility graph from the robot (node 0) to the goal (node 1).
-        // Passing on the right costs a little more, so that the side taken does not flip from
-        // step to step where both ways are about as long (a disc straight ahead).
-        let side = SIDE_BIAS * norm(sub(goal, p));
         let n = self.nodes.len();
         self.dist.clear();
         self.dist.resize(n, f64::INFINITY);
@@ -222,10 +235,7 @@ impl Router {
                     continue;
                 }
                 let b = self.nodes[v].0;
-                let mut through = best + norm(sub(b, a));
-                if u == 0 && cross(sub(goal, p), sub(b, p)) < 0.0 {
-                    through += side;
-                }
+                let through = best + norm(sub(b, a));
                 let seen = match u {
                     0 => self.visible_from_robot(a, b),
                     _ => self.visible(a, b),
@@ -240,73 +250,75 @@ impl Router {
             // Enclosed: no way around what is known. Aim at the goal (the shield parks).
             return goal;
         }
-        // The graph decides the way: around which disc first, and turning which way. The target
-        // is then exact: along the tangent from the robot to that disc's inflated circle on that
-        // side, at least a lookahead away (on the rim, the tangent at the robot).
+        // The way to go: the direction to a point of the path the robot sees (see
+        // `Router::aim`); the target is that far along it as the path is long, so that
+        // `V = |p - target|^2` is the squared length of the way left (a CLF whose gradient
+        // points along the path, and which asks the speed it would ask of a clear goal).
+        let aim = self.aim(p, clearance);
+        let u = sub(aim, p);
+        let len = norm(u);
+        if len <= 1e-12 {
+            return aim;
+        }
+        let left = self.dist[1];
+        [p[0] + left * u[0] / len, p[1] + left * u[1] / len]
+    }
+
+    /// A point of the last path found that the robot at `p` sees (see the module docs): the
+    /// point a lookahead along the path, or, hidden behind the disc the path wraps around, the
+    /// way along the tangent on its side; else the farthest point short of it in sight; the
+    /// first node at the least, which the robot sees by construction.
+    fn aim(&self, p: [f64; 2], clearance: f64) -> [f64; 2] {
         let mut first = 1;
         while self.prev[first] != 0 {
             first = self.prev[first];
         }
         let (corner_at, disc) = self.nodes[first];
         if disc == usize::MAX {
-            return goal;
+            return corner_at;
         }
-        let (c, r) = (self.discs[disc].center, self.inflated[disc]);
-        let rim = sub(p, c);
-        let d = norm(rim);
         let lookahead = LOOKAHEAD * self.discs[disc].radius * (1.0 + clearance);
-        // Which way round: towards the first node of the path a little way off (a corner the
-        // robot is passing may lie just behind it).
-        let mut ahead = corner_at;
-        let mut node = 1;
-        while node != 0 {
-            let v = self.nodes[node].0;
-            if norm(sub(v, p)) >= 0.5 * lookahead {
-                ahead = v;
-            }
-            node = self.prev[node];
+        let carrot = self.along_path(lookahead);
+        if self.visible_from_robot(p, carrot) {
+            return carrot;
         }
-        let turn = cross(rim, sub(ahead, p));
-        let direction = if d <= r || d == 0.0 {
-            let sign = if turn >= 0.0 { 1.0 } else { -1.0 };
-            [
-                -rim[1] * sign / d.max(f64::MIN_POSITIVE),
-                rim[0] * sign / d.max(f64::MIN_POSITIVE),
-            ]
+        // Hidden behind the disc the path wraps around (the robot on its rim): the way along
+        // the tangent from the robot on the carrot's side, which it sees.
+        let (c, r) = (self.discs[disc].center, self.inflated[disc]);
+        let [a, b] = [1.0, -1.0].map(|side| past_tangent(p, c, r, side, lookahead));
+        let toward = if norm(sub(a, carrot)) <= norm(sub(b, carrot)) {
+            a
         } else {
-            let beta = (r / d).acos();
-            let (u, (sin, cos)) = ([rim[0] / d, rim[1] / d], beta.sin_cos());
-            let touch = |sin: f64| {
-                let w = [u[0] * cos - u[1] * sin, u[0] * sin + u[1] * cos];
-                [c[0] + r * w[0], c[1] + r * w[1]]
-            };
-            let (a, b) = (touch(sin), touch(-sin));
-            let t = if cross(rim, sub(a, p)) * turn >= 0.0 {
-                a
-            } else {
-                b
-            };
-            let to = sub(t, p);
-            let len = norm(to).max(f64::MIN_POSITIVE);
-            if len > lookahead {
-                return self.in_sight_or(p, t, corner_at);
-            }
-            [to[0] / len, to[1] / len]
+            b
         };
-        let target = [
-            p[0] + lookahead * direction[0],
-            p[1] + lookahead * direction[1],
-        ];
-        self.in_sight_or(p, target, corner_at)
+        if self.visible_from_robot(p, toward) {
+            return toward;
+        }
+        let mut along = 0.8 * lookahead;
+        while along > self.dist[first] {
+            let carrot = self.along_path(along);
+            if self.visible_from_robot(p, carrot) {
+                return carrot;
+            }
+            along *= 0.8;
+        }
+        corner_at
     }
 
-    /// `target` if the robot sees it, else `corner` (the path's first corner, which it sees).
-    fn in_sight_or(&self, p: [f64; 2], target: [f64; 2], corner: [f64; 2]) -> [f64; 2] {
-        if self.visible_from_robot(p, target) {
-            target
-        } else {
-            corner
+    /// The point at length `along` on the last path found (robot to goal; the goal past its
+    /// end).
+    fn along_path(&self, along: f64) -> [f64; 2] {
+        let mut node = 1;
+        while self.prev[node] != 0 && self.dist[self.prev[node]] >= along {
+            node = self.prev[node];
         }
+        if self.dist[node] <= along {
+            return self.nodes[node].0;
+        }
+        let before = self.prev[node];
+        let (a, b) = (self.nodes[before].0, self.nodes[node].0);
+        let t = (along - self.dist[before]) / (self.dist[node] - self.dist[before]);
+        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
     }
 }
 
@@ -333,7 +345,7 @@ mod tests {
     fn a_disc_on_the_line_is_passed_on_one_side() {
         let mut r = router(&[([0.0, 0.0], 1.0)]);
         let t = r.target([-3.0, 0.0], [3.0, 0.0], 0.2);
-        assert!(t[1].abs() > 0.5, "{t:?}");
+        assert!(t[1].abs() > 0.1, "{t:?}");
         assert!(!crosses([-3.0, 0.0], t, [0.0, 0.0], 1.0));
     }
 
@@ -366,9 +378,15 @@ mod tests {
             prop_assert!(t.iter().all(|v| v.is_finite()));
             let clear = discs.iter().all(|&(c, rad)| !crosses(p, goal, c, rad));
             if t != goal {
+                // The target lies along a point of the path that the robot sees.
+                let aim = r.aim(p, 0.2);
                 for &(c, rad) in &discs {
-                    prop_assert!(!crosses(p, t, c, rad), "target {:?} behind disc {:?}", t, (c, rad));
+                    prop_assert!(!crosses(p, aim, c, rad), "aim {:?} behind disc {:?}", aim, (c, rad));
                 }
+                let (u, v) = (sub(t, p), sub(aim, p));
+                prop_assert!((u[0] * v[1] - u[1] * v[0]).abs() <= 1e-9 * norm(u) * norm(v));
+                prop_assert!(u[0] * v[0] + u[1] * v[1] > 0.0);
+                prop_assert!(norm(u) >= norm(sub(goal, p)) * (1.0 - 1e-9));
             } else if !clear {
                 // Aiming at a goal behind a disc only when no path exists: check that the
                 // inflated discs really close it off from the robot, by a grid flood fill.
