@@ -43,6 +43,8 @@ pub(super) struct Program {
     pub(super) lg: Vec<f64>,
     rhs: Vec<f64>,
     weights: Vec<f64>,
+    /// Per barrier: whether the router goes around it (the outside of a disc over `pos`).
+    routed: Vec<bool>,
     /// The CLF goal and `Lg V` (m values).
     pub(super) goal: Vec<f64>,
     pub(super) clf_lg: Vec<f64>,
@@ -96,6 +98,16 @@ fn jacobian_times(
         (None, Some(model)) if transpose => model.jacobian_f_transpose_times(s, u, out),
         (None, Some(model)) => model.jacobian_f_times(s, u, out),
         (None, None) => unreachable!("second-order rows need a model or a Jacobian"),
+    }
+}
+
+/// Whether the outside of `predicate` is what the router goes around: a ball over `pos`, or a
+/// union with such a ball.
+fn is_disc(predicate: &Predicate, pos: &[usize]) -> bool {
+    match predicate {
+        Predicate::Ball(b) => b.pos() == pos,
+        Predicate::Union(parts) => parts.iter().any(|p| is_disc(p, pos)),
+        _ => false,
     }
 }
 
@@ -210,6 +222,7 @@ impl Program {
         self.lg.clear();
         self.rhs.clear();
         self.weights.clear();
+        self.routed.clear();
         // The atoms' robustness at s, once for both the safe set and the goal: the task
         // monitor's reading of this state when there is one.
         let reading = match task {
@@ -279,6 +292,8 @@ impl Program {
         });
         for (source, predicate, sign, h, weight, second) in user.chain(kept) {
             self.weights.push(weight);
+            self.routed
+                .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos));
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
             let lf = dot(&self.grad, &self.f);
@@ -424,15 +439,16 @@ impl Program {
         }
     }
 
-    /// Progress the barriers will cancel is not progress: for every barrier row that the RL
-    /// action alone violates (`r + L . a_rl < 0`, so the CBF will cut that action), the part of
+    /// Progress the barriers will cancel is not progress: for every row of a barrier the router
+    /// goes around (the outside of a disc) that the RL action alone violates (`r + L . a_rl < 0`, so the CBF will cut that action), the part of
     /// `Lg V` that credits motion into the barrier (`Lg V . L > 0`) is projected out. Without
     /// this, a push into an obstacle that also points towards the target satisfies the CLF row
     /// while `a_cbf` cancels it: a parked equilibrium with `delta = 0` (measured with a greedy
     /// seeker on the unicycle). With it, the CLF must find its decrease along the barrier.
     fn uncredit_blocked_progress(&mut self, m: usize) {
-        for (row, &rhs) in self.lg.chunks_exact(m).zip(&self.rhs) {
-            if rhs >= 0.0 {
+        let rows = self.lg.chunks_exact(m).zip(&self.rhs).zip(&self.routed);
+        for ((row, &rhs), &routed) in rows {
+            if rhs >= 0.0 || !routed {
                 continue;
             }
             let (along, norm2) = (dot(&self.clf_lg, row), dot(row, row));

@@ -1,0 +1,122 @@
+"""The shield routes instead of parking (issue 44): scripted scenarios with a robot on one side
+of obstacles and its goal on the other (``tlshield.lab.routing``; docs/concepts/deadlock.md).
+Every cell is 50 seeded episodes, for the three robots, four layouts and both encodings (the
+obstacles in the formula and as barriers), driven by the shield alone or by a greedy seeker."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+
+import tlshield
+from tlshield.lab import routing
+
+EPISODES = 50
+
+
+@pytest.mark.parametrize("robot", routing.ROBOTS)
+@pytest.mark.parametrize("driver", routing.DRIVERS)
+def test_every_scenario_reaches_its_goal_and_never_enters(robot: str, driver: str) -> None:
+    floor = 0.95 if driver == "shield" else 0.80
+    for layout in routing.LAYOUTS:
+        for encoding in routing.ENCODINGS:
+            cell = routing.cell(layout, robot, encoding, driver, EPISODES)
+            where = f"{robot}/{driver}/{layout}/{encoding}"
+            assert cell["success"] >= floor, f"{where}: success {cell['success']}"
+            assert cell["entries"] == 0, f"{where}: {cell['entries']} steps inside an obstacle"
+            assert cell["relaxed"] == 0, f"{where}: {cell['relaxed']} relaxed or failed QPs"
+
+
+def test_without_routing_the_unicycle_parks() -> None:
+    """The deadlock the router removes: the same episodes, routing off."""
+    for layout in ("line", "off_line", "u_shape"):
+        assert routing.cell(layout, "unicycle", "barriers", "shield", 10, route=False)["success"] == 0.0
+
+
+def _shield(barriers: dict | None, spec: tlshield.Spec, **kw) -> tlshield.Shield:
+    settings = dict(alpha=2.0, c3=1.0, k=2.0, cbf_bounds=(-3.0, 3.0), clf_bounds=(-1.0, 1.0))
+    return tlshield.Shield(
+        spec, tlshield.SingleIntegrator([0, 1]), barriers=barriers, **{**settings, **kw}
+    )
+
+
+def test_with_nothing_in_the_way_the_target_is_the_goal_bit_for_bit() -> None:
+    goal = tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])
+    spec = tlshield.Spec("F goal", {"goal": goal})
+    far = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 3.0])}
+    routed, straight = _shield(far, spec), _shield(far, spec, route=False)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        s = rng.uniform([-2.0, -1.0], [1.5, 1.0])
+        q = spec.automaton().step(s, spec.automaton().initial)
+        a = rng.uniform(-1.0, 1.0, 2)
+        one, other = routed.filter(s, q, a), straight.filter(s, q, a)
+        assert np.array_equal(one.goal, other.goal)
+        assert np.array_equal(one.action, other.action)
+
+
+def test_a_union_of_discs_is_routed_around() -> None:
+    """The U of three discs as one region in the formula: ``(!cup) U goal``."""
+    parts = [tlshield.Ball([0, 1], r, center=list(c)) for c, r in routing.layout("u_shape", None)]
+    spec = tlshield.Spec(
+        "!cup U goal",
+        {"cup": tlshield.Union(parts), "goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])},
+    )
+    for route, reached in ((False, False), (True, True)):
+        shield = _shield(None, spec, route=route, k=1e3)
+        monitor = tlshield.Monitor(shield.automaton)
+        s = np.array([-2.0, 0.0])
+        task = monitor.reset(s)
+        for _ in range(routing.HORIZON):
+            out = shield.filter_monitor(monitor, np.zeros(2))
+            s = s + routing.DT * out.action
+            task = monitor.advance(s)
+            assert not task.trapped
+            if task.accepted:
+                break
+        assert task.accepted == reached, f"route={route}"
+
+
+def test_an_enclosed_goal_is_aimed_at_and_the_robot_stays_out() -> None:
+    """What the router cannot do: a goal walled in by overlapping discs has no way round; the
+    target is the goal, and the barriers hold the robot outside."""
+    ring = {
+        f"!o{k}": tlshield.Ball([0, 1], 0.5, center=[np.cos(a), np.sin(a)])
+        for k, a in enumerate(np.linspace(0, 2 * np.pi, 10, endpoint=False))
+    }
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[0.0, 0.0])})
+    shield = _shield(ring, spec)
+    monitor = tlshield.Monitor(shield.automaton)
+    s = np.array([-3.0, 0.1])
+    monitor.reset(s)
+    for _ in range(400):
+        out = shield.filter_monitor(monitor, np.zeros(2))
+        np.testing.assert_array_equal(out.goal, [0.0, 0.0])
+        s = s + routing.DT * out.action
+        monitor.advance(s)
+        assert min(h for _, h in out.barriers) > 0.0
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf")])
+def test_a_bad_clearance_is_refused_where_it_is_given(bad: float) -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    with pytest.raises(tlshield.ShieldError, match="route_clearance"):
+        _shield(None, spec, route_clearance=bad)
+
+
+def test_copies_keep_the_routing_settings() -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}
+    shield = _shield(barriers, spec, route=False, route_clearance=0.5)
+    for twin in (copy.deepcopy(shield), pickle.loads(pickle.dumps(shield))):
+        q = spec.automaton().initial
+        s, a = np.array([-2.0, 0.0]), np.array([0.3, 0.0])
+        assert np.array_equal(twin.filter(s, q, a).goal, shield.filter(s, q, a).goal)
+    # and a routed shield's copy routes
+    routed = _shield(barriers, spec, route_clearance=0.5)
+    s, q, a = np.array([-2.0, 0.0]), spec.automaton().initial, np.zeros(2)
+    assert not np.array_equal(routed.filter(s, q, a).goal, [2.0, 0.0])
+    assert np.array_equal(pickle.loads(pickle.dumps(routed)).filter(s, q, a).goal, routed.filter(s, q, a).goal)
