@@ -29,6 +29,8 @@ def make_shield(**overrides: object) -> tlshield.Shield:
         "clf_bounds": PARAMS.clf,
         "clf_gain": CLF_GAIN,
         "barriers": {"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)},
+        # The QP of Eq. 5D2 as hand_rows builds it (routing aims the CLF around the obstacle).
+        "route": False,
         **overrides,
     }
     model = tlshield.DoubleIntegrator(pos=[0, 1], vel=[2, 3])

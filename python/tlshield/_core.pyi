@@ -31,6 +31,7 @@ GRAD_RELAXED: int
 GRAD_FAILED: int
 GRAD_DEGENERATE: int
 GRAD_SINGULAR: int
+GRAD_ROUTED: int
 
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""

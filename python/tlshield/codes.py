@@ -5,7 +5,13 @@ serialise as plain integers. ``Shield.vjp_batch``'s per-row flags are :class:`Gr
 
 from enum import IntEnum, IntFlag
 
-from tlshield._core import GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_SINGULAR
+from tlshield._core import (
+    GRAD_DEGENERATE,
+    GRAD_FAILED,
+    GRAD_RELAXED,
+    GRAD_ROUTED,
+    GRAD_SINGULAR,
+)
 
 __all__ = ["GradFlag", "Solver", "Status"]
 
@@ -57,3 +63,6 @@ class GradFlag(IntFlag):
     DEGENERATE = GRAD_DEGENERATE
     #: The KKT system on the active rows was singular: only the identity part is returned.
     SINGULAR = GRAD_SINGULAR
+    #: Routing changed the CLF row (a target around an obstacle, or progress into one
+    #: uncredited): ``dL/da_rl`` is exact; ``dL/ds`` holds the target fixed.
+    ROUTED = GRAD_ROUTED

@@ -95,8 +95,19 @@ def _wrap(a: float) -> float:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
+#: Overrides every robot's k when set (``--k``), to measure other gains.
+K_OVERRIDE: float | None = None
+
+
 def robot(name: str) -> Robot:
-    """One of ``ROBOTS``, with the gains the guides recommend (k = clf_bound / d)."""
+    """One of ``ROBOTS``, with the gains the guides recommend (k = clf_bound / (d gain))."""
+    r = _robot(name)
+    if K_OVERRIDE is not None:
+        r.shield_kwargs["k"] = K_OVERRIDE
+    return r
+
+
+def _robot(name: str) -> Robot:
     if name == "single":
         b = SPEED
         return Robot(
@@ -243,9 +254,13 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--route", choices=("on", "off", "both"), default="both")
+    parser.add_argument("--k", type=float, default=None, help="every robot's k (default: the rule)")
     args = parser.parse_args(argv)
+    global K_OVERRIDE
+    K_OVERRIDE = args.k
     for route in {"on": [True], "off": [False], "both": [False, True]}[args.route]:
-        print(f"routing {'on' if route else 'off'} ({args.episodes} episodes per cell; success formula / barriers)")
+        k = "the rule" if args.k is None else f"{args.k:g}"
+        print(f"routing {'on' if route else 'off'}, k = {k} ({args.episodes} episodes per cell; success formula / barriers)")
         print(table(args.episodes, route))
         print()
 

@@ -46,6 +46,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GRAD_FAILED", tlshield_core::shield::GRAD_FAILED)?;
     m.add("GRAD_DEGENERATE", tlshield_core::shield::GRAD_DEGENERATE)?;
     m.add("GRAD_SINGULAR", tlshield_core::shield::GRAD_SINGULAR)?;
+    m.add("GRAD_ROUTED", tlshield_core::shield::GRAD_ROUTED)?;
     // The paper's task-reward defaults (Monitor, and the Python trackers read them).
     m.add("DEFAULT_C_R", tlshield_core::monitor::DEFAULT_C_R)?;
     m.add(

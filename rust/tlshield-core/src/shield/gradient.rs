@@ -15,7 +15,7 @@
 //! (the gradient with respect to `a_rl` is available for every shield).
 //!
 //! What each row's flags mean ([`GRAD_RELAXED`], [`GRAD_FAILED`], [`GRAD_DEGENERATE`],
-//! [`GRAD_SINGULAR`]): the gradient is always that of the action actually returned. A relaxed
+//! [`GRAD_SINGULAR`], [`GRAD_ROUTED`]): the gradient is always that of the action actually returned. A relaxed
 //! step is differentiated as the relaxed QP it solved; a failed step returned `a_rl`, whose
 //! gradient is the identity. At a point where the active set changes, the one-sided derivative
 //! of the piece on which every tight row stays tight (see `sensitivity.rs`).
@@ -35,6 +35,10 @@ pub const GRAD_RELAXED: u8 = 1;
 pub const GRAD_FAILED: u8 = 2;
 /// Flag: the active set changes here; the gradient is one-sided (see the module docs).
 pub const GRAD_DEGENERATE: u8 = 4;
+/// Flag: routing changed the CLF row (a target around an obstacle, or progress into one
+/// uncredited; see [`crate::route`]). `dL/da_rl` is exact; `dL/ds` holds the target and the
+/// uncredited direction fixed, leaving out how the route moves with the state.
+pub const GRAD_ROUTED: u8 = 16;
 /// Flag: the KKT system on the active rows was singular; only the identity part of the
 /// gradient (`da/da_rl` through `a_rl` itself) is returned.
 pub const GRAD_SINGULAR: u8 = 8;
@@ -494,7 +498,7 @@ impl Shield {
             grad: b,
             ..
         } = ws;
-        let mut flags = 0;
+        let mut flags = if program.rerouted { GRAD_ROUTED } else { 0 };
         let params = &self.params;
         let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
         let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);

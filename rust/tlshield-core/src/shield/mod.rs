@@ -48,7 +48,9 @@ mod outcome;
 mod params;
 mod program;
 mod workspace;
-pub use gradient::{BatchGradient, GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_SINGULAR};
+pub use gradient::{
+    BatchGradient, GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_ROUTED, GRAD_SINGULAR,
+};
 pub use inputs::{BatchDynamics, ControlAffine};
 use inputs::{BatchRows, Call, Want};
 use order::Orders;

@@ -56,6 +56,9 @@ pub(super) struct Program {
     pub(super) delta_0: f64,
     /// Routes the CLF's target around the discs to avoid (`crate::route`).
     router: Router,
+    /// Whether routing changed this step's CLF row: a target other than the goal, or progress
+    /// uncredited (`Program::uncredit_blocked_progress`).
+    pub(super) rerouted: bool,
     /// Variables of the unrelaxed problem: `a_cbf` (m if the CBF is on), `a_clf` and `d` (if
     /// there is a goal).
     pub(super) cbf_vars: usize,
@@ -380,6 +383,7 @@ impl Program {
                 }),
                 None => reading.goal(q, &mut self.goal),
             };
+        self.rerouted = false;
         if self.has_goal && params.route && params.pos.len() == 2 {
             self.route(params, s, q, reading);
         }
@@ -457,6 +461,7 @@ impl Program {
                 for (l, r) in self.clf_lg.iter_mut().zip(row) {
                     *l -= t * r;
                 }
+                self.rerouted = true;
             }
         }
     }
@@ -493,6 +498,7 @@ impl Program {
         let p = [s[pos[0]], s[pos[1]]];
         let goal = [self.goal[0], self.goal[1]];
         let target = router.target(p, goal, params.route_clearance);
+        self.rerouted |= target != goal;
         self.goal.copy_from_slice(&target);
     }
 
