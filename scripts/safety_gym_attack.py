@@ -3,7 +3,8 @@ in every configuration (docs/guides/safety-gym.md).
 
     .venv/bin/python scripts/safety_gym_attack.py [--episodes 10]
 
-Policies: the lidar hazard attacker (:func:`tlshield.envs.safety_gym.hazard_attacker`: it sees
+Policies: ``zero`` (no action: with ``rl_cbf_clf`` the shield alone drives, by its CLF), the
+lidar hazard attacker (:func:`tlshield.envs.safety_gym.hazard_attacker`: it sees
 what a policy sees, steers at the nearest hazard and brakes inside it), uniform random actions,
 and two goal-seekers that read the lidars as a policy does: ``seeker`` turns to the goal and
 thrusts, ``navigator`` also steers away from hazards and vases within 0.9 m (a potential field:
@@ -60,7 +61,7 @@ def main() -> None:
         "--policies",
         nargs="+",
         default=["attacker", "random"],
-        choices=["attacker", "random", "seeker", "navigator"],
+        choices=["zero", "attacker", "random", "seeker", "navigator"],
     )
     parser.add_argument("--configs", nargs="+", default=["rl", "rl_cbf", "rl_cbf_clf"])
     parser.add_argument(
@@ -86,7 +87,9 @@ def main() -> None:
                     obs, _ = env.reset(seed=700 + ep)
                     done = False
                     while not done:
-                        if policy == "attacker":
+                        if policy == "zero":
+                            action = np.zeros(2)
+                        elif policy == "attacker":
                             action = hazard_attacker(env, obs)
                         elif policy == "random":
                             action = rng.uniform(-1.0, 1.0, 2)

@@ -30,6 +30,17 @@ def test_every_scenario_reaches_its_goal_and_never_enters(robot: str, driver: st
             assert cell["relaxed"] == 0, f"{where}: {cell['relaxed']} relaxed or failed QPs"
 
 
+@pytest.mark.parametrize("robot", routing.TURNING)
+def test_robots_that_must_turn_go_round_a_disc(robot: str) -> None:
+    """The acceleration unicycle and ThrustTurn, the shield alone: the CLF turns the heading
+    towards its push instead of braking (the disc on the line, off it, and the U)."""
+    for layout in ("line", "off_line", "u_shape"):
+        for encoding in routing.ENCODINGS:
+            cell = routing.cell(layout, robot, encoding, "shield", EPISODES)
+            assert cell["success"] >= 0.95 and cell["entries"] == 0, (robot, layout, cell)
+            assert routing.cell(layout, robot, encoding, "shield", 5, route=False)["success"] < 0.5
+
+
 def test_without_routing_the_unicycle_parks() -> None:
     """The deadlock the router removes: the same episodes, routing off."""
     for layout in ("line", "off_line", "u_shape"):

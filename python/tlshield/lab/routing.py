@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from tlshield import (
+    AccelerationUnicycle,
     Ball,
     DoubleIntegrator,
     Monitor,
@@ -28,11 +29,14 @@ from tlshield import (
     SingleIntegrator,
     Spec,
     Status,
+    ThrustTurn,
     Unicycle,
 )
 
 LAYOUTS = ("line", "off_line", "u_shape", "random8")
 ROBOTS = ("single", "unicycle", "double")
+#: Robots that must turn at acceleration level (issue 44's point 2), measured beside ROBOTS.
+TURNING = ("accel_unicycle", "thrust_turn")
 ENCODINGS = ("formula", "barriers")
 DRIVERS = ("shield", "seeker")
 
@@ -157,7 +161,30 @@ def _robot(name: str) -> Robot:
             ),
             seek_double,
         )
-    raise ValueError(f"robot: expected one of {ROBOTS}, got {name!r}")
+    if name in TURNING:
+        # x, y, theta, then v (the acceleration unicycle) or vx, vy (ThrustTurn: a body pushed
+        # along its heading, with drag, like Safety-Gymnasium's Point).
+        model = AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, 1.0)
+
+        def seek_turning(s: np.ndarray, g: np.ndarray) -> np.ndarray:
+            err = _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
+            return np.array([0.5 * max(np.cos(err), 0.0), float(np.clip(2.0 * err, -1.0, 1.0))])
+
+        return Robot(
+            model,
+            lambda p: np.concatenate([p, np.zeros(2 if name == "accel_unicycle" else 3)]),
+            dict(
+                alpha=2.0,
+                alpha2=2.0,
+                c3=1.0,
+                k=SPEED / CLF_DISTANCE,
+                clf_gain=1.0,
+                cbf_bounds=(-3.0, 3.0),
+                clf_bounds=(-1.0, 1.0),
+            ),
+            seek_turning,
+        )
+    raise ValueError(f"robot: expected one of {ROBOTS + TURNING}, got {name!r}")
 
 
 def shield_for(
@@ -233,7 +260,7 @@ def table(episodes: int, route: bool) -> str:
         "|---|---|" + "---|" * len(LAYOUTS),
     ]
     entries = relaxed = 0
-    for robot_name in ROBOTS:
+    for robot_name in ROBOTS + TURNING:
         for driver in DRIVERS:
             cells = []
             for layout_name in LAYOUTS:

@@ -264,7 +264,21 @@ impl Dynamics {
         })
     }
 
-    /// Number of inputs m.
+    /// The heading of an acceleration-level model whose turn input reaches the position only
+    /// through the heading (the acceleration unicycle, the bicycle, ThrustTurn): the router's
+    /// CLF adds a term that turns it towards where the CLF pushes (`shield/program.rs`).
+    pub fn steered_heading(&self) -> Option<usize> {
+        match *self {
+            Dynamics::AccelerationUnicycle { theta, .. }
+            | Dynamics::KinematicBicycle { theta, .. }
+            | Dynamics::ThrustTurn { theta, .. } => Some(theta),
+            Dynamics::SingleIntegrator { .. }
+            | Dynamics::Unicycle { .. }
+            | Dynamics::DoubleIntegrator { .. } => None,
+        }
+    }
+
+    /// The number of inputs m.
     pub fn inputs(&self) -> usize {
         match self {
             Dynamics::SingleIntegrator { pos } | Dynamics::DoubleIntegrator { pos, .. } => {

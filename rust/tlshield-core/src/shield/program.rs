@@ -412,6 +412,12 @@ impl Program {
                                 .map(|i| self.jt[i] * self.g[i * m + j])
                                 .sum::<f64>();
                     }
+                    let steered = model.and_then(Dynamics::steered_heading);
+                    if let (true, Some(theta)) = (params.route && params.pos.len() == 2, steered) {
+                        let (dv, dlf) = self.turn_towards_push(params, s, theta, v);
+                        v += dv;
+                        lf += dlf;
+                    }
                 }
                 false => {
                     for (&k, &c) in params.pos.iter().zip(&self.goal) {
@@ -464,6 +470,33 @@ impl Program {
                 self.rerouted = true;
             }
         }
+    }
+
+    /// Robots that must turn (beyond the paper): under a model whose turn input reaches the
+    /// position only through the heading (`Dynamics::steered_heading`), the second-order CLF's
+    /// `Lg V` has no part on the turn, so the QP brakes where it should turn. The CLF gains
+    /// `lambda (1 - cos(theta - psi))`, with `psi` the direction the CLF pushes (`-e`) and
+    /// `lambda = |e|^2`, both held for the step: its decrease asks the heading to turn towards
+    /// the push. Returns what it adds to `V` and `Lf V` (`Lg V` is updated in place).
+    fn turn_towards_push(
+        &mut self,
+        params: &ShieldParams,
+        s: &[f64],
+        theta: usize,
+        v: f64,
+    ) -> (f64, f64) {
+        let (ex, ey) = (self.hf[params.pos[0]], self.hf[params.pos[1]]);
+        if v <= 1e-18 {
+            return (0.0, 0.0);
+        }
+        let off = s[theta] - (-ey).atan2(-ex);
+        let (sin, cos) = off.sin_cos();
+        let m = self.clf_lg.len();
+        for (j, l) in self.clf_lg.iter_mut().enumerate() {
+            *l += v * sin * self.g[theta * m + j];
+        }
+        self.rerouted = true;
+        (v * (1.0 - cos), v * sin * self.f[theta])
     }
 
     /// Replaces the goal by the router's target around the discs this step keeps the state out
