@@ -52,6 +52,7 @@ bench:
 	$(BIN)/python benches/compare_robustness.py
 	$(BIN)/python benches/compare_automaton.py --install-mona
 	$(BIN)/python benches/compare_shield.py
+	$(BIN)/python benches/compare_routing.py
 	$(BIN)/python benches/compare_cbfpy.py
 	$(BIN)/python benches/compare_grad.py
 

@@ -22,6 +22,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("compare_automaton.py", ["--quick"], "tlshield speedup"),
         ("automaton_scaling.py", ["--sizes", "4", "6", "--timeout", "120"], "| FlatWorld F5 |"),
         ("compare_shield.py", ["--quick", "--memory-calls", "2000"], "tlshield speedup"),
+        ("compare_routing.py", ["--quick", "--steps", "100"], "routed / unrouted median"),
         ("env_speed.py", ["--quick"], "ShieldedVecEnv"),
         ("step_crossings.py", ["--steps", "1000"], "| rl_cbf_clf | 1.00 |"),
         ("import_cost.py", ["--runs", "1"], "| `import tlshield` |"),

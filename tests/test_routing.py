@@ -44,7 +44,10 @@ def test_robots_that_must_turn_go_round_a_disc(robot: str) -> None:
 def test_without_routing_the_unicycle_parks() -> None:
     """The deadlock the router removes: the same episodes, routing off."""
     for layout in ("line", "off_line", "u_shape"):
-        assert routing.cell(layout, "unicycle", "barriers", "shield", 10, route=False)["success"] == 0.0
+        assert (
+            routing.cell(layout, "unicycle", "barriers", "shield", 10, route=False)["success"]
+            == 0.0
+        )
 
 
 def _shield(barriers: dict | None, spec: tlshield.Spec, **kw) -> tlshield.Shield:
@@ -130,4 +133,6 @@ def test_copies_keep_the_routing_settings() -> None:
     routed = _shield(barriers, spec, route_clearance=0.5)
     s, q, a = np.array([-2.0, 0.0]), spec.automaton().initial, np.zeros(2)
     assert not np.array_equal(routed.filter(s, q, a).goal, [2.0, 0.0])
-    assert np.array_equal(pickle.loads(pickle.dumps(routed)).filter(s, q, a).goal, routed.filter(s, q, a).goal)
+    assert np.array_equal(
+        pickle.loads(pickle.dumps(routed)).filter(s, q, a).goal, routed.filter(s, q, a).goal
+    )

@@ -651,10 +651,11 @@ class Shield:
     ) -> Self:
         """``route`` aims the CLF at a target that leads around the discs the shield keeps
         the state out of (its avoid literals and ``!`` barriers), re-planned every step, so
-        that the CLF-CBF QP does not park the robot in front of an obstacle (``FilterResult.goal``
-        is that target); ``route_clearance`` is how far the route keeps from each disc, as a
-        fraction of its radius (None: 0.2). ``inputs`` is the number of inputs m when ``dynamics`` is None and the bounds are
-        scalars (a model gives m itself); ``slack_penalty`` prices barrier slack when the QP
+        that the CLF-CBF QP does not park the robot in front of an obstacle
+        (``FilterResult.goal`` is that target); ``route_clearance`` is how far the route keeps
+        from each disc, as a fraction of its radius (None: 0.2). ``inputs`` is the number of
+        inputs m when ``dynamics`` is None and the bounds are scalars (a model gives m itself);
+        ``slack_penalty`` prices barrier slack when the QP
         must be relaxed (None: 1e6); ``margin`` is what every barrier is kept above (> 0;
         None: 1e-6); ``rl_bounds`` is the range of the RL action: when given, a CBF box that
         cannot cancel every RL action plus every CLF correction is refused here, and an

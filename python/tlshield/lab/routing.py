@@ -15,8 +15,8 @@ goal are jittered, and the random layout is drawn, from ``numpy.random.default_r
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -117,7 +117,13 @@ def _robot(name: str) -> Robot:
         return Robot(
             SingleIntegrator([0, 1]),
             lambda p: p.copy(),
-            dict(alpha=2.0, c3=1.0, k=b / CLF_DISTANCE, cbf_bounds=(-3 * b, 3 * b), clf_bounds=(-b, b)),
+            dict(
+                alpha=2.0,
+                c3=1.0,
+                k=b / CLF_DISTANCE,
+                cbf_bounds=(-3 * b, 3 * b),
+                clf_bounds=(-b, b),
+            ),
             lambda s, g: 0.5 * SPEED * _unit(g - s[:2]),
         )
     if name == "unicycle":
@@ -125,7 +131,9 @@ def _robot(name: str) -> Robot:
 
         def seek(s: np.ndarray, g: np.ndarray) -> np.ndarray:
             err = _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
-            return np.array([0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN) * 0.5])
+            return np.array(
+                [0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN) * 0.5]
+            )
 
         return Robot(
             Unicycle(eps=0.1),
@@ -188,11 +196,18 @@ def _robot(name: str) -> Robot:
 
 
 def shield_for(
-    robot_name: str, obstacles: list[tuple[np.ndarray, float]], goal: np.ndarray, encoding: str, route: bool
+    robot_name: str,
+    obstacles: list[tuple[np.ndarray, float]],
+    goal: np.ndarray,
+    encoding: str,
+    route: bool,
 ) -> Shield:
     """The shield of one episode: obstacles in the formula or as barriers."""
     r = robot(robot_name)
-    balls = {f"o{i + 1}": Ball(pos=[0, 1], radius=rad, center=list(c)) for i, (c, rad) in enumerate(obstacles)}
+    balls = {
+        f"o{i + 1}": Ball(pos=[0, 1], radius=rad, center=list(c))
+        for i, (c, rad) in enumerate(obstacles)
+    }
     goal_ball = Ball(pos=[0, 1], radius=GOAL_RADIUS, center=list(goal))
     if encoding == "formula":
         avoid = " & ".join(f"!{name}" for name in balls)
@@ -216,7 +231,9 @@ class Episode:
     relaxed: int
 
 
-def episode(layout_name: str, robot_name: str, encoding: str, driver: str, seed: int, route: bool = True) -> Episode:
+def episode(
+    layout_name: str, robot_name: str, encoding: str, driver: str, seed: int, route: bool = True
+) -> Episode:
     """One seeded episode (see the module docs)."""
     rng = np.random.default_rng(seed)
     start = START + rng.uniform(-0.1, 0.1, 2)
@@ -242,9 +259,13 @@ def episode(layout_name: str, robot_name: str, encoding: str, driver: str, seed:
     return Episode(False, entries, HORIZON, relaxed)
 
 
-def cell(layout_name: str, robot_name: str, encoding: str, driver: str, episodes: int, route: bool = True) -> dict:
+def cell(
+    layout_name: str, robot_name: str, encoding: str, driver: str, episodes: int, route: bool = True
+) -> dict:
     """Success rate, obstacle entries and relaxed steps over seeds ``0..episodes-1``."""
-    runs = [episode(layout_name, robot_name, encoding, driver, seed, route) for seed in range(episodes)]
+    runs = [
+        episode(layout_name, robot_name, encoding, driver, seed, route) for seed in range(episodes)
+    ]
     return {
         "success": sum(e.reached for e in runs) / episodes,
         "entries": sum(e.entries for e in runs),
@@ -287,7 +308,9 @@ def main(argv: list[str] | None = None) -> None:
     K_OVERRIDE = args.k
     for route in {"on": [True], "off": [False], "both": [False, True]}[args.route]:
         k = "the rule" if args.k is None else f"{args.k:g}"
-        print(f"routing {'on' if route else 'off'}, k = {k} ({args.episodes} episodes per cell; success formula / barriers)")
+        where = "on" if route else "off"
+        print(f"routing {where}, k = {k} ({args.episodes} episodes per cell)")
+        print("each cell: success with the obstacles in the formula / as barriers")
         print(table(args.episodes, route))
         print()
 

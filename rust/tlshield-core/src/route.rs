@@ -42,6 +42,20 @@ use std::f64::consts::PI;
 
 /// Sides of the polygon circumscribing each inflated disc.
 pub const SIDES: usize = 8;
+/// The unit vectors to the corners of the octagon, at multiples of 45 degrees.
+const OCTAGON: [[f64; 2]; SIDES] = {
+    const H: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    [
+        [1.0, 0.0],
+        [H, H],
+        [0.0, 1.0],
+        [-H, H],
+        [-1.0, 0.0],
+        [-H, -H],
+        [0.0, -1.0],
+        [H, -H],
+    ]
+};
 /// The carrot's distance along the path, in radii of the disc whose corner comes first.
 pub const LOOKAHEAD: f64 = 1.0;
 /// How far into the clearance (a fraction of the inflated radius) a segment from the robot may
@@ -68,6 +82,8 @@ pub struct Router {
     /// Graph nodes: 0 is the robot, 1 the goal, then polygon corners with their disc.
     nodes: Vec<([f64; 2], usize)>,
     dist: Vec<f64>,
+    /// Per node, the straight distance to the goal (A*'s heuristic).
+    rest: Vec<f64>,
     prev: Vec<usize>,
     done: Vec<bool>,
 }
@@ -192,11 +208,8 @@ impl Router {
             let lookahead = LOOKAHEAD * d.radius * (1.0 + clearance);
             let tangents = [1.0, -1.0]
                 .map(|side| past_tangent(p, d.center, self.inflated[i], side, lookahead));
-            let corners = (0..SIDES).map(|k| {
-                let angle = 2.0 * PI * k as f64 / SIDES as f64;
-                [d.center[0] + r * angle.cos(), d.center[1] + r * angle.sin()]
-            });
-            for v in corners.chain(tangents) {
+            let corners = OCTAGON.map(|[c, s]| [d.center[0] + r * c, d.center[1] + r * s]);
+            for v in corners.into_iter().chain(tangents) {
                 let covered = self
                     .discs
                     .iter()
@@ -208,8 +221,13 @@ impl Router {
                 }
             }
         }
-        // Dijkstra on the dense visibility graph from the robot (node 0) to the goal (node 1).
+        // A* on the dense visibility graph from the robot (node 0) to the goal (node 1), with
+        // the straight distance to the goal as the (consistent) heuristic, and an edge's
+        // visibility tested only when it would improve a node.
         let n = self.nodes.len();
+        self.rest.clear();
+        self.rest
+            .extend(self.nodes.iter().map(|&(v, _)| norm(sub(goal, v))));
         self.dist.clear();
         self.dist.resize(n, f64::INFINITY);
         self.prev.clear();
@@ -221,14 +239,15 @@ impl Router {
             let mut u = usize::MAX;
             let mut best = f64::INFINITY;
             for (i, (&d, &done)) in self.dist.iter().zip(&self.done).enumerate() {
-                if !done && d < best {
-                    (u, best) = (i, d);
+                if !done && d + self.rest[i] < best {
+                    (u, best) = (i, d + self.rest[i]);
                 }
             }
             if u == usize::MAX || u == 1 {
                 break;
             }
             self.done[u] = true;
+            let best = self.dist[u];
             let a = self.nodes[u].0;
             for v in 1..n {
                 if self.done[v] {
@@ -236,11 +255,14 @@ impl Router {
                 }
                 let b = self.nodes[v].0;
                 let through = best + norm(sub(b, a));
+                if through >= self.dist[v] {
+                    continue;
+                }
                 let seen = match u {
                     0 => self.visible_from_robot(a, b),
                     _ => self.visible(a, b),
                 };
-                if through < self.dist[v] && seen {
+                if seen {
                     self.dist[v] = through;
                     self.prev[v] = u;
                 }
