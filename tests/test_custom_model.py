@@ -94,7 +94,10 @@ def test_a_custom_model_gives_the_built_in_models_actions(
     given = jacobian if exact_jacobian else None
     custom = tlshield.ControlAffine(f, g, state_dim=n, inputs=2, jacobian=given)  # type: ignore[arg-type]
     extra = {} if n == 4 else {"alpha2": None}
-    a, b = shield(built_in, **extra), shield(custom, **extra)
+    # A custom model declares the heading its turn input steers (the built-in acceleration
+    # unicycle knows its own), so that routing's CLF turns it alike.
+    declared = {"heading": 2} if isinstance(built_in, tlshield.AccelerationUnicycle) else {}
+    a, b = shield(built_in, **extra), shield(custom, **extra, **declared)
     rng = np.random.default_rng(0)
     xs = states(rng, 300, n)
     a_rl = rng.uniform(-4.0, 4.0, (300, 2))
@@ -264,13 +267,18 @@ def test_the_kinematic_bicycle_steps_as_its_equations() -> None:
         state_dim=4,
         inputs=2,
     )
-    a_sh, b_sh = shield(bike), shield(custom)
+    a_sh, b_sh = shield(bike), shield(custom, heading=2)
     rng = np.random.default_rng(3)
     for s in states(rng, 200, 4):
         u = rng.uniform(-4.0, 4.0, 2)
         np.testing.assert_allclose(
             b_sh.filter(s, 0, u).action, a_sh.filter(s, 0, u).action, rtol=0, atol=1e-9
         )
+
+
+def test_a_heading_on_the_clf_position_is_refused() -> None:
+    with pytest.raises(tlshield.ShieldError, match="heading = 1"):
+        shield(tlshield.AccelerationUnicycle(), heading=1)
 
 
 def test_the_kinematic_bicycle_keeps_its_barriers_under_attack() -> None:

@@ -648,12 +648,16 @@ class Shield:
         disturbance: Mapping[int, float] | None = None,
         route: bool = True,
         route_clearance: float | None = None,
+        heading: int | None = None,
     ) -> Self:
         """``route`` aims the CLF at a target that leads around the discs the shield keeps
         the state out of (its avoid literals and ``!`` barriers), re-planned every step, so
         that the CLF-CBF QP does not park the robot in front of an obstacle
         (``FilterResult.goal`` is that target); ``route_clearance`` is how far the route keeps
-        from each disc, as a fraction of its radius (None: 0.2). ``inputs`` is the number of
+        from each disc, as a fraction of its radius (None: 0.2); ``heading`` is the state
+        dimension of the heading that a turn input steers, for a custom model whose turn
+        reaches the position only through it (None: the built-in model's), so that routing
+        turns it towards the CLF's push. ``inputs`` is the number of
         inputs m when ``dynamics`` is None and the bounds are scalars (a model gives m itself);
         ``slack_penalty`` prices barrier slack when the QP
         must be relaxed (None: 1e6); ``margin`` is what every barrier is kept above (> 0;

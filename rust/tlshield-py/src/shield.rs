@@ -366,7 +366,7 @@ impl PyShield {
         spec, dynamics, *, alpha, c3, k, cbf_bounds, clf_bounds, action_bounds=None,
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
-        inputs=None, disturbance=None, route=true, route_clearance=None,
+        inputs=None, disturbance=None, route=true, route_clearance=None, heading=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -394,6 +394,7 @@ impl PyShield {
         disturbance: Option<&Bound<'_, PyAny>>,
         route: bool,
         route_clearance: Option<f64>,
+        heading: Option<usize>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let custom = dynamics
@@ -470,6 +471,7 @@ impl PyShield {
             route,
             route_clearance.unwrap_or(tlshield_core::route::DEFAULT_CLEARANCE),
         )
+        .with_heading(heading)
         .with_disturbance(
             disturbance
                 .map(disturbance_bounds)
@@ -854,6 +856,7 @@ impl PyShield {
         kwargs.set_item("inputs", shield.inputs())?;
         kwargs.set_item("route", p.route)?;
         kwargs.set_item("route_clearance", p.route_clearance)?;
+        kwargs.set_item("heading", p.heading)?;
         let bounds = PyDict::new(py);
         for &(d, w) in &p.disturbance {
             bounds.set_item(d, w)?;

@@ -242,6 +242,13 @@ impl Shield {
         positive("c3", params.c3)?;
         positive("k", params.k)?;
         positive("slack_penalty", params.slack_penalty)?;
+        if let Some(h) = params.heading.filter(|h| params.pos.contains(h)) {
+            return Err(ShieldError::Config(format!(
+                "heading = {h}: it is one of the CLF's position dimensions pos = {:?}; the \
+                 heading is the angle a turn input steers",
+                params.pos
+            )));
+        }
         if !(params.route_clearance.is_finite() && params.route_clearance >= 0.0) {
             return Err(ShieldError::Config(format!(
                 "route_clearance = {}: expected a finite number >= 0 (a fraction of each \
@@ -341,6 +348,7 @@ impl Shield {
             .max()
             .unwrap_or(0)
             .max(params.pos.iter().max().map_or(0, |p| p + 1))
+            .max(params.heading.map_or(0, |h| h + 1))
             .max(
                 params
                     .disturbance

@@ -223,6 +223,12 @@ pub struct ShieldParams {
     /// How far the router keeps from each disc, relative to its radius (>= 0; default
     /// [`crate::route::DEFAULT_CLEARANCE`]).
     pub route_clearance: f64,
+    /// The state dimension of the robot's heading, when a turn input reaches the position only
+    /// through it: routing's CLF then turns the heading towards where it pushes
+    /// (`shield/program.rs`). `None` takes the built-in model's
+    /// ([`Dynamics::steered_heading`](crate::Dynamics::steered_heading)); a custom model
+    /// declares its own here.
+    pub heading: Option<usize>,
 }
 
 impl ShieldParams {
@@ -261,6 +267,7 @@ impl ShieldParams {
             disturbance: Vec::new(),
             route: true,
             route_clearance: crate::route::DEFAULT_CLEARANCE,
+            heading: None,
         }
     }
 
@@ -336,6 +343,12 @@ impl ShieldParams {
     pub fn with_route(mut self, on: bool, clearance: f64) -> Self {
         self.route = on;
         self.route_clearance = clearance;
+        self
+    }
+
+    /// The heading a turn input steers (see [`ShieldParams::heading`]).
+    pub fn with_heading(mut self, heading: Option<usize>) -> Self {
+        self.heading = heading;
         self
     }
 

@@ -412,7 +412,9 @@ impl Program {
                                 .map(|i| self.jt[i] * self.g[i * m + j])
                                 .sum::<f64>();
                     }
-                    let steered = model.and_then(Dynamics::steered_heading);
+                    let steered = params
+                        .heading
+                        .or_else(|| model.and_then(Dynamics::steered_heading));
                     if let (true, Some(theta)) = (params.route && params.pos.len() == 2, steered) {
                         let (dv, dlf) = self.turn_towards_push(params, s, theta, v);
                         v += dv;
