@@ -111,6 +111,24 @@ def robot(name: str) -> Robot:
     return r
 
 
+def _heading_error(s: np.ndarray, g: np.ndarray) -> float:
+    """The angle from the heading ``s[2]`` to the goal ``g``, in ``[-pi, pi)``."""
+    return _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
+
+
+def _second_order(b: float) -> dict:
+    """The gains of an acceleration-level robot with inputs bounded by ``b``."""
+    return dict(
+        alpha=2.0,
+        alpha2=2.0,
+        c3=1.0,
+        k=b / CLF_DISTANCE,
+        clf_gain=1.0,
+        cbf_bounds=(-3 * b, 3 * b),
+        clf_bounds=(-b, b),
+    )
+
+
 def _robot(name: str) -> Robot:
     if name == "single":
         b = SPEED
@@ -130,7 +148,7 @@ def _robot(name: str) -> Robot:
         lo, hi = (-SPEED, -TURN), (SPEED, TURN)
 
         def seek(s: np.ndarray, g: np.ndarray) -> np.ndarray:
-            err = _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
+            err = _heading_error(s, g)
             return np.array(
                 [0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN) * 0.5]
             )
@@ -158,15 +176,7 @@ def _robot(name: str) -> Robot:
         return Robot(
             DoubleIntegrator([0, 1], [2, 3]),
             lambda p: np.array([p[0], p[1], 0.0, 0.0]),
-            dict(
-                alpha=2.0,
-                alpha2=2.0,
-                c3=1.0,
-                k=b / CLF_DISTANCE,
-                clf_gain=1.0,
-                cbf_bounds=(-3 * b, 3 * b),
-                clf_bounds=(-b, b),
-            ),
+            _second_order(b),
             seek_double,
         )
     if name in TURNING:
@@ -175,21 +185,13 @@ def _robot(name: str) -> Robot:
         model = AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, 1.0)
 
         def seek_turning(s: np.ndarray, g: np.ndarray) -> np.ndarray:
-            err = _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
+            err = _heading_error(s, g)
             return np.array([0.5 * max(np.cos(err), 0.0), float(np.clip(2.0 * err, -1.0, 1.0))])
 
         return Robot(
             model,
             lambda p: np.concatenate([p, np.zeros(2 if name == "accel_unicycle" else 3)]),
-            dict(
-                alpha=2.0,
-                alpha2=2.0,
-                c3=1.0,
-                k=SPEED / CLF_DISTANCE,
-                clf_gain=1.0,
-                cbf_bounds=(-3.0, 3.0),
-                clf_bounds=(-1.0, 1.0),
-            ),
+            _second_order(SPEED),
             seek_turning,
         )
     raise ValueError(f"robot: expected one of {ROBOTS + TURNING}, got {name!r}")
