@@ -136,3 +136,56 @@ def test_copies_keep_the_routing_settings() -> None:
     assert np.array_equal(
         pickle.loads(pickle.dumps(routed)).filter(s, q, a).goal, routed.filter(s, q, a).goal
     )
+
+
+def _steps_to_goal(angle: float, **kw: object) -> int:
+    """The shield alone drives a single integrator 10 m towards ``angle``: steps to the goal."""
+    goal = 10.0 * np.array([np.cos(angle), np.sin(angle)])
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=list(goal))})
+    shield = _shield(None, spec, **kw)
+    monitor = tlshield.Monitor(shield.automaton)
+    s = np.zeros(2)
+    task = monitor.reset(s)
+    for t in range(999):
+        s = s + routing.DT * shield.filter_monitor(monitor, np.zeros(2)).action
+        task = monitor.advance(s)
+        if task.accepted:
+            return t + 1
+    return 1000
+
+
+def test_a_round_clf_bound_does_not_depend_on_the_worlds_orientation() -> None:
+    """Far from the goal the CLF saturates its bounds: the per-axis box lets it move sqrt(2) faster
+    along a diagonal; the round bound moves it alike in every direction (to the inscribed
+    16-gon's 1.9%)."""
+    boxed = [_steps_to_goal(a, k=1e4) for a in (0.0, np.pi / 4)]
+    assert max(boxed) < 1000, boxed
+    assert boxed[0] > 1.15 * boxed[1], boxed
+    angles = np.linspace(0, np.pi / 2, 7)
+    round_ = [_steps_to_goal(a, k=1e4, clf_round=(0, 1, 1.0)) for a in angles]
+    assert max(round_) <= 1.03 * min(round_), round_
+
+
+def test_the_round_clf_bound_holds_on_random_steps() -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}
+    shield = _shield(barriers, spec, clf_round=(0, 1, 0.7), k=1e4)
+    rng = np.random.default_rng(4)
+    q = spec.automaton().initial
+    for _ in range(500):
+        s = rng.uniform(-3.0, 3.0, 2)
+        if np.linalg.norm(s) < 0.55:
+            continue
+        out = shield.filter(s, q, rng.uniform(-1.0, 1.0, 2))
+        assert np.linalg.norm(out.a_clf) <= 0.7 + 1e-9, out.a_clf
+        assert np.all(np.abs(out.a_clf) <= 1.0 + 1e-9)
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [((0, 0, 1.0), "distinct"), ((0, 2, 1.0), "below m = 2"), ((0, 1, 0.0), "radius")],
+)
+def test_a_bad_round_bound_is_refused_where_it_is_given(bad: tuple, message: str) -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    with pytest.raises(tlshield.ShieldError, match=message):
+        _shield(None, spec, clf_round=bad)

@@ -649,6 +649,7 @@ class Shield:
         route: bool = True,
         route_clearance: float | None = None,
         heading: int | None = None,
+        clf_round: tuple[int, int, float] | None = None,
     ) -> Self:
         """``route`` aims the CLF at a target that leads around the discs the shield keeps
         the state out of (its avoid literals and ``!`` barriers), re-planned every step, so
@@ -657,7 +658,10 @@ class Shield:
         from each disc, as a fraction of its radius (None: 0.2); ``heading`` is the state
         dimension of the heading that a turn input steers, for a custom model whose turn
         reaches the position only through it (None: the built-in model's), so that routing
-        turns it towards the CLF's push. ``inputs`` is the number of
+        turns it towards the CLF's push; ``clf_round=(i, j, radius)`` bounds the CLF's
+        correction on inputs i, j by a circle, beside ``clf_bounds`` (held as the inscribed
+        16-gon: up to 1.9% short of the radius), so that a bound meaning a speed does not
+        depend on which way the world faces. ``inputs`` is the number of
         inputs m when ``dynamics`` is None and the bounds are scalars (a model gives m itself);
         ``slack_penalty`` prices barrier slack when the QP
         must be relaxed (None: 1e6); ``margin`` is what every barrier is kept above (> 0;

@@ -367,6 +367,7 @@ impl PyShield {
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
         inputs=None, disturbance=None, route=true, route_clearance=None, heading=None,
+        clf_round=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -395,6 +396,7 @@ impl PyShield {
         route: bool,
         route_clearance: Option<f64>,
         heading: Option<usize>,
+        clf_round: Option<(usize, usize, f64)>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let custom = dynamics
@@ -472,6 +474,12 @@ impl PyShield {
             route_clearance.unwrap_or(tlshield_core::route::DEFAULT_CLEARANCE),
         )
         .with_heading(heading)
+        .with_clf_round(
+            clf_round.map(|(i, j, radius)| tlshield_core::shield::RoundBound {
+                inputs: [i, j],
+                radius,
+            }),
+        )
         .with_disturbance(
             disturbance
                 .map(disturbance_bounds)
@@ -857,6 +865,10 @@ impl PyShield {
         kwargs.set_item("route", p.route)?;
         kwargs.set_item("route_clearance", p.route_clearance)?;
         kwargs.set_item("heading", p.heading)?;
+        kwargs.set_item(
+            "clf_round",
+            p.clf_round.map(|r| (r.inputs[0], r.inputs[1], r.radius)),
+        )?;
         let bounds = PyDict::new(py);
         for &(d, w) in &p.disturbance {
             bounds.set_item(d, w)?;

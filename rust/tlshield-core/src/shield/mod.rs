@@ -58,7 +58,7 @@ use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
 #[allow(deprecated)]
 pub use params::ShieldConfig;
-pub use params::{Barrier, Bounds, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
+pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
 use workspace::Workspace;
 
 /// Batches smaller than this are shielded on the calling thread.
@@ -294,6 +294,9 @@ impl Shield {
             ));
         }
         params.cbf_bounds.check("cbf_bounds", m)?;
+        if let Some(round) = &params.clf_round {
+            round.check("clf_round", m)?;
+        }
         params.clf_bounds.check("clf_bounds", m)?;
         if let Some(b) = &params.action_bounds {
             b.check("action_bounds", m)?;

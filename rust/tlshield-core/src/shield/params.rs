@@ -155,6 +155,52 @@ impl Bounds {
     }
 }
 
+/// A round (Euclidean) bound on two inputs of the CLF's correction,
+/// `|(a_clf[i], a_clf[j])| <= radius`, beside the per-axis box: a bound that means a speed then
+/// does not depend on which way the world faces. The QP holds it as the regular polygon of
+/// [`RoundBound::SIDES`] sides inscribed in the circle, whose sides come within
+/// `1 - cos(pi / SIDES)` (1.9%) of the radius: at most 1.9% less than the radius in some
+/// directions, never more than it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoundBound {
+    /// The two inputs (distinct, each `< m`).
+    pub inputs: [usize; 2],
+    /// The radius (finite, > 0).
+    pub radius: f64,
+}
+
+impl RoundBound {
+    /// Sides of the inscribed polygon.
+    pub const SIDES: usize = 16;
+
+    /// Checks the inputs against `m` and the radius.
+    pub(super) fn check(&self, what: &str, m: usize) -> Result<(), ShieldError> {
+        let [i, j] = self.inputs;
+        if i == j || i >= m || j >= m {
+            return Err(ShieldError::Config(format!(
+                "{what}: inputs ({i}, {j}) must be two distinct inputs below m = {m}"
+            )));
+        }
+        if !(self.radius.is_finite() && self.radius > 0.0) {
+            return Err(ShieldError::Config(format!(
+                "{what}: radius = {}: expected a finite number > 0",
+                self.radius
+            )));
+        }
+        Ok(())
+    }
+
+    /// The polygon's rows `n_k . (a_i, a_j) <= radius cos(pi / SIDES)`, as `(n_k, rhs)`.
+    pub fn rows(&self) -> impl Iterator<Item = ([f64; 2], f64)> + '_ {
+        let half = std::f64::consts::PI / Self::SIDES as f64;
+        let rhs = self.radius * half.cos();
+        (0..Self::SIDES).map(move |k| {
+            let angle = (2 * k + 1) as f64 * half;
+            ([angle.cos(), angle.sin()], rhs)
+        })
+    }
+}
+
 /// The 0.1 name of [`ShieldParams`] ("config" now means only a configuration of the case
 /// study: rl, rl_cbf, rl_clf, rl_cbf_clf).
 #[deprecated(since = "0.2.0", note = "renamed `ShieldParams`")]
@@ -229,6 +275,8 @@ pub struct ShieldParams {
     /// ([`Dynamics::steered_heading`](crate::Dynamics::steered_heading)); a custom model
     /// declares its own here.
     pub heading: Option<usize>,
+    /// A round bound on two inputs of `a_clf`, beside `clf_bounds` (see [`RoundBound`]).
+    pub clf_round: Option<RoundBound>,
 }
 
 impl ShieldParams {
@@ -268,6 +316,7 @@ impl ShieldParams {
             route: true,
             route_clearance: crate::route::DEFAULT_CLEARANCE,
             heading: None,
+            clf_round: None,
         }
     }
 
@@ -346,6 +395,12 @@ impl ShieldParams {
         self
     }
 
+    /// A round bound on two inputs of the CLF's correction (see [`RoundBound`]).
+    pub fn with_clf_round(mut self, round: Option<RoundBound>) -> Self {
+        self.clf_round = round;
+        self
+    }
+
     /// The heading a turn input steers (see [`ShieldParams::heading`]).
     pub fn with_heading(mut self, heading: Option<usize>) -> Self {
         self.heading = heading;
@@ -362,6 +417,28 @@ impl ShieldParams {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_round_bound_is_the_inscribed_polygon() {
+        let round = RoundBound {
+            inputs: [0, 1],
+            radius: 2.0,
+        };
+        let inner = 2.0 * (std::f64::consts::PI / RoundBound::SIDES as f64).cos();
+        for k in 0..720 {
+            let (s, c) = (k as f64 * std::f64::consts::PI / 360.0).sin_cos();
+            let holds = |r: f64| {
+                round
+                    .rows()
+                    .all(|(n, h)| n[0] * r * c + n[1] * r * s <= h + 1e-12)
+            };
+            // Within 1.9% of the radius in every direction, never past it.
+            assert!(holds(inner), "direction {k}");
+            assert!(!holds(2.0 * (1.0 + 1e-9)), "direction {k}");
+        }
+        assert!(round.check("r", 2).is_ok());
+        assert!(round.check("r", 1).is_err());
+    }
 
     #[test]
     fn a_name_says_the_side() {

@@ -609,6 +609,15 @@ impl Program {
                 }
             }
         }
+        // After the actuator limits, whose place the gradient reads: constant rows on a_clf.
+        if let (true, Some(round)) = (has_goal, &params.clf_round) {
+            let [i, j] = round.inputs;
+            for (n, rhs) in round.rows() {
+                let r = push_row(qp, nv, rhs);
+                r[cbf_vars + i] = n[0];
+                r[cbf_vars + j] = n[1];
+            }
+        }
         for b in 0..slacks {
             push_row(qp, nv, 0.0)[vars + b] = -1.0;
         }
