@@ -189,3 +189,36 @@ def test_a_bad_round_bound_is_refused_where_it_is_given(bad: tuple, message: str
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
     with pytest.raises(tlshield.ShieldError, match=message):
         _shield(None, spec, clf_round=bad)
+
+
+def test_gradients_through_a_round_bound_match_finite_differences() -> None:
+    """The 16 rows are constant in a_rl and the state: the adjoint of the QP carries them."""
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[4.0, 1.0])})
+    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[1.0, 0.0])}
+    shield = _shield(barriers, spec, clf_round=(0, 1, 0.6), k=1e4, route=False)
+    rng = np.random.default_rng(7)
+    states = rng.uniform([-2.0, -2.0], [0.3, 2.0], (200, 2))
+    states = states[np.linalg.norm(states - [1.0, 0.0], axis=1) > 0.6]
+    qs = np.zeros(len(states), dtype=np.int64)
+    a = rng.uniform(-0.5, 0.5, states.shape)
+    v = rng.normal(size=a.shape)
+    ga, gs, flags = shield.vjp_batch(states, qs, a, v)
+    ok = flags == 0
+    # Steps whose CLF correction is on the polygon (its sides are at 0.6 cos(pi / 16) = 0.588).
+    norms = np.linalg.norm(shield.filter_batch(states, qs, a).a_clf, axis=1)
+    on_circle = norms > 0.58
+    assert (ok & on_circle).sum() >= 20, (ok.sum(), (ok & on_circle).sum())
+    eps = 1e-6
+
+    def value(s_: np.ndarray, a_: np.ndarray) -> np.ndarray:
+        return (shield.filter_batch(s_, qs, a_).action * v).sum(axis=1)
+
+    for j in range(2):
+        d = np.zeros_like(a)
+        d[:, j] = eps
+        fd = (value(states, a + d) - value(states, a - d)) / (2 * eps)
+        np.testing.assert_allclose(ga[ok, j], fd[ok], atol=1e-5, rtol=1e-5)
+        d = np.zeros_like(states)
+        d[:, j] = eps
+        fd = (value(states + d, a) - value(states - d, a)) / (2 * eps)
+        np.testing.assert_allclose(gs[ok, j], fd[ok], atol=1e-5, rtol=1e-5)
