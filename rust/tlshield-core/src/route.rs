@@ -4,23 +4,33 @@
 //! A CLF aimed straight at a goal behind an obstacle makes the CLF-CBF QP park the robot in
 //! front of it: where the barrier's gradient is parallel to the CLF's, the QP cancels the push
 //! and the closed loop has an equilibrium on the barrier's rim (Reis, Aguiar and Silvestre 2021).
-//! The router removes that equilibrium by construction: the CLF's target is a point the robot
-//! can reach in a straight line without entering any known disc, on a shortest path around
-//! them. Where the robot stands on a disc's rim, that line is tangent to the disc (or points
-//! away from it), so the barrier never cancels it: the CLF's push always has a component the
-//! barrier leaves free, and the robot slides around instead of stopping.
+//! The router removes that equilibrium by construction: the CLF's target lies in the direction
+//! of a point the robot can reach in a straight line without entering any known disc, on a
+//! shortest path around them. Where the robot stands on a disc's rim, that line is tangent to
+//! the disc (or points away from it), so the barrier never cancels it: the CLF's push always has
+//! a component the barrier leaves free, and the robot slides around instead of stopping.
 //!
 //! The planner is a visibility graph, re-built each step from the discs' current centres (so
 //! moving obstacles are re-read every step):
 //! - each disc of radius `r` is inflated to `R = r (1 + clearance)` and circumscribed by a
-//!   regular polygon of [`SIDES`] sides, whose vertices are the graph's nodes (a vertex inside
-//!   another inflated disc is dropped);
+//!   regular polygon of [`SIDES`] sides, whose vertices are the graph's nodes, with the two
+//!   points along the tangents from the robot to the inflated circle, at least a lookahead
+//!   ([`LOOKAHEAD`] radii) away (a node inside another inflated disc is dropped);
 //! - two nodes are joined when the segment between them keeps out of every inflated disc (a
-//!   polygon's own sides touch its disc and are allowed);
-//! - the robot's position and the goal are nodes too, and Dijkstra gives the shortest path;
-//! - the target is the first corner of that path, or, once the robot is closer than a
-//!   lookahead ([`LOOKAHEAD`] of the corner's disc radius) to it, the point that far along the
-//!   path (a carrot), so that the robot does not slow down at each corner.
+//!   polygon's own sides touch its disc and are allowed; a segment from the robot may cut
+//!   [`ROBOT_SLACK`] into the clearance, never into a disc);
+//! - the robot's position and the goal are nodes too, and A* (the straight distance to the goal
+//!   as its heuristic) gives the shortest path;
+//! - the aim is the point a lookahead along that path if the robot sees it, else the point
+//!   along the tangent on the side the path wraps the disc it meets first, else the farthest
+//!   point short of the lookahead in sight (the path's first node at the least);
+//! - the target lies in the aim's direction, as far away as the path is long, so that
+//!   `V = |p - target|^2` is the squared length of the way left: it asks the speed it would ask
+//!   of a clear goal, and does not slow the robot at each corner.
+//!
+//! Moving along a shortest path shortens it by the distance moved and any other path by at
+//! most that, so the way chosen does not flip from step to step; ties are broken by the
+//! nodes' order, deterministically.
 //!
 //! With a clear straight line to the goal the target is the goal itself, bit for bit: routing
 //! changes nothing where nothing is in the way. A disc that holds the robot (a slip) or the goal
@@ -56,7 +66,7 @@ const OCTAGON: [[f64; 2]; SIDES] = {
         [H, -H],
     ]
 };
-/// The carrot's distance along the path, in radii of the disc whose corner comes first.
+/// The aim's distance along the path, in inflated radii of the disc the path meets first.
 pub const LOOKAHEAD: f64 = 1.0;
 /// How far into the clearance (a fraction of the inflated radius) a segment from the robot may
 /// cut.
