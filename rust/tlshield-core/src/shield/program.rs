@@ -104,37 +104,35 @@ fn jacobian_times(
     }
 }
 
-/// Whether the outside of `predicate` is what the router goes around: a ball over `pos`, or a
-/// union with such a ball.
-fn is_disc(predicate: &Predicate, pos: &[usize]) -> bool {
-    match predicate {
-        Predicate::Ball(b) => b.pos() == pos,
-        Predicate::Union(parts) => parts.iter().any(|p| is_disc(p, pos)),
-        _ => false,
-    }
-}
-
-/// The discs whose outside `predicate` asks for, as the router sees them: a ball over `pos`
-/// (centre fixed or read from `s`), or each ball of a union; anything else is not routed.
-fn push_discs(router: &mut Router, predicate: &Predicate, pos: &[usize; 2], s: &[f64]) {
+/// The discs whose outside `predicate` asks for, as the router sees them, each given to
+/// `found`: a ball over `pos` (centre fixed or read from `s`), or each such ball of a union;
+/// anything else is not routed. The one rule for what the router goes around.
+fn each_disc(predicate: &Predicate, pos: &[usize], s: &[f64], found: &mut impl FnMut(Disc)) {
     match predicate {
         Predicate::Ball(b) if b.pos() == pos => {
             let center = match b.center() {
                 Center::Fixed(c) => [c[0], c[1]],
                 Center::Dims(d) => [s[d[0]], s[d[1]]],
             };
-            router.push(Disc {
+            found(Disc {
                 center,
                 radius: b.radius(),
             });
         }
         Predicate::Union(parts) => {
             for part in parts {
-                push_discs(router, part, pos, s);
+                each_disc(part, pos, s, found);
             }
         }
         _ => {}
     }
+}
+
+/// Whether the router goes around the outside of `predicate` (see [`each_disc`]).
+fn is_disc(predicate: &Predicate, pos: &[usize], s: &[f64]) -> bool {
+    let mut any = false;
+    each_disc(predicate, pos, s, &mut |_| any = true);
+    any
 }
 
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
@@ -296,7 +294,7 @@ impl Program {
         for (source, predicate, sign, h, weight, second) in user.chain(kept) {
             self.weights.push(weight);
             self.routed
-                .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos));
+                .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos, s));
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
             let lf = dot(&self.grad, &self.f);
@@ -452,8 +450,9 @@ impl Program {
     }
 
     /// Progress the barriers will cancel is not progress: for every row of a barrier the router
-    /// goes around (the outside of a disc) that the RL action alone violates (`r + L . a_rl < 0`, so the CBF will cut that action), the part of
-    /// `Lg V` that credits motion into the barrier (`Lg V . L > 0`) is projected out. Without
+    /// goes around (the outside of a disc) that the RL action alone violates
+    /// (`r + L . a_rl < 0`, so the CBF will cut that action), the part of `Lg V` that credits
+    /// motion into the barrier (`Lg V . L > 0`) is projected out. Without
     /// this, a push into an obstacle that also points towards the target satisfies the CLF row
     /// while `a_cbf` cancels it: a parked equilibrium with `delta = 0` (measured with a greedy
     /// seeker on the unicycle). With it, the CLF must find its decrease along the barrier.
@@ -528,7 +527,7 @@ impl Program {
             .filter(|(lit, _)| !lit.positive)
             .map(|(lit, _)| &predicates[lit.atom]);
         for predicate in user.chain(kept) {
-            push_discs(router, predicate, &pos, s);
+            each_disc(predicate, &pos, s, &mut |disc| router.push(disc));
         }
         let p = [s[pos[0]], s[pos[1]]];
         let goal = [self.goal[0], self.goal[1]];
