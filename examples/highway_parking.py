@@ -16,8 +16,13 @@ approximation: ``tlshield.AccelerationUnicycle`` on the centre, whose turn rate 
 constant box whatever the speed, its output mapped to a steering angle by inverting the
 relation above (saturated at the steering limit). The exact model shields the wrong point for
 this lot: the car's body reaches 5 m ahead of its rear axle, which discs around the rear axle
-do not see (docs/guides/highway-parking.md has the measurements). Positions are constraints of
-relative degree 2 under both, so the shield uses higher-order barriers (``alpha2``).
+do not see (docs/guides/highway-parking.md has the measurements). ``--model body`` keeps the
+exact model on the rear axle and protects the whole body: three discs along the car
+(:data:`BODY`), each a ``tlshield.Ball`` on a body point (``heading``, ``offset``), kept out of
+every parked car's two discs, and walls kept as far from the rear axle as the body reaches.
+Positions are constraints of relative degree 2 under these models, so the shield uses
+higher-order barriers (``alpha2``); a body point's heading is one integration from the steering
+(mixed relative degree, which the shield holds with one row more).
 
 ``python examples/highway_parking.py [--steps N] [--seed S] [--model M]`` drives a naive policy
 (steer and accelerate towards the goal, 30% random actions) for N environment steps with and
@@ -48,6 +53,16 @@ CAR_RADIUS = 3.0
 GOAL_RADIUS = 1.0
 #: highway-env's limits: acceleration (m/s^2), steering (rad); the car's length (m).
 MAX_ACCEL, MAX_STEER, LENGTH = 5.0, math.pi / 4, 5.0
+#: ``--model body``: the ego's 5 m x 2 m body as three discs at these distances ahead of the
+#: rear axle (which highway-env puts at the back of the body), each of radius
+#: ``BODY_RADIUS`` (a sixth of the length and half the width: its corners are inside). A parked
+#: car's two discs (at +-1.5 m along it) then need ``PARKED_RADIUS`` to cover its body.
+BODY = (LENGTH / 6, LENGTH / 2, 5 * LENGTH / 6)
+BODY_RADIUS = math.hypot(LENGTH / 6, 1.0)
+PARKED_RADIUS = math.hypot(LENGTH / 2 - 1.5, 1.0)
+#: The walls' margin from the rear axle under ``--model body``: half a wall, the body's reach
+#: ahead of the rear axle (its far corner), and 0.5 m for the model's error.
+BODY_WALL_MARGIN = 0.5 + math.hypot(LENGTH, 1.0) + 0.5
 
 
 def state_of(env: gym.Env) -> np.ndarray:
@@ -77,13 +92,14 @@ def make_spec(env: gym.Env, model: str = "unicycle") -> tlshield.Spec:
     point: the centre (unicycle) or the rear axle, whose goal disc is larger by the half length
     that separates the two (success is still judged on the centre: :func:`parked`)."""
     goal = env.unwrapped.vehicle.goal.position
+    margin = BODY_WALL_MARGIN if model == "body" else WALL_MARGIN
     walls = {
-        "w1": tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], HALF_X - WALL_MARGIN),
-        "w2": tlshield.Halfspace([1.0, 0.0, 0.0, 0.0], HALF_X - WALL_MARGIN),
-        "w3": tlshield.Halfspace([0.0, -1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
-        "w4": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], HALF_Y - WALL_MARGIN),
+        "w1": tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], HALF_X - margin),
+        "w2": tlshield.Halfspace([1.0, 0.0, 0.0, 0.0], HALF_X - margin),
+        "w3": tlshield.Halfspace([0.0, -1.0, 0.0, 0.0], HALF_Y - margin),
+        "w4": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], HALF_Y - margin),
     }
-    radius = GOAL_RADIUS + (LENGTH / 2 if model == "bicycle" else 0.0)
+    radius = GOAL_RADIUS + (LENGTH / 2 if model != "unicycle" else 0.0)
     g = tlshield.Ball(pos=[0, 1], radius=radius, center=list(goal))
     return tlshield.Spec("(w1 & w2 & w3 & w4) U g", {**walls, "g": g})
 
@@ -94,16 +110,22 @@ def make_shield(
     car_radius: float = CAR_RADIUS,
     alpha: float = 1.0,
     model: str = "unicycle",
+    clf: bool = False,
 ) -> tlshield.Shield:
-    """The shield of the episode just reset: the task's walls, the parked cars as barriers."""
+    """The shield of the episode just reset: the task's walls, the parked cars as barriers (for
+    ``model="body"``, every pair of a body disc and a parked car's disc, ``car_radius`` apart)."""
     u = env.unwrapped
     cars: dict[str, tlshield.Ball] = {}
+    points = BODY if model == "body" else (None,)
     for k, car in enumerate(u.road.vehicles[1:]):
         along = 1.5 * np.array([math.cos(car.heading), math.sin(car.heading)])
         for end, sign in (("f", 1.0), ("r", -1.0)):
             centre = list(car.position + sign * along)
-            cars[f"!car{k}{end}"] = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre)
-    if model == "bicycle":
+            for i, ahead in enumerate(points):
+                body = {} if ahead is None else {"heading": 2, "offset": (ahead, 0.0)}
+                name = f"!car{k}{end}" + ("" if ahead is None else f"b{i}")
+                cars[name] = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre, **body)
+    if model != "unicycle":
         dynamics: Any = tlshield.KinematicBicycle(LENGTH, x=0, y=1, theta=2, v=3)
         limits = ((-MAX_ACCEL, -math.tan(MAX_STEER)), (MAX_ACCEL, math.tan(MAX_STEER)))
     else:
@@ -119,7 +141,7 @@ def make_shield(
         cbf_bounds=(-20.0, 20.0),
         clf_bounds=(-0.5, 0.5),
         action_bounds=limits,
-        use_clf=False,
+        use_clf=clf,
         margin=0.05,
         barriers=cars,
     )
@@ -165,9 +187,10 @@ def run(
     car_radius: float = CAR_RADIUS,
     alpha: float = 1.0,
     model: str = "unicycle",
+    clf: bool = False,
 ) -> dict[str, Any]:
     """``steps`` environment steps of the naive policy, shielded or not."""
-    bicycle = model == "bicycle"
+    bicycle = model != "unicycle"
     observe = rear_state_of if bicycle else state_of
     turn_limit = 1.0 if bicycle else 2.0  # tan(MAX_STEER) = tan(pi / 4) = 1
     env = gym.make("parking-v0", config={"vehicles_count": 10, "duration": 60})
@@ -179,7 +202,7 @@ def run(
         env.reset(seed=seed * 10_000 + episode)
         episode += 1
         spec = make_spec(env, model)
-        shield = make_shield(env, spec, car_radius, alpha, model) if shielded else None
+        shield = make_shield(env, spec, car_radius, alpha, model, clf) if shielded else None
         aut = spec.automaton()
         q = aut.step(observe(env), aut.initial)
         while counts["steps"] < steps:
@@ -200,7 +223,8 @@ def run(
             if info["crashed"]:
                 counts["crashes"] += 1
                 x, y = observe(env)[:2]
-                near_wall = abs(x) > HALF_X - WALL_MARGIN or abs(y) > HALF_Y - WALL_MARGIN
+                margin = BODY_WALL_MARGIN if model == "body" else WALL_MARGIN
+                near_wall = abs(x) > HALF_X - margin or abs(y) > HALF_Y - margin
                 counts["wall_crashes"] += bool(near_wall)
                 break
             if parked(env):
@@ -227,15 +251,23 @@ def main() -> int:
     parser.add_argument("--alpha", type=float, default=1.0, help="alpha = alpha2 of the HOCBF")
     parser.add_argument(
         "--model",
-        choices=("unicycle", "bicycle"),
+        choices=("unicycle", "bicycle", "body"),
         default="unicycle",
-        help="the shield's model: the centre as an acceleration unicycle (an approximation, "
-        "default: the one measured safe) or the rear axle as the exact kinematic bicycle",
+        help="the shield's model: the centre as an acceleration unicycle (an approximation), "
+        "the rear axle as the exact kinematic bicycle, or the exact bicycle with barriers on "
+        "three discs of the body (body: --car-radius defaults to the two discs' radii summed)",
+    )
+    parser.add_argument(
+        "--clf",
+        action="store_true",
+        help="also drive to the goal with the shield's CLF, routed around the parked cars",
     )
     args = parser.parse_args()
+    if args.model == "body" and args.car_radius == [CAR_RADIUS]:
+        args.car_radius = [PARKED_RADIUS + BODY_RADIUS]
     print(
         f"highway-env parking-v0, 10 parked cars, naive policy, {args.steps} steps each, "
-        f"model {args.model}, alpha = alpha2 = {args.alpha:g}:"
+        f"model {args.model}, alpha = alpha2 = {args.alpha:g}, CLF {'on' if args.clf else 'off'}:"
     )
     print(
         "| shield | car disc radius | episodes | crashes (at a wall) | successes | relaxed | "
@@ -245,7 +277,7 @@ def main() -> int:
     settings = [(False, math.nan)] + [(True, r) for r in args.car_radius]
     for shielded, radius in settings:
         start = time.perf_counter()
-        c = run(args.steps, shielded, args.seed, radius, args.alpha, args.model)
+        c = run(args.steps, shielded, args.seed, radius, args.alpha, args.model, args.clf)
         print(
             f"| {'on' if shielded else 'off'} | {radius:g} | {c['episodes']} | "
             f"{c['crashes']} ({c['wall_crashes']}) | "

@@ -67,6 +67,13 @@ def main() -> None:
     parser.add_argument(
         "--velocity-error", type=float, help="the env's velocity_error override (m/s^2)"
     )
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="overrides of the env's settings (SafetyGoalParams), e.g. route_clearance=1.0",
+    )
     args = parser.parse_args()
     from tlshield import Status
     from tlshield.envs.safety_gym import TASKS, hazard_attacker
@@ -76,7 +83,14 @@ def main() -> None:
         "episode | relaxed steps |"
     )
     print("|---|---|---|---:|---:|---:|---:|---:|---:|")
-    overrides = {} if args.velocity_error is None else {"velocity_error": args.velocity_error}
+    overrides: dict[str, float] = {}
+    if args.velocity_error is not None:
+        overrides["velocity_error"] = args.velocity_error
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep:
+            parser.error(f"--set {item!r}: expected NAME=VALUE")
+        overrides[name] = float(value)
     for task in args.tasks or TASKS:
         for policy in args.policies:
             for config in args.configs:

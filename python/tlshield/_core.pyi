@@ -58,7 +58,10 @@ class Halfspace:
 
 @final
 class Ball:
-    """Ball predicate ``rho(s) = radius - |s[pos] - c|``; centre fixed or read from the state."""
+    """Ball predicate ``rho(s) = radius - |p(s) - c|``; centre fixed or read from the state.
+
+    ``p(s)`` is ``s[pos]``, or with ``heading`` and ``offset = (along, across)`` the point of the
+    body ``s[pos] + R(s[heading]) offset`` (metres ahead of and left of ``s[pos]``)."""
 
     def __new__(
         cls,
@@ -66,6 +69,8 @@ class Ball:
         radius: float,
         center: ArrayLike | None = None,
         center_dims: Sequence[int] | None = None,
+        heading: int | None = None,
+        offset: ArrayLike | None = None,
     ) -> Self: ...
     def robustness(self, s: ArrayLike) -> float: ...
     def gradient(self, s: ArrayLike) -> NDArray[np.float64]: ...
@@ -77,6 +82,10 @@ class Ball:
     def center(self) -> list[float] | None: ...
     @property
     def center_dims(self) -> list[int] | None: ...
+    @property
+    def heading(self) -> int | None: ...
+    @property
+    def offset(self) -> tuple[float, float] | None: ...
 
 @final
 class Union:

@@ -167,6 +167,9 @@ class SafetyGoalParams:
     clf_bound: float = 0.5
     #: Barriers are kept this far above 0 (in h = distance - radius, metres).
     margin: float = 0.02
+    #: The router's clearance: it plans around each avoided disc grown by this fraction of
+    #: its radius (``Shield(route_clearance=...)``).
+    route_clearance: float = 0.2
     #: The shield's ``disturbance`` bounds: the model's one-step error on the position's
     #: rate (m/s, on ``x, y``) and on the velocity's rate (m/s^2, on ``vx, vy``), from
     #: ``scripts/safety_gym_model.py`` (0 turns a bound off).
@@ -262,6 +265,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             action_bounds=(-1.0, 1.0),
             rl_bounds=(-1.0, 1.0),
             margin=p.margin,
+            route_clearance=p.route_clearance,
             use_cbf=use_cbf,
             use_clf=use_clf,
             disturbance={d: w for d, w in bounds.items() if w > 0},

@@ -50,7 +50,7 @@ pub use dynamics::Dynamics;
 pub use error::{AutomatonError, InputError, ShieldError, SpecError};
 pub use formula::Formula;
 pub use monitor::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
-pub use predicate::{Ball, Center, Halfspace, Predicate};
+pub use predicate::{Ball, Center, Halfspace, Offset, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 #[allow(deprecated)]

@@ -26,12 +26,44 @@ pub enum Center {
     Dims(Vec<usize>),
 }
 
-/// `rho(s) = radius - |s[pos] - c|`: inside a ball around a fixed or state-dependent centre.
+/// A point of the robot's body: `(along, across)` in the frame of the heading `s[heading]`.
+/// The ball then holds the body point `s[pos] + R(s[heading]) (along, across)`, not `s[pos]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Offset {
+    /// The state dimension of the heading (radians).
+    pub heading: usize,
+    /// Metres ahead of `s[pos]` along the heading.
+    pub along: f64,
+    /// Metres to the left of the heading.
+    pub across: f64,
+}
+
+impl Offset {
+    /// `R(theta) (along, across)`: where the body point sits relative to `s[pos]`.
+    #[inline]
+    fn rotated(&self, s: &[f64]) -> [f64; 2] {
+        let (sin, cos) = s[self.heading].sin_cos();
+        [
+            self.along * cos - self.across * sin,
+            self.along * sin + self.across * cos,
+        ]
+    }
+
+    /// The distance from `s[pos]` to the body point (the same at every heading).
+    pub fn length(&self) -> f64 {
+        self.along.hypot(self.across)
+    }
+}
+
+/// `rho(s) = radius - |p(s) - c|`: inside a ball around a fixed or state-dependent centre,
+/// where `p(s)` is `s[pos]`, or a point of the body (`offset`) for barriers that protect more
+/// than the reference point.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ball {
     pos: Vec<usize>,
     radius: f64,
     center: Center,
+    offset: Option<Offset>,
 }
 
 /// A state predicate.
@@ -127,7 +159,41 @@ impl Predicate {
             pos,
             radius,
             center,
+            offset: None,
         }))
+    }
+
+    /// A ball that holds a point of the body, `offset` from `s[pos]` in the frame of the
+    /// heading (see [`Offset`]): as [`Predicate::ball`], with `pos` two-dimensional, the
+    /// offset finite, and the heading a dimension apart from `pos` and a state centre.
+    pub fn body_ball(
+        pos: Vec<usize>,
+        radius: f64,
+        center: Center,
+        offset: Offset,
+    ) -> Result<Self, SpecError> {
+        let Predicate::Ball(mut ball) = Predicate::ball(pos, radius, center)? else {
+            unreachable!("Predicate::ball builds a ball")
+        };
+        if ball.pos.len() != 2 {
+            return Err(SpecError::InvalidPredicate(format!(
+                "Ball offset needs a planar pos (2 dimensions), got {}",
+                ball.pos.len()
+            )));
+        }
+        check_finite("Ball offset", &[offset.along, offset.across])?;
+        let centre_dims = match &ball.center {
+            Center::Dims(d) => d.as_slice(),
+            Center::Fixed(_) => &[],
+        };
+        if ball.pos.contains(&offset.heading) || centre_dims.contains(&offset.heading) {
+            return Err(SpecError::InvalidPredicate(format!(
+                "Ball heading dimension {} is also a pos or center_dims dimension",
+                offset.heading
+            )));
+        }
+        ball.offset = Some(offset);
+        Ok(Predicate::Ball(ball))
     }
 
     /// A union of regions: holds where any part holds. `parts` must be non-empty, and parts
@@ -193,12 +259,14 @@ impl Predicate {
                     Center::Fixed(_) => 0,
                     Center::Dims(d) => d.iter().copied().max().map_or(0, |m| m + 1),
                 };
+                let heading_max = b.offset.map_or(0, |o| o.heading + 1);
                 b.pos
                     .iter()
                     .copied()
                     .max()
                     .map_or(0, |m| m + 1)
                     .max(center_max)
+                    .max(heading_max)
             }
             Predicate::Union(p) | Predicate::Intersection(p) => {
                 p.iter().map(Predicate::min_dim).max().unwrap_or(0)
@@ -275,6 +343,11 @@ impl Predicate {
                 }
             },
             Predicate::Ball(b) => match (b.pos.as_slice(), &b.center) {
+                _ if b.offset.is_some() => {
+                    for (o, s) in out.iter_mut().zip(rows) {
+                        *o = self.value(s);
+                    }
+                }
                 ([px, py], Center::Dims(c)) => {
                     let (cx, cy) = (c[0], c[1]);
                     for (o, s) in out.iter_mut().zip(rows) {
@@ -308,7 +381,9 @@ impl Predicate {
         match self {
             Predicate::Halfspace(h) => h.terms.iter().any(|&(i, _)| i == d),
             Predicate::Ball(b) => {
-                b.pos.contains(&d) || matches!(&b.center, Center::Dims(c) if c.contains(&d))
+                b.pos.contains(&d)
+                    || matches!(&b.center, Center::Dims(c) if c.contains(&d))
+                    || b.offset.is_some_and(|o| o.heading == d)
             }
             Predicate::Union(p) | Predicate::Intersection(p) => p.iter().any(|x| x.reads(d)),
         }
@@ -317,7 +392,9 @@ impl Predicate {
     /// `out = H(s) v`: the Hessian of [`Predicate::value`] at `s` times `v` (lengths n), for
     /// second-order barrier rows. Zero for a half-space. For a ball, `value = r - |d|` with
     /// `d = s[pos] - c(s)` linear in `s`, so `H = -J^T (I - u u^T) J / |d|` (`u = d / |d|`,
-    /// `J` the map `s -> d`); zero at the centre, where it is undefined (never NaN).
+    /// `J` the map `s -> d`); zero at the centre, where it is undefined (never NaN). A body
+    /// point (`Offset`) adds the heading's column `w = dR/dtheta o` to `J` and the curvature
+    /// term `(u . R o) v_theta` on the heading (`d^2 d / dtheta^2 = -R o`).
     pub fn hessian_times(&self, s: &[f64], v: &[f64], out: &mut [f64]) {
         out.fill(0.0);
         let Predicate::Ball(b) = self.active(s) else {
@@ -327,12 +404,23 @@ impl Predicate {
         if dist == 0.0 {
             return;
         }
+        let ro = b.offset.map_or([0.0; 2], |o| o.rotated(s));
+        // dR/dtheta o = R(theta + pi/2) o.
+        let w = [-ro[1], ro[0]];
+        let v_heading = b.offset.map_or(0.0, |o| v[o.heading]);
         // J v and u . J v.
-        let jv = |k: usize| match &b.center {
-            Center::Fixed(_) => v[b.pos[k]],
-            Center::Dims(c) => v[b.pos[k]] - v[c[k]],
+        let jv = |k: usize| {
+            let turn = if b.offset.is_some() {
+                w[k] * v_heading
+            } else {
+                0.0
+            };
+            turn + match &b.center {
+                Center::Fixed(_) => v[b.pos[k]],
+                Center::Dims(c) => v[b.pos[k]] - v[c[k]],
+            }
         };
-        let unit = |k: usize| (s[b.pos[k]] - b.center_at(s, k)) / dist;
+        let unit = |k: usize| b.diff(s, k) / dist;
         let along: f64 = (0..b.pos.len()).map(|k| unit(k) * jv(k)).sum();
         for k in 0..b.pos.len() {
             let z = (jv(k) - unit(k) * along) / dist;
@@ -340,6 +428,12 @@ impl Predicate {
             if let Center::Dims(c) = &b.center {
                 out[c[k]] += z;
             }
+            if let Some(o) = b.offset {
+                out[o.heading] -= w[k] * z;
+            }
+        }
+        if let Some(o) = b.offset {
+            out[o.heading] += (unit(0) * ro[0] + unit(1) * ro[1]) * v_heading;
         }
     }
 
@@ -354,11 +448,16 @@ impl Predicate {
                 if dist == 0.0 {
                     return;
                 }
+                let ro = b.offset.map_or([0.0; 2], |o| o.rotated(s));
                 for (k, &p) in b.pos.iter().enumerate() {
-                    let unit = (s[p] - b.center_at(s, k)) / dist;
+                    let unit = b.diff(s, k) / dist;
                     out[p] -= unit;
                     if let Center::Dims(d) = &b.center {
                         out[d[k]] += unit;
+                    }
+                    if let Some(o) = b.offset {
+                        // d p / d theta = R(theta + pi/2) o = (-ro_y, ro_x).
+                        out[o.heading] -= unit * if k == 0 { -ro[1] } else { ro[0] };
                     }
                 }
             }
@@ -405,11 +504,21 @@ impl Ball {
         }
     }
 
-    /// `|s[pos] - c|`, finite for every finite difference (the squares of differences above
+    /// Entry `k` of `p(s) - c`: the body point (or `s[pos]`) less the centre.
+    #[inline]
+    fn diff(&self, s: &[f64], k: usize) -> f64 {
+        let shift = match self.offset {
+            Some(o) => o.rotated(s)[k],
+            None => 0.0,
+        };
+        s[self.pos[k]] + shift - self.center_at(s, k)
+    }
+
+    /// `|p(s) - c|`, finite for every finite difference (the squares of differences above
     /// ~1e154 overflow, so those are summed rescaled by the largest).
     #[inline]
     fn distance(&self, s: &[f64]) -> f64 {
-        let diff = |k: usize| s[self.pos[k]] - self.center_at(s, k);
+        let diff = |k: usize| self.diff(s, k);
         let sq: f64 = (0..self.pos.len()).map(|k| diff(k) * diff(k)).sum();
         if sq.is_finite() {
             return sq.sqrt();
@@ -432,6 +541,11 @@ impl Ball {
     /// Where the centre comes from.
     pub fn center(&self) -> &Center {
         &self.center
+    }
+
+    /// The body point the ball holds, if not `s[pos]` itself.
+    pub fn offset(&self) -> Option<Offset> {
+        self.offset
     }
 }
 
@@ -465,6 +579,8 @@ mod tests {
                 Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![4, 5])).unwrap(),
                 Predicate::ball(vec![2], 0.5, Center::Fixed(vec![1.0])).unwrap(),
                 Predicate::halfspace(vec![1.0, -1.0, 0.0, 0.0, 0.0, 0.0], 1.5).unwrap(),
+                body(Center::Fixed(vec![0.3, -0.2])),
+                body(Center::Dims(vec![4, 5])),
             ];
             for p in &predicates {
                 if let Predicate::Ball(b) = p {
@@ -490,6 +606,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A ball on a body point 1.2 m ahead and 0.4 m left of `s[0..2]`, heading `s[2]`.
+    fn body(center: Center) -> Predicate {
+        let offset = Offset {
+            heading: 2,
+            along: 1.2,
+            across: 0.4,
+        };
+        Predicate::body_ball(vec![0, 1], 0.5, center, offset).unwrap()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(300))]
+
+        /// A body ball's value is the plain ball's at the body point worked out by hand, and
+        /// its gradient matches central finite differences of the value.
+        #[test]
+        fn body_ball_matches_the_point_and_finite_differences(
+            s in proptest::collection::vec(-3.0..3.0f64, 6),
+        ) {
+            let p = body(Center::Dims(vec![4, 5]));
+            let q = [
+                s[0] + 1.2 * s[2].cos() - 0.4 * s[2].sin(),
+                s[1] + 1.2 * s[2].sin() + 0.4 * s[2].cos(),
+            ];
+            let by_hand = 0.5 - ((q[0] - s[4]).powi(2) + (q[1] - s[5]).powi(2)).sqrt();
+            proptest::prop_assert!((p.value(&s) - by_hand).abs() < 1e-12);
+            proptest::prop_assume!(by_hand < 0.49);
+            let mut g = vec![0.0; 6];
+            p.gradient_into(&s, &mut g);
+            for i in 0..6 {
+                let h = 1e-6;
+                let (mut plus, mut minus) = (s.clone(), s.clone());
+                plus[i] += h;
+                minus[i] -= h;
+                let fd = (p.value(&plus) - p.value(&minus)) / (2.0 * h);
+                proptest::prop_assert!((g[i] - fd).abs() < 1e-6, "{i}: {} vs {fd}", g[i]);
+            }
+            proptest::prop_assert!(p.reads(2) && !p.reads(3));
+            proptest::prop_assert_eq!(p.min_dim(), 6);
+        }
+    }
+
+    #[test]
+    fn body_ball_settings_are_checked() {
+        let offset = |heading| Offset {
+            heading,
+            along: 1.0,
+            across: 0.0,
+        };
+        let err = |p: Result<Predicate, SpecError>| p.unwrap_err().to_string();
+        let fixed = || Center::Fixed(vec![0.0, 0.0]);
+        assert!(err(Predicate::body_ball(vec![0, 1], 1.0, fixed(), offset(1))).contains("heading"));
+        let moving = Center::Dims(vec![3, 4]);
+        assert!(err(Predicate::body_ball(vec![0, 1], 1.0, moving, offset(3))).contains("heading"));
+        let line = Center::Fixed(vec![0.0]);
+        assert!(err(Predicate::body_ball(vec![0], 1.0, line, offset(2))).contains("planar"));
+        let far = Offset {
+            along: f64::NAN,
+            ..offset(2)
+        };
+        assert!(err(Predicate::body_ball(vec![0, 1], 1.0, fixed(), far)).contains("offset"));
     }
 
     #[test]

@@ -104,7 +104,7 @@ pub fn product<'a>(
 /// The goal space of a set of leaves: the `pos` of their first ball (`None` without a ball).
 pub fn goal_dims<'a>(leaves: &[&'a Predicate]) -> Option<&'a [usize]> {
     leaves.iter().find_map(|p| match p {
-        Predicate::Ball(b) => Some(b.pos()),
+        Predicate::Ball(b) if b.offset().is_none() => Some(b.pos()),
         _ => None,
     })
 }
@@ -114,7 +114,7 @@ pub fn goal_dims<'a>(leaves: &[&'a Predicate]) -> Option<&'a [usize]> {
 /// `Some(None)`: the leaf does not live in this space (it takes no part).
 pub fn piece(leaf: &Predicate, dims: &[usize], s: Option<&[f64]>) -> Option<Option<Piece>> {
     match leaf {
-        Predicate::Ball(b) if b.pos() == dims => {
+        Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => {
             let centre = match (b.center(), s) {
                 (Center::Fixed(c), _) => c.clone(),
                 (Center::Dims(d), Some(s)) => d.iter().map(|&i| s[i]).collect(),
@@ -153,7 +153,7 @@ pub fn centre_if_deepest(
     let mut ball = None;
     for leaf in leaves {
         match leaf {
-            Predicate::Ball(b) if b.pos() == dims => {
+            Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => {
                 if ball.is_some() {
                     return false;
                 }
@@ -202,7 +202,7 @@ pub fn separated(leaves: &[Predicate], dims: &[usize], s: &[f64]) -> bool {
     };
     let balls = || {
         leaves.iter().filter_map(|leaf| match leaf {
-            Predicate::Ball(b) if b.pos() == dims => Some(b),
+            Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => Some(b),
             _ => None,
         })
     };

@@ -1,12 +1,14 @@
 //! Second-order barriers (HOCBF) under acceleration-level models, through the public API:
 //! forward invariance of an obstacle's outside under adversarial accelerations, for the double
-//! integrator and the acceleration-driven unicycle.
+//! integrator and the acceleration-driven unicycle. Barriers on a point of the body ahead of
+//! the reference point (mixed relative degree) under the heading models.
 
 use std::f64::consts::PI;
 use std::sync::Arc;
 
 use tlshield_core::{
-    Automaton, Barrier, Bounds, Center, Dynamics, Predicate, Shield, ShieldParams, Spec, Status,
+    Automaton, Barrier, Bounds, Center, Dynamics, Offset, Predicate, Shield, ShieldParams, Spec,
+    Status,
 };
 
 /// Adversarial steps per model (the README quotes this run).
@@ -31,11 +33,23 @@ fn bounds(v: f64, m: usize) -> Bounds {
     }
 }
 
-/// A shield keeping `s[0..2]` out of a ball of radius 1 at the origin, CLF off, HOCBF gains 2
+/// A shield keeping `s[0..2]`, or the body point `along` metres ahead of it on the heading
+/// `s[2]` (`along > 0`), out of a ball of radius 1 at the origin, CLF off, HOCBF gains 2
 /// and 2. The obstacle is a user barrier, or (`in_formula`) an atom of the task `!o U g` whose
 /// safe-set literal `!o` the shield enforces.
-fn shield(model: Dynamics, accel: f64, in_formula: bool) -> Shield {
-    let obstacle = Predicate::ball(vec![0, 1], 1.0, Center::Fixed(vec![0.0, 0.0])).unwrap();
+fn shield(model: Dynamics, accel: f64, in_formula: bool, along: f64) -> Shield {
+    let origin = Center::Fixed(vec![0.0, 0.0]);
+    let obstacle = match along {
+        0.0 => Predicate::ball(vec![0, 1], 1.0, origin).unwrap(),
+        _ => {
+            let offset = Offset {
+                heading: 2,
+                along,
+                across: 0.0,
+            };
+            Predicate::body_ball(vec![0, 1], 1.0, origin, offset).unwrap()
+        }
+    };
     let goal = Predicate::ball(vec![0, 1], 0.2, Center::Fixed(vec![50.0, 50.0])).unwrap();
     let m = model.inputs();
     let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
@@ -65,18 +79,26 @@ fn shield(model: Dynamics, accel: f64, in_formula: bool) -> Shield {
     .unwrap()
 }
 
+/// The point the barrier protects: `s[0..2]`, or `along` metres ahead on the heading `s[2]`.
+fn point(s: &[f64], along: f64) -> (f64, f64) {
+    match along {
+        0.0 => (s[0], s[1]),
+        _ => (s[0] + along * s[2].cos(), s[1] + along * s[2].sin()),
+    }
+}
+
 /// Steps `steps` adversarial actions (toward the obstacle at full acceleration, or random)
 /// from random starts with h >= 0 and psi_1 >= 0, shielded or not; returns (min h, relaxed,
-/// failed).
+/// failed), h measured at the protected point.
 fn attack(
     model: Dynamics,
     start: impl Fn(&mut Rng) -> Vec<f64>,
     steps: usize,
-    shielded: bool,
-    in_formula: bool,
+    (shielded, in_formula): (bool, bool),
+    along: f64,
 ) -> (f64, usize, usize) {
     let accel = 2.0;
-    let sh = shield(model.clone(), accel, in_formula);
+    let sh = shield(model.clone(), accel, in_formula, along);
     let dt = 0.01;
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let (mut min_h, mut relaxed, mut failed) = (f64::INFINITY, 0, 0);
@@ -88,11 +110,16 @@ fn attack(
         }
         let m = model.inputs();
         let a_rl: Vec<f64> = if rng.uniform(0.0, 1.0) < 0.7 {
-            // Accelerate straight at the obstacle (for the unicycle: full forward, no turn).
+            // Accelerate straight at the obstacle (for the unicycle: full forward, no turn; for
+            // a body point, also turning its nose at the obstacle as fast as allowed).
             let (px, py) = (s[0], s[1]);
             let norm = (px * px + py * py).sqrt().max(1e-9);
             match model {
                 Dynamics::DoubleIntegrator { .. } => vec![-accel * px / norm, -accel * py / norm],
+                _ if along > 0.0 => {
+                    let bearing = (-py).atan2(-px) - s[2];
+                    vec![accel, accel * bearing.sin().signum()]
+                }
                 _ => vec![accel, 0.0],
             }
         } else {
@@ -113,7 +140,8 @@ fn attack(
         };
         model.euler_step(&s, &action, dt, &mut next);
         std::mem::swap(&mut s, &mut next);
-        min_h = min_h.min((s[0] * s[0] + s[1] * s[1]).sqrt() - 1.0);
+        let (px, py) = point(&s, along);
+        min_h = min_h.min((px * px + py * py).sqrt() - 1.0);
     }
     (min_h, relaxed, failed)
 }
@@ -121,9 +149,19 @@ fn attack(
 /// The attack is real (unshielded, it enters the obstacle), and shielded it never enters,
 /// with the obstacle as a user barrier and as an atom of the formula.
 fn never_enters(name: &str, model: Dynamics, start: impl Fn(&mut Rng) -> Vec<f64> + Copy) {
-    assert!(attack(model.clone(), start, 4_000, false, false).0 < 0.0);
+    never_enters_at(name, model, start, 0.0);
+}
+
+fn never_enters_at(
+    name: &str,
+    model: Dynamics,
+    start: impl Fn(&mut Rng) -> Vec<f64> + Copy,
+    along: f64,
+) {
+    assert!(attack(model.clone(), start, 4_000, (false, false), along).0 < 0.0);
     for in_formula in [false, true] {
-        let (min_h, relaxed, failed) = attack(model.clone(), start, STEPS, true, in_formula);
+        let (min_h, relaxed, failed) =
+            attack(model.clone(), start, STEPS, (true, in_formula), along);
         assert!(min_h >= 0.0, "{name} entered the obstacle: min h = {min_h}");
         assert_eq!(failed, 0);
         let form = if in_formula {
@@ -155,19 +193,40 @@ fn double_integrator_never_enters_the_obstacle() {
     never_enters("double integrator", model, start);
 }
 
-/// A start `[x, y, theta, v]` outside the obstacle, driving at up to 1 m/s, with
-/// `psi_1 = dh/dt + 2 h >= 0` (the unicycle's and the bicycle's state alike).
-fn heading_start(rng: &mut Rng) -> Vec<f64> {
+/// A start `[x, y, theta, v]` with the point `along` metres ahead outside the obstacle, driving
+/// at up to 1 m/s, with `psi_1 = Lf h + 2 h >= 0` (the unicycle's and the bicycle's state
+/// alike: with no input the point moves at `v` along the heading).
+fn body_start(rng: &mut Rng, along: f64) -> Vec<f64> {
     loop {
         let angle = rng.uniform(-PI, PI);
         let r = rng.uniform(1.05, 3.0);
-        let (px, py) = (r * angle.cos(), r * angle.sin());
+        let (qx, qy) = (r * angle.cos(), r * angle.sin());
         let theta = rng.uniform(-PI, PI);
         let v = rng.uniform(0.0, 1.0);
-        let psi = v * (px * theta.cos() + py * theta.sin()) / r + 2.0 * (r - 1.0);
+        let psi = v * (qx * theta.cos() + qy * theta.sin()) / r + 2.0 * (r - 1.0);
         if psi >= 0.0 {
-            return vec![px, py, theta, v];
+            return vec![qx - along * theta.cos(), qy - along * theta.sin(), theta, v];
         }
+    }
+}
+
+/// [`body_start`] for the reference point itself.
+fn heading_start(rng: &mut Rng) -> Vec<f64> {
+    body_start(rng, 0.0)
+}
+
+/// A point 0.8 m ahead of the reference point (mixed relative degree: the heading is one
+/// integration from the turn input, the position two from the acceleration).
+#[test]
+fn a_body_point_never_enters_the_obstacle() {
+    let unicycle = Dynamics::acceleration_unicycle(0, 1, 2, 3).unwrap();
+    let bicycle = Dynamics::kinematic_bicycle(0.5, 0, 1, 2, 3).unwrap();
+    let models = [
+        ("acceleration unicycle, body point", unicycle),
+        ("kinematic bicycle, body point", bicycle),
+    ];
+    for (name, model) in models {
+        never_enters_at(name, model, |rng| body_start(rng, 0.8), 0.8);
     }
 }
 

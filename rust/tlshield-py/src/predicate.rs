@@ -5,7 +5,7 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
-use tlshield_core::{Center, Predicate};
+use tlshield_core::{Center, Offset, Predicate};
 
 use crate::convert::{indices, FloatArray};
 use crate::errors::map;
@@ -94,7 +94,9 @@ impl PyHalfspace {
 }
 
 /// Ball predicate `rho(s) = radius - |s[pos] - c|` with a fixed centre `center` or a centre read
-/// from the state dimensions `center_dims` (give exactly one).
+/// from the state dimensions `center_dims` (give exactly one). With `heading` and `offset`, the
+/// point held is a point of the body: `s[pos] + R(s[heading]) offset`, `offset = (along,
+/// across)` in metres ahead of and left of `s[pos]`.
 #[pyclass(name = "Ball", module = "tlshield._core", frozen)]
 pub struct PyBall {
     pub(crate) inner: Predicate,
@@ -103,12 +105,14 @@ pub struct PyBall {
 #[pymethods]
 impl PyBall {
     #[new]
-    #[pyo3(signature = (pos, radius, center=None, center_dims=None))]
+    #[pyo3(signature = (pos, radius, center=None, center_dims=None, heading=None, offset=None))]
     fn new(
         pos: &Bound<'_, PyAny>,
         radius: f64,
         center: Option<&Bound<'_, PyAny>>,
         center_dims: Option<&Bound<'_, PyAny>>,
+        heading: Option<usize>,
+        offset: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let pos = indices(pos, "pos")?;
         let center = match (center, center_dims) {
@@ -127,9 +131,30 @@ impl PyBall {
                 ))
             }
         };
-        Ok(PyBall {
-            inner: map(Predicate::ball(pos, radius, center))?,
-        })
+        let inner = match (heading, offset) {
+            (None, None) => Predicate::ball(pos, radius, center),
+            (Some(heading), Some(o)) => {
+                let o = FloatArray::extract(o, "offset", 1, "(2,): (along, across)")?;
+                let [along, across] = o.values()[..] else {
+                    return Err(PyValueError::new_err(format!(
+                        "offset: expected 2 values (along, across), got {}",
+                        o.values().len()
+                    )));
+                };
+                let offset = Offset {
+                    heading,
+                    along,
+                    across,
+                };
+                Predicate::body_ball(pos, radius, center, offset)
+            }
+            _ => {
+                return Err(PyValueError::new_err(
+                    "Ball takes heading and offset together (a point of the body), or neither",
+                ))
+            }
+        };
+        Ok(PyBall { inner: map(inner)? })
     }
 
     /// Robustness `radius - |s[pos] - c|` at state `s`.
@@ -172,14 +197,33 @@ impl PyBall {
         }
     }
 
+    /// The heading's state dimension of a body point, or None.
+    #[getter]
+    fn heading(&self) -> Option<usize> {
+        self.ball().offset().map(|o| o.heading)
+    }
+
+    /// A body point's `(along, across)` offset from `s[pos]`, or None.
+    #[getter]
+    fn offset(&self) -> Option<(f64, f64)> {
+        self.ball().offset().map(|o| (o.along, o.across))
+    }
+
     fn __repr__(&self) -> String {
         let b = self.ball();
         let centre = match b.center() {
             Center::Fixed(c) => format!("center={}", fmt_list(c)),
             Center::Dims(d) => format!("center_dims={}", fmt_list(d)),
         };
+        let body = match b.offset() {
+            Some(o) => format!(
+                ", heading={}, offset=({:?}, {:?})",
+                o.heading, o.along, o.across
+            ),
+            None => String::new(),
+        };
         format!(
-            "Ball(pos={}, radius={:?}, {centre})",
+            "Ball(pos={}, radius={:?}, {centre}{body})",
             fmt_list(b.pos()),
             b.radius()
         )
@@ -200,6 +244,11 @@ impl PyBall {
                 b.radius().into_pyobject(py)?.into_any(),
                 center,
                 dims,
+                b.offset().map(|o| o.heading).into_pyobject(py)?.into_any(),
+                b.offset()
+                    .map(|o| (o.along, o.across))
+                    .into_pyobject(py)?
+                    .into_any(),
             ],
         )?;
         reduce(slf.get_type().into_any(), args, None, None)

@@ -53,7 +53,7 @@ impl Reading<'_> {
         let mut any = false;
         for cube in &aut.progress[q] {
             let ball = cube.literals().find_map(|l| match &predicates[l.atom] {
-                Predicate::Ball(b) if l.positive => Some((l.atom, b)),
+                Predicate::Ball(b) if l.positive && b.offset().is_none() => Some((l.atom, b)),
                 _ => None,
             });
             if let Some((atom, ball)) = ball {

@@ -521,7 +521,9 @@ impl Shield {
         b.beta.resize(m, 0.0);
 
         // Barrier rows: h_b = r_b + L_b . a_rl, G_b = -L_b on the a_cbf and a_clf columns.
-        let sources =
+        // State gradients come only without second-order rows, so then every barrier has one
+        // row and the rows follow the sources (a mixed barrier's second row needs no source).
+        let mut sources =
             params
                 .barriers
                 .iter()
@@ -529,7 +531,7 @@ impl Shield {
                 .chain(program.safe.iter().map(|&(lit, _)| {
                     (&self.automaton.spec().predicates()[lit.atom], lit.positive)
                 }));
-        for (row, (predicate, positive)) in sources.enumerate().take(barriers) {
+        for row in 0..barriers {
             let alpha = b.dh[row];
             let lg = &program.lg[row * m..(row + 1) * m];
             for j in 0..m {
@@ -546,6 +548,7 @@ impl Shield {
             let Some(gs) = gs.as_deref_mut() else {
                 continue;
             };
+            let (predicate, positive) = sources.next().expect("first-order rows: one per source");
             let model = self
                 .dynamics
                 .as_ref()

@@ -6,20 +6,47 @@
 //! every call) can only form first-order rows, so each call checks that the `g` it is given
 //! moves something every enforced barrier reads: a row that cannot act is an error, never a
 //! silent pass.
+//!
+//! A barrier that reads both kinds of dimension (a point of the body under an acceleration-level
+//! model: its position is two integrations from the acceleration, its heading one from the
+//! steering) has mixed relative degree. Its rate splits into `Lf h` (no input) and `Lg h . a`.
+//! The shield holds each part with its own row: the second-order row keeps
+//! `psi_1 = Lf h + alpha h >= 0`, and a first-order row keeps `Lg h . a >= -alpha h`. Together
+//! `dh/dt >= -2 alpha h`, so `h` stays positive, and the first-order row is always feasible
+//! (`a` with `Lg h . a = 0` meets it).
 
 use super::{ShieldError, ShieldParams};
 use crate::automaton::Automaton;
 use crate::dynamics::Structure;
 use crate::predicate::Predicate;
 
+/// The form of one barrier's rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Form {
+    /// One first-order row (relative degree 1).
+    First,
+    /// One second-order (HOCBF) row (relative degree 2).
+    Second,
+    /// Mixed relative degree: the second-order row on `Lf h`, then a first-order row on
+    /// `Lg h . a` (see the module docs).
+    Mixed,
+}
+
+impl Form {
+    /// Whether the first row is the second-order one.
+    pub(super) fn second(self) -> bool {
+        self != Form::First
+    }
+}
+
 /// The order of every barrier row and of the CLF row.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub(super) struct Orders {
-    /// Per atom of the spec: its safe-set literal needs the second-order row (false for atoms
+    /// Per atom of the spec: the form of its safe-set literal's rows (first order for atoms
     /// no safe set can keep).
-    pub(super) atoms: Vec<bool>,
+    pub(super) atoms: Vec<Form>,
     /// Per user barrier, the same.
-    pub(super) barriers: Vec<bool>,
+    pub(super) barriers: Vec<Form>,
     /// The CLF needs its second-order form (no CLF dimension is moved by an input directly).
     pub(super) clf: bool,
     /// Per atom of the spec: some state's safe set keeps it (the shield may enforce it).
@@ -27,16 +54,17 @@ pub(super) struct Orders {
 }
 
 /// The relative degree of a barrier on `predicate` under `model`: 1 when it reads a dimension
-/// an input moves, 2 when it reads one an input moves through one integration, else none the
-/// shield can enforce (`None`).
-fn degree(predicate: &Predicate, model: &dyn Structure, n: usize) -> Option<u8> {
+/// an input moves, 2 when it reads one an input moves through one integration, mixed when it
+/// reads both, else none the shield can enforce (`None`).
+fn degree(predicate: &Predicate, model: &dyn Structure, n: usize) -> Option<Form> {
     let reads = |test: &dyn Fn(usize) -> bool| (0..n).any(|d| predicate.reads(d) && test(d));
-    if reads(&|d| model.actuates(d)) {
-        Some(1)
-    } else if reads(&|d| model.actuates_twice_removed(d)) {
-        Some(2)
-    } else {
-        None
+    let once = reads(&|d| model.actuates(d));
+    let twice = reads(&|d| !model.actuates(d) && model.actuates_twice_removed(d));
+    match (once, twice) {
+        (true, true) => Some(Form::Mixed),
+        (true, false) => Some(Form::First),
+        (false, true) => Some(Form::Second),
+        (false, false) => None,
     }
 }
 
@@ -66,16 +94,16 @@ impl Orders {
             .collect();
         let Some(model) = model else {
             return Ok(Orders {
-                atoms: vec![false; spec.atoms().len()],
-                barriers: vec![false; params.barriers.len()],
+                atoms: vec![Form::First; spec.atoms().len()],
+                barriers: vec![Form::First; params.barriers.len()],
                 clf: false,
                 enforced,
             });
         };
-        let order = |what: String, p: &Predicate| -> Result<bool, ShieldError> {
+        let order = |what: String, p: &Predicate| -> Result<Form, ShieldError> {
             match degree(p, model, n) {
-                Some(d) => Ok(params.use_cbf && d == 2),
-                None if !params.use_cbf => Ok(false),
+                _ if !params.use_cbf => Ok(Form::First),
+                Some(form) => Ok(form),
                 None => Err(ShieldError::Config(format!(
                     "{what} reads no state dimension that {model} can move within two \
                      integrations (relative degree > 2, or not controlled): the shield cannot \
@@ -83,17 +111,17 @@ impl Orders {
                 ))),
             }
         };
-        let atoms: Vec<bool> = spec
+        let atoms: Vec<Form> = spec
             .atoms()
             .iter()
             .zip(spec.predicates())
             .enumerate()
             .map(|(i, (a, p))| match enforced[i] {
                 true => order(format!("atom {a:?}"), p),
-                false => Ok(false),
+                false => Ok(Form::First),
             })
             .collect::<Result<_, _>>()?;
-        let barriers: Vec<bool> = params
+        let barriers: Vec<Form> = params
             .barriers
             .iter()
             .map(|b| order(format!("barrier {:?}", b.name), &b.predicate))
@@ -102,12 +130,12 @@ impl Orders {
         if params.alpha2.is_none() {
             let first = atoms
                 .iter()
-                .position(|&o| o)
+                .position(|o| o.second())
                 .map(|i| format!("atom {:?}", spec.atoms()[i]))
                 .or_else(|| {
                     barriers
                         .iter()
-                        .position(|&o| o)
+                        .position(|o| o.second())
                         .map(|i| format!("barrier {:?}", params.barriers[i].name))
                 });
             if let Some(what) = first {
@@ -127,7 +155,7 @@ impl Orders {
 
     /// Whether some row needs the drift's Jacobian (a second-order barrier row or CLF).
     pub(super) fn second_order(&self) -> bool {
-        self.clf || self.atoms.contains(&true) || self.barriers.contains(&true)
+        self.clf || self.atoms.iter().chain(&self.barriers).any(|o| o.second())
     }
 
     /// For a shield without a model: checks that the `g` (n x m) given at `s` moves a state

@@ -16,7 +16,7 @@
 //! The buffers live in [`Program`] and are reused from step to step: nothing here allocates
 //! once they have grown to the problem's size.
 
-use super::order::Orders;
+use super::order::{Form, Orders};
 use super::{BarrierSource, Call, ControlAffine, ShieldParams};
 use crate::automaton::{Automaton, Reading};
 use crate::cnf::Literal;
@@ -114,9 +114,11 @@ fn each_disc(predicate: &Predicate, pos: &[usize], s: &[f64], found: &mut impl F
                 Center::Fixed(c) => [c[0], c[1]],
                 Center::Dims(d) => [s[d[0]], s[d[1]]],
             };
+            // A body point keeps the ball's radius from the centre, so the reference point
+            // is safe from that disc grown by the point's distance from it.
             found(Disc {
                 center,
-                radius: b.radius(),
+                radius: b.radius() + b.offset().map_or(0.0, |o| o.length()),
             });
         }
         Predicate::Union(parts) => {
@@ -275,23 +277,23 @@ impl Program {
         let user = params.barriers.iter().enumerate().map(|(i, b)| {
             let sign = if b.positive { 1.0 } else { -1.0 };
             let h = b.value(s);
-            let second = orders.barriers[i];
+            let form = orders.barriers[i];
             (
                 BarrierSource::User(i),
                 &b.predicate,
                 sign,
                 h,
                 b.slack_weight,
-                second,
+                form,
             )
         });
         let kept = self.safe.iter().map(|&(lit, h)| {
             let sign = if lit.positive { 1.0 } else { -1.0 };
             let predicate = &spec.predicates()[lit.atom];
-            let second = orders.atoms[lit.atom];
-            (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, second)
+            let form = orders.atoms[lit.atom];
+            (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, form)
         });
-        for (source, predicate, sign, h, weight, second) in user.chain(kept) {
+        for (source, predicate, sign, h, weight, form) in user.chain(kept) {
             self.weights.push(weight);
             self.routed
                 .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos, s));
@@ -300,7 +302,7 @@ impl Program {
             let lf = dot(&self.grad, &self.f);
             let psi = params.alpha * (h - params.margin);
             // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
-            let (coefficients, second_r) = match second {
+            let (coefficients, second_r) = match form.second() {
                 true => {
                     predicate.hessian_times(s, &self.f, &mut self.hf);
                     self.hf.iter_mut().for_each(|v| *v *= sign);
@@ -308,9 +310,11 @@ impl Program {
                     jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
                     let lf_psi =
                         dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + params.alpha * lf;
-                    // Lg psi_1 = (H f + J_f^T grad h)^T g: H f + J_f^T grad h into hf.
-                    for (a, b) in self.hf.iter_mut().zip(&self.jt) {
+                    // grad psi_1 = H f + J_f^T grad h + alpha grad h into hf, so Lg psi_1 =
+                    // hf^T g (alpha Lg h is 0 at relative degree 2, not where it is mixed).
+                    for ((a, b), g) in self.hf.iter_mut().zip(&self.jt).zip(&self.grad) {
                         *a += b;
+                        *a += params.alpha * g;
                     }
                     let alpha2 = params.alpha2.expect("Orders requires alpha2");
                     (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
@@ -318,17 +322,11 @@ impl Program {
                 false => (&self.grad, None),
             };
             // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
-            // order) or H f + J_f^T grad h + alpha grad h (second order).
+            // order) or grad psi_1 (second order), the row's coefficients either way.
             let robust: f64 = params
                 .disturbance
                 .iter()
-                .map(|&(d, w)| {
-                    let c = match second_r {
-                        Some(_) => coefficients[d] + params.alpha * self.grad[d],
-                        None => coefficients[d],
-                    };
-                    c.abs() * w
-                })
+                .map(|&(d, w)| coefficients[d].abs() * w)
                 .sum();
             let mut lg_a = 0.0;
             for (j, a) in a_rl.iter().enumerate() {
@@ -345,6 +343,26 @@ impl Program {
                     None => lf + lg_a + psi,
                 } - robust,
             );
+            if form == Form::Mixed {
+                // The input's share of dh/dt: Lg h . a >= -alpha (h - margin), tightened by the
+                // disturbance on what h reads (see order.rs).
+                let mut lg_a = 0.0;
+                for (j, a) in a_rl.iter().enumerate() {
+                    let lg = (0..s.len())
+                        .map(|k| self.grad[k] * self.g[k * m + j])
+                        .sum::<f64>();
+                    lg_a += lg * a;
+                    self.lg.push(lg);
+                }
+                let robust: f64 = params
+                    .disturbance
+                    .iter()
+                    .map(|&(d, w)| self.grad[d].abs() * w)
+                    .sum();
+                self.rhs.push(lg_a + psi - robust);
+                self.weights.push(weight);
+                self.routed.push(false);
+            }
             if let Some(out) = barriers_out.as_deref_mut() {
                 out.push((source, h));
             }
