@@ -32,9 +32,7 @@ def test_the_ball_holds_the_body_point() -> None:
         c, sn = math.cos(s[2]), math.sin(s[2])
         q = s[:2] + np.array([0.8 * c - 0.3 * sn, 0.8 * sn + 0.3 * c])
         assert ball.robustness(s) == pytest.approx(1.0 - np.linalg.norm(q), abs=1e-12)
-        fd = [
-            (ball.robustness(s + e) - ball.robustness(s - e)) / 2e-6 for e in 1e-6 * np.eye(3)
-        ]
+        fd = [(ball.robustness(s + e) - ball.robustness(s - e)) / 2e-6 for e in 1e-6 * np.eye(3)]
         np.testing.assert_allclose(ball.gradient(s), fd, atol=1e-6)
     assert (ball.heading, ball.offset) == (2, (0.8, 0.3))
     copy = pickle.loads(pickle.dumps(ball))
