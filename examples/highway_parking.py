@@ -99,7 +99,10 @@ def make_spec(env: gym.Env, model: str = "unicycle") -> tlshield.Spec:
         "w3": tlshield.Halfspace([0.0, -1.0, 0.0, 0.0], HALF_Y - margin),
         "w4": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], HALF_Y - margin),
     }
-    radius = GOAL_RADIUS + (LENGTH / 2 if model != "unicycle" else 0.0)
+    radius = GOAL_RADIUS + (LENGTH / 2 if model == "bicycle" else 0.0)
+    if model == "body":  # where the rear axle is when the car is parked in the spot
+        spot = env.unwrapped.vehicle.goal.heading
+        goal = goal - LENGTH / 2 * np.array([math.cos(spot), math.sin(spot)])
     g = tlshield.Ball(pos=[0, 1], radius=radius, center=list(goal))
     return tlshield.Spec("(w1 & w2 & w3 & w4) U g", {**walls, "g": g})
 
@@ -113,9 +116,12 @@ def make_shield(
     clf: bool = False,
 ) -> tlshield.Shield:
     """The shield of the episode just reset: the task's walls, the parked cars as barriers (for
-    ``model="body"``, every pair of a body disc and a parked car's disc, ``car_radius`` apart)."""
+    ``model="body"``, every pair of a body disc and a parked car's disc, ``car_radius`` apart,
+    and the walls again as barriers, so that they hold after the task is done)."""
     u = env.unwrapped
-    cars: dict[str, tlshield.Ball] = {}
+    cars: dict[str, tlshield.Predicate] = {}
+    if model == "body":
+        cars.update({w: spec.predicates[w] for w in ("w1", "w2", "w3", "w4")})
     points = BODY if model == "body" else (None,)
     for k, car in enumerate(u.road.vehicles[1:]):
         along = 1.5 * np.array([math.cos(car.heading), math.sin(car.heading)])

@@ -191,7 +191,9 @@ CASES: dict[str, Case] = {
     "Halfspace.robustness": Case(lambda: tlshield.Halfspace(S[:13], 0.5), "robustness", {"s": S}),
     "Halfspace.gradient": Case(lambda: tlshield.Halfspace(S[:13], 0.5), "gradient", {"s": S}),
     "Ball.__new__": Case(
-        lambda: tlshield.Ball, "__call__", {"pos": [0, 1], "radius": 0.7, "center": S[3:5]}
+        lambda: tlshield.Ball,
+        "__call__",
+        {"pos": [0, 1], "radius": 0.7, "center": S[3:5], "heading": 2, "offset": S[5:7]},
     ),
     "Ball.robustness": Case(
         lambda: tlshield.Ball([0, 1], 0.7, center_dims=[3, 4]), "robustness", {"s": S}
@@ -380,7 +382,7 @@ def canon(value: Any) -> Any:
     if isinstance(value, _core.Halfspace):
         return canon((value.w, value.b))
     if isinstance(value, _core.Ball):
-        return canon((value.pos, value.radius, value.center))
+        return canon((value.pos, value.radius, value.center, value.heading, value.offset))
     if isinstance(value, _core.ControlAffine):
         return canon((value.actuated, value.integrated))
     if isinstance(value, (tuple, list)):
