@@ -60,8 +60,33 @@ def test_the_adapter_checks_versions_and_says_what_to_install(
     finally:
         sg.load_builder.cache_clear()
         monkeypatch.undo()
-    with pytest.raises(ValueError, match="Car robot"):
-        sg.make_builder("SafetyCarGoal1-v0")
+    with pytest.raises(ValueError, match="SafetyCarGoal1-v0"):
+        sg.make_builder("SafetyCarGoal3-v0")
+    with pytest.raises(ValueError, match="no model of the Car robot"):
+        sg.SafetyGoalEnv("SafetyCarGoal1-v0")
+
+
+def test_the_car_robot_builds_and_steps_under_numpy_2() -> None:
+    """safety-gymnasium's Car reads a joint by a sensor's one-element id array, which
+    MuJoCo 2.3.7 refuses under numpy 2 unless the adapter's patch is in place; the patch
+    passes every other argument on as it was."""
+    env = sg.make_builder("SafetyCarGoal1-v0")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == env.observation_space.shape
+    assert env.action_space.shape == (2,)
+    model = env.task.model
+    assert [model.actuator(i).name for i in range(model.nu)] == ["left", "right"]
+    total = 0.0
+    for _ in range(50):
+        obs, reward, cost, terminated, truncated, _ = env.step(np.ones(2))
+        total += reward
+        assert np.isfinite(reward) and cost >= 0.0
+    assert total != 0.0  # the wheels moved it
+    joint = model.jnt(np.array([1], dtype=np.int32))
+    assert joint.id == model.jnt(1).id == 1
+    assert model.jnt("left").id == model.joint("left").id
+    with pytest.raises(TypeError):
+        model.jnt(np.array([1.5]))
 
 
 @pytest.mark.parametrize("task", sg.TASKS)

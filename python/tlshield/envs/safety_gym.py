@@ -3,10 +3,13 @@
 **The adapter.** safety-gymnasium 1.0.0 as published does not import with gymnasium 1.x and
 Python 3.11: its package ``__init__`` imports ``gymnasium.wrappers.compatibility`` (removed in
 gymnasium 1.0), and its colours are numpy arrays used as dataclass defaults (refused since
-Python 3.11: unhashable). :func:`load_builder` checks the installed versions
-(:data:`VERSIONS`), makes the package importable without running its ``__init__`` (a module
-shell whose ``__path__`` is the package's folder), makes the colour arrays hashable (a view
-with identity hashing; the values are untouched), and returns its ``Builder``, the env class
+Python 3.11: unhashable), and its Car robot reads a joint by the id a sensor's view gives, a
+one-element numpy array, which MuJoCo 2.3.7's ``MjModel.jnt`` refuses under numpy 2.
+:func:`load_builder` checks the installed versions (:data:`VERSIONS`), makes the package
+importable without running its ``__init__`` (a module shell whose ``__path__`` is the
+package's folder), makes the colour arrays hashable (a view with identity hashing; the values
+are untouched), lets ``MjModel.jnt`` take a one-element integer array as the integer it holds
+(every other argument goes through as it is), and returns its ``Builder``, the env class
 every Safety-Gymnasium task is made from. Nothing else is patched. ``make safety-gym``
 installs the stack (docs/guides/safety-gym.md says what and why).
 
@@ -51,6 +54,9 @@ INSTALL = (
 )
 #: The tasks registered as ``tlshield/<task>``.
 TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0")
+#: The tasks :func:`make_builder` makes (Safety-Gymnasium's own, unshielded): the shielded
+#: ones, and the Car robot's, whose model the shield does not have yet.
+BUILDER_TASKS = (*TASKS, "SafetyCarGoal1-v0")
 
 
 class MissingStack(ImportError):
@@ -98,20 +104,39 @@ def load_builder() -> type:
 
         for name, value in list(color.COLOR.items()):
             color.COLOR[name] = np.asarray(value).view(_HashableArray)
+    _accept_array_joint_ids()
     from safety_gymnasium.builder import Builder  # type: ignore[import-not-found]
 
     return Builder
 
 
+def _accept_array_joint_ids() -> None:
+    """``MjModel.jnt(id)`` with ``id`` a one-element integer array (a sensor view's
+    ``objid``) reads joint ``int(id)``; any other argument is passed on untouched."""
+    import mujoco
+
+    jnt = mujoco.MjModel.jnt
+    if getattr(jnt, "_tlshield_patched", False):
+        return
+
+    def patched(self: Any, *args: Any, **kwargs: Any) -> Any:
+        if len(args) == 1 and not kwargs:
+            key = args[0]
+            if isinstance(key, np.ndarray) and key.size == 1 and key.dtype.kind in "iu":
+                args = (int(key.reshape(())),)
+        return jnt(self, *args, **kwargs)
+
+    patched._tlshield_patched = True  # type: ignore[attr-defined]
+    mujoco.MjModel.jnt = patched
+
+
 def make_builder(task: str) -> Any:
-    """Safety-Gymnasium's own env of ``task`` (e.g. ``"SafetyPointGoal1-v0"``), through the
-    adapter. Its ``step`` returns Safety-Gymnasium's 6-tuple."""
+    """Safety-Gymnasium's own env of ``task`` (one of :data:`BUILDER_TASKS`, e.g.
+    ``"SafetyPointGoal1-v0"``), through the adapter. Its ``step`` returns Safety-Gymnasium's
+    6-tuple."""
+    if task not in BUILDER_TASKS:
+        raise ValueError(f"task = {task!r}: the adapter supports {', '.join(BUILDER_TASKS)}")
     robot = task.removeprefix("Safety").split("Goal")[0]
-    if robot != "Point" or task not in TASKS:
-        raise ValueError(
-            f"task = {task!r}: the adapter supports {', '.join(TASKS)} (the Car robot fails in "
-            "safety-gymnasium 1.0.0 under numpy 2: model.jnt() is given a numpy array)"
-        )
     return load_builder()(task, config={"agent_name": robot})
 
 
@@ -227,6 +252,11 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     ) -> None:
         if config not in CONFIGS:
             raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        if task not in TASKS:
+            raise ValueError(
+                f"task = {task!r}: the shielded envs are {', '.join(TASKS)} (the shield has no "
+                "model of the Car robot yet; make_builder makes its unshielded env)"
+            )
         self.params = build(SafetyGoalParams, overrides, task)
         self.config = config
         self.task = task
