@@ -78,7 +78,7 @@ def test_the_car_robot_builds_and_steps_under_numpy_2() -> None:
     assert [model.actuator(i).name for i in range(model.nu)] == ["left", "right"]
     total = 0.0
     for _ in range(50):
-        obs, reward, cost, terminated, truncated, _ = env.step(np.ones(2))
+        obs, reward, cost, *_ = env.step(np.ones(2))
         total += reward
         assert np.isfinite(reward) and cost >= 0.0
     assert total != 0.0  # the wheels moved it
