@@ -137,6 +137,32 @@ fn is_disc(predicate: &Predicate, pos: &[usize], s: &[f64]) -> bool {
     any
 }
 
+/// Appends a barrier row's `L = c^T g` (one value per input) to `lg`, for the row's state
+/// coefficients `c` (`grad h`, or `grad psi_1` for a second-order row); returns `L . a_rl`.
+fn push_lg(coefficients: &[f64], g: &[f64], a_rl: &[f64], lg: &mut Vec<f64>) -> f64 {
+    let m = a_rl.len();
+    let mut lg_a = 0.0;
+    for (j, a) in a_rl.iter().enumerate() {
+        let l = coefficients
+            .iter()
+            .enumerate()
+            .map(|(k, c)| c * g[k * m + j])
+            .sum::<f64>();
+        lg_a += l * a;
+        lg.push(l);
+    }
+    lg_a
+}
+
+/// The robust tightening of a row with state coefficients `c`: `sum_d |c_d| w_d` over the
+/// disturbance bounds `(d, w)`.
+fn tightening(coefficients: &[f64], disturbance: &[(usize, f64)]) -> f64 {
+    disturbance
+        .iter()
+        .map(|&(d, w)| coefficients[d].abs() * w)
+        .sum()
+}
+
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
 fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
     let start = qp.g.len();
@@ -267,7 +293,6 @@ impl Program {
             q,
             a_rl,
         } = at;
-        let m = a_rl.len();
         let spec = automaton.spec();
         if params.preserve_progress {
             reading.progress_safe_set(q, &mut self.safe);
@@ -323,19 +348,8 @@ impl Program {
             };
             // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
             // order) or grad psi_1 (second order), the row's coefficients either way.
-            let robust: f64 = params
-                .disturbance
-                .iter()
-                .map(|&(d, w)| coefficients[d].abs() * w)
-                .sum();
-            let mut lg_a = 0.0;
-            for (j, a) in a_rl.iter().enumerate() {
-                let lg = (0..s.len())
-                    .map(|k| coefficients[k] * self.g[k * m + j])
-                    .sum::<f64>();
-                lg_a += lg * a;
-                self.lg.push(lg);
-            }
+            let robust = tightening(coefficients, &params.disturbance);
+            let lg_a = push_lg(coefficients, &self.g, a_rl, &mut self.lg);
             self.rhs.push(
                 match second_r {
                     Some(r) => r + lg_a,
@@ -346,19 +360,8 @@ impl Program {
             if form == Form::Mixed {
                 // The input's share of dh/dt: Lg h . a >= -alpha (h - margin), tightened by the
                 // disturbance on what h reads (see order.rs).
-                let mut lg_a = 0.0;
-                for (j, a) in a_rl.iter().enumerate() {
-                    let lg = (0..s.len())
-                        .map(|k| self.grad[k] * self.g[k * m + j])
-                        .sum::<f64>();
-                    lg_a += lg * a;
-                    self.lg.push(lg);
-                }
-                let robust: f64 = params
-                    .disturbance
-                    .iter()
-                    .map(|&(d, w)| self.grad[d].abs() * w)
-                    .sum();
+                let robust = tightening(&self.grad, &params.disturbance);
+                let lg_a = push_lg(&self.grad, &self.g, a_rl, &mut self.lg);
                 self.rhs.push(lg_a + psi - robust);
                 self.weights.push(weight);
                 self.routed.push(false);
