@@ -3,8 +3,6 @@
 //! is built once per shape and only the data (`c`, `G`, `h`) is updated per solve, so a shield
 //! step reuses the solver's allocations.
 
-use std::collections::HashMap;
-
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus,
@@ -84,19 +82,21 @@ pub struct QpSolution {
     pub iterations: u32,
 }
 
-/// Clarabel with one cached solver per problem shape and diagonal `P`.
+/// Clarabel, with a solver built for each problem. A solver kept per shape and updated in
+/// place keeps the data scaling (equilibration) of the first problem it saw, so its answers
+/// depended, in their last digits, on which problems that workspace had solved before, and
+/// workspaces go to threads by timing: two runs of the same training differed (measured:
+/// `tlshield reproduce` with two Ray workers). Clarabel is the fallback of the active-set
+/// solver, so the cost of building it is paid on few steps.
 pub struct ClarabelQp {
     settings: DefaultSettings<f64>,
-    solvers: HashMap<(usize, usize, Vec<u64>), DefaultSolver<f64>>,
     /// Column-major copy of G (Clarabel's CSC of a dense matrix), reused.
     nzval: Vec<f64>,
 }
 
 impl std::fmt::Debug for ClarabelQp {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ClarabelQp")
-            .field("cached_shapes", &self.solvers.len())
-            .finish()
+        f.debug_struct("ClarabelQp").finish_non_exhaustive()
     }
 }
 
@@ -132,12 +132,12 @@ impl ClarabelQp {
             .expect("valid Clarabel settings");
         ClarabelQp {
             settings,
-            solvers: HashMap::new(),
             nzval: Vec::new(),
         }
     }
 
-    /// Solves `qp`, reusing the solver built for its shape.
+    /// Solves `qp` with a solver built for it (see the type's docs: the answer depends on `qp`
+    /// alone).
     pub fn solve(&mut self, qp: &DenseQp) -> QpSolution {
         let (n, rows) = (qp.vars(), qp.rows());
         let failed = |status| QpSolution {
@@ -160,33 +160,14 @@ impl ClarabelQp {
         for j in 0..n {
             self.nzval.extend((0..rows).map(|i| qp.g[i * n + j]));
         }
-        let key = (
-            n,
-            rows,
-            qp.p_diag.iter().map(|p| p.to_bits()).collect::<Vec<_>>(),
-        );
-        let solver = match self.solvers.entry(key) {
-            std::collections::hash_map::Entry::Occupied(entry) => {
-                let solver = entry.into_mut();
-                let ok = solver.update_A(&self.nzval).is_ok()
-                    && solver.update_q(&qp.c).is_ok()
-                    && solver.update_b(&qp.h).is_ok();
-                if !ok {
-                    return failed(QpStatus::Failed);
-                }
-                solver
-            }
-            std::collections::hash_map::Entry::Vacant(entry) => {
-                let p =
-                    CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), qp.p_diag.clone());
-                let a = dense_csc(rows, n, self.nzval.clone());
-                let cones = [NonnegativeConeT(rows)];
-                match DefaultSolver::new(&p, &qp.c, &a, &qp.h, &cones, self.settings.clone()) {
-                    Ok(solver) => entry.insert(solver),
-                    Err(_) => return failed(QpStatus::Failed),
-                }
-            }
-        };
+        let p = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), qp.p_diag.clone());
+        let a = dense_csc(rows, n, self.nzval.clone());
+        let cones = [NonnegativeConeT(rows)];
+        let mut solver =
+            match DefaultSolver::new(&p, &qp.c, &a, &qp.h, &cones, self.settings.clone()) {
+                Ok(solver) => solver,
+                Err(_) => return failed(QpStatus::Failed),
+            };
         solver.solve();
         let sol = &solver.solution;
         let status = match sol.status {
@@ -257,6 +238,35 @@ mod tests {
         assert!((sol.x[0] - 1.0).abs() < 1e-8 && (sol.x[1] + 1.0).abs() < 1e-8);
         assert!((sol.z[0] - 2.0).abs() < 1e-6, "{:?}", sol.z);
         assert!(kkt_residual(&qp, &sol.x, &sol.z) < 1e-7);
+    }
+
+    /// The answer to a problem is the same bit for bit whatever the solver solved before (a
+    /// solver updated in place kept the first problem's scaling, and training runs whose steps
+    /// met the workspaces in another order differed).
+    #[test]
+    fn an_answer_does_not_depend_on_earlier_problems() {
+        let problem = |scale: f64| DenseQp {
+            p_diag: vec![2.0, 2.0, 0.0],
+            c: vec![0.0, 0.0, 1e4],
+            g: vec![
+                scale, 0.3, -1.0, //
+                0.0, 0.0, -1.0, //
+                1.0, 0.0, 0.0, //
+                -1.0, 0.0, 0.0, //
+                0.0, 1.0, 0.0, //
+                0.0, -1.0, 0.0,
+            ],
+            h: vec![-0.7 * scale, 0.0, 2.0, 2.0, 2.0, 2.0],
+        };
+        let target = problem(0.9);
+        let alone = ClarabelQp::new().solve(&target);
+        assert_eq!(alone.status, QpStatus::Solved);
+        let mut used = ClarabelQp::new();
+        for scale in [1e3, 1e-3, 37.0] {
+            used.solve(&problem(scale));
+        }
+        let after = used.solve(&target);
+        assert_eq!(after, alone);
     }
 
     #[test]
