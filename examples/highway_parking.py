@@ -119,7 +119,7 @@ def make_shield(
     ``model="body"``, every pair of a body disc and a parked car's disc, ``car_radius`` apart,
     and the walls again as barriers, so that they hold after the task is done)."""
     u = env.unwrapped
-    cars: dict[str, tlshield.Predicate] = {}
+    cars: dict[str, tlshield.Ball | tlshield.Halfspace] = {}
     if model == "body":
         cars.update({w: spec.predicates[w] for w in ("w1", "w2", "w3", "w4")})
     points = BODY if model == "body" else (None,)
