@@ -1,0 +1,129 @@
+"""Identifies Safety-Gymnasium's Car robot (issue 45, point 4) and measures the one-step error of
+the candidate models against MuJoCo, as ``scripts/safety_gym_model.py`` does for the Point
+(docs/guides/safety-gym.md, "The Car robot").
+
+    .venv/bin/python scripts/safety_gym_car_model.py [--episodes 6] [--steps 500]
+
+The Car is a differential drive: two wheel motors (``left``, ``right``) whose force MuJoCo
+clips at ``±0.02``, on a free joint. Its state here is the centre ``x, y``, the heading ``psi``
+it drives along when both wheels push forward (the body's ``-y`` axis, measured), the forward
+speed ``v`` and the yaw rate ``omega``; the inputs are the saturated wheel commands
+``u = clip(a / 0.02, -1, 1)``. Two models are fitted by least squares on random rollouts
+(piecewise-constant actions, half of them within the saturation):
+
+* second order: ``dv/dt = a_v (uL + uR) - d_v v``, ``domega/dt = a_w (uR - uL) - d_w omega``;
+* kinematic (what ``tlshield.Unicycle`` takes): ``v = k_v (uL + uR)``, ``omega = k_w (uR - uL)``,
+  the steady state of the first.
+
+The one-step error of the kinematic model is ``|(s_{t+1} - s_t) / dt - (f(s_t) + g(s_t) u_t)|``
+on ``x, y, psi``, the bound a shield's ``disturbance`` setting would need.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import warnings
+
+import numpy as np
+
+DT = 0.02  # Safety-Gymnasium's step: 10 MuJoCo steps of 0.002 s
+#: The wheel motors' force limit (MuJoCo's ``forcerange``).
+SATURATION = 0.02
+
+
+def car_state(env: object) -> np.ndarray:
+    """``[x, y, psi, v, omega]`` of the Car from its free joint (``qpos``: position, then the
+    quaternion ``w, x, y, z``; ``qvel``: world linear velocity, then body angular velocity)."""
+    data = env.task.data  # type: ignore[attr-defined]
+    joint = env.task.model.joint("agent")  # type: ignore[attr-defined]
+    q, dq = int(joint.qposadr[0]), int(joint.dofadr[0])
+    qw, qx, qy, qz = data.qpos[q + 3 : q + 7]
+    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    psi = yaw - math.pi / 2.0  # both wheels forward drive it along the body's -y axis
+    vx, vy = data.qvel[dq], data.qvel[dq + 1]
+    v = vx * math.cos(psi) + vy * math.sin(psi)
+    return np.array([data.qpos[q], data.qpos[q + 1], psi, v, data.qvel[dq + 5]])
+
+
+def rollouts(episodes: int, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """States before and after each step and the saturated wheel commands, over random
+    rollouts of the unshielded SafetyCarGoal1-v0 (seeds 500, 501, ...)."""
+    from tlshield.envs.safety_gym import make_builder
+
+    env = make_builder("SafetyCarGoal1-v0")
+    rng = np.random.default_rng(0)
+    before, after, inputs = [], [], []
+    for ep in range(episodes):
+        env.reset(seed=500 + ep)
+        action = np.zeros(2)
+        for t in range(steps):
+            if t % 10 == 0:
+                action = rng.uniform(-1, 1, 2) * rng.choice([0.01, 1.0])
+            s = car_state(env)
+            _, _, _, terminated, truncated, info = env.step(action)
+            if info.get("goal_met"):  # a new world: the next state is not this one's successor
+                break
+            before.append(s)
+            after.append(car_state(env))
+            inputs.append(np.clip(action / SATURATION, -1.0, 1.0))
+            if terminated or truncated:
+                break
+    return np.array(before), np.array(after), np.array(inputs)
+
+
+def wrapped(angle: np.ndarray) -> np.ndarray:
+    return np.angle(np.exp(1j * angle))
+
+
+def fit(s: np.ndarray, s2: np.ndarray, u: np.ndarray) -> dict[str, float]:
+    """Both models' gains and the second-order fit's R^2 per rate."""
+    total, diff = u[:, 0] + u[:, 1], u[:, 1] - u[:, 0]
+    out: dict[str, float] = {}
+    for name, command, k in (("v", total, 3), ("w", diff, 4)):
+        rate = (s2[:, k] - s[:, k]) / DT
+        x = np.stack([command, -s[:, k]], 1)
+        (gain, drag), *_ = np.linalg.lstsq(x, rate, rcond=None)
+        out[f"a_{name}"], out[f"d_{name}"] = float(gain), float(drag)
+        out[f"r2_{name}"] = float(1.0 - np.var(rate - x @ [gain, drag]) / np.var(rate))
+        out[f"k_{name}"] = float(gain / drag)
+    return out
+
+
+def kinematic_errors(
+    s: np.ndarray, s2: np.ndarray, u: np.ndarray, k_v: float, k_w: float
+) -> np.ndarray:
+    """``|rate - model|`` on ``x, y, psi`` per step for the kinematic model."""
+    v = k_v * (u[:, 0] + u[:, 1])
+    w = k_w * (u[:, 1] - u[:, 0])
+    rate = (s2[:, :3] - s[:, :3]) / DT
+    rate[:, 2] = wrapped(s2[:, 2] - s[:, 2]) / DT
+    model = np.stack([v * np.cos(s[:, 2]), v * np.sin(s[:, 2]), w], 1)
+    return np.abs(rate - model)
+
+
+def main() -> None:
+    warnings.filterwarnings("ignore", category=RuntimeWarning)  # gymnasium's Box casts
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=6)
+    parser.add_argument("--steps", type=int, default=500)
+    args = parser.parse_args()
+    s, s2, u = rollouts(args.episodes, args.steps)
+    g = fit(s, s2, u)
+    print(f"{len(s)} steps of random rollouts")
+    print(
+        f"second order: dv/dt = {g['a_v']:.3f} (uL + uR) - {g['d_v']:.3f} v (R^2 {g['r2_v']:.2f}); "
+        f"domega/dt = {g['a_w']:.3f} (uR - uL) - {g['d_w']:.3f} omega (R^2 {g['r2_w']:.2f})"
+    )
+    print(f"kinematic: v = {g['k_v']:.3f} (uL + uR), omega = {g['k_w']:.3f} (uR - uL)")
+    print(f"largest forward speed seen: {np.abs(s[:, 3]).max():.2f} m/s")
+    e = kinematic_errors(s, s2, u, g["k_v"], g["k_w"])
+    print("\n| model | state rate | p50 | p90 | p99 | max |")
+    print("|---|---|---:|---:|---:|---:|")
+    for d, name in enumerate(("dx/dt (m/s)", "dy/dt (m/s)", "dpsi/dt (rad/s)")):
+        p = np.percentile(e[:, d], [50, 90, 99, 100])
+        print(f"| kinematic | {name} | " + " | ".join(f"{x:.3f}" for x in p) + " |")
+
+
+if __name__ == "__main__":
+    main()
