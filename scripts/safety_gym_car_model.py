@@ -13,7 +13,10 @@ speed ``v`` and the yaw rate ``omega``; the inputs are the saturated wheel comma
 
 * second order: ``dv/dt = a_v (uL + uR) - d_v v``, ``domega/dt = a_w (uR - uL) - d_w omega``;
 * kinematic (what ``tlshield.Unicycle`` takes): ``v = k_v (uL + uR)``, ``omega = k_w (uR - uL)``,
-  the steady state of the first.
+  the steady state of the first;
+
+and the first as a lag over one step (``v' = keep v + push (uL + uR)``), whose fit of the next
+value says how much of the rates' misfit is the fast lag rather than missing physics.
 
 The one-step error of the kinematic model is ``|(s_{t+1} - s_t) / dt - (f(s_t) + g(s_t) u_t)|``
 on ``x, y, psi``, the bound a shield's ``disturbance`` setting would need.
@@ -87,6 +90,11 @@ def fit(s: np.ndarray, s2: np.ndarray, u: np.ndarray) -> dict[str, float]:
         out[f"a_{name}"], out[f"d_{name}"] = float(gain), float(drag)
         out[f"r2_{name}"] = float(1.0 - np.var(rate - x @ [gain, drag]) / np.var(rate))
         out[f"k_{name}"] = float(gain / drag)
+        # The same first-order lag over one 0.02 s step: next = keep * now + push * command.
+        x = np.stack([s[:, k], command], 1)
+        (keep, push), *_ = np.linalg.lstsq(x, s2[:, k], rcond=None)
+        out[f"keep_{name}"], out[f"push_{name}"] = float(keep), float(push)
+        out[f"r2d_{name}"] = float(1.0 - np.var(s2[:, k] - x @ [keep, push]) / np.var(s2[:, k]))
     return out
 
 
@@ -114,6 +122,10 @@ def main() -> None:
     print(
         f"second order: dv/dt = {g['a_v']:.3f} (uL + uR) - {g['d_v']:.3f} v (R^2 {g['r2_v']:.2f}); "
         f"domega/dt = {g['a_w']:.3f} (uR - uL) - {g['d_w']:.3f} omega (R^2 {g['r2_w']:.2f})"
+    )
+    print(
+        f"per step: v' = {g['keep_v']:.3f} v + {g['push_v']:.4f} (uL + uR) (R^2 {g['r2d_v']:.2f}); "
+        f"omega' = {g['keep_w']:.3f} omega + {g['push_w']:.4f} (uR - uL) (R^2 {g['r2d_w']:.2f})"
     )
     print(f"kinematic: v = {g['k_v']:.3f} (uL + uR), omega = {g['k_w']:.3f} (uR - uL)")
     print(f"largest forward speed seen: {np.abs(s[:, 3]).max():.2f} m/s")
