@@ -18,8 +18,8 @@ speed ``v`` and the yaw rate ``omega``; the inputs are the saturated wheel comma
 and the first as a lag over one step (``v' = keep v + push (uL + uR)``), whose fit of the next
 value says how much of the rates' misfit is the fast lag rather than missing physics.
 
-The one-step error of the kinematic model is ``|(s_{t+1} - s_t) / dt - (f(s_t) + g(s_t) u_t)|``
-on ``x, y, psi``, the bound a shield's ``disturbance`` setting would need.
+The one-step error of each model is ``|(s_{t+1} - s_t) / dt - (f(s_t) + g(s_t) u_t)|`` per
+state dimension, the bound a shield's ``disturbance`` setting would need.
 """
 
 from __future__ import annotations
@@ -110,6 +110,27 @@ def kinematic_errors(
     return np.abs(rate - model)
 
 
+def second_order_errors(
+    s: np.ndarray, s2: np.ndarray, u: np.ndarray, g: dict[str, float]
+) -> np.ndarray:
+    """``|rate - model|`` on ``x, y, psi, v, omega`` per step for the second-order model
+    (``dx/dt = v cos psi``, ``dpsi/dt = omega``, and the fitted lags)."""
+    rate = (s2 - s) / DT
+    rate[:, 2] = wrapped(s2[:, 2] - s[:, 2]) / DT
+    v, w = s[:, 3], s[:, 4]
+    model = np.stack(
+        [
+            v * np.cos(s[:, 2]),
+            v * np.sin(s[:, 2]),
+            w,
+            g["a_v"] * (u[:, 0] + u[:, 1]) - g["d_v"] * v,
+            g["a_w"] * (u[:, 1] - u[:, 0]) - g["d_w"] * w,
+        ],
+        1,
+    )
+    return np.abs(rate - model)
+
+
 def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)  # gymnasium's Box casts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -129,12 +150,22 @@ def main() -> None:
     )
     print(f"kinematic: v = {g['k_v']:.3f} (uL + uR), omega = {g['k_w']:.3f} (uR - uL)")
     print(f"largest forward speed seen: {np.abs(s[:, 3]).max():.2f} m/s")
-    e = kinematic_errors(s, s2, u, g["k_v"], g["k_w"])
+    names = (
+        "dx/dt (m/s)",
+        "dy/dt (m/s)",
+        "dpsi/dt (rad/s)",
+        "dv/dt (m/s^2)",
+        "domega/dt (rad/s^2)",
+    )
     print("\n| model | state rate | p50 | p90 | p99 | max |")
     print("|---|---|---:|---:|---:|---:|")
-    for d, name in enumerate(("dx/dt (m/s)", "dy/dt (m/s)", "dpsi/dt (rad/s)")):
-        p = np.percentile(e[:, d], [50, 90, 99, 100])
-        print(f"| kinematic | {name} | " + " | ".join(f"{x:.3f}" for x in p) + " |")
+    for model, e in (
+        ("kinematic", kinematic_errors(s, s2, u, g["k_v"], g["k_w"])),
+        ("second order", second_order_errors(s, s2, u, g)),
+    ):
+        for d in range(e.shape[1]):
+            p = np.percentile(e[:, d], [50, 90, 99, 100])
+            print(f"| {model} | {names[d]} | " + " | ".join(f"{x:.3f}" for x in p) + " |")
 
 
 if __name__ == "__main__":
