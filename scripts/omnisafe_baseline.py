@@ -3,7 +3,8 @@
 virtual environment, because omnisafe 0.5.0 needs safety-gymnasium's own gymnasium (0.28.1):
 
     python3 -m venv /tmp/omni
-    /tmp/omni/bin/pip install --no-deps omnisafe==0.5.0 safety-gymnasium==1.0.0
+    /tmp/omni/bin/pip install --no-deps omnisafe==0.5.0 safety-gymnasium==1.0.0 \
+        gymnasium-robotics==1.2.2 pettingzoo==1.23.1
     /tmp/omni/bin/pip install "numpy<2" gymnasium==0.28.1 mujoco==2.3.7 xmltodict imageio \\
         pyyaml pandas==2.0.3 torch tensorboard wandb moviepy typing-extensions "typer[all]" \\
         seaborn matplotlib gdown
