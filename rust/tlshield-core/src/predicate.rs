@@ -400,11 +400,11 @@ impl Predicate {
         let Predicate::Ball(b) = self.active(s) else {
             return;
         };
-        let dist = b.distance(s);
+        let ro = b.shift(s);
+        let dist = b.distance_shifted(s, &ro);
         if dist == 0.0 {
             return;
         }
-        let ro = b.offset.map_or([0.0; 2], |o| o.rotated(s));
         // dR/dtheta o = R(theta + pi/2) o.
         let w = [-ro[1], ro[0]];
         let v_heading = b.offset.map_or(0.0, |o| v[o.heading]);
@@ -420,7 +420,7 @@ impl Predicate {
                 Center::Dims(c) => v[b.pos[k]] - v[c[k]],
             }
         };
-        let unit = |k: usize| b.diff(s, k) / dist;
+        let unit = |k: usize| b.diff(s, k, &ro) / dist;
         let along: f64 = (0..b.pos.len()).map(|k| unit(k) * jv(k)).sum();
         for k in 0..b.pos.len() {
             let z = (jv(k) - unit(k) * along) / dist;
@@ -444,13 +444,13 @@ impl Predicate {
         match self.active(s) {
             Predicate::Halfspace(h) => out[..h.w.len()].copy_from_slice(&h.w),
             Predicate::Ball(b) => {
-                let dist = b.distance(s);
+                let ro = b.shift(s);
+                let dist = b.distance_shifted(s, &ro);
                 if dist == 0.0 {
                     return;
                 }
-                let ro = b.offset.map_or([0.0; 2], |o| o.rotated(s));
                 for (k, &p) in b.pos.iter().enumerate() {
-                    let unit = b.diff(s, k) / dist;
+                    let unit = b.diff(s, k, &ro) / dist;
                     out[p] -= unit;
                     if let Center::Dims(d) = &b.center {
                         out[d[k]] += unit;
@@ -504,13 +504,18 @@ impl Ball {
         }
     }
 
-    /// Entry `k` of `p(s) - c`: the body point (or `s[pos]`) less the centre.
+    /// `p(s) - s[pos]` (zero without a body point), worked out once per call: the heading's
+    /// sine and cosine.
     #[inline]
-    fn diff(&self, s: &[f64], k: usize) -> f64 {
-        let shift = match self.offset {
-            Some(o) => o.rotated(s)[k],
-            None => 0.0,
-        };
+    fn shift(&self, s: &[f64]) -> [f64; 2] {
+        self.offset.map_or([0.0; 2], |o| o.rotated(s))
+    }
+
+    /// Entry `k` of `p(s) - c`: the body point (or `s[pos]`) less the centre, `shift` from
+    /// [`Ball::shift`].
+    #[inline]
+    fn diff(&self, s: &[f64], k: usize, shift: &[f64; 2]) -> f64 {
+        let shift = if self.offset.is_some() { shift[k] } else { 0.0 };
         s[self.pos[k]] + shift - self.center_at(s, k)
     }
 
@@ -518,7 +523,13 @@ impl Ball {
     /// ~1e154 overflow, so those are summed rescaled by the largest).
     #[inline]
     fn distance(&self, s: &[f64]) -> f64 {
-        let diff = |k: usize| self.diff(s, k);
+        self.distance_shifted(s, &self.shift(s))
+    }
+
+    /// [`Ball::distance`] with the body point's shift already worked out.
+    #[inline]
+    fn distance_shifted(&self, s: &[f64], shift: &[f64; 2]) -> f64 {
+        let diff = |k: usize| self.diff(s, k, shift);
         let sq: f64 = (0..self.pos.len()).map(|k| diff(k) * diff(k)).sum();
         if sq.is_finite() {
             return sq.sqrt();
