@@ -57,10 +57,6 @@ CASES: dict[str, list[Case]] = {
         ("--dot in a missing folder", lambda b, r: ["fsa", "F a", "--dot", str(b / "no/x.dot")]),
     ],
     "train": [
-        (
-            "a Safety-Gymnasium task",
-            lambda b, r: ["train", "--env", "tlshield/SafetyPointGoal1-v0", "--out", str(b / "o")],
-        ),
         ("--out is an existing file", lambda b, r: ["train", "--out", str(_file(b))]),
         ("--out under a file", lambda b, r: ["train", "--out", _under_a_file(b)]),
         ("--out in /proc", lambda b, r: ["train", "--out", "/proc/tlshield-run"]),

@@ -98,12 +98,23 @@ def env_horizon(env: Any) -> int | None:
         return getattr(spec, "max_episode_steps", None)
 
 
+def scored_by_return(env_id: str) -> bool:
+    """Whether ``env_id`` is scored by its reward and cost (Safety-Gymnasium's tasks: the goal
+    moves when met and an episode runs to its horizon), not by a temporal-logic task's success.
+    Training validates such an env on its return, and evaluation runs it as it trained (the
+    unshielded ``rl`` stays unshielded), to the horizon."""
+    return env_id in SAFETY_GYM_IDS
+
+
 def check_task_env(env: Any, gamma: float, env_id: str) -> None:
     """Checks that ``env`` exposes a task that training can read, and that its reward's
     guarantees hold for this training: an :class:`tlshield.wrappers.FsaAugmented` in the
     wrapper chain (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's
     ``gamma``, and a reward horizon no shorter than the episodes (else finishing late may not
-    out-earn not finishing). Raises ValueError naming what is wrong."""
+    out-earn not finishing). Raises ValueError naming what is wrong. An env
+    :func:`scored_by_return` has its own reward, so only its ``info`` is read."""
+    if scored_by_return(env_id):
+        return
     try:
         tracker = env.get_wrapper_attr("tracker")
     except AttributeError:
@@ -133,12 +144,6 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
     (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
     if env_id == ENV_ID:
         return ChannelEnv(config=config, **kwargs)
-    if env_id in SAFETY_GYM_IDS:
-        raise ValueError(
-            f"env {env_id!r}: Safety-Gymnasium's tasks are scored by its reward and cost, not "
-            "by a temporal-logic task; train and evaluate them with `tlshield benchmark "
-            "safety-gym` (docs/guides/safety-gym.md)"
-        )
     check_env_id(env_id)  # an unknown id or module is one clear ValueError
     try:
         return gym.make(env_id, config=config, **kwargs)
@@ -169,6 +174,7 @@ __all__ = [
     "factory_takes",
     "import_modules",
     "make",
+    "scored_by_return",
 ]
 
 

@@ -200,6 +200,18 @@ class SafetyGoalParams:
     #: ``scripts/safety_gym_model.py`` (0 turns a bound off).
     position_error: float = 0.05
     velocity_error: float = 0.0
+    #: Paid per step as ``correction_penalty * |u - u_rl|`` (the shield's correction in its
+    #: units, thrust and turn in ``[-1, 1]``), taken off the reward PPO learns from
+    #: (Krasowski et al. 2023); ``info["task_reward"]`` keeps Safety-Gymnasium's reward, which
+    #: every table reports. 0 (the default) pays nothing.
+    correction_penalty: float = 0.0
+
+    #: The settings that may be 0 (every other one must be > 0).
+    _MAY_BE_ZERO: ClassVar[tuple[str, ...]] = (
+        "position_error",
+        "velocity_error",
+        "correction_penalty",
+    )
 
     def check(self) -> None:
         """Raises ValueError naming the first bad setting."""
@@ -207,9 +219,9 @@ class SafetyGoalParams:
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"{f.name} = {v!r}: expected a finite number")
-            if f.name.endswith("_error") and v < 0:
-                raise ValueError(f"{f.name} = {v!r}: expected a bound >= 0")
-            if not f.name.endswith("_error") and v <= 0:
+            if f.name in self._MAY_BE_ZERO and v < 0:
+                raise ValueError(f"{f.name} = {v!r}: expected a number >= 0")
+            if f.name not in self._MAY_BE_ZERO and v <= 0:
                 raise ValueError(f"{f.name} = {v!r}: expected a number > 0")
 
 
@@ -383,30 +395,43 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         result = None
         applied = action
         u_rl = self.shield_input(action)
+        penalty = 0.0
         if self.shield is not None:
             result = self.shield.filter_monitor(self.monitor, u_rl)
             u = result.action
             applied = np.array([POINT.saturation * u[0], u[1]])
+            penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
         obs, reward, cost, terminated, truncated, info = self._env.step(applied)
         goal_met = bool(info.get("goal_met", False))
         if goal_met:
             self._find_agent()
         self._state = self.true_state()
         if goal_met:  # a new goal was placed: the task starts again
-            self.monitor.reset(self._state)
+            step = self.monitor.reset(self._state)
         else:
-            self.monitor.advance(self._state)
+            step = self.monitor.advance(self._state)
         info = {
             **info,
             "cost": float(cost),
             "violation": float(cost) > 0.0,
             "goal_met": goal_met,
+            # What training's metrics count (as for every bundled env): a goal met is a
+            # success, and the automaton's trap (inside a hazard's or a vase's disc) an entry.
+            "success": goal_met,
+            "trap": bool(step.trapped),
+            "task_reward": float(reward),
             "action": applied,
             "state": self._state,
         }
         if self.shield is not None:
             info["shield"] = shield_info(result, u_rl)
-        return np.asarray(obs, dtype=np.float64), float(reward), terminated, truncated, info
+        return (
+            np.asarray(obs, dtype=np.float64),
+            float(reward) - penalty,
+            terminated,
+            truncated,
+            info,
+        )
 
 
 def make_safety_goal(

@@ -19,6 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
+from tlshield.envs import scored_by_return
 from tlshield.lab.evaluation import rollouts
 from tlshield.lab.measures import step_violation
 from tlshield.lab.presets import clf_scale
@@ -61,11 +62,19 @@ class UpdateMetrics:
         self.gamma = gamma
         self.discounted = np.zeros(n_envs)
         self.discount = np.ones(n_envs)
+        # The episode so far, undiscounted: the task's own reward and cost.
+        self.task_return = np.zeros(n_envs)
+        self.episode_cost = np.zeros(n_envs)
         self.was_trapped = np.zeros(n_envs, dtype=bool)
         self.reset_update()
 
     def reset_update(self) -> None:
         self.returns: list[float] = []
+        #: Per finished episode, the task's own reward (``info["task_reward"]``, else the
+        #: reward) and the cost (``info["cost"]``) summed without discount.
+        self.task_returns: list[float] = []
+        self.episode_costs: list[float] = []
+        self.cost: float | None = None  # None: no step reported a cost
         #: Per constraint the env reports (``info["constraints"]``), its smallest value.
         self.min_h: dict[str, float] = {}
         self.min_d = math.inf
@@ -78,6 +87,10 @@ class UpdateMetrics:
         self.discounted += self.discount * rewards
         self.discount *= self.gamma
         for i, info in enumerate(infos):
+            self.task_return[i] += float(info.get("task_reward", rewards[i]))
+            if "cost" in info:
+                self.cost = (self.cost or 0.0) + float(info["cost"])
+                self.episode_cost[i] += float(info["cost"])
             for name, h in info.get("constraints", {}).items():
                 self.min_h[name] = min(self.min_h.get(name, math.inf), h)
             self.min_d = min(self.min_d, info.get("min_obstacle_distance", math.inf))
@@ -96,13 +109,21 @@ class UpdateMetrics:
                 self.correction += float(np.linalg.norm(shield["a_cbf"] + shield["a_clf"]))
             if dones[i]:
                 self.returns.append(float(self.discounted[i]))
+                self.task_returns.append(float(self.task_return[i]))
+                self.episode_costs.append(float(self.episode_cost[i]))
                 self.discounted[i], self.discount[i] = 0.0, 1.0
+                self.task_return[i] = self.episode_cost[i] = 0.0
                 self.was_trapped[i] = False
 
 
 def _measured(value: float) -> float:
     """A running minimum as a metric: NaN when no step measured it (still infinite)."""
     return math.nan if math.isinf(value) else value
+
+
+def _mean(values: list[float]) -> float:
+    """The mean of a metric's values, NaN when there are none (no episode ended)."""
+    return float(np.mean(values)) if values else math.nan
 
 
 def metrics_text(count: float) -> str:
@@ -172,28 +193,31 @@ class ClfSchedule(BaseCallback):  # type: ignore[misc]
 
 
 class Validation(BaseCallback):  # type: ignore[misc]
-    """Every ``validate_every`` updates, the validation success of the deterministic policy;
-    the best so far (ties: the later) is saved as the run's kept model."""
+    """Every ``validate_every`` updates, the validation episodes of the deterministic policy;
+    the best so far (ties: the later) is saved as the run's kept model. Best means the highest
+    success rate, or, for an env :func:`tlshield.envs.scored_by_return`, the highest mean
+    return (its cost is recorded beside it)."""
 
     def __init__(self, run: TrainingRun) -> None:
         super().__init__()
         self.run = run
         self.update = 0
-        self.best = -1.0
-        #: This update's validation success (NaN when it did not validate).
-        self.last = math.nan
+        self.best = -math.inf
+        #: This update's validation success, return and cost (NaN when it did not validate).
+        self.last = self.last_return = self.last_cost = math.nan
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
         self.update += 1
-        self.last = self._validate()
-
-    def _validate(self) -> float:
+        self.last = self.last_return = self.last_cost = math.nan
         run = self.run
-        if not run.validate_every or self.update % run.validate_every:
-            return math.nan
+        if run.validate_every and self.update % run.validate_every == 0:
+            self._validate()
+
+    def _validate(self) -> None:
+        run = self.run
         trials = run.validation_trials
         seeds = [validation_seed(run.seed, i) for i in range(trials)]
         model, venv = run.model, run.venv
@@ -202,13 +226,19 @@ class Validation(BaseCallback):  # type: ignore[misc]
             return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
         outcomes = rollouts(run.config, run.overrides, policy, seeds, run.env_id)[0]
-        success = sum(o["success"] for o in outcomes) / trials
-        if success >= self.best:
-            self.best = success
+        self.last = sum(o["success"] for o in outcomes) / trials
+        self.last_return = float(np.mean([o["return"] for o in outcomes]))
+        costs = [o["cost"] for o in outcomes if o["cost"] is not None]
+        self.last_cost = float(np.mean(costs)) if costs else math.nan
+        score = self.last_return if scored_by_return(run.env_id) else self.last
+        if score >= self.best:
+            self.best = score
             model.save(run.folder / "model.zip")
             save_normalization(venv, run.folder / "normalization.json")
-            run.record["kept"] = {"update": self.update, "validation_success": success}
-        return success
+            kept = {"update": self.update, "validation_success": self.last}
+            if scored_by_return(run.env_id):
+                kept |= {"validation_return": self.last_return, "validation_cost": self.last_cost}
+            run.record["kept"] = kept
 
 
 class UpdateLog(BaseCallback):  # type: ignore[misc]
@@ -290,6 +320,13 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
             "validation_success": self.validation.last,
             "wall_time": self.elapsed(),
             **diagnostics(self.model, metrics),
+            "task_return_mean": _mean(metrics.task_returns),
+            "episode_cost_mean": _mean(metrics.episode_costs)
+            if metrics.cost is not None
+            else math.nan,
+            "cost": math.nan if metrics.cost is None else metrics.cost,
+            "validation_return": self.validation.last_return,
+            "validation_cost": self.validation.last_cost,
         }
         self.writer.writerow(row)
         self.csv_file.flush()

@@ -182,6 +182,11 @@ def _print_evaluation(result: dict[str, object]) -> None:
         f"{result['trials']} ({result['success_rate']:.0%}), "
         f"collisions {shown(collisions)}, "  # type: ignore[arg-type]
         f"violation steps {shown(steps)}"  # type: ignore[arg-type]
+        + (
+            f", return {result['return_mean']:.2f}, cost {result['cost_mean']:.1f} per episode"
+            if result.get("cost_mean") is not None
+            else ""
+        )
     )
 
 
@@ -476,9 +481,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--configs",
         nargs="+",
-        choices=sorted(CONFIGS),
+        metavar="CONFIG",
         help="trained configurations (default: flatworld rl_cbf_clf rl; safety-gym rl rl_cbf "
-        "rl_cbf_clf)",
+        "rl_cbf_clf); safety-gym also takes its levers: rl_cbf+penalty rl_cbf+executed "
+        "rl_cbf_clf+routed",
     )
     bench.add_argument(
         "--seeds", nargs="+", type=int, help="default: flatworld 1 2 3; safety-gym 0 1 2"

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, env_horizon, import_modules, make
+from tlshield.envs import ENV_ID, env_horizon, import_modules, make, scored_by_return
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.lab import measures
@@ -36,16 +36,31 @@ def rollouts(
     by side with one batched policy call per step: per-trial outcomes, start states, agent
     paths and obstacle paths (the last three for Channel-v0 only; empty for other envs).
     Violations and collisions are counted as :mod:`tlshield.lab.measures` says; ``None`` where the
-    environment gives nothing to measure them by."""
+    environment gives nothing to measure them by. Each outcome also has the trial's
+    undiscounted ``return`` (the task's own reward, ``info["task_reward"]`` where the env
+    shapes it) and ``cost`` (``info["cost"]`` summed; ``None`` where the env reports none).
+
+    An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
+    the unshielded ``rl`` unshielded, and every episode runs to the horizon (a met goal moves,
+    it does not end the task); its ``success`` says whether any goal was met."""
+    by_return = scored_by_return(env_id)
     # The paper's evaluation rules: the CBF on in every configuration.
-    envs = [make(env_id, config, evaluation=True, **overrides) for _ in seeds]
+    envs = [make(env_id, config, evaluation=not by_return, **overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
     channel = env_id == ENV_ID
     starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))
     paths = [[env.state[[X, Y]]] for env in envs] if channel else []
     obstacle_paths = [[_obstacles(env)] for env in envs] if channel else []
     outcomes: list[dict[str, Any]] = [
-        {"reset_seed": s, "success": False, "collision": None, "steps": 0, "violations": None}
+        {
+            "reset_seed": s,
+            "success": False,
+            "collision": None,
+            "steps": 0,
+            "violations": None,
+            "return": 0.0,
+            "cost": None,
+        }
         for s in seeds
     ]
     trapped = [False] * len(seeds)
@@ -57,7 +72,7 @@ def rollouts(
         actions = np.asarray(policy(obs[active]), dtype=np.float64).reshape(len(active), -1)
         still = []
         for i, action in zip(active, actions, strict=True):
-            o, _, terminated, truncated, info = envs[i].step(action)
+            o, reward, terminated, truncated, info = envs[i].step(action)
             obs[i] = o
             if channel:
                 paths[i].append(envs[i].state[[X, Y]])
@@ -68,10 +83,17 @@ def rollouts(
             if violation is not None:
                 out["violations"] = (out["violations"] or 0) + int(violation)
             out["steps"] = t + 1
+            out["return"] += float(info.get("task_reward", reward))
+            if "cost" in info:
+                out["cost"] = (out["cost"] or 0.0) + float(info["cost"])
             collision = measures.collision(info)
             if collision is not None:
                 out["collision"] = collision
-            if terminated or truncated or collision:
+            if by_return:
+                out["success"] = out["success"] or bool(info.get("success", False))
+                if not (terminated or truncated):
+                    still.append(i)
+            elif terminated or truncated or collision:
                 out["success"] = bool(info["success"])
             else:
                 still.append(i)
@@ -133,6 +155,7 @@ def evaluate(
     )
     successes = sum(o["success"] for o in outcomes)
     steps_to_success = [o["steps"] for o in outcomes if o["success"]]
+    costs = [o["cost"] for o in outcomes if o["cost"] is not None]
     result = {
         "config": record["config"],
         "seed": record["seed"],
@@ -145,6 +168,8 @@ def evaluate(
         "violation_steps": measures.total([o["violations"] for o in outcomes]),
         "violating_trials": measures.total([_count(o["violations"]) for o in outcomes]),
         "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
+        "return_mean": float(np.mean([o["return"] for o in outcomes])),
+        "cost_mean": float(np.mean(costs)) if costs else None,
         "outcomes": outcomes,
     }
     Path(run, evaluation_file).write_text(json.dumps(result, indent=2))

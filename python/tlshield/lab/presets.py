@@ -85,6 +85,31 @@ PRESETS: dict[str, dict[str, Any]] = {
         },
         "net_arch": {"pi": [64, 64], "vf": [64, 64]},
     },
+    # Safety-Gymnasium's tasks (tlshield.lab.benchmark_safety_gym): Stable-Baselines3's PPO
+    # defaults (one environment of 2048 steps per update, minibatches of 64, Tanh 64-64 networks,
+    # raw observations and rewards), the settings the unshielded row of docs/guides/safety-gym.md
+    # was measured with, the same for every configuration. Validation is on the return
+    # (tlshield.envs.scored_by_return): 5 episodes of 1,000 steps every 10 updates (about 25%
+    # more environment steps), the best checkpoint kept and the last one beside it.
+    "safety-gym": {
+        "n_envs": 1,
+        "activation": "Tanh",
+        "norm_obs": False,
+        "norm_reward": False,
+        "validate_every": 10,
+        "validation_trials": 5,
+        "ppo": {
+            "n_steps": 2048,
+            "batch_size": 64,
+            "n_epochs": 10,
+            "learning_rate": 3e-4,
+            "gamma": 0.99,
+            "gae_lambda": 0.95,
+            "clip_range": 0.2,
+            "ent_coef": 0.0,
+        },
+        "net_arch": {"pi": [64, 64], "vf": [64, 64]},
+    },
 }
 #: The CLF-bound schedules of :func:`clf_scale` (the CLI and the tuner offer these).
 SCHEDULES = ("fixed", "linear", "exponential")

@@ -41,6 +41,7 @@ from tlshield.envs.params import upgrade
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
     "METRIC_COLUMNS",
+    "RETURN_COLUMNS",
     "RUN_FILE",
     "Run",
     "is_finished",
@@ -85,6 +86,20 @@ DIAGNOSTIC_COLUMNS = (
     "value_loss",
     "entropy_loss",
 )
+#: Return and cost, per update (the last columns of metrics.csv; NaN in older runs, and cost
+#: NaN where the environment reports none): the mean undiscounted return of the episodes that
+#: ended in the update (the task's own reward, ``info["task_reward"]`` where an env shapes
+#: it), their mean cost (``info["cost"]``), the cost summed over every step of the update, and
+#: the validation episodes' mean return and cost (NaN when the update did not validate).
+RETURN_COLUMNS = (
+    "task_return_mean",
+    "episode_cost_mean",
+    "cost",
+    "validation_return",
+    "validation_cost",
+)
+#: Columns that came later: a run written before them reads them as NaN.
+_LATER_COLUMNS = (*DIAGNOSTIC_COLUMNS, *RETURN_COLUMNS)
 #: The columns of metrics.csv before the constraint columns.
 _HEAD_COLUMNS = ("update", "timesteps", "episodes", "return_mean", "return_std")
 #: The columns of metrics.csv after the constraint columns.
@@ -99,6 +114,7 @@ _TAIL_COLUMNS = (
     "validation_success",
     "wall_time",
     *DIAGNOSTIC_COLUMNS,
+    *RETURN_COLUMNS,
 )
 
 
@@ -180,10 +196,10 @@ def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:
                 columns = metric_columns(constraints)
             for row in reader:
                 try:
-                    # Diagnostic columns came later: older runs read them as NaN.
+                    # Some columns came later: older runs read them as NaN.
                     rows.append(
                         [
-                            float(row.get(c) or "nan") if c in DIAGNOSTIC_COLUMNS else float(row[c])
+                            float(row.get(c) or "nan") if c in _LATER_COLUMNS else float(row[c])
                             for c in columns
                         ]
                     )

@@ -47,6 +47,7 @@ from tlshield.envs import (
     factory_takes,
     import_modules,
     make,
+    scored_by_return,
 )
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.envs.params import FULL, as_flat
@@ -144,7 +145,7 @@ def prepare(
     settings = _ppo_settings(preset, ppo)
     # The progress reward is shaped for the discount PPO uses (the bundled environments take
     # it as a keyword; a user's environment is checked below).
-    if env.startswith("tlshield/") or factory_takes(env, "gamma"):
+    if not scored_by_return(env) and (env.startswith("tlshield/") or factory_takes(env, "gamma")):
         overrides = {"gamma": settings.ppo["gamma"], **overrides}
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
