@@ -1,5 +1,5 @@
 """The shield alone on Safety-Gymnasium: scripted policies against ``tlshield/SafetyPointGoal*``
-in every configuration (docs/guides/safety-gym.md).
+and ``tlshield/SafetyCarGoal1-v0`` in every configuration (docs/guides/safety-gym.md).
 
     .venv/bin/python scripts/safety_gym_attack.py [--episodes 10]
 
@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from tlshield.envs.safety_gym import POINT, SafetyGoalEnv
+from tlshield.envs.safety_gym import SafetyGoalEnv
 
 
 def goal_seeker(
@@ -30,7 +30,8 @@ def goal_seeker(
     """Turn to the goal lidar's nearest bin (pushed away from the hazard and vase bins nearer
     than ``reach``, with gain ``repel``) and thrust as far as the heading allows."""
     goal = env.lidar(obs, "goal")
-    angles = (np.arange(goal.size) + 0.5) * 2.0 * np.pi / goal.size
+    # Bin angles from the heading (the Car's lidar reads its body frame, whose x is not ahead).
+    angles = (np.arange(goal.size) + 0.5) * 2.0 * np.pi / goal.size - env.robot.ahead
     i = int(np.argmax(goal))
     v = np.array([math.cos(angles[i]), math.sin(angles[i])])
     for name in ("hazards", "vases"):
@@ -47,9 +48,7 @@ def goal_seeker(
                 * np.array([math.cos(angles[j]), math.sin(angles[j])])
             )
     heading = math.atan2(v[1], v[0])
-    return np.array(
-        [POINT.saturation * max(0.0, math.cos(heading)), float(np.clip(3.0 * heading, -1, 1))]
-    )
+    return env.robot.drive(max(0.0, math.cos(heading)), float(np.clip(3.0 * heading, -1, 1)))
 
 
 def main() -> None:

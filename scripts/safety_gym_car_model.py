@@ -30,23 +30,26 @@ import warnings
 
 import numpy as np
 
-DT = 0.02  # Safety-Gymnasium's step: 10 MuJoCo steps of 0.002 s
+#: Safety-Gymnasium's step for the Car: 10 MuJoCo steps of 0.004 s (the Point's are 0.002 s;
+#: the first version of this script took 0.02 s, which doubled every rate), checked against
+#: the model in :func:`rollouts`.
+DT = 0.04
 #: The wheel motors' force limit (MuJoCo's ``forcerange``).
 SATURATION = 0.02
 
 
 def car_state(env: object) -> np.ndarray:
-    """``[x, y, psi, v, omega]`` of the Car from its free joint (``qpos``: position, then the
-    quaternion ``w, x, y, z``; ``qvel``: world linear velocity, then body angular velocity)."""
-    data = env.task.data  # type: ignore[attr-defined]
-    joint = env.task.model.joint("agent")  # type: ignore[attr-defined]
-    q, dq = int(joint.qposadr[0]), int(joint.dofadr[0])
-    qw, qx, qy, qz = data.qpos[q + 3 : q + 7]
-    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-    psi = yaw - math.pi / 2.0  # both wheels forward drive it along the body's -y axis
-    vx, vy = data.qvel[dq], data.qvel[dq + 1]
-    v = vx * math.cos(psi) + vy * math.sin(psi)
-    return np.array([data.qpos[q], data.qpos[q + 1], psi, v, data.qvel[dq + 5]])
+    """``[x, y, psi, v, omega]`` of the Car: what the shield reads
+    (:meth:`tlshield.envs.safety_gym.CarModel.read`: the point ``pivot`` behind the free
+    joint's origin, the heading, the speed along it), then the yaw rate (the free joint's
+    angular velocity about the vertical, in the body frame)."""
+    from tlshield.envs.safety_gym import CAR
+
+    model, data = env.task.model, env.task.data  # type: ignore[attr-defined]
+    s = np.zeros(5)
+    CAR.read(data, CAR.locate(model), s)
+    s[4] = data.qvel[int(model.joint("agent").dofadr[0]) + 5]
+    return s
 
 
 def rollouts(episodes: int, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -55,6 +58,11 @@ def rollouts(episodes: int, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndar
     from tlshield.envs.safety_gym import make_builder
 
     env = make_builder("SafetyCarGoal1-v0")
+    env.reset(seed=500)
+    conf = env.task.sim_conf
+    step = env.task.model.opt.timestep * conf.frameskip_binom_n
+    if conf.frameskip_binom_p != 1.0 or abs(step - DT) > 1e-12:
+        raise RuntimeError(f"the Car's step is {step} s (p {conf.frameskip_binom_p}), not {DT}")
     rng = np.random.default_rng(0)
     before, after, inputs = [], [], []
     for ep in range(episodes):
@@ -131,6 +139,23 @@ def second_order_errors(
     return np.abs(rate - model)
 
 
+def shield_errors(s: np.ndarray, s2: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``|rate - model|`` on ``x, y, psi, v`` per step for the shield's model
+    (:class:`tlshield.envs.safety_gym.CarModel`: the speed's lag, the turn as a rate), with
+    its inputs ``u0 = (uL + uR) / 2``, ``u1 = (uL - uR) / 2``."""
+    from tlshield.envs.safety_gym import CAR
+
+    model = CAR.model(4)
+    rate = (s2[:, :4] - s[:, :4]) / DT
+    rate[:, 2] = wrapped(s2[:, 2] - s[:, 2]) / DT
+    inputs = np.stack([(u[:, 0] + u[:, 1]) / 2.0, (u[:, 0] - u[:, 1]) / 2.0], 1)
+    predicted = []
+    for state, a in zip(s[:, :4], inputs, strict=True):
+        f, g = model.eval(state)
+        predicted.append(f + g @ a)
+    return np.abs(rate - np.array(predicted))
+
+
 def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)  # gymnasium's Box casts
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -162,6 +187,7 @@ def main() -> None:
     for model, e in (
         ("kinematic", kinematic_errors(s, s2, u, g["k_v"], g["k_w"])),
         ("second order", second_order_errors(s, s2, u, g)),
+        ("shield (CarModel)", shield_errors(s, s2, u)),
     ):
         for d in range(e.shape[1]):
             p = np.percentile(e[:, d], [50, 90, 99, 100])

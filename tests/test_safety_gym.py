@@ -133,8 +133,8 @@ def test_a_start_inside_a_hazard_is_driven_out_and_stays_out() -> None:
     # Put the agent 0.1 m from the hazard's centre (its cost radius is 0.2), at rest.
     state = env.true_state()
     offset = hazard + np.array([0.1, 0.0]) - state[:2]
-    c, s = env._rot0
-    qx, qy = env._qpos[:2]
+    c, s = env._at.rot0
+    qx, qy = env._at.qpos[:2]
     task.data.qpos[qx] += c * offset[0] + s * offset[1]
     task.data.qpos[qy] += -s * offset[0] + c * offset[1]
     task.data.qvel[:] = 0.0

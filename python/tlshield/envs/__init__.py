@@ -32,7 +32,11 @@ if FLATWORLD_ID not in gym.registry:
     gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
 #: Safety-Gymnasium's tasks, shielded (``make safety-gym`` installs their stack; registering
 #: imports none of it).
-SAFETY_GYM_IDS = ("tlshield/SafetyPointGoal1-v0", "tlshield/SafetyPointGoal2-v0")
+SAFETY_GYM_IDS = (
+    "tlshield/SafetyPointGoal1-v0",
+    "tlshield/SafetyPointGoal2-v0",
+    "tlshield/SafetyCarGoal1-v0",
+)
 for _id in SAFETY_GYM_IDS:
     if _id not in gym.registry:
         gym.register(

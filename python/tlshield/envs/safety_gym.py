@@ -41,7 +41,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, Ball, Monitor, Shield, Spec, ThrustTurn
+from tlshield._core import Automaton, Ball, ControlAffine, Monitor, Shield, Spec, ThrustTurn
 from tlshield.envs.params import CONFIGS, FULL, build
 from tlshield.tracking import shield_info
 
@@ -53,10 +53,9 @@ INSTALL = (
     "mujoco==2.3.7 xmltodict pyyaml imageio)"
 )
 #: The tasks registered as ``tlshield/<task>``.
-TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0")
-#: The tasks :func:`make_builder` makes (Safety-Gymnasium's own, unshielded): the shielded
-#: ones, and the Car robot's, whose model the shield does not have yet.
-BUILDER_TASKS = (*TASKS, "SafetyCarGoal1-v0")
+TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0", "SafetyCarGoal1-v0")
+#: The tasks :func:`make_builder` makes (Safety-Gymnasium's own, unshielded).
+BUILDER_TASKS = TASKS
 
 
 class MissingStack(ImportError):
@@ -158,18 +157,184 @@ class PointModel:
     drag: float = 1.915
     #: The control at which the motor's force saturates.
     saturation: float = 0.05
+    #: The agent's part of the shield's state: ``x, y, theta, vx, vy``.
+    agent_dim: ClassVar[int] = 5
+    #: The cost is measured at the state's ``x, y`` (no point of the body ahead of it).
+    pivot: ClassVar[float] = 0.0
 
-    def model(self) -> ThrustTurn:
+    def model(self, state_dim: int = 5) -> ThrustTurn:
         """The core model over ``[x, y, theta, vx, vy, ...]``."""
         return ThrustTurn(self.thrust, self.turn, self.drag)
+
+    def input_box(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The shield's action box ``(lo, hi)`` per input (thrust, turn)."""
+        return (-1.0, -1.0), (1.0, 1.0)
+
+    def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The policy's action in the shield's units: the motor's control scaled to its
+        saturation and clipped, the turn as it is."""
+        a0 = min(max(float(action[0]) / self.saturation, -1.0), 1.0)
+        return np.array([a0, min(max(float(action[1]), -1.0), 1.0)])
+
+    def env_action(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """What the env is sent for the shield's input ``u``."""
+        return np.array([self.saturation * u[0], u[1]])
+
+    def drive(self, thrust: float, turn: float) -> NDArray[np.float64]:
+        """The env action for a push along the heading and a turn, each in ``[-1, 1]``."""
+        return self.env_action(np.array([thrust, turn]))
+
+    def locate(self, model: Any) -> Any:
+        """Where the agent's pose and velocity are in MuJoCo's arrays (re-read whenever
+        Safety-Gymnasium rebuilds the world): its slide joints move along the body's axes as
+        placed, rotated by its initial yaw."""
+        body = model.body("agent")
+        w, _, _, z = body.quat  # a rotation about the vertical axis
+        yaw0 = 2.0 * math.atan2(z, w)
+        return types.SimpleNamespace(
+            base=body.pos.copy(),
+            yaw0=yaw0,
+            rot0=(math.cos(yaw0), math.sin(yaw0)),
+            qpos=[int(model.joint(n).qposadr[0]) for n in "xyz"],
+            qvel=[int(model.joint(n).dofadr[0]) for n in "xyz"],
+        )
+
+    def read(self, data: Any, at: Any, s: NDArray[np.float64]) -> None:
+        """Writes ``x, y, theta, vx, vy`` into ``s[:5]``."""
+        qpos, qvel = data.qpos, data.qvel
+        (x, y, z), (dx, dy, _) = at.qpos, at.qvel
+        c, sn = at.rot0
+        s[0] = at.base[0] + c * qpos[x] - sn * qpos[y]
+        s[1] = at.base[1] + sn * qpos[x] + c * qpos[y]
+        s[2] = at.yaw0 + qpos[z]
+        s[3] = c * qvel[dx] - sn * qvel[dy]
+        s[4] = sn * qvel[dx] + c * qvel[dy]
+
+    def forward_speed(self, velocimeter: NDArray[np.float64]) -> float:
+        """The speed along the heading, from the velocimeter (body frame, ``x`` ahead)."""
+        return float(velocimeter[0])
+
+    #: The heading's angle in the body frame the lidars and sensors read (``x`` ahead).
+    ahead: ClassVar[float] = 0.0
 
 
 #: The Point robot's identified model.
 POINT = PointModel()
 
-#: The shield's state: agent ``x, y, theta, vx, vy``, then the goal's ``x, y``, then two values
-#: per hazard and per vase.
-AGENT_DIM, GOAL = 5, (5, 6)
+
+@dataclass(frozen=True)
+class CarModel:
+    """The Car robot, a differential drive on a free joint, as a
+    :class:`tlshield.ControlAffine` model identified from MuJoCo
+    (``scripts/safety_gym_car_model.py``).
+
+    State ``x, y, psi, v``: the centre, the heading it drives along when both wheels push
+    forward (the body's ``-y`` axis, measured) and the speed along it. The wheel motors
+    saturate at ``|a| = 0.02``; with ``uL, uR = clip(a / 0.02, -1, 1)`` the shield's inputs
+    are ``u0 = (uL + uR) / 2`` (drive) and ``u1 = (uL - uR) / 2`` (turn):
+
+    ``dx = v cos psi,  dy = v sin psi,  dpsi = turn u1,  dv = push u0 - drag v``.
+
+    The speed's lag is fitted (Safety-Gymnasium's step is 0.04 s for the Car); the yaw rate's
+    lag (about 0.05 s) is not modelled: the turn is a rate. A wheel command is ``u0 ± u1``, so
+    the inputs the wheels can follow are the diamond ``|u0| + |u1| <= 1``; the shield's box is
+    inside it (``|u0| <= share``, ``|u1| <= 1 - share``), so that what it sends is what the
+    wheels do."""
+
+    #: dv/dt per unit of u0 (m/s^2), the speed's decay (1/s), dpsi/dt per unit of u1 (rad/s).
+    push: float = 3.886
+    drag: float = 6.253
+    turn: float = 1.442
+    #: The wheel motors' saturation.
+    saturation: float = 0.02
+    #: The drive's share of the wheels' range (the turn gets the rest).
+    share: float = 0.5
+    #: How far the body's origin (where Safety-Gymnasium measures the cost and the goal) is
+    #: ahead of the point that moves along the heading (m; the origin's sideways speed is
+    #: this times the yaw rate, fitted). The state's ``x, y`` is that point; the barriers hold
+    #: the origin, a point of the body (``Ball(..., heading=2, offset=(pivot, 0))``).
+    pivot: float = 0.043
+    #: The agent's part of the shield's state: ``x, y, psi, v``.
+    agent_dim: ClassVar[int] = 4
+
+    def model(self, state_dim: int) -> ControlAffine:
+        """The core model over ``[x, y, psi, v, ...]`` (``state_dim`` values, the rest fixed:
+        the goal's and the obstacles' centres)."""
+        n = state_dim
+        g = np.zeros((n, 2))
+        g[3, 0], g[2, 1] = self.push, self.turn
+
+        def f(s: NDArray[np.float64]) -> NDArray[np.float64]:
+            out = np.zeros(n)
+            out[0], out[1] = s[3] * math.cos(s[2]), s[3] * math.sin(s[2])
+            out[3] = -self.drag * s[3]
+            return out
+
+        def jacobian(s: NDArray[np.float64]) -> NDArray[np.float64]:
+            out = np.zeros((n, n))
+            c, sn = math.cos(s[2]), math.sin(s[2])
+            out[0, 2], out[0, 3] = -s[3] * sn, c
+            out[1, 2], out[1, 3] = s[3] * c, sn
+            out[3, 3] = -self.drag
+            return out
+
+        return ControlAffine(f, g, state_dim=n, inputs=2, jacobian=jacobian)
+
+    def input_box(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The shield's action box ``(lo, hi)`` per input (drive, turn)."""
+        return (-self.share, self.share - 1.0), (self.share, 1.0 - self.share)
+
+    def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The policy's wheel commands in the shield's units (drive and turn, in the diamond
+        ``|u0| + |u1| <= 1``)."""
+        left = min(max(float(action[0]) / self.saturation, -1.0), 1.0)
+        right = min(max(float(action[1]) / self.saturation, -1.0), 1.0)
+        return np.array([(left + right) / 2.0, (left - right) / 2.0])
+
+    def env_action(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The wheel commands for the shield's input ``u``."""
+        return self.saturation * np.array([u[0] + u[1], u[0] - u[1]])
+
+    def drive(self, thrust: float, turn: float) -> NDArray[np.float64]:
+        """The env action for a push along the heading and a turn, each in ``[-1, 1]``
+        (scaled into the wheels' diamond; a positive turn is counter-clockwise)."""
+        scale = 1.0 / max(1.0, abs(thrust) + abs(turn))
+        return self.env_action(np.array([thrust * scale, turn * scale]))
+
+    def locate(self, model: Any) -> Any:
+        """Where the agent's free joint is in MuJoCo's arrays."""
+        joint = model.joint("agent")
+        return types.SimpleNamespace(q=int(joint.qposadr[0]), dq=int(joint.dofadr[0]))
+
+    def read(self, data: Any, at: Any, s: NDArray[np.float64]) -> None:
+        """Writes ``x, y, psi, v`` into ``s[:4]`` (the free joint's position less ``pivot``
+        along ``psi``, its quaternion's yaw less a quarter turn, and its world velocity along
+        ``psi``)."""
+        qw, qx, qy, qz = data.qpos[at.q + 3 : at.q + 7]
+        psi = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)) - math.pi / 2
+        c, sn = math.cos(psi), math.sin(psi)
+        s[0] = data.qpos[at.q] - self.pivot * c
+        s[1] = data.qpos[at.q + 1] - self.pivot * sn
+        s[2] = psi
+        s[3] = data.qvel[at.dq] * c + data.qvel[at.dq + 1] * sn
+
+    def forward_speed(self, velocimeter: NDArray[np.float64]) -> float:
+        """The speed along the heading, from the velocimeter (body frame, ``-y`` ahead)."""
+        return -float(velocimeter[1])
+
+    #: The heading's angle in the body frame the lidars and sensors read (``-y`` ahead).
+    ahead: ClassVar[float] = -math.pi / 2.0
+
+
+#: The Car robot's identified model.
+CAR = CarModel()
+#: The shielded robots by Safety-Gymnasium's name.
+ROBOTS: dict[str, PointModel | CarModel] = {"Point": POINT, "Car": CAR}
+
+
+def robot_of(task: str) -> PointModel | CarModel:
+    """The robot model of a task (``"SafetyCarGoal1-v0"``: :data:`CAR`)."""
+    return ROBOTS[task.removeprefix("Safety").split("Goal")[0]]
 
 
 @dataclass(frozen=True)
@@ -200,6 +365,8 @@ class SafetyGoalParams:
     #: ``scripts/safety_gym_model.py`` (0 turns a bound off).
     position_error: float = 0.05
     velocity_error: float = 0.0
+    #: The bound on the heading's rate error (rad/s; the Car's turn lags its command).
+    heading_error: float = 0.0
     #: Paid per step as ``correction_penalty * |u - u_rl|`` (the shield's correction in its
     #: units, thrust and turn in ``[-1, 1]``), taken off the reward PPO learns from
     #: (Krasowski et al. 2023); ``info["task_reward"]`` keeps Safety-Gymnasium's reward, which
@@ -210,6 +377,7 @@ class SafetyGoalParams:
     _MAY_BE_ZERO: ClassVar[tuple[str, ...]] = (
         "position_error",
         "velocity_error",
+        "heading_error",
         "correction_penalty",
     )
 
@@ -225,18 +393,24 @@ class SafetyGoalParams:
                 raise ValueError(f"{f.name} = {v!r}: expected a number > 0")
 
 
-def goal_spec(hazards: int, vases: int, params: SafetyGoalParams) -> Spec:
-    """``(!h1 & ... & !v1 & ...) U goal`` over the shield's state (the objects' centres are
-    read from the state, so one spec serves every layout)."""
+def goal_spec(
+    hazards: int, vases: int, params: SafetyGoalParams, agent_dim: int = 5, pivot: float = 0.0
+) -> Spec:
+    """``(!h1 & ... & !v1 & ...) U goal`` over the shield's state: the agent's ``agent_dim``
+    values, the goal's ``x, y``, then two values per hazard and per vase (the objects' centres
+    are read from the state, so one spec serves every layout). With ``pivot`` > 0 the hazards
+    and vases hold the point ``pivot`` ahead of ``x, y`` along the heading ``s[2]``."""
     # The goal is 0.3 m in Safety-Gymnasium; 0.25 here, so that Safety-Gymnasium meets it (and
     # places the next one, which restarts the task) before the automaton accepts.
-    preds: dict[str, Ball] = {"goal": Ball(pos=[0, 1], radius=0.25, center_dims=list(GOAL))}
+    goal = [agent_dim, agent_dim + 1]
+    preds: dict[str, Ball] = {"goal": Ball(pos=[0, 1], radius=0.25, center_dims=goal)}
     radius = {"h": 0.2 + params.hazard_margin, "v": params.vase_radius}
-    start = AGENT_DIM + 2
+    start = agent_dim + 2
     for kind, count in (("h", hazards), ("v", vases)):
         for i in range(count):
+            body = {"heading": 2, "offset": (pivot, 0.0)} if pivot > 0 else {}
             preds[f"{kind}{i + 1}"] = Ball(
-                pos=[0, 1], radius=radius[kind], center_dims=[start, start + 1]
+                pos=[0, 1], radius=radius[kind], center_dims=[start, start + 1], **body
             )
             start += 2
     avoid = " & ".join(f"!{name}" for name in preds if name != "goal")
@@ -265,13 +439,11 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if config not in CONFIGS:
             raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
         if task not in TASKS:
-            raise ValueError(
-                f"task = {task!r}: the shielded envs are {', '.join(TASKS)} (the shield has no "
-                "model of the Car robot yet; make_builder makes its unshielded env)"
-            )
+            raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
         self.params = build(SafetyGoalParams, overrides, task)
         self.config = config
         self.task = task
+        self.robot = robot_of(task)
         self._env = make_builder(task)
         self.observation_space = self._env.observation_space
         self.action_space = self._env.action_space
@@ -279,7 +451,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._hazards = sg.hazards.num if hasattr(sg, "hazards") else 0
         vases = getattr(sg, "vases", None)
         self._vases = vases.num if vases is not None and vases.is_constrained else 0
-        spec = goal_spec(self._hazards, self._vases, self.params)
+        self._state_dim = self.robot.agent_dim + 2 * (1 + self._hazards + self._vases)
+        robot = self.robot
+        spec = goal_spec(self._hazards, self._vases, self.params, robot.agent_dim, robot.pivot)
         self.automaton: Automaton = spec.automaton()
         self.monitor = Monitor(self.automaton)
         use_cbf, use_clf = CONFIGS[config]
@@ -292,11 +466,12 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if not (use_cbf or use_clf):
             return None
         p = self.params
-        bounds = {0: p.position_error, 1: p.position_error}
-        bounds |= {3: p.velocity_error, 4: p.velocity_error}
+        bounds = {0: p.position_error, 1: p.position_error, 2: p.heading_error}
+        # The velocity's rate: vx, vy for the Point, the speed v for the Car.
+        bounds |= {d: p.velocity_error for d in range(3, self.robot.agent_dim)}
         return Shield(
             self.automaton,
-            POINT.model(),
+            self.robot.model(self._state_dim),
             alpha=p.alpha,
             alpha2=p.alpha2,
             c3=p.c3,
@@ -304,10 +479,12 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             clf_gain=p.clf_gain,
             cbf_bounds=(-2.0, 2.0),
             clf_bounds=(-p.clf_bound, p.clf_bound),
-            action_bounds=(-1.0, 1.0),
+            action_bounds=self.robot.input_box(),
             rl_bounds=(-1.0, 1.0),
             margin=p.margin,
             route_clearance=p.route_clearance,
+            # The Car's model is a user model: name the heading its turn steers, for routing.
+            heading=2 if isinstance(self.robot, CarModel) else None,
             use_cbf=use_cbf,
             use_clf=use_clf,
             disturbance={d: w for d, w in bounds.items() if w > 0},
@@ -316,34 +493,21 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     def _find_agent(self) -> None:
         # Safety-Gymnasium rebuilds the MuJoCo world on reset and when it places a new goal
         # (the agent's body then starts where it was, its joints at 0).
-        # Its slide joints move along the body's axes as placed: rotated by its initial yaw.
         model = self._env.task.model
-        body = model.body("agent")
-        self._base = body.pos.copy()
-        w, _, _, z = body.quat  # a rotation about the vertical axis
-        self._yaw0 = 2.0 * math.atan2(z, w)
-        self._rot0 = (math.cos(self._yaw0), math.sin(self._yaw0))
-        self._qpos = [int(model.joint(n).qposadr[0]) for n in "xyz"]
-        self._qvel = [int(model.joint(n).dofadr[0]) for n in "xyz"]
+        self._at = self.robot.locate(model)
         names = ["goal", *(f"hazard{i}" for i in range(self._hazards))]
         names += [f"vase{i}" for i in range(self._vases)]
         self._bodies = np.array([model.body(n).id for n in names])
-        self._buffer = np.zeros(AGENT_DIM + 2 * len(names))
+        self._buffer = np.zeros(self._state_dim)
 
     def true_state(self) -> NDArray[np.float64]:
-        """The privileged state ``[x, y, theta, vx, vy, goal x, y, hazards..., vases...]``:
-        the agent from MuJoCo's joints, the objects from their bodies' positions."""
+        """The privileged state: the agent's (Point: ``x, y, theta, vx, vy``; Car: ``x, y,
+        psi, v``), then the goal's ``x, y``, the hazards' and the vases': the agent from
+        MuJoCo's joints, the objects from their bodies' positions."""
         data = self._env.task.data
-        qpos, qvel = data.qpos, data.qvel
-        (x, y, z), (dx, dy, _) = self._qpos, self._qvel
-        c, sn = self._rot0
         s = self._buffer
-        s[0] = self._base[0] + c * qpos[x] - sn * qpos[y]
-        s[1] = self._base[1] + sn * qpos[x] + c * qpos[y]
-        s[2] = self._yaw0 + qpos[z]
-        s[3] = c * qvel[dx] - sn * qvel[dy]
-        s[4] = sn * qvel[dx] + c * qvel[dy]
-        s[AGENT_DIM:] = data.xpos[self._bodies, :2].ravel()
+        self.robot.read(data, self._at, s)
+        s[self.robot.agent_dim :] = data.xpos[self._bodies, :2].ravel()
         return s.copy()
 
     def reset(
@@ -379,10 +543,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         return self.sensor(obs, f"{name}_lidar")
 
     def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The policy's action in the shield's units: the motor's control scaled to its
-        saturation and clipped, the turn as it is (see :class:`PointModel`)."""
-        a0 = min(max(float(action[0]) / POINT.saturation, -1.0), 1.0)
-        return np.array([a0, min(max(float(action[1]), -1.0), 1.0)])
+        """The policy's action in the shield's units (:meth:`PointModel.shield_input`,
+        :meth:`CarModel.shield_input`)."""
+        return self.robot.shield_input(action)
 
     def step(
         self, action: NDArray[np.float64]
@@ -399,7 +562,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if self.shield is not None:
             result = self.shield.filter_monitor(self.monitor, u_rl)
             u = result.action
-            applied = np.array([POINT.saturation * u[0], u[1]])
+            applied = self.robot.env_action(u)
             penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
         obs, reward, cost, terminated, truncated, info = self._env.step(applied)
         goal_met = bool(info.get("goal_met", False))
@@ -446,14 +609,15 @@ def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.
     lidar and, from the velocimeter, drives at a speed that falls with the distance to it, so
     that it stops at the centre and stays there (full thrust ahead when no hazard is in
     range)."""
+    robot = env.robot
     bins = env.lidar(obs, "hazards")
     if bins.max() <= 0.0:
-        return np.array([1.0, 0.0])
+        return robot.drive(1.0, 0.0)
     i = int(np.argmax(bins))
-    angle = (i + 0.5) * 2.0 * np.pi / bins.size
+    angle = (i + 0.5) * 2.0 * np.pi / bins.size - robot.ahead  # from the heading
     angle = (angle + np.pi) % (2.0 * np.pi) - np.pi  # (-pi, pi]: left is positive
     distance = env.lidar_range * (1.0 - bins[i])
     speed = min(1.0, 2.0 * distance)  # wanted, towards the hazard
-    forward = env.sensor(obs, "velocimeter")[0]
+    forward = robot.forward_speed(env.sensor(obs, "velocimeter"))
     thrust = float(np.clip(5.0 * (speed * math.cos(angle) - forward), -1.0, 1.0))
-    return np.array([POINT.saturation * thrust, float(np.clip(3.0 * angle, -1.0, 1.0))])
+    return robot.drive(thrust, float(np.clip(3.0 * angle, -1.0, 1.0)))
