@@ -25,7 +25,6 @@ state dimension, the bound a shield's ``disturbance`` setting would need.
 from __future__ import annotations
 
 import argparse
-import math
 import warnings
 
 import numpy as np

@@ -61,8 +61,8 @@ def test_the_adapter_checks_versions_and_says_what_to_install(
         monkeypatch.undo()
     with pytest.raises(ValueError, match="SafetyCarGoal1-v0"):
         sg.make_builder("SafetyCarGoal3-v0")
-    with pytest.raises(ValueError, match="no model of the Car robot"):
-        sg.SafetyGoalEnv("SafetyCarGoal1-v0")
+    with pytest.raises(ValueError, match="the shielded envs are"):
+        sg.SafetyGoalEnv("SafetyCarGoal3-v0")
 
 
 def test_the_car_robot_builds_and_steps_under_numpy_2() -> None:
@@ -104,8 +104,13 @@ def test_spaces_reward_and_cost_are_safety_gymnasiums(task: str) -> None:
         raw_obs, raw_r, raw_cost, raw_term, raw_trunc, _ = raw.step(a)
         np.testing.assert_array_equal(obs, raw_obs)
         assert (r, info["cost"], terminated, truncated) == (raw_r, raw_cost, raw_term, raw_trunc)
-        # The privileged state is MuJoCo's: the agent where Safety-Gymnasium reads it.
-        np.testing.assert_allclose(info["state"][:2], raw.task.agent.pos[:2], atol=1e-9)
+        # The privileged state is MuJoCo's: the agent where Safety-Gymnasium reads it (the
+        # Car's state is the point ``pivot`` behind it, along the heading).
+        state = info["state"]
+        body = state[:2] + env.unwrapped.robot.pivot * np.array(
+            [np.cos(state[2]), np.sin(state[2])]
+        )
+        np.testing.assert_allclose(body, raw.task.agent.pos[:2], atol=1e-9)
 
 
 @pytest.mark.parametrize("config", ["rl_cbf", "rl_cbf_clf"])
@@ -150,6 +155,56 @@ def test_a_start_inside_a_hazard_is_driven_out_and_stays_out() -> None:
     out = next(i for i, c in enumerate(costs) if c == 0.0)
     assert out < 50, costs[:60]
     assert sum(costs[out:]) == 0.0  # and it stays out
+
+
+def test_the_car_model_is_its_equations_and_its_inputs_fit_the_wheels() -> None:
+    car = sg.CAR
+    rng = np.random.default_rng(5)
+    model = car.model(8)
+    for _ in range(50):
+        s = rng.uniform(-2, 2, 8)
+        u = rng.uniform(-1, 1, 2)
+        f, g = model.eval(s)
+        psi, v = s[2], s[3]
+        want = np.zeros(8)
+        want[:4] = [
+            v * np.cos(psi),
+            v * np.sin(psi),
+            car.turn * u[1],
+            car.push * u[0] - car.drag * v,
+        ]
+        np.testing.assert_allclose(f + g @ u, want, atol=1e-12)
+        jac = model.drift_jacobian(s)
+        eps = 1e-6
+        for d in range(8):
+            e = np.zeros(8)
+            e[d] = eps
+            fd = (model.eval(s + e)[0] - model.eval(s - e)[0]) / (2 * eps)
+            np.testing.assert_allclose(jac[:, d], fd, atol=1e-7)
+        # Wheels -> (drive, turn) -> wheels: the diamond |u0| + |u1| <= 1, back exactly.
+        wheels = rng.uniform(-1, 1, 2) * car.saturation
+        u = car.shield_input(wheels)
+        assert abs(u[0]) + abs(u[1]) <= 1.0 + 1e-12
+        np.testing.assert_allclose(car.env_action(u), wheels, atol=1e-15)
+    # The shield's box is inside the diamond: what it sends, the wheels do.
+    (lo0, lo1), (hi0, hi1) = car.input_box()
+    assert hi0 + hi1 <= 1.0 and lo0 + lo1 >= -1.0
+    assert np.all(np.abs(car.drive(1.0, 1.0)) <= car.saturation + 1e-15)
+
+
+def test_the_car_holds_its_body_origin_out_of_the_hazards() -> None:
+    """The cost is measured at the Car's body origin, ``pivot`` ahead of the state's point:
+    the barriers hold that point (a turn alone swings it), read from the state."""
+    env = sg.SafetyGoalEnv("SafetyCarGoal1-v0", "rl_cbf")
+    env.reset(seed=11)
+    ball = env.automaton.spec.predicates["h1"]
+    assert ball.heading == 2 and ball.offset == (sg.CAR.pivot, 0.0)
+    state = env.true_state()
+    origin = state[:2] + sg.CAR.pivot * np.array([np.cos(state[2]), np.sin(state[2])])
+    centre = state[6:8]
+    assert ball.robustness(state) == pytest.approx(
+        ball.radius - np.linalg.norm(origin - centre), abs=1e-12
+    )
 
 
 def test_thrust_turn_is_its_equations() -> None:
