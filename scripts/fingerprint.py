@@ -55,6 +55,16 @@ def rollout(env: gym.Env, steps: int = 1000) -> str:
     return _digest(parts)
 
 
+#: metrics.csv columns newer than the fingerprint (tlshield.lab.runs.RETURN_COLUMNS).
+NEW_COLUMNS = (
+    "task_return_mean",
+    "episode_cost_mean",
+    "cost",
+    "validation_return",
+    "validation_cost",
+)
+
+
 def training() -> str:
     try:
         from tlshield.lab.training import train
@@ -66,6 +76,9 @@ def training() -> str:
         rows = list(csv.DictReader((folder / "metrics.csv").open()))
         for row in rows:
             row.pop("wall_time")
+            # Return and cost came later (issue 45): left out, so that older checkouts compare.
+            for name in NEW_COLUMNS:
+                row.pop(name, None)
         weights = [
             zipfile.ZipFile(folder / name).read("policy.pth").hex()
             for name in ("model.zip", "last_model.zip")

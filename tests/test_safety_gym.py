@@ -364,5 +364,7 @@ def test_the_correction_penalty_comes_off_the_reward_only() -> None:
 def test_the_cli_refuses_what_the_suite_does_not_take(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["benchmark", "safety-gym", "--formulas", "F a"]) == 2
     assert "--formulas" in capsys.readouterr().err
-    assert cli.main(["benchmark", "safety-gym", "--envs", "SafetyCarGoal1-v0"]) == 2
-    assert "SafetyCarGoal1-v0" in capsys.readouterr().err
+    assert cli.main(["benchmark", "safety-gym", "--envs", "SafetyCarGoal2-v0"]) == 2
+    assert "SafetyCarGoal2-v0" in capsys.readouterr().err
+    assert cli.main(["benchmark", "safety-gym", "--configs", "rl_cbf+nothing"]) == 2
+    assert "rl_cbf+penalty" in capsys.readouterr().err  # the error lists the known rows

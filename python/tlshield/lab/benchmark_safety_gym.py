@@ -35,7 +35,11 @@ import numpy as np
 from tlshield.lab.seeds import check_block, check_seeds
 
 #: The default budget per env (PPO steps per agent).
-DEFAULT_STEPS = {"SafetyPointGoal1-v0": 1_000_000, "SafetyPointGoal2-v0": 300_000}
+DEFAULT_STEPS = {
+    "SafetyPointGoal1-v0": 1_000_000,
+    "SafetyPointGoal2-v0": 300_000,
+    "SafetyCarGoal1-v0": 1_000_000,
+}
 DEFAULT_CONFIGS = ("rl", "rl_cbf", "rl_cbf_clf")
 DEFAULT_SEEDS = (0, 1, 2)
 DEFAULT_EPISODES = 10
@@ -104,6 +108,10 @@ OMNISAFE = {
         "PPO": (25.49, 159.28),
         "PPO-Lag": (1.98, 41.20),
         "CPO": (2.50, 40.84),
+    },
+    "SafetyCarGoal1-v0": {
+        "PPO": (33.41, 58.06),
+        "PPO-Lag": (13.27, 21.72),
     },
 }
 

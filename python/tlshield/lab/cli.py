@@ -476,7 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--envs",
         nargs="+",
         metavar="ENV",
-        help="safety-gym: default SafetyPointGoal1-v0 SafetyPointGoal2-v0",
+        help="safety-gym: default SafetyPointGoal1-v0 SafetyPointGoal2-v0 SafetyCarGoal1-v0",
     )
     bench.add_argument(
         "--configs",
@@ -497,8 +497,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--steps",
         type=_positive,
-        help="PPO steps per agent (default: flatworld 600000; safety-gym 1000000 on Goal1, "
-        "300000 on Goal2)",
+        help="PPO steps per agent (default: flatworld 600000; safety-gym 1000000 on "
+        "PointGoal1 and CarGoal1, 300000 on PointGoal2)",
     )
     bench.add_argument("--out", help="(default: results_flatworld, results_safety_gym)")
     _add_ray(bench)
