@@ -136,7 +136,10 @@ def evaluate(
     environment is the one its run.json names (``env_id``; Channel-v0 when absent).
     ``which="last"`` evaluates the last policy instead of the kept one and writes
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
-    folder's pickled statistics load (see :mod:`tlshield.lab.saved`)."""
+    folder's pickled statistics load (see :mod:`tlshield.lab.saved`). ``evaluation.json`` also
+    has the trials' mean undiscounted ``return_mean`` and ``cost_mean`` (None where the env
+    reports no cost). An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) is
+    evaluated as :func:`rollouts` says: as it trained, to the horizon."""
     if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
         raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")
     if which not in EVALUATION_FILES:
