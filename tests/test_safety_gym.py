@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import importlib.metadata
+import json
 import pickle
 from pathlib import Path
 from typing import Any
@@ -368,3 +369,51 @@ def test_the_cli_refuses_what_the_suite_does_not_take(capsys: pytest.CaptureFixt
     assert "SafetyCarGoal2-v0" in capsys.readouterr().err
     assert cli.main(["benchmark", "safety-gym", "--configs", "rl_cbf+nothing"]) == 2
     assert "rl_cbf+penalty" in capsys.readouterr().err  # the error lists the known rows
+
+
+def test_td3_trains_through_the_shield_layer(tmp_path: Path) -> None:
+    """The fourth lever's script: TD3 whose actor ends in the exact shield trains, costs 0 in
+    training and evaluation, and its actor's gradient reaches the network through the layer."""
+    import subprocess
+    import sys
+
+    import torch
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(root / "scripts" / "safety_gym_td3_layer.py"),
+            *("--steps", "300", "--episodes", "1", "--out", str(tmp_path)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = json.loads((tmp_path / "SafetyPointGoal1-v0-td3_layer-s0.json").read_text())
+    assert row["steps"] == 300 and row["train_cost"] == 0.0 and row["last_cost"] == 0.0
+    # The actor's output is the layer's: safe at the state, and differentiable to the weights.
+    sys.path.insert(0, str(root / "scripts"))
+    try:
+        from safety_gym_td3_layer import ShieldUnits, policy_class
+    finally:
+        sys.path.pop(0)
+    from tlshield.torch import ShieldLayer
+
+    inner = sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
+    env = ShieldUnits(inner)
+    obs, _ = env.reset(seed=2)
+    assert inner.shield is not None
+    policy = policy_class(ShieldLayer(inner.shield), env.n_obs, env.n_state)(
+        env.observation_space, env.action_space, lambda _: 1e-3, net_arch=[16]
+    )
+    batch = torch.as_tensor(np.stack([obs] * 4), dtype=torch.float32)
+    out = policy.actor(batch)
+    out.sum().backward()
+    assert all(p.grad is not None for p in policy.actor.mu.parameters())
+    s, q = inner.monitor.state, inner.monitor.q
+    raw = policy.actor.mu(policy.actor.extract_features(batch, policy.actor.features_extractor))
+    want = inner.shield.filter(s, q, raw[0].detach().double().numpy()).action
+    np.testing.assert_allclose(out[0].detach().numpy(), want, atol=1e-6)
