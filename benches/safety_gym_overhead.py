@@ -10,8 +10,8 @@ the same actions would not step the same states). The figure is the median over 
 actions alternate with them. Target: overhead <= 10 % of Safety-Gymnasium's own step.
 ``make safety-gym`` installs the stack.
 
-Run: ``.venv/bin/python benches/safety_gym_overhead.py [--rounds 7] [--steps 1000]``. Exit 2
-when the target is missed.
+Run: ``.venv/bin/python benches/safety_gym_overhead.py [--rounds 7] [--steps 1000]
+[--task SafetyCarGoal1-v0]``. Exit 2 when the target is missed.
 """
 
 from __future__ import annotations
@@ -43,11 +43,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument(
+        "--task", default="SafetyPointGoal1-v0", help="one of tlshield.envs.safety_gym.TASKS"
+    )
     args = parser.parse_args()
     from tlshield.envs.safety_gym import SafetyGoalEnv, make_builder
 
-    raw = make_builder("SafetyPointGoal1-v0")
-    shielded = SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf_clf")
+    raw = make_builder(args.task)
+    shielded = SafetyGoalEnv(args.task, "rl_cbf_clf")
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, 2))
     inner = {"seconds": 0.0, "steps": 0}
     step = shielded._env.step
@@ -72,7 +75,7 @@ def main() -> int:
     print("|---|---:|")
     rows = [
         ("Safety-Gymnasium's own (Builder), random actions", base),
-        ("tlshield/SafetyPointGoal1-v0, rl_cbf_clf: whole step", ours),
+        (f"tlshield/{args.task}, rl_cbf_clf: whole step", ours),
         ("of which inside Safety-Gymnasium's step", inside),
     ]
     for name, times in rows:
