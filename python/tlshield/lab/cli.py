@@ -483,8 +483,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="CONFIG",
         help="trained configurations (default: flatworld rl_cbf_clf rl; safety-gym rl rl_cbf "
-        "rl_cbf_clf); safety-gym also takes its levers: rl_cbf+penalty rl_cbf+executed "
-        "rl_cbf_clf+routed",
+        "rl_cbf_clf+routed); safety-gym also takes rl_clf, rl_cbf_clf and the levers "
+        "rl_cbf+penalty rl_cbf+executed",
     )
     bench.add_argument(
         "--seeds", nargs="+", type=int, help="default: flatworld 1 2 3; safety-gym 0 1 2"
