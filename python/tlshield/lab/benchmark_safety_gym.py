@@ -41,8 +41,8 @@ DEFAULT_STEPS = {
     "SafetyCarGoal1-v0": 1_000_000,
 }
 #: The default rows: unshielded PPO, the CBF alone, and the CLF as the base controller at the
-#: routed settings (the best of the levers on the tuning seeds 0-2, confirmed on 3-5:
-#: docs/guides/safety-gym.md).
+#: routed settings (the best of the levers on the tuning seeds 0-2; the confirmation seeds 3-5
+#: are in docs/guides/safety-gym.md).
 DEFAULT_CONFIGS = ("rl", "rl_cbf", "rl_cbf_clf+routed")
 DEFAULT_SEEDS = (0, 1, 2)
 DEFAULT_EPISODES = 10
