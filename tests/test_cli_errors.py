@@ -142,7 +142,7 @@ CASES: dict[str, list[Case]] = {
             "--formulas for safety-gym",
             lambda b, r: ["benchmark", "safety-gym", "--formulas", "F a"],
         ),
-        ("an unknown env", lambda b, r: ["benchmark", "safety-gym", "--envs", "SafetyCarGoal1-v0"]),
+        ("an unknown env", lambda b, r: ["benchmark", "safety-gym", "--envs", "SafetyCarGoal2-v0"]),
     ],
     "plot": [
         ("missing folder", lambda b, r: ["plot", str(b / "nope")]),
