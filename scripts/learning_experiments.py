@@ -79,6 +79,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "clf_exponential": {**SAMPLED, "clf_schedule": "exponential"},
     "executed": {"learn_from": "executed"},
     "executed_without_clf": {"learn_from": "executed_without_clf"},
+    # Potential-based shaping towards the automaton's CLF goal (the progress reward's goal
+    # term, ChannelTask.goal_weight), over the default preset: the CLF's information without
+    # its push.
+    "goal0.25": {"goal_weight": 0.25},
+    "goal0.5": {"goal_weight": 0.5},
+    "goal1": {"goal_weight": 1.0},
     "vec64+executed_without_clf": {
         "n_envs": 64,
         "batch_size": 2048,

@@ -70,6 +70,10 @@ def test_potential_and_advance_agree() -> None:
         ({"horizon": -5}, "horizon"),
         ({"step_cost": math.nan}, "step_cost"),
         ({"exclusive": [["g1", "nope"]]}, 'exclusive names "nope", which is not an atom'),
+        ({"goal_weight": -0.5}, "goal_weight"),
+        ({"goal_weight": math.inf}, "goal_weight"),
+        ({"goal_weight": 0.5, "goal_span": 0.0}, "goal_span"),
+        ({"goal_weight": 0.5, "goal_span": math.nan}, "goal_span"),
     ],
 )
 def test_bad_parameters_raise(kwargs: dict, match: str) -> None:
@@ -90,6 +94,43 @@ def test_bad_calls_raise() -> None:
         FsaTracker(other, 1.0, -1.0, r)
 
 
+def test_goal_term_is_the_distance_to_the_clf_goal() -> None:
+    """The goal term against its definition, from the public goal query and ranks:
+    ``Phi_k = Phi_0 - k span rank(q) - k min(|p - goal(s, q)|, span)`` (floor ``-k span``
+    without a goal), on random states in every FSA state."""
+    import pickle
+
+    aut = automaton()
+    k, span = 0.5, 6.0
+    plain = aut.progress_reward(scale=2.0)
+    shaped = aut.progress_reward(scale=2.0, goal_weight=k, goal_span=span)
+    assert (shaped.goal_weight, shaped.goal_span) == (k, span)
+    copy = pickle.loads(pickle.dumps(shaped))
+    assert (copy.goal_weight, copy.goal_span, copy.bonus) == (k, span, shaped.bonus)
+    # The bonus and trap penalty cover the widened bands: (max rank + 1) (1 + k span).
+    assert shaped.bonus == pytest.approx(plain.bonus * (1 + k * span))
+    assert shaped.trap_penalty < plain.trap_penalty
+    rng = np.random.default_rng(0)
+    seen_far = False
+    for _ in range(300):
+        s = np.zeros(13)
+        s[:2] = rng.uniform(-3, 13, size=2)
+        s[2] = rng.uniform(-math.pi, math.pi)
+        s[3:13] = rng.uniform(-1, 10, size=10)
+        for q in range(aut.num_states):
+            if q in aut.accepting:
+                assert shaped.potential(s, q) == 0.0
+                continue
+            goal = aut.goal(s, q)
+            d = span if goal is None else min(float(np.linalg.norm(s[:2] - goal)), span)
+            seen_far |= goal is not None and d == span
+            rank = aut.ranks[q]
+            rank = max(r for r in aut.ranks if r is not None) + 1 if rank is None else rank
+            want = plain.potential(s, q) - k * span * rank - k * d
+            assert shaped.potential(s, q) == pytest.approx(want, abs=1e-9)
+    assert seen_far  # the clamp at span was exercised
+
+
 @pytest.mark.parametrize(
     ("config", "overrides"),
     [
@@ -98,6 +139,9 @@ def test_bad_calls_raise() -> None:
         # Without a shield the straight-line finisher sometimes drives through an obstacle; the
         # collision cost is checked by the barging test, so here the task reward alone.
         ("rl", {"collision_penalty": 0.0, "w": 0.0}),
+        # Without the goal term, and with a strong one.
+        ("rl_cbf", {"goal_weight": 0.0}),
+        ("rl_cbf", {"goal_weight": 2.0}),
     ],
 )
 def test_finishing_out_earns_parking_on_every_seed(config: str, overrides: dict) -> None:

@@ -157,6 +157,8 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
                 scale=params.task.progress_scale,
                 bonus=params.task.bonus,
                 c_r=params.task.c_r,
+                goal_weight=params.task.goal_weight,
+                goal_span=params.task.goal_span,
             )
         self.tracker = FsaTracker(automaton, params.task.c_r, params.trap_penalty, progress)
         lo, hi = params.agent.arena

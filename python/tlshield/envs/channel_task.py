@@ -71,6 +71,12 @@ class ChannelTask:
     bonus: float | None = None
     #: Weight of the trap term in Eq. 5A1.
     c_r: float = 1.0
+    #: The progress reward's goal term: potential per metre of approach to the automaton's CLF
+    #: goal (the goal that advances the task), potential-based shaping that gives every
+    #: configuration the CLF's information without its push; 0 leaves it out.
+    goal_weight: float = 0.0
+    #: Distance (m) beyond which the goal term is flat (at least the distance between goals).
+    goal_span: float = 12.0
 
 
 @dataclass(frozen=True)
@@ -233,7 +239,7 @@ class ChannelParams:
         task, agent, shield = self.task, self.agent, self.shield
         for name in ("half_width", "goal_radius", "eps", "dt", "obstacle_radius", "c_r"):
             _positive(name, self._get(name))
-        for name in ("alpha", "c3", "k", "progress_scale", "barrier_radius"):
+        for name in ("alpha", "c3", "k", "progress_scale", "barrier_radius", "goal_span"):
             _positive(name, self._get(name))
         if not (isinstance(task.horizon, int) and task.horizon > 0):
             raise ValueError(f"horizon = {task.horizon!r}: expected a positive integer")
@@ -250,7 +256,7 @@ class ChannelParams:
                 raise ValueError(f"{name} = {value!r}: expected one of {allowed}")
         if not (0.0 < task.gamma <= 1.0):
             raise ValueError(f"gamma = {task.gamma!r}: expected a discount in (0, 1]")
-        for name in ("w", "bonus", "collision_penalty", "intervention_penalty"):
+        for name in ("w", "bonus", "collision_penalty", "intervention_penalty", "goal_weight"):
             value = self._get(name)
             if name == "bonus" and value is None:
                 continue

@@ -74,6 +74,10 @@ class PointMassParams:
     #: The progress reward's discount (the trainer's gamma) and Eq. 5A1 scale (m).
     gamma: float = 0.999
     progress_scale: float = 2.0
+    #: The progress reward's goal term (potential per metre towards the CLF goal; 0: none) and
+    #: the distance (m) beyond which it is flat (``ChannelTask.goal_weight``).
+    goal_weight: float = 0.0
+    goal_span: float = 12.0
     #: Paid per step inside an obstacle (training does not end on a collision).
     collision_penalty: float = 1.0
 
@@ -96,7 +100,7 @@ class PointMassParams:
                 if not (isinstance(v, (int, float)) and math.isfinite(v)):
                     raise ValueError(f"{f.name} = {value!r}: expected finite numbers")
         positive = ("goal_radius", "obstacle_radius", "max_accel", "dt", "alpha", "alpha2")
-        positive += ("c3", "k", "clf_gain", "clf_bound", "progress_scale", "margin")
+        positive += ("c3", "k", "clf_gain", "clf_bound", "progress_scale", "margin", "goal_span")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} = {getattr(self, name)!r}: expected a number > 0")
@@ -104,6 +108,8 @@ class PointMassParams:
             raise ValueError(f"horizon = {self.horizon!r}: expected a positive integer")
         if not 0.0 < self.gamma <= 1.0:
             raise ValueError(f"gamma = {self.gamma!r}: expected a discount in (0, 1]")
+        if self.goal_weight < 0:
+            raise ValueError(f"goal_weight = {self.goal_weight!r}: expected a number >= 0")
         lo, hi = self.room
         if not lo < hi:
             raise ValueError(f"room = {self.room!r}: expected (lo, hi) with lo < hi")
@@ -205,6 +211,8 @@ class PointMassEnv(
             horizon=params.horizon,
             scale=params.progress_scale,
             exclusive=[["a", "b", "o1", "o2"]],
+            goal_weight=params.goal_weight,
+            goal_span=params.goal_span,
         )
         self.tracker = FsaTracker(automaton, DEFAULT_C_R, DEFAULT_TRAP_PENALTY, progress)
         shield_config = shielded_config(config, evaluation)

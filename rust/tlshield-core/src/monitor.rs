@@ -132,7 +132,7 @@ impl Monitor {
         self.q = self.reading().step(self.automaton.initial());
         self.phi = 0.0;
         self.started = true;
-        self.update_goal();
+        let _ = self.update_goal();
         self.report(0.0)
     }
 
@@ -148,23 +148,24 @@ impl Monitor {
     /// [`Monitor::advance`] of a started monitor and a state checked with [`Monitor::check`].
     fn advance_checked(&mut self, s_next: &[f64]) -> TaskStep {
         self.read(s_next);
-        let reading = self.reading();
         let q = self.q;
-        let q_next = reading.step(q);
-        let reward = match &self.reward {
+        let q_next = self.reading().step(q);
+        self.q = q_next;
+        // The goal at (s', q') is the shield's next goal and the progress reward's goal term.
+        let distance = self.update_goal();
+        let reading = self.reading();
+        let (reward, phi) = match &self.reward {
             TaskReward::Progress(p, _) => {
-                let phi_next = p.potential(&reading, q_next);
+                let phi_next = p.potential_at(&reading, q_next, distance);
                 let r = p.reward(&self.automaton, q, q_next, self.phi, phi_next);
-                self.phi = phi_next;
-                r
+                (r, phi_next)
             }
             TaskReward::Paper { trap_penalty, .. } if Some(q) == self.automaton.trap() => {
-                *trap_penalty
+                (*trap_penalty, self.phi)
             }
-            TaskReward::Paper { c_r, .. } => reading.reward(q, *c_r),
+            TaskReward::Paper { c_r, .. } => (reading.reward(q, *c_r), self.phi),
         };
-        self.q = q_next;
-        self.update_goal();
+        self.phi = phi;
         self.report(reward)
     }
 
@@ -185,9 +186,12 @@ impl Monitor {
         self.s.extend_from_slice(s);
     }
 
-    fn update_goal(&mut self) {
+    /// Places the CLF goal of `q` at the last state read; returns its distance.
+    fn update_goal(&mut self) -> Option<f64> {
         let reading = Reading::from_parts(&self.automaton, &self.s, self.rho);
-        self.has_goal = reading.goal(self.q, &mut self.goal);
+        let distance = reading.goal_distance(self.q, &mut self.goal);
+        self.has_goal = distance.is_some();
+        distance
     }
 
     fn report(&self, reward: f64) -> TaskStep {
@@ -246,7 +250,7 @@ impl Monitor {
         self.started = state.started;
         if state.started {
             self.read(&state.s);
-            self.update_goal();
+            let _ = self.update_goal();
         } else {
             self.s.clear();
             self.has_goal = false;

@@ -22,6 +22,17 @@
 //!   trap; 0 on steps that stay accepting. An episode starts from `Phi = 0` (the first step
 //!   pays the whole distance to go). Standing still costs exactly `step_cost` a step.
 //!
+//! With `goal_weight = k > 0` the potential also measures the way to the CLF goal (Eq. 5B1, the
+//! goal the shield's CLF drives to): `Phi(s, q) = -rank(q) B + squash(sigma_q(s)) - k min(d, span)`,
+//! `d` the distance from `s` to the goal of `q` in the goal's space ([`Reading::goal_distance`]),
+//! `span = goal_span` and `B = 1 + k span` the widened band, so bands still never overlap and
+//! entering a state closer to acceptance still never lowers `Phi`. It gives a learner without
+//! the CLF the CLF's information (which goal advances the task, and how far it is) as reward
+//! rather than as a push: potential-based shaping (Ng, Harada and Russell 1999). The squash
+//! flattens far from a goal (slope `scale / (scale + x)^2`); the goal term keeps a slope of `k`
+//! per metre out to `span`. Where `q` has no goal the term sits at its floor `-k span`. The
+//! bonus, trap penalty and the bound below use the whole range `(max rank + 1) B`.
+//!
 //! Why undiscounted differences and a bonus: with `gamma * Phi' - Phi` (classic potential
 //! shaping) every return telescopes to its end point, so reaching a sub-goal and stopping
 //! there earns the same as never moving (measured: PPO then never finds the task). The
@@ -39,6 +50,8 @@ pub const DEFAULT_GAMMA: f64 = 0.99;
 pub const DEFAULT_HORIZON: u32 = 200;
 /// The default robustness scale of [`ProgressParams`].
 pub const DEFAULT_SCALE: f64 = 1.0;
+/// The default `goal_span` of [`ProgressParams`] (metres).
+pub const DEFAULT_GOAL_SPAN: f64 = 10.0;
 
 /// Parameters of [`ProgressReward`].
 #[derive(Debug, Clone, PartialEq)]
@@ -60,6 +73,12 @@ pub struct ProgressParams {
     pub c_r: f64,
     /// Groups of atom indices of which at most one holds at a time (bitmasks).
     pub exclusive: Vec<u32>,
+    /// Weight `k` of the goal term (potential per metre of approach to the CLF goal); 0 (the
+    /// default) leaves it out.
+    pub goal_weight: f64,
+    /// Distance beyond which the goal term is flat (metres, > 0): pick at least the usual
+    /// distance between consecutive goals.
+    pub goal_span: f64,
 }
 
 impl Default for ProgressParams {
@@ -72,6 +91,8 @@ impl Default for ProgressParams {
             horizon: DEFAULT_HORIZON,
             c_r: crate::automaton::DEFAULT_C_R,
             exclusive: Vec::new(),
+            goal_weight: 0.0,
+            goal_span: DEFAULT_GOAL_SPAN,
         }
     }
 }
@@ -88,6 +109,10 @@ pub struct ProgressReward {
     c_r: f64,
     trap_penalty: f64,
     horizon: u32,
+    goal_weight: f64,
+    goal_span: f64,
+    /// The width of one rank's band of `Phi`: `1 + goal_weight * goal_span`.
+    band_width: f64,
 }
 
 fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
@@ -189,6 +214,15 @@ impl ProgressReward {
             }
         }
         check_exclusive(automaton, &params.exclusive)?;
+        finite_at_least("goal_weight", params.goal_weight, 0.0)?;
+        if !(params.goal_span.is_finite() && params.goal_span > 0.0) {
+            return Err(InputError::Value {
+                what: "goal_span".into(),
+                expected: "a finite distance > 0".into(),
+                got: params.goal_span.to_string(),
+            }
+            .into());
+        }
         let ranks = ranks(automaton, &params.exclusive);
         if ranks[automaton.initial()].is_none() {
             return Err(InputError::Value {
@@ -209,6 +243,9 @@ impl ProgressReward {
         }
         let max_rank = ranks.iter().flatten().copied().max().unwrap_or(0);
         let band = f64::from(max_rank + 1);
+        let band_width = 1.0 + params.goal_weight * params.goal_span;
+        // The whole range of `Phi` outside the trap: what shaping can add along a trajectory.
+        let range = band * band_width;
         let step_cost = match params.step_cost {
             Some(c) => {
                 finite_at_least("step_cost", c, 0.0)?;
@@ -218,7 +255,7 @@ impl ProgressReward {
         };
         // gamma^(1 - T): how much the last step's bonus is discounted over the horizon.
         let stretch = params.gamma.powi(1 - params.horizon as i32);
-        let least_bonus = band * (stretch - 1.0) - 1.0;
+        let least_bonus = range * (stretch - 1.0) - 1.0;
         let bonus = match params.bonus {
             Some(b) => {
                 finite_at_least("bonus", b, 0.0)?;
@@ -226,8 +263,9 @@ impl ProgressReward {
                     return Err(InputError::Value {
                         what: "bonus".into(),
                         expected: format!(
-                            "more than {least_bonus:.4} (max rank + 1 = {band}, gamma {}, horizon \
-                             {}), so that finishing out-earns not finishing",
+                            "more than {least_bonus:.4} (max rank + 1 = {band}, band width \
+                             {band_width}, gamma {}, horizon {}), so that finishing out-earns not \
+                             finishing",
                             params.gamma, params.horizon
                         ),
                         got: b.to_string(),
@@ -236,11 +274,11 @@ impl ProgressReward {
                 }
                 b
             }
-            None => band * stretch,
+            None => range * stretch,
         };
-        // Every step outside the trap pays at least -(K + 1) - c; a trap step pays less, and
+        // Every step outside the trap pays at least -(K + 1) B - c; a trap step pays less, and
         // enough less (times gamma^(1 - T)) that entering it even at the last step loses.
-        let trap_penalty = -(band + 1.0 + step_cost) * stretch;
+        let trap_penalty = -(range + 1.0 + step_cost) * stretch;
         Ok(ProgressReward {
             ranks,
             max_rank,
@@ -251,6 +289,9 @@ impl ProgressReward {
             c_r: params.c_r,
             trap_penalty,
             horizon: params.horizon,
+            goal_weight: params.goal_weight,
+            goal_span: params.goal_span,
+            band_width,
         })
     }
 
@@ -284,14 +325,41 @@ impl ProgressReward {
         self.gamma
     }
 
+    /// The goal term's weight (0: no goal term).
+    pub fn goal_weight(&self) -> f64 {
+        self.goal_weight
+    }
+
+    /// The distance beyond which the goal term is flat.
+    pub fn goal_span(&self) -> f64 {
+        self.goal_span
+    }
+
     /// The potential `Phi(s, q)` at the state read by `reading`, a reading of the automaton the
     /// reward was built for. States without a path to acceptance sit one band below the
     /// farthest state that has one.
     pub fn potential(&self, reading: &Reading<'_>, q: usize) -> f64 {
+        let distance = if self.goal_weight > 0.0 {
+            reading.goal_distance(q, &mut Vec::new())
+        } else {
+            None
+        };
+        self.potential_at(reading, q, distance)
+    }
+
+    /// [`ProgressReward::potential`] given the distance to the CLF goal of `q` at this state
+    /// ([`Reading::goal_distance`], read only with a goal term), for callers that already
+    /// have it (the monitor, allocation-free).
+    pub fn potential_at(&self, reading: &Reading<'_>, q: usize, goal_distance: Option<f64>) -> f64 {
         if reading.automaton().is_accepting(q) {
             return 0.0;
         }
         let rank = self.ranks[q].unwrap_or(self.max_rank + 1);
+        let approach = if self.goal_weight > 0.0 {
+            -self.goal_weight * goal_distance.map_or(self.goal_span, |d| d.min(self.goal_span))
+        } else {
+            0.0
+        };
         let sigma = reading.reachable_reward(q, self.c_r).min(0.0);
         // -inf (a `false` guard) squashes to the band's floor, not to -inf / inf = NaN.
         let squashed = if sigma.is_finite() {
@@ -299,7 +367,7 @@ impl ProgressReward {
         } else {
             -1.0
         };
-        -f64::from(rank) + squashed
+        -f64::from(rank) * self.band_width + squashed + approach
     }
 
     /// The reward of the step `q -> q_next` given `Phi` before (`phi`; 0 at an episode's
@@ -527,6 +595,28 @@ mod tests {
                 },
                 "exclusive",
             ),
+            (
+                ProgressParams {
+                    goal_weight: -0.5,
+                    ..Default::default()
+                },
+                "goal_weight",
+            ),
+            (
+                ProgressParams {
+                    goal_weight: f64::INFINITY,
+                    ..Default::default()
+                },
+                "goal_weight",
+            ),
+            (
+                ProgressParams {
+                    goal_weight: 0.5,
+                    goal_span: 0.0,
+                    ..Default::default()
+                },
+                "goal_span",
+            ),
         ] {
             crate::tests_support::assert_error(ProgressReward::new(&aut, &p), "Input(Value", names);
         }
@@ -583,18 +673,22 @@ mod tests {
         /// (d) a trajectory entering the trap earns less than any that never does.
         #[test]
         fn accepting_beats_not_accepting_and_the_trap_is_worst(
-            f in co_safe(), trajs in trajectories(), gamma in 0.8..1.0f64, tight in any::<bool>()
+            f in co_safe(), trajs in trajectories(), gamma in 0.8..1.0f64, tight in any::<bool>(),
+            goal_weight in prop_oneof![Just(0.0), 0.0..2.0f64], goal_span in 0.5..4.0f64
         ) {
             let spec = spec_for(&f);
             let aut = Automaton::build(&spec).unwrap();
             // An unsatisfiable task is refused (tested below).
             prop_assume!(ranks(&aut, &[])[aut.initial()].is_some());
             let horizon = 11; // every trajectory has 12 states = 11 steps
-            let params = ProgressParams { gamma, scale: 2.0, horizon, ..Default::default() };
+            let params = ProgressParams {
+                gamma, scale: 2.0, horizon, goal_weight, goal_span, ..Default::default()
+            };
             let mut r = ProgressReward::new(&aut, &params).unwrap();
             if tight {
                 // The least bonus the guarantee allows (just above the bound).
-                let band = f64::from(r.ranks().iter().flatten().max().copied().unwrap_or(0) + 1);
+                let band = f64::from(r.ranks().iter().flatten().max().copied().unwrap_or(0) + 1)
+                    * (1.0 + goal_weight * goal_span);
                 let least = band * (gamma.powi(1 - horizon as i32) - 1.0) - 1.0;
                 let bonus = Some(least.max(0.0) + 1e-9);
                 r = ProgressReward::new(&aut, &ProgressParams { bonus, ..params }).unwrap();
@@ -640,12 +734,16 @@ mod tests {
         /// (c) Within one FSA state the reward orders next states by Eq. 5A1.
         #[test]
         fn progress_never_lowers_and_shaping_ranks_states(
-            f in co_safe(), data in prop::collection::vec(-2.0..2.0f64, 3 * 12), gamma in 0.9..1.0f64
+            f in co_safe(), data in prop::collection::vec(-2.0..2.0f64, 3 * 12), gamma in 0.9..1.0f64,
+            goal_weight in prop_oneof![Just(0.0), 0.0..2.0f64], goal_span in 0.5..4.0f64
         ) {
             let spec = spec_for(&f);
             let aut = Automaton::build(&spec).unwrap();
             prop_assume!(ranks(&aut, &[])[aut.initial()].is_some());
-            let params = ProgressParams { gamma, scale: 2.0, ..Default::default() };
+            let params = ProgressParams {
+                gamma, scale: 2.0, goal_weight, goal_span, ..Default::default()
+            };
+            let width = 1.0 + goal_weight * goal_span;
             let r = ProgressReward::new(&aut, &params).unwrap();
             let states: Vec<&[f64]> = data.chunks(3).collect();
             let (mut q, mut phi) = (aut.step(states[0], aut.initial()).unwrap(), 0.0);
@@ -663,7 +761,7 @@ mod tests {
                 q = qn;
                 phi = pn;
             }
-            // Bands: a state of rank k has Phi in [-(k + 1), -k], so every Phi of a state is
+            // Bands: a state of rank k has Phi in [-(k + 1) B, -k B], so every Phi of a state is
             // at least every Phi of a state with a larger rank.
             for s in &states {
                 let reading = aut.read(s).unwrap();
@@ -671,13 +769,29 @@ mod tests {
                     if let (Some(k), false) = (r.ranks()[q], aut.is_accepting(q)) {
                         let phi = r.potential(&reading, q);
                         let k = f64::from(k);
-                        prop_assert!((-(k + 1.0)..=-k).contains(&phi), "rank {k}: Phi {phi}");
+                        prop_assert!(
+                            (-(k + 1.0) * width..=-k * width).contains(&phi),
+                            "rank {k}: Phi {phi}"
+                        );
+                        // The goal term, against its definition from the public goal query.
+                        let plain = ProgressReward::new(&aut, &ProgressParams {
+                            goal_weight: 0.0, ..params.clone()
+                        }).unwrap().potential(&reading, q);
+                        let d = aut.goal(s, q).unwrap().map_or(goal_span, |g| {
+                            // The goal lives in its region's position dimensions: a
+                            // co_safe formula's predicates read s[0..g.len()].
+                            g.iter().zip(s.iter()).map(|(g, x)| (x - g).powi(2)).sum::<f64>()
+                                .sqrt().min(goal_span)
+                        });
+                        let want = plain - k * goal_weight * goal_span - goal_weight * d;
+                        prop_assert!((phi - want).abs() < 1e-9, "Phi {phi}, want {want}");
                     }
                 }
             }
-            // (c) two next states that stay in q are ordered as Eq. 5A1 orders them.
+            // (c) two next states that stay in q are ordered as Eq. 5A1 orders them (without
+            // a goal term; with one, the bands' check above pins Phi down).
             let q = aut.step(states[0], aut.initial()).unwrap();
-            if !aut.is_accepting(q) && Some(q) != aut.trap() {
+            if goal_weight == 0.0 && !aut.is_accepting(q) && Some(q) != aut.trap() {
                 let mut stay = vec![];
                 for s in &states[1..] {
                     if aut.step(s, q).unwrap() == q {

@@ -56,6 +56,8 @@ impl PyProgressReward {
         kwargs.set_item("bonus", p.bonus)?;
         kwargs.set_item("c_r", p.c_r)?;
         kwargs.set_item("exclusive", exclusive)?;
+        kwargs.set_item("goal_weight", p.goal_weight)?;
+        kwargs.set_item("goal_span", p.goal_span)?;
         let automaton = Bound::new(py, PyAutomaton::new(py, this.automaton.clone()))?;
         let make = automaton.getattr("progress_reward")?;
         reduce(make, PyTuple::empty(py), Some(kwargs), None)
@@ -368,7 +370,8 @@ impl PyAutomaton {
     /// so that finishing within it out-earns not finishing), ``scale`` the Eq. 5A1 value at
     /// which the within-state shaping is halfway down its band, ``exclusive`` groups of atoms
     /// that never hold together beyond those the spec declares (``Spec(..., exclusive=...)``),
-    /// which always apply.
+    /// which always apply. ``goal_weight`` (> 0) adds potential-based shaping towards the CLF
+    /// goal: ``goal_weight`` per metre of approach, flat beyond ``goal_span`` metres.
     #[pyo3(signature = (
         *,
         gamma=progress::DEFAULT_GAMMA,
@@ -377,7 +380,9 @@ impl PyAutomaton {
         step_cost=None,
         bonus=None,
         c_r=tlshield_core::monitor::DEFAULT_C_R,
-        exclusive=None
+        exclusive=None,
+        goal_weight=0.0,
+        goal_span=progress::DEFAULT_GOAL_SPAN
     ))]
     #[allow(clippy::too_many_arguments)]
     fn progress_reward(
@@ -389,6 +394,8 @@ impl PyAutomaton {
         bonus: Option<f64>,
         c_r: f64,
         exclusive: Option<&Bound<'_, PyAny>>,
+        goal_weight: f64,
+        goal_span: f64,
     ) -> PyResult<PyProgressReward> {
         let exclusive = exclusive
             .map(crate::spec::groups_of)
@@ -408,6 +415,8 @@ impl PyAutomaton {
             horizon,
             c_r,
             exclusive: Vec::new(),
+            goal_weight,
+            goal_span,
         };
         PyProgressReward::build(self.inner.clone(), params, &exclusive)
     }

@@ -14,6 +14,9 @@ use crate::errors::map;
 /// ``Phi(s, q) = -rank(q) + x / (scale + |x|)`` with ``x = min(eq5a1(s, q), 0)`` (``rank``:
 /// fewest transitions to acceptance), the step reward ``Phi' - Phi - step_cost``, ``bonus``
 /// on entering acceptance, ``trap_penalty`` in the trap. Episodes start from ``Phi = 0``.
+/// With ``goal_weight = k > 0``: ``Phi = -rank(q) (1 + k span) + x / (scale + |x|) - k
+/// min(d, span)``, ``d`` the distance to the CLF goal of ``q`` (``Automaton.goal``), ``span =
+/// goal_span``: the CLF's information as potential-based shaping, without its push.
 /// ``exclusive``: groups of atom names of which at most one holds at a time (disjoint goal
 /// regions), so one state cannot count as reaching two goals. ``step_cost=None`` picks
 /// ``(1 - gamma) (max rank + 1)``; ``bonus=None`` picks ``(max rank + 1) gamma^(1 - horizon)``,
@@ -87,6 +90,18 @@ impl PyProgressReward {
     #[getter]
     fn horizon(&self) -> u32 {
         self.inner.horizon()
+    }
+
+    /// The goal term's weight per metre (0: none).
+    #[getter]
+    fn goal_weight(&self) -> f64 {
+        self.inner.goal_weight()
+    }
+
+    /// The distance beyond which the goal term is flat (metres).
+    #[getter]
+    fn goal_span(&self) -> f64 {
+        self.inner.goal_span()
     }
 
     /// ``Phi(s, q)``.

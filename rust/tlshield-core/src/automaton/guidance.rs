@@ -137,11 +137,29 @@ impl Reading<'_> {
     /// empty ones are when the automaton is built. `false` (and `goal` empty) when `q` cannot
     /// reach acceptance or no cube has a region.
     pub fn goal(&self, q: usize, goal: &mut Vec<f64>) -> bool {
+        self.goal_space(q, goal).is_some()
+    }
+
+    /// The Euclidean distance from this state to the CLF goal of `q` ([`Reading::goal`],
+    /// written into `goal`), measured in the goal's space (the position dimensions of its
+    /// region); `None` where `q` has no goal.
+    pub fn goal_distance(&self, q: usize, goal: &mut Vec<f64>) -> Option<f64> {
+        let dims = self.goal_space(q, goal)?;
+        let s = self.s;
+        Some(
+            dims.iter()
+                .zip(goal.iter())
+                .map(|(&i, g)| (s[i] - g).powi(2))
+                .sum::<f64>()
+                .sqrt(),
+        )
+    }
+
+    /// [`Reading::goal`], returning the goal's space (the state dimensions it is a point of).
+    fn goal_space(&self, q: usize, goal: &mut Vec<f64>) -> Option<&[usize]> {
         let (aut, s, rho) = (self.aut, self.s, self.rho());
         goal.clear();
-        let Some(rank) = aut.ranks[q] else {
-            return false;
-        };
+        let rank = aut.ranks[q]?;
         // Moving regions are placed at this state; one that is empty here is passed over.
         let mut empty_here: SmallVec<[&GoalAlternative; 4]> = SmallVec::new();
         loop {
@@ -169,15 +187,13 @@ impl Reading<'_> {
                     }
                 }
             }
-            let Some((alt, _)) = best else {
-                return false;
-            };
+            let (alt, _) = best?;
             if let Some(x) = &alt.fixed {
                 goal.extend_from_slice(x);
-                return true;
+                return Some(&alt.dims);
             }
             if region::centre_if_deepest(&alt.leaves, &alt.dims, s, goal) {
-                return true;
+                return Some(&alt.dims);
             }
             goal.clear();
             if region::separated(&alt.leaves, &alt.dims, s) {
@@ -190,7 +206,7 @@ impl Reading<'_> {
             {
                 Some((x, depth)) if depth > region::EMPTY_DEPTH => {
                     goal.extend_from_slice(&x);
-                    return true;
+                    return Some(&alt.dims);
                 }
                 _ => empty_here.push(alt),
             }
