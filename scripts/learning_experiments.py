@@ -85,6 +85,15 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "goal0.25": {"goal_weight": 0.25},
     "goal0.5": {"goal_weight": 0.5},
     "goal1": {"goal_weight": 1.0},
+    "x2": {"updates_scale": 2.0},
+    "goal0.5+x2": {"goal_weight": 0.5, "updates_scale": 2.0},
+    "goal0.5+clf_exp": {"goal_weight": 0.5, "clf_schedule": "exponential"},
+    # Training episodes end on entering the trap (ChannelTask.end_on_trap).
+    "goal0.5+end_on_trap": {"goal_weight": 0.5, "end_on_trap": True},
+    "goal0.5+end_on_trap+x2": {"goal_weight": 0.5, "end_on_trap": True, "updates_scale": 2.0},
+    # The same levers on PointMass-v0, a task nothing was tuned on.
+    "pm_x2": {"env": "tlshield/PointMass-v0", "updates_scale": 2.0},
+    "pm_goal0.5+x2": {"env": "tlshield/PointMass-v0", "goal_weight": 0.5, "updates_scale": 2.0},
     "vec64+executed_without_clf": {
         "n_envs": 64,
         "batch_size": 2048,
@@ -97,7 +106,14 @@ VARIANTS: dict[str, dict[str, Any]] = {
 def _options(variant: str) -> dict[str, Any]:
     from tlshield.lab import settings
 
-    return settings.split({k: v for k, v in VARIANTS[variant].items() if k != "updates_scale"})
+    # "env" picks the environment (Channel-v0 unless given); the rest are training settings.
+    variant_settings = VARIANTS[variant]
+    options = settings.split(
+        {k: v for k, v in variant_settings.items() if k not in ("updates_scale", "env")}
+    )
+    if "env" in variant_settings:
+        options["env"] = variant_settings["env"]
+    return options
 
 
 def _updates(variant: str, updates: int) -> int:

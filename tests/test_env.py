@@ -477,3 +477,38 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
             if terminated or truncated:
                 break
     assert steps > 300
+
+
+def test_end_on_trap_ends_a_training_episode_where_it_leaves_the_channel() -> None:
+    """``end_on_trap``: the step entering the trap pays the trap penalty once and terminates;
+    without it the episode goes on in the trap, paying it every step. The same states up to
+    there, and a shielded configuration (which never enters the trap) runs unchanged."""
+    runs = {}
+    for end in (False, True):
+        env = ChannelEnv(config="rl", end_on_trap=end)
+        env.reset(seed=3)
+        rewards, states = [], []
+        for _ in range(200):
+            _, reward, terminated, truncated, info = env.step(np.array([1.0, -0.3]))
+            rewards.append(reward)
+            states.append(env.state.copy())
+            if terminated or truncated or len(rewards) > 40:
+                break
+        runs[end] = (rewards, states, terminated, info["trap"])
+    (kept, kept_states, kept_term, kept_trap), (ended, ended_states, term, trap) = (
+        runs[False],
+        runs[True],
+    )
+    assert trap and term and kept_trap and not kept_term
+    k = len(ended)
+    assert k < len(kept) and kept[:k] == ended
+    np.testing.assert_array_equal(np.array(kept_states[:k]), np.array(ended_states))
+    penalty = env.tracker.trap_penalty
+    assert all(r <= penalty for r in kept[k:])
+    # With the CBF the trap is never entered: the option changes nothing.
+    shielded = {}
+    for end in (False, True):
+        env = ChannelEnv(config="rl_cbf", end_on_trap=end)
+        env.reset(seed=3)
+        shielded[end] = [env.step(np.array([1.0, -0.3]))[1] for _ in range(60)]
+    assert shielded[False] == shielded[True]

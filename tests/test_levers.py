@@ -165,3 +165,20 @@ def test_the_lever_scripts_run(tmp_path: Path) -> None:
         "time_to_solve.py", str(tmp_path / "t.png"), f"a={tmp_path / 'a'}", f"b={tmp_path / 'b'}"
     )
     assert (tmp_path / "t.png").stat().st_size > 10_000
+
+
+def test_the_exploration_script_counts_reaches_and_traps() -> None:
+    # Untrained policies on every configuration: the shielded ones never enter the trap, and
+    # the CLF's push reaches g1/g2 where the policy alone does not.
+    out = _script("exploration_reach.py", "--episodes", "6")
+    rows = {
+        (cells[1], cells[2]): [float(c) for c in cells[3:6]]
+        for line in out.splitlines()
+        if line.startswith("| rl") and len(cells := [c.strip() for c in line.split("|")]) > 6
+    }
+    assert len(rows) == 8
+    for (config, _), (reached, trapped, moved) in rows.items():
+        assert 0.0 <= reached <= 1.0 and moved >= 0.0
+        if "cbf" in config:
+            assert trapped == 0.0
+    assert rows[("rl_cbf_clf", "uniform")][0] > rows[("rl_cbf", "uniform")][0]

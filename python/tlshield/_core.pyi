@@ -370,6 +370,7 @@ class ChannelWorld:
         obstacle_drift: bool,
         evaluation: bool,
         channel_atoms: tuple[int, int],
+        end_on_trap: bool = False,
     ) -> Self: ...
     def reset(self, s0: ArrayLike, obstacles: ArrayLike) -> None: ...
     def step(

@@ -201,6 +201,7 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
             obstacle_drift=params.shield.obstacle_drift,
             evaluation=evaluation,
             channel_atoms=self._channel_atoms,
+            end_on_trap=params.task.end_on_trap,
         )
         #: The barrier slack of the last shielded step (> 0 only when the QP was relaxed).
         self.last_slack = 0.0

@@ -67,6 +67,9 @@ pub struct ChannelParams {
     pub obstacle_drift: bool,
     /// The paper's evaluation rules: an episode also ends on a collision.
     pub evaluation: bool,
+    /// An episode also ends on entering the trap (the task can no longer be done; the step
+    /// pays the trap penalty once instead of on every step left).
+    pub end_on_trap: bool,
     /// Spec atom indices of the channel constraints c1, c2.
     pub channel_atoms: [usize; 2],
 }
@@ -276,7 +279,8 @@ impl ChannelWorld {
             let push = f.a_cbf[0] * f.a_cbf[0] + f.a_cbf[1] * f.a_cbf[1];
             reward -= p.intervention_penalty * push;
         }
-        let terminated = task.accepted || (p.evaluation && measure.collision);
+        let terminated =
+            task.accepted || (p.end_on_trap && task.trapped) || (p.evaluation && measure.collision);
         Ok(WorldStep {
             a_rl,
             applied,

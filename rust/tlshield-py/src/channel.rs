@@ -112,7 +112,7 @@ impl PyChannelWorld {
     #[pyo3(signature = (
         model, *, dt, horizon, arena, half_width, obstacle_radius, safe_distance, w,
         collision_penalty, intervention_penalty, relative, rl_bounds, obstacle_drift,
-        evaluation, channel_atoms,
+        evaluation, channel_atoms, end_on_trap=false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -131,6 +131,7 @@ impl PyChannelWorld {
         obstacle_drift: bool,
         evaluation: bool,
         channel_atoms: (usize, usize),
+        end_on_trap: bool,
     ) -> PyResult<Self> {
         let params = ChannelParams {
             dt,
@@ -149,6 +150,7 @@ impl PyChannelWorld {
             ),
             obstacle_drift,
             evaluation,
+            end_on_trap,
             channel_atoms: [channel_atoms.0, channel_atoms.1],
         };
         Ok(PyChannelWorld {
@@ -178,6 +180,7 @@ impl PyChannelWorld {
         )?;
         kwargs.set_item("obstacle_drift", p.obstacle_drift)?;
         kwargs.set_item("evaluation", p.evaluation)?;
+        kwargs.set_item("end_on_trap", p.end_on_trap)?;
         kwargs.set_item("channel_atoms", (p.channel_atoms[0], p.channel_atoms[1]))?;
         let model = crate::dynamics::to_python(py, world.model())?;
         let snap = world.snapshot();
