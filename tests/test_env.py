@@ -480,9 +480,10 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
 
 
 def test_end_on_trap_ends_a_training_episode_where_it_leaves_the_channel() -> None:
-    """``end_on_trap``: the step entering the trap pays the trap penalty once and terminates;
-    without it the episode goes on in the trap, paying it every step. The same states up to
-    there, and a shielded configuration (which never enters the trap) runs unchanged."""
+    """``end_on_trap``: the step entering the trap terminates and also pays the trap penalty of
+    every step left to the horizon; without it the episode goes on in the trap, paying it
+    every step. The same states and rewards up to there, and a shielded configuration (which
+    never enters the trap) runs unchanged."""
     runs = {}
     for end in (False, True):
         env = ChannelEnv(config="rl", end_on_trap=end)
@@ -501,10 +502,12 @@ def test_end_on_trap_ends_a_training_episode_where_it_leaves_the_channel() -> No
     )
     assert trap and term and kept_trap and not kept_term
     k = len(ended)
-    assert k < len(kept) and kept[:k] == ended
+    assert k < len(kept) and kept[: k - 1] == ended[:-1]
     np.testing.assert_array_equal(np.array(kept_states[:k]), np.array(ended_states))
     penalty = env.tracker.trap_penalty
-    assert all(r <= penalty for r in kept[k:])
+    assert all(r <= penalty for r in kept[k - 1 :])
+    horizon = env.params.task.horizon
+    assert ended[-1] == pytest.approx(kept[k - 1] + penalty * (horizon - k))
     # With the CBF the trap is never entered: the option changes nothing.
     shielded = {}
     for end in (False, True):

@@ -153,6 +153,25 @@ def test_finishing_out_earns_parking_on_every_seed(config: str, overrides: dict)
         assert done > parked, f"seed {seed}: finish {done:.2f} <= park {parked:.2f}"
 
 
+def _leave_the_channel(env: ChannelEnv) -> np.ndarray:
+    """Drives straight across the channel's wall (into the trap)."""
+    p = env.state[:2]
+    return towards(env, p + 3.0 * np.array([1.0, -1.0]) / math.sqrt(2))
+
+
+@pytest.mark.parametrize("goal_weight", [0.0, 0.5])
+def test_ending_early_in_the_trap_never_pays(goal_weight: float) -> None:
+    """With ``end_on_trap`` an episode ends in the trap: leaving the channel at once must still
+    earn less than parking and than finishing (no escape from a bad episode by ending it)."""
+    env = ChannelEnv(config="rl", end_on_trap=True, goal_weight=goal_weight, w=0.0)
+    for seed in range(20):
+        left, left_ok, _ = discounted_return(env, _leave_the_channel, seed)
+        assert not left_ok and env.tracker.trapped
+        parked, _, _ = discounted_return(env, park, seed)
+        done, ok, _ = discounted_return(env, finish, seed)
+        assert ok and left < parked < done, f"seed {seed}: {left:.2f}, {parked:.2f}, {done:.2f}"
+
+
 def test_the_paper_reward_pays_parking() -> None:
     """The loophole the progress reward closes, measured on Eq. 5A1 itself."""
     env = ChannelEnv(config="rl", reward="paper")

@@ -78,8 +78,9 @@ class ChannelTask:
     #: Distance (m) beyond which the goal term is flat (at least the distance between goals).
     goal_span: float = 12.0
     #: End a training episode on entering the trap (leaving the channel before g3): the task
-    #: can no longer be done, and the step pays the trap penalty once instead of on each of
-    #: the steps left. Evaluation episodes never reach the trap (the CBF is on).
+    #: can no longer be done. The step entering it also pays the trap's task reward for every
+    #: step left to the horizon, so ending a bad episode early never pays. Evaluation episodes
+    #: never reach the trap (the CBF is on).
     end_on_trap: bool = False
 
 

@@ -20,6 +20,7 @@ from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 from tlshield.envs.params import FULL
 from tlshield.envs.safety_gym import MissingStack
+from tlshield.lab.presets import DEFAULT_UPDATES
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
 TRAINING_MODULES = frozenset(
@@ -386,7 +387,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_import(train)
     train.add_argument(
-        "--updates", type=_positive, default=300, help="PPO updates (1024 steps each by default)"
+        "--updates",
+        type=_positive,
+        default=DEFAULT_UPDATES,
+        help=f"PPO updates (1024 steps each by default; default {DEFAULT_UPDATES})",
     )
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--out", required=True, help="run folder to write")
@@ -422,7 +426,9 @@ def build_parser() -> argparse.ArgumentParser:
     repro.add_argument("--out", default="results", help="results folder (default: results)")
     repro.add_argument("--configs", nargs="+", choices=sorted(CONFIGS), default=list(CONFIGS))
     repro.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    repro.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
+    repro.add_argument(
+        "--updates", type=_positive, default=DEFAULT_UPDATES, help="PPO updates per run"
+    )
     repro.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
     _add_ray(repro)
     repro.add_argument("--quiet", action="store_true")

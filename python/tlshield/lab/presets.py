@@ -6,6 +6,12 @@ from __future__ import annotations
 
 from typing import Any
 
+#: PPO updates of a training run (``tlshield train`` and ``tlshield reproduce``; 1,024 steps
+#: each with the default preset). 600: with the progress reward's goal term, rl_cbf kept
+#: 0.90-0.99 on the tuning seeds 0-4 at 600 updates and 0.87-0.96 at 300; rl_cbf_clf
+#: 0.98-1.00 and 0.87-0.99 (docs/learning.md).
+DEFAULT_UPDATES = 600
+
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks, and tlshield's own
 #: keys (read by :func:`tlshield.lab.training.train`): ``policy``
 #: (:data:`tlshield.lab.policies.POLICIES`, default ``"gaussian"``), ``activation``

@@ -52,7 +52,13 @@ from tlshield.envs import (
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
 from tlshield.envs.params import FULL, as_flat
 from tlshield.lab.evaluation import evaluate
-from tlshield.lab.presets import DEFAULT_FINAL_SCALE, DEFAULT_SCHEDULE, PRESETS, SCHEDULES
+from tlshield.lab.presets import (
+    DEFAULT_FINAL_SCALE,
+    DEFAULT_SCHEDULE,
+    DEFAULT_UPDATES,
+    PRESETS,
+    SCHEDULES,
+)
 from tlshield.lab.runs import RUN_FILE, is_finished, load_run
 from tlshield.lab.seeds import check_seeds, learner_seed, train_seed
 
@@ -423,7 +429,7 @@ def reproduce(
     *,
     configs: tuple[str, ...] = tuple(CONFIGS),
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 300,
+    updates: int = DEFAULT_UPDATES,
     trials: int = 100,
     workers: int | None = None,
     address: str | None = None,

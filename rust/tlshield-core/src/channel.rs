@@ -67,8 +67,10 @@ pub struct ChannelParams {
     pub obstacle_drift: bool,
     /// The paper's evaluation rules: an episode also ends on a collision.
     pub evaluation: bool,
-    /// An episode also ends on entering the trap (the task can no longer be done; the step
-    /// pays the trap penalty once instead of on every step left).
+    /// An episode also ends on entering the trap (the task can no longer be done). The step
+    /// entering it also pays, at once, the trap's task reward for every step left to the
+    /// horizon, so that ending a bad episode early in the trap never pays better than going on
+    /// outside it.
     pub end_on_trap: bool,
     /// Spec atom indices of the channel constraints c1, c2.
     pub channel_atoms: [usize; 2],
@@ -279,8 +281,13 @@ impl ChannelWorld {
             let push = f.a_cbf[0] * f.a_cbf[0] + f.a_cbf[1] * f.a_cbf[1];
             reward -= p.intervention_penalty * push;
         }
-        let terminated =
-            task.accepted || (p.end_on_trap && task.trapped) || (p.evaluation && measure.collision);
+        let ended_in_trap = p.end_on_trap && task.trapped;
+        if ended_in_trap {
+            // The steps the episode would have spent in the trap, each paying the trap's task
+            // reward (`task.reward` is that reward: this step entered the trap).
+            reward += task.reward * f64::from(p.horizon.saturating_sub(self.t));
+        }
+        let terminated = task.accepted || ended_in_trap || (p.evaluation && measure.collision);
         Ok(WorldStep {
             a_rl,
             applied,
