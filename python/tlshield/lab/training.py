@@ -461,12 +461,14 @@ def _ablation_rows() -> list[tuple[str, dict[str, Any]]]:
     observation = {**reward, "observation": "relative"}
     barrier = {**observation, "obstacle_barrier": True}
     intervention = {**barrier, "intervention_penalty": 0.05}
+    goal = {**intervention, "goal_weight": 0.5, "end_on_trap": True}
     return [
         ("paper settings (Eq. 5A1, 13-value obs., paper PPO)", paper),
         ("+ progress reward", reward),
         ("+ relative body-frame observation", observation),
         ("+ moving-obstacle barrier", barrier),
         ("+ intervention penalty", intervention),
+        ("+ the goal term, training episodes ending in the trap", goal),
         (
             "default PPO preset, no intervention penalty (= tlshield's defaults)",
             {"preset": "default"},
