@@ -95,6 +95,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # Training episodes end on entering the trap (ChannelTask.end_on_trap). With 600 updates
     # (--updates 300 x 2) this is the default.
     "goal0.5+end_on_trap+x2": {"goal_weight": 0.5, "end_on_trap": True, "updates_scale": 2.0},
+    "goal0.5+end_on_trap+x3": {"goal_weight": 0.5, "end_on_trap": True, "updates_scale": 3.0},
     # The same levers on PointMass-v0, a task nothing was tuned on.
     "pm_x2": {"env": "tlshield/PointMass-v0", "goal_weight": 0.0, "updates_scale": 2.0},
     "pm_goal0.5+x2": {"env": "tlshield/PointMass-v0", "goal_weight": 0.5, "updates_scale": 2.0},

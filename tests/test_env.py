@@ -471,7 +471,12 @@ def test_the_core_world_steps_as_the_numpy_reference(config: str) -> None:
                 cfg.obstacles.w * min(d - cfg.obstacles.safe_distance, 0.0)
                 - cfg.obstacles.collision_penalty * collision
             )
-            assert reward == pytest.approx(info["tl_reward"] + terms, abs=1e-12)
+            # end_on_trap (the default): the step entering the trap ends the episode and pays
+            # the trap's reward for every step left.
+            ends_in_trap = cfg.task.end_on_trap and info["trap"]
+            lump = info["tl_reward"] * (cfg.task.horizon - t) if ends_in_trap else 0.0
+            assert reward == pytest.approx(info["tl_reward"] + terms + lump, abs=1e-9)
+            assert terminated == (info["success"] or ends_in_trap)
             s = want
             steps += 1
             if terminated or truncated:

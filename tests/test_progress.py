@@ -74,6 +74,7 @@ def test_potential_and_advance_agree() -> None:
         ({"goal_weight": math.inf}, "goal_weight"),
         ({"goal_weight": 0.5, "goal_span": 0.0}, "goal_span"),
         ({"goal_weight": 0.5, "goal_span": math.nan}, "goal_span"),
+        ({"goal_weight": 1e300, "goal_span": 1e300}, "goal_weight"),
     ],
 )
 def test_bad_parameters_raise(kwargs: dict, match: str) -> None:

@@ -28,7 +28,8 @@
 //! `span = goal_span` and `B = 1 + k span` the widened band, so bands still never overlap and
 //! entering a state closer to acceptance still never lowers `Phi`. It gives a learner without
 //! the CLF the CLF's information (which goal advances the task, and how far it is) as reward
-//! rather than as a push: potential-based shaping (Ng, Harada and Russell 1999). The squash
+//! rather than as a push: potential-based shaping (Ng, Harada and Russell 1999; undiscounted
+//! differences, as for the rest of `Phi`, with the bonus sized for the discount). The squash
 //! flattens far from a goal (slope `scale / (scale + x)^2`); the goal term keeps a slope of `k`
 //! per metre out to `span`. Where `q` has no goal the term sits at its floor `-k span`. The
 //! bonus, trap penalty and the bound below use the whole range `(max rank + 1) B`.
@@ -244,6 +245,14 @@ impl ProgressReward {
         let max_rank = ranks.iter().flatten().copied().max().unwrap_or(0);
         let band = f64::from(max_rank + 1);
         let band_width = 1.0 + params.goal_weight * params.goal_span;
+        if !band_width.is_finite() {
+            return Err(InputError::Value {
+                what: "goal_weight".into(),
+                expected: "goal_weight * goal_span finite".into(),
+                got: format!("{} * {}", params.goal_weight, params.goal_span),
+            }
+            .into());
+        }
         // The whole range of `Phi` outside the trap: what shaping can add along a trajectory.
         let range = band * band_width;
         let step_cost = match params.step_cost {
