@@ -234,7 +234,8 @@ def test_barging_through_an_obstacle_never_out_earns_going_around(seed: int) -> 
 
 @pytest.mark.parametrize("reward", ["progress", "paper"])
 def test_trap_never_pays_better_than_outside(reward: str) -> None:
-    env = ChannelEnv(config="rl", reward=reward)
+    # Episodes go on in the trap, so every trap step's reward is seen.
+    env = ChannelEnv(config="rl", reward=reward, end_on_trap=False)
     rng = np.random.default_rng(1)
     worst, trapped_steps = math.inf, 0
     penalty = env.tracker.trap_penalty

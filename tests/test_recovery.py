@@ -81,10 +81,11 @@ def test_a_start_inside_a_hazard_of_the_formula_is_driven_out_and_kept_out(polic
 def test_channel_starts_outside_the_channel_return_and_stay() -> None:
     """Channel-v0 with starts spread 4 m: under random actions, every episode that starts
     outside the channel comes back in and stays (before: once in the trap nothing pushed
-    back)."""
+    back). Episodes go on in the trap (``end_on_trap=False``; by default a training episode
+    ends there, with nothing left to do)."""
     starts_outside = returned = outside_after = 0
     for episode in range(30):
-        env = gym.make("tlshield/Channel-v0", config="rl_cbf", start_spread=4.0)
+        env = gym.make("tlshield/Channel-v0", config="rl_cbf", start_spread=4.0, end_on_trap=False)
         env.reset(seed=episode)
         u = env.unwrapped
         width = u.params.task.half_width
