@@ -9,7 +9,7 @@ setup:
 	@bash scripts/setup.sh
 
 ## The main job on its defaults: train the four configurations (2 seeds each, a budget of
-## about 8 minutes from nothing on 2 cores, setup included), evaluate them, and write figures
+## about 6 minutes from nothing on 2 cores, setup included), evaluate them, and write figures
 ## and a results table.
 run: setup
 	$(BIN)/python -m tlshield reproduce --out results
