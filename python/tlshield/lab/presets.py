@@ -37,8 +37,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         # The Gaussian's mean is tanh-bounded: SB3's unbounded mean drifted past the action
         # box, where clipping hides it, on the runs that collapsed (docs/learning.md).
         "policy": "tanh_mean",
-        # The progress reward is bounded by design (bands of width 1 per FSA state, a bonus of
-        # about 5), so it needs no running normalisation; with it, a run whose returns stopped
+        # The progress reward is bounded by design (Channel-v0: bands of width 7 per FSA state
+        # with the goal term, a bonus of about 26), so it needs no running normalisation (the
+        # goal term's runs were measured so); with it, a run whose returns stopped
         # varying divided by a tiny std, the value loss reached 1e3-1e4, and the global
         # gradient clip then starved the policy (approx_kl 1e-9): a permanent collapse.
         "norm_reward": False,
