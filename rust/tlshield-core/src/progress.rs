@@ -116,6 +116,18 @@ pub struct ProgressReward {
     band_width: f64,
 }
 
+/// Checks that `value` is finite and > 0 (`noun`: what the error says it must be).
+fn finite_positive(what: &str, value: f64, noun: &str) -> Result<(), InputError> {
+    if value.is_finite() && value > 0.0 {
+        return Ok(());
+    }
+    Err(InputError::Value {
+        what: what.into(),
+        expected: format!("a finite {noun} > 0"),
+        got: value.to_string(),
+    })
+}
+
 fn finite_at_least(what: &str, value: f64, lo: f64) -> Result<(), InputError> {
     if value.is_finite() && value >= lo {
         return Ok(());
@@ -179,14 +191,7 @@ impl ProgressReward {
             }
             .into());
         }
-        if !(params.scale.is_finite() && params.scale > 0.0) {
-            return Err(InputError::Value {
-                what: "scale".into(),
-                expected: "a finite number > 0".into(),
-                got: params.scale.to_string(),
-            }
-            .into());
-        }
+        finite_positive("scale", params.scale, "number")?;
         if params.horizon == 0 {
             return Err(InputError::Value {
                 what: "horizon".into(),
@@ -195,14 +200,7 @@ impl ProgressReward {
             }
             .into());
         }
-        if !(params.c_r.is_finite() && params.c_r > 0.0) {
-            return Err(InputError::Value {
-                what: "c_r".into(),
-                expected: "a finite weight > 0".into(),
-                got: params.c_r.to_string(),
-            }
-            .into());
-        }
+        finite_positive("c_r", params.c_r, "weight")?;
         let atoms = automaton.spec().atoms().len();
         for &g in &params.exclusive {
             if atoms < 32 && g >> atoms != 0 {
@@ -216,14 +214,7 @@ impl ProgressReward {
         }
         check_exclusive(automaton, &params.exclusive)?;
         finite_at_least("goal_weight", params.goal_weight, 0.0)?;
-        if !(params.goal_span.is_finite() && params.goal_span > 0.0) {
-            return Err(InputError::Value {
-                what: "goal_span".into(),
-                expected: "a finite distance > 0".into(),
-                got: params.goal_span.to_string(),
-            }
-            .into());
-        }
+        finite_positive("goal_span", params.goal_span, "distance")?;
         let ranks = ranks(automaton, &params.exclusive);
         if ranks[automaton.initial()].is_none() {
             return Err(InputError::Value {
