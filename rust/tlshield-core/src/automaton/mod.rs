@@ -234,6 +234,16 @@ impl Automaton {
         }
     }
 
+    /// [`Automaton::check_state`] of every `qs[i]` (the error names the first bad one as
+    /// `{what}[i]`); the name is only formatted for an error, so a batch's check allocates
+    /// nothing per row.
+    pub fn check_states(&self, what: &str, qs: &[usize]) -> Result<(), AutomatonError> {
+        match qs.iter().position(|&q| q >= self.num_states()) {
+            None => Ok(()),
+            Some(i) => self.check_state(&format!("{what}[{i}]"), qs[i]).map(|_| ()),
+        }
+    }
+
     fn check_vector(&self, s: &[f64]) -> Result<(), InputError> {
         self.spec.check_state_len(s.len())?;
         check_finite("s", s, s.len())
@@ -298,9 +308,7 @@ impl Automaton {
         }
         self.spec.check_state_len(dim)?;
         check_finite("states", states, dim)?;
-        for (i, &q) in qs.iter().enumerate() {
-            self.check_state(&format!("qs[{i}]"), q)?;
-        }
+        self.check_states("qs", qs)?;
         let mut out = crate::alloc::try_vec("qs", qs.len(), 0)?;
         crate::parallel::install(|| {
             out.par_iter_mut()

@@ -807,10 +807,7 @@ impl Shield {
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
-        for (i, &q) in qs.iter().enumerate() {
-            self.automaton.check_state(&format!("qs[{i}]"), q)?;
-        }
-        Ok(())
+        Ok(self.automaton.check_states("qs", qs)?)
     }
 
     /// [`Shield::filter_batch`] at the monitors' last states and FSA states, reusing their
