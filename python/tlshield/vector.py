@@ -39,15 +39,18 @@ def batch_infos(out: FilterBatch, a_rl: NDArray[np.float64]) -> list[dict[str, A
         out.solver.tolist(),
         strict=True,
     )
+    # The enum members by value: a dict lookup, where calling the enum per row cost about a
+    # third of this function (as in WorldBatch.infos).
+    status_of, solver_of = _MEMBERS[Status], _MEMBERS[Solver]
     return [
         {
             "a_rl": a,
             "a_cbf": cbf,
             "a_clf": clf,
             "delta": delta,
-            "status": Status(status),
+            "status": status_of[status],
             "slack": slack,
-            "solver": Solver(solver),
+            "solver": solver_of[solver],
         }
         for a, cbf, clf, delta, status, slack, solver in columns
     ]
