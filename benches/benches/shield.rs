@@ -1,15 +1,17 @@
 //! The shield's hot path at the case-study size (m = 2: two channel rows and the safe set,
-//! one CLF row, bounds): the bare QP on both solver paths over the same instances, and the
-//! whole step (predicates, FSA safe set, goal, rows, QP).
+//! one CLF row, bounds): the bare QP on both solver paths over the same instances, the whole
+//! step (predicates, FSA safe set, goal, rows, QP), and the batch calls against the same
+//! steps one by one (`shield_batch`, 1,024 rows; throughput in rows, so criterion prints the
+//! time per row; `RAYON_NUM_THREADS=1` for one thread).
 
 use std::hint::black_box;
 use std::sync::Arc;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use tlshield_bench::{shield_instances, task_shield};
 use tlshield_core::active_set::ActiveSetQp;
 use tlshield_core::qp::{ClarabelQp, QpSolution, QpStatus};
-use tlshield_core::{Automaton, SolverChoice};
+use tlshield_core::{Automaton, BatchGradient, BatchOutput, SolverChoice};
 
 fn shield(c: &mut Criterion) {
     let automaton = Arc::new(Automaton::build(&tlshield_bench::task_spec()).unwrap());
@@ -66,5 +68,65 @@ fn shield(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, shield);
+/// The batch path per row against single steps over the same rows.
+fn batch(c: &mut Criterion) {
+    const ROWS: usize = 1024;
+    let automaton = Arc::new(Automaton::build(&tlshield_bench::task_spec()).unwrap());
+    let instances = shield_instances(&automaton, ROWS, 7);
+    let sh = task_shield(automaton, SolverChoice::Auto);
+    let n = instances[0].0.len();
+    let states: Vec<f64> = instances.iter().flat_map(|(s, _, _)| s.clone()).collect();
+    let qs: Vec<usize> = instances.iter().map(|(_, q, _)| *q).collect();
+    let a_rl: Vec<f64> = instances.iter().flat_map(|(_, _, a)| a.clone()).collect();
+    let mut group = c.benchmark_group("shield_batch");
+    group.throughput(Throughput::Elements(ROWS as u64));
+    group.bench_function("single_steps", |b| {
+        b.iter(|| {
+            for (s, q, a) in &instances {
+                black_box(sh.filter(black_box(s), *q, a, None, None).unwrap().status);
+            }
+        })
+    });
+    let mut out = BatchOutput::default();
+    group.bench_function("filter_batch", |b| {
+        b.iter(|| {
+            sh.filter_batch(black_box(&states), n, &qs, &a_rl, None, &mut out)
+                .unwrap()
+        })
+    });
+    let mut grad = BatchGradient::default();
+    group.bench_function("jacobian_batch", |b| {
+        b.iter(|| {
+            sh.jacobian_batch(
+                black_box(&states),
+                n,
+                &qs,
+                &a_rl,
+                None,
+                None,
+                true,
+                &mut grad,
+            )
+            .unwrap()
+        })
+    });
+    group.bench_function("jacobian_batch_actions_only", |b| {
+        b.iter(|| {
+            sh.jacobian_batch(
+                black_box(&states),
+                n,
+                &qs,
+                &a_rl,
+                None,
+                None,
+                false,
+                &mut grad,
+            )
+            .unwrap()
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, shield, batch);
 criterion_main!(benches);
