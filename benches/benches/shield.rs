@@ -95,36 +95,19 @@ fn batch(c: &mut Criterion) {
         })
     });
     let mut grad = BatchGradient::default();
-    group.bench_function("jacobian_batch", |b| {
-        b.iter(|| {
-            sh.jacobian_batch(
-                black_box(&states),
-                n,
-                &qs,
-                &a_rl,
-                None,
-                None,
-                true,
-                &mut grad,
-            )
-            .unwrap()
-        })
-    });
-    group.bench_function("jacobian_batch_actions_only", |b| {
-        b.iter(|| {
-            sh.jacobian_batch(
-                black_box(&states),
-                n,
-                &qs,
-                &a_rl,
-                None,
-                None,
-                false,
-                &mut grad,
-            )
-            .unwrap()
-        })
-    });
+    // With the state gradients `(B, m, n)` and with the action gradients only.
+    for (name, want_states) in [
+        ("jacobian_batch", true),
+        ("jacobian_batch_actions_only", false),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let states = black_box(&states);
+                sh.jacobian_batch(states, n, &qs, &a_rl, None, None, want_states, &mut grad)
+                    .unwrap()
+            })
+        });
+    }
     group.finish();
 }
 
