@@ -389,6 +389,36 @@ impl Predicate {
         }
     }
 
+    /// A bound on how fast the value changes along state dimension `d`, everywhere:
+    /// `|value(s + t e_d) - value(s)| <= lipschitz(d) |t|` (0 where it does not read `d`). A
+    /// ball's distance moves at most as fast as its difference vector, one per place `d` enters
+    /// it (and the body point's lever arm through the heading); a union's or intersection's
+    /// max or min no faster than its fastest part.
+    pub fn lipschitz(&self, d: usize) -> f64 {
+        match self {
+            Predicate::Halfspace(h) => h
+                .terms
+                .iter()
+                .filter(|&&(i, _)| i == d)
+                .map(|&(_, w)| w.abs())
+                .sum(),
+            Predicate::Ball(b) => {
+                let centre = match &b.center {
+                    Center::Dims(c) => c.iter().filter(|&&i| i == d).count(),
+                    Center::Fixed(_) => 0,
+                };
+                let lever = b
+                    .offset
+                    .filter(|o| o.heading == d)
+                    .map_or(0.0, |o| o.along.hypot(o.across));
+                (b.pos.iter().filter(|&&i| i == d).count() + centre) as f64 + lever
+            }
+            Predicate::Union(p) | Predicate::Intersection(p) => {
+                p.iter().map(|x| x.lipschitz(d)).fold(0.0, f64::max)
+            }
+        }
+    }
+
     /// `out = H(s) v`: the Hessian of [`Predicate::value`] at `s` times `v` (lengths n), for
     /// second-order barrier rows. Zero for a half-space. For a ball, `value = r - |d|` with
     /// `d = s[pos] - c(s)` linear in `s`, so `H = -J^T (I - u u^T) J / |d|` (`u = d / |d|`,
@@ -615,6 +645,40 @@ mod tests {
                         proptest::prop_assert_eq!(g[i], 0.0);
                     }
                 }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(crate::tests_support::seeded(300))]
+
+        /// No predicate's value moves along a dimension faster than its `lipschitz` bound (any
+        /// step, compounds and body points included), and the bound is 0 off what it reads.
+        #[test]
+        fn values_move_no_faster_than_the_lipschitz_bound(
+            s in proptest::collection::vec(-3.0..3.0f64, 6),
+            d in 0..6usize,
+            t in -4.0..4.0f64,
+        ) {
+            let ball = Predicate::ball(vec![0, 1], 0.5, Center::Dims(vec![4, 5])).unwrap();
+            let line = Predicate::ball(vec![3], 0.5, Center::Dims(vec![4])).unwrap();
+            let wall = Predicate::halfspace(vec![1.0, -2.5, 0.0, 0.0, 0.5, 0.0], 1.5).unwrap();
+            let predicates = [
+                Predicate::Union(vec![ball.clone(), wall.clone()]),
+                Predicate::Intersection(vec![body(Center::Dims(vec![4, 5])), wall.clone()]),
+                ball,
+                line,
+                wall,
+                body(Center::Fixed(vec![0.3, -0.2])),
+            ];
+            let mut moved = s.clone();
+            moved[d] += t;
+            for p in &predicates {
+                let bound = p.lipschitz(d);
+                let change = (p.value(&moved) - p.value(&s)).abs();
+                proptest::prop_assert!(change <= bound * t.abs() * (1.0 + 1e-12) + 1e-12,
+                    "{p:?} d={d}: {change} > {bound} * {t}");
+                proptest::prop_assert_eq!(bound == 0.0, !p.reads(d), "{:?} d={}", p, d);
             }
         }
     }

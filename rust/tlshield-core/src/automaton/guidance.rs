@@ -17,7 +17,7 @@ pub const DEFAULT_C_R: f64 = 1.0;
 /// The default reward of a step in the trap (the paper's task reward).
 pub const DEFAULT_TRAP_PENALTY: f64 = -100.0;
 
-impl Reading<'_> {
+impl<'a> Reading<'a> {
     /// The Eq. 5A1 value of being in `q` at this state:
     /// `min(rho(s, D_q), c_r * rho(s, !psi_{q,trap}))`, `rho(s, D_q)` without a trap edge, 0 in
     /// an accepting state and -inf in the trap (no progress is possible; the checked
@@ -156,14 +156,21 @@ impl Reading<'_> {
     }
 
     /// [`Reading::goal`], returning the goal's space (the state dimensions it is a point of).
-    fn goal_space(&self, q: usize, goal: &mut Vec<f64>) -> Option<&[usize]> {
+    fn goal_space(&self, q: usize, goal: &mut Vec<f64>) -> Option<&'a [usize]> {
+        self.goal_choice(q, goal).map(|c| c.alt.dims.as_slice())
+    }
+
+    /// [`Reading::goal`], returning how the goal was chosen: the alternative, its lead over the
+    /// others, and the better-scored ones passed over as empty here.
+    pub(crate) fn goal_choice(&self, q: usize, goal: &mut Vec<f64>) -> Option<GoalChoice<'a>> {
         let (aut, s, rho) = (self.aut, self.s, self.rho());
         goal.clear();
         let rank = aut.ranks[q]?;
         // Moving regions are placed at this state; one that is empty here is passed over.
-        let mut empty_here: SmallVec<[&GoalAlternative; 4]> = SmallVec::new();
+        let mut empty_here: SmallVec<[&'a GoalAlternative; 4]> = SmallVec::new();
         loop {
-            let mut best: Option<(&GoalAlternative, f64)> = None;
+            let mut best: Option<(&'a GoalAlternative, f64)> = None;
+            let mut runner_up = f64::NEG_INFINITY;
             for (e, edge) in aut.edges.iter().enumerate() {
                 if edge.src != q || edge.dst == q || aut.ranks[edge.dst].is_none_or(|d| d >= rank) {
                     continue;
@@ -183,38 +190,117 @@ impl Reading<'_> {
                             .iter()
                             .map(|p| p.value(s))
                             .fold(negatives, f64::min);
-                        best = first_max(best, (alt, score));
+                        // The first of the largest scores wins (ties keep the earlier one).
+                        match best {
+                            Some((_, b)) if b >= score => runner_up = runner_up.max(score),
+                            _ => {
+                                runner_up = best.map_or(runner_up, |(_, b)| runner_up.max(b));
+                                best = Some((alt, score));
+                            }
+                        }
                     }
                 }
             }
-            let (alt, _) = best?;
-            if let Some(x) = &alt.fixed {
-                goal.extend_from_slice(x);
-                return Some(&alt.dims);
+            let (alt, score) = best?;
+            if alt.place(s, goal) {
+                return Some(GoalChoice {
+                    alt,
+                    lead: score - runner_up,
+                    passed: empty_here,
+                });
             }
-            if region::centre_if_deepest(&alt.leaves, &alt.dims, s, goal) {
-                return Some(&alt.dims);
-            }
-            goal.clear();
-            if region::separated(&alt.leaves, &alt.dims, s) {
-                empty_here.push(alt); // empty in closed form: no cone program this step
-                continue;
-            }
-            let leaves: SmallVec<[&Predicate; 8]> = alt.leaves.iter().collect();
-            match region::pieces(&leaves, &alt.dims, Some(s))
-                .and_then(|pieces| region::deepest_point(&pieces))
-            {
-                Some((x, depth)) if depth > region::EMPTY_DEPTH => {
-                    goal.extend_from_slice(&x);
-                    return Some(&alt.dims);
-                }
-                _ => empty_here.push(alt),
-            }
+            empty_here.push(alt); // empty at this state: the next best
         }
     }
 }
 
+/// How [`Reading::goal`] chose its goal at one state (for the shield's goal Jacobian: a choice
+/// that no step of a central difference can change needs no difference over the dimensions
+/// only the other alternatives read).
+#[derive(Debug, Clone)]
+pub(crate) struct GoalChoice<'a> {
+    alt: &'a GoalAlternative,
+    /// The chosen alternative's score minus the best other's not found empty (+inf when alone).
+    pub lead: f64,
+    /// The better-scored alternatives passed over as empty at this state.
+    passed: SmallVec<[&'a GoalAlternative; 4]>,
+}
+
+impl GoalChoice<'_> {
+    /// Whether every alternative passed over as empty at the chosen state is still empty at
+    /// `s`, a state that differs from it only in dimension `d` (one that does not read `d` is
+    /// unchanged; the others are placed again, into `spare`).
+    pub fn passed_stay_empty(&self, s: &[f64], d: usize, spare: &mut Vec<f64>) -> bool {
+        self.passed.iter().all(|a| {
+            spare.clear();
+            !a.leaves.iter().any(|p| p.reads(d)) || !a.place(s, spare)
+        })
+    }
+
+    /// Whether the chosen goal moves with state dimension `d` (a moving leaf reads it).
+    pub fn reads(&self, d: usize) -> bool {
+        self.alt.fixed.is_none() && self.alt.leaves.iter().any(|p| p.reads(d))
+    }
+
+    /// The chosen alternative's deepest point at state `s` into `goal`; false (and `goal`
+    /// empty) when its regions do not meet there.
+    pub fn place(&self, s: &[f64], goal: &mut Vec<f64>) -> bool {
+        goal.clear();
+        self.alt.place(s, goal)
+    }
+}
+
+impl GoalAlternative {
+    /// This alternative's deepest point at state `s`, appended to the empty `goal`: its fixed
+    /// point, the centre of its ball when that is deepest, or the closed form or cone program
+    /// of [`region`]; false (and `goal` empty) when its regions do not meet at `s`.
+    fn place(&self, s: &[f64], goal: &mut Vec<f64>) -> bool {
+        if let Some(x) = &self.fixed {
+            goal.extend_from_slice(x);
+            return true;
+        }
+        if region::centre_if_deepest(&self.leaves, &self.dims, s, goal) {
+            return true;
+        }
+        goal.clear();
+        if region::separated(&self.leaves, &self.dims, s) {
+            return false; // empty in closed form: no cone program this step
+        }
+        let leaves: SmallVec<[&Predicate; 8]> = self.leaves.iter().collect();
+        match region::pieces(&leaves, &self.dims, Some(s))
+            .and_then(|pieces| region::deepest_point(&pieces))
+        {
+            Some((x, depth)) if depth > region::EMPTY_DEPTH => {
+                goal.extend_from_slice(&x);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// A bound on how fast any score of the goal's choice moves along state dimension `d`.
+    fn score_lipschitz(&self, d: usize) -> f64 {
+        self.leaves
+            .iter()
+            .map(|p| p.lipschitz(d))
+            .fold(0.0, f64::max)
+    }
+}
+
 impl Automaton {
+    /// A bound on how fast any score [`Reading::goal`] compares moves along state dimension
+    /// `d`: every alternative's leaves and every atom (the negative literals of a cube).
+    pub(crate) fn goal_score_lipschitz(&self, d: usize) -> f64 {
+        let atoms = self.spec.predicates().iter().map(|p| p.lipschitz(d));
+        let leaves = self
+            .goal_alternatives
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|a| a.score_lipschitz(d));
+        atoms.chain(leaves).fold(0.0, f64::max)
+    }
+
     /// The FSA-augmented reward of Eq. 5A1 for leaving `q` into state `s_next`
     /// ([`Reading::reward`]), `trap_penalty` in the trap (an error when it is `None`).
     pub fn reward(

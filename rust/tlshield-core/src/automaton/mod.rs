@@ -26,6 +26,7 @@ mod regions;
 
 pub use build::{MAX_GUARD_CUBES, MAX_STATES};
 pub use diagram::MAX_NODES;
+pub(crate) use guidance::GoalChoice;
 pub use guidance::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 pub use regions::ranks;
 

@@ -23,6 +23,7 @@
 use smallvec::SmallVec;
 
 use super::{BatchDynamics, BatchRows, Shield, Status, Want, Workspace};
+use crate::automaton::GoalChoice;
 use crate::error::{InputError, ShieldError};
 use crate::linalg::dot;
 use crate::predicate::{Center, Predicate};
@@ -136,6 +137,8 @@ pub(super) struct Buffers {
     shifted: Vec<f64>,
     plus: Vec<f64>,
     minus: Vec<f64>,
+    /// Where an alternative passed over as empty is placed again (it must stay empty).
+    spare: Vec<f64>,
 }
 
 /// Appends the state dimensions any ball in `p` reads its centre from.
@@ -174,6 +177,30 @@ pub const GRADIENT_PARALLEL_MIN_ROWS: usize = 128;
 
 /// Relative step of the central differences of a moving goal.
 const GOAL_STEP: f64 = 1e-6;
+/// What rounding may add to two scores' difference when a lead is compared with their steps.
+const LEAD_ROUNDING: f64 = 1e-9;
+
+/// One column of the goal's Jacobian from its central difference (`plus`, `minus` at +-h;
+/// written at `column[k * stride]`); true when the goal changes its choice within the step.
+fn goal_column(
+    goal: &[f64],
+    plus: &[f64],
+    minus: &[f64],
+    h: f64,
+    column: &mut [f64],
+    stride: usize,
+) -> bool {
+    let mut kink = false;
+    for (k, &x) in goal.iter().enumerate() {
+        let (p, mm) = (plus[k], minus[k]);
+        // A switch of goal within the step shows as a curvature far above rounding.
+        if (p - 2.0 * x + mm).abs() > 1e-4 * h.max((p - mm).abs()) {
+            kink = true;
+        }
+        column[k * stride] = (p - mm) / (2.0 * h);
+    }
+    kink
+}
 
 impl Shield {
     /// Why this shield cannot give state gradients, if it cannot.
@@ -416,10 +443,42 @@ impl Shield {
                 }
             }
         }
+        // How the goal was chosen at s, when that is the goal given (routing may aim elsewhere).
+        let choice = self
+            .automaton
+            .read_validated(s)
+            .goal_choice(q, &mut b.plus)
+            .filter(|_| b.plus == goal);
         let mut kink = false;
         for ci in 0..c {
             let dim = b.centres[ci];
             let h = GOAL_STEP * (1.0 + s[dim].abs());
+            // When no step of +-h can change which alternative wins (its lead beats what two
+            // such steps can move two scores), the goal at the shifted states is that
+            // alternative's point there: the same numbers as the automaton's whole choice,
+            // without scoring the others, and exactly zero where it does not read `dim`.
+            let lip = self.automaton.goal_score_lipschitz(dim);
+            let leads = |ch: &&GoalChoice| ch.lead > 2.0 * h * lip + LEAD_ROUNDING;
+            if let Some(ch) = choice.as_ref().filter(leads) {
+                let moves = ch.reads(dim);
+                let mut held = true;
+                for (sign, into) in [(1.0, &mut b.plus), (-1.0, &mut b.minus)] {
+                    b.shifted.clear();
+                    b.shifted.extend_from_slice(s);
+                    b.shifted[dim] += sign * h;
+                    held &= ch.passed_stay_empty(&b.shifted, dim, &mut b.spare);
+                    if moves {
+                        held &= ch.place(&b.shifted, into) && into.len() == g;
+                    }
+                }
+                if held {
+                    if moves {
+                        kink |= goal_column(goal, &b.plus, &b.minus, h, &mut b.goal_jac[ci..], c);
+                    }
+                    continue;
+                }
+                // The choice changes within the step: the automaton chooses again (below).
+            }
             for (sign, into) in [(1.0, &mut b.plus), (-1.0, &mut b.minus)] {
                 b.shifted.clear();
                 b.shifted.extend_from_slice(s);
@@ -432,14 +491,7 @@ impl Shield {
                 kink = true;
                 continue;
             }
-            for (k, &x) in goal.iter().enumerate() {
-                let (p, mm) = (b.plus[k], b.minus[k]);
-                // A switch of goal within the step shows as a curvature far above rounding.
-                if (p - 2.0 * x + mm).abs() > 1e-4 * h.max((p - mm).abs()) {
-                    kink = true;
-                }
-                b.goal_jac[k * c + ci] = (p - mm) / (2.0 * h);
-            }
+            kink |= goal_column(goal, &b.plus, &b.minus, h, &mut b.goal_jac[ci..], c);
         }
         kink
     }
@@ -721,6 +773,81 @@ mod tests {
                 m[i] -= eps;
                 let fd = (value(&sh, &p, q, &a, &v) - value(&sh, &m, q, &a, &v)) / (2.0 * eps);
                 prop_assert!((out.states[i] - fd).abs() < 1e-5 * (1.0 + fd.abs()), "s[{i}]: {} vs {fd}", out.states[i]);
+            }
+        }
+    }
+
+    /// The goal Jacobian by brute force: central differences of the automaton's whole choice
+    /// in every centre dimension, kinks flagged as `goal_jacobian` flags them.
+    fn goal_jacobian_by_brute_force(
+        aut: &Automaton,
+        s: &[f64],
+        q: usize,
+        goal: &[f64],
+    ) -> (Vec<f64>, bool) {
+        let centres = [3, 4, 5, 6, 7, 8];
+        let (g, c) = (goal.len(), centres.len());
+        let mut jac = vec![0.0; g * c];
+        let mut kink = false;
+        for (ci, &dim) in centres.iter().enumerate() {
+            let h = GOAL_STEP * (1.0 + s[dim].abs());
+            let at = |sign: f64| {
+                let mut shifted = s.to_vec();
+                shifted[dim] += sign * h;
+                aut.goal(&shifted, q).unwrap().unwrap_or_default()
+            };
+            let (plus, minus) = (at(1.0), at(-1.0));
+            if plus.len() != g || minus.len() != g {
+                kink = true;
+                continue;
+            }
+            let mut column = vec![0.0; g * c];
+            kink |= goal_column(goal, &plus, &minus, h, &mut column[ci..], c);
+            for k in 0..g {
+                jac[k * c + ci] = column[k * c + ci];
+            }
+        }
+        (jac, kink)
+    }
+
+    proptest! {
+        #![proptest_config(crate::tests_support::seeded(1000))]
+
+        /// The goal Jacobian that differentiates only the chosen alternative (when no step can
+        /// change the choice) equals the brute-force differences of the whole choice bit for
+        /// bit, kinks included: goal discs anywhere (straddling a wall, overlapping, tied).
+        #[test]
+        fn goal_jacobian_equals_the_whole_choice_differenced(
+            xy in (-1.0..8.0f64, -1.6..1.6f64),
+            goals in proptest::collection::vec(-1.0..10.0f64, 6),
+            tie in 0..3usize,
+        ) {
+            let sh = paper_shield(true, true);
+            let aut: &Automaton = sh.automaton();
+            let mut s = vec![0.0; N];
+            s[0] = xy.0 + xy.1 / 2.0;
+            s[1] = xy.0 - xy.1 / 2.0;
+            s[3..9].copy_from_slice(&goals);
+            if tie == 1 {
+                // g2 the mirror image of g1 across the robot: equally robust, a tie.
+                s[5] = 2.0 * s[0] - s[3];
+                s[6] = 2.0 * s[1] - s[4];
+            }
+            s[9..13].copy_from_slice(&[20.0, 20.0, 20.0, -20.0]);
+            let mut b = Buffers::default();
+            for q in 0..aut.num_states() {
+                let Some(goal) = aut.goal(&s, q).unwrap() else {
+                    continue;
+                };
+                // A goal at a ball's centre read from the state is differentiated exactly.
+                if (3..9).step_by(2).any(|d| s[d..d + 2] == goal[..]) {
+                    continue;
+                }
+                let kink = sh.goal_jacobian(&s, q, &goal, &mut b);
+                let (jac, brute_kink) = goal_jacobian_by_brute_force(aut, &s, q, &goal);
+                prop_assert_eq!(kink, brute_kink);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                prop_assert_eq!(bits(&b.goal_jac), bits(&jac), "s = {:?}, q = {}", s, q);
             }
         }
     }
