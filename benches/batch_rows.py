@@ -75,10 +75,11 @@ def worker(rows: list[int], budget: float, seed: int) -> dict[str, dict[str, flo
         jac = shield.jacobian_batch(states, qs, actions)
         if not np.array_equal(jac[0], action):
             raise AssertionError("jacobian_batch's actions differ from filter_batch's")
+        rows_ = (states, qs, actions)
         calls = {
-            CALLS[0]: lambda _: shield.filter_batch(states, qs, actions),
-            CALLS[1]: lambda _: shield.jacobian_batch(states, qs, actions, state_grad=False),
-            CALLS[2]: lambda _: shield.jacobian_batch(states, qs, actions, state_grad=True),
+            CALLS[0]: lambda _, r=rows_: shield.filter_batch(*r),
+            CALLS[1]: lambda _, r=rows_: shield.jacobian_batch(*r, state_grad=False),
+            CALLS[2]: lambda _, r=rows_: shield.jacobian_batch(*r, state_grad=True),
         }
         out[str(n)] = {
             name: measure(call, [None], budget, 5)[0] / n for name, call in calls.items()
@@ -144,7 +145,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             for t in thread_counts:
                 us = [per_row(name, t, n, c) * 1e6 for c in CALLS]
                 ratio = us[2] / us[0]
-                print(f"| {n:,} | {t} | " + " | ".join(f"{u:.2f}" for u in us) + f" | {ratio:.2f}x |")
+                cells = " | ".join(f"{u:.2f}" for u in us)
+                print(f"| {n:,} | {t} | {cells} | {ratio:.2f}x |")
         print()
     print("### Targets (HEAD)\n")
     for n in rows:
@@ -152,20 +154,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         for call, u in zip(CALLS, one, strict=True):
             ok = u <= TARGET_PER_ROW_US
             verdicts.append(ok)
-            print(f"- {n:,} rows, one thread, {call}: {u:.2f} us per row (<= "
-                  f"{TARGET_PER_ROW_US}: {'ok' if ok else 'NOT MET'})")
+            print(
+                f"- {n:,} rows, one thread, {call}: {u:.2f} us per row (<= "
+                f"{TARGET_PER_ROW_US}: {'ok' if ok else 'NOT MET'})"
+            )
         for call, u in zip(CALLS[1:], one[1:], strict=True):
             ok = u / one[0] <= TARGET_JACOBIAN
             verdicts.append(ok)
-            print(f"- {n:,} rows, {call} / filter_batch: {u / one[0]:.2f}x (<= "
-                  f"{TARGET_JACOBIAN}: {'ok' if ok else 'NOT MET'})")
+            print(
+                f"- {n:,} rows, {call} / filter_batch: {u / one[0]:.2f}x (<= "
+                f"{TARGET_JACOBIAN}: {'ok' if ok else 'NOT MET'})"
+            )
         if 2 in thread_counts:
             for call in CALLS:
                 gain = per_row("HEAD", 1, n, call) / per_row("HEAD", 2, n, call)
                 ok = gain >= TARGET_TWO_THREADS
                 verdicts.append(ok)
-                print(f"- {n:,} rows, {call}, 2 threads vs 1: {gain:.2f}x (>= "
-                      f"{TARGET_TWO_THREADS}: {'ok' if ok else 'NOT MET'})")
+                print(
+                    f"- {n:,} rows, {call}, 2 threads vs 1: {gain:.2f}x (>= "
+                    f"{TARGET_TWO_THREADS}: {'ok' if ok else 'NOT MET'})"
+                )
     if "against" in builds:
         print("\n### HEAD against the other build (its time / HEAD's, > 1: HEAD faster)\n")
         print("| rows | threads | " + " | ".join(CALLS) + " |")
