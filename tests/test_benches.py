@@ -29,6 +29,7 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("moving_obstacles.py", ["--steps", "2000"], "moving-obstacle barrier"),
         ("compare_cbfpy.py", ["--quick"], "tlshield speedup"),
         ("compare_grad.py", ["--quick"], "| 8 |"),
+        ("batch_rows.py", ["--quick", "--rows", "64"], "targets met"),
         ("ray_overhead.py", ["--quick"], "runs identical: yes"),
         ("ray_scaling.py", ["--quick"], "runs identical at every size: yes"),
         ("safety_gym_overhead.py", ["--rounds", "1", "--steps", "100"], "shield overhead"),
