@@ -6,7 +6,10 @@
 //! calls therefore run on a pool tagged with the id of the process that built it; a forked
 //! child sees a different id and builds a fresh pool on its first batch call.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+
+use smallvec::SmallVec;
 
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
@@ -60,4 +63,71 @@ pub fn in_place_scope<'scope, R>(op: impl FnOnce(Option<&rayon::Scope<'scope>>) 
 /// Threads of this process's pool (1 without one).
 pub fn threads() -> usize {
     pool().map_or(1, |pool| pool.current_num_threads())
+}
+
+/// How many parts [`for_each_part`] callers cut a batch into per thread: enough that a thread
+/// that wakes late finds little left to take, few enough that each part amortises its
+/// workspace.
+pub const PARTS_PER_THREAD: usize = 4;
+
+/// The rows of each part when a batch of `rows` is cut for [`for_each_part`]: the whole batch
+/// under `serial_below` rows (waking the pool would cost more than the rows), else
+/// [`PARTS_PER_THREAD`] parts per thread.
+pub fn part_len(rows: usize, serial_below: usize) -> usize {
+    if rows < serial_below {
+        return rows.max(1);
+    }
+    rows.div_ceil(threads() * PARTS_PER_THREAD).max(1)
+}
+
+/// Runs `work` on every part, the calling thread and the pool's threads claiming one part at a
+/// time in order from a shared counter. The caller starts at once, and a pool thread that wakes
+/// late (about 50-150 us on a VM after the pool has slept between a Python loop's calls) finds
+/// fewer parts left, or none, instead of holding the batch up by a fixed share. Serial with
+/// one part or one thread. Which thread runs a part never changes its result.
+pub fn for_each_part<P: Send>(parts: &mut [P], work: impl Fn(&mut P) + Sync) {
+    let helpers = threads().min(parts.len()).saturating_sub(1);
+    if helpers == 0 {
+        parts.iter_mut().for_each(work);
+        return;
+    }
+    let cells: SmallVec<[Mutex<&mut P>; 32]> = parts.iter_mut().map(Mutex::new).collect();
+    let next = AtomicUsize::new(0);
+    let claim = || {
+        while let Some(cell) = cells.get(next.fetch_add(1, Ordering::Relaxed)) {
+            // Each part is claimed once: the lock is never contended (nor poisoned but by a
+            // panic in `work`, which the scope propagates anyway).
+            let mut part = cell.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            work(&mut part);
+        }
+    };
+    in_place_scope(|scope| match scope {
+        Some(scope) => {
+            for _ in 0..helpers {
+                scope.spawn(|_| claim());
+            }
+            claim();
+        }
+        None => claim(),
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_part_runs_once() {
+        for len in [0, 1, 2, 7, 64] {
+            let mut parts: Vec<(usize, u32)> = (0..len).map(|i| (i, 0)).collect();
+            for_each_part(&mut parts, |(i, runs)| {
+                *runs += 1;
+                *i *= 10;
+            });
+            assert!(parts
+                .iter()
+                .enumerate()
+                .all(|(k, &(i, runs))| i == 10 * k && runs == 1));
+        }
+    }
 }

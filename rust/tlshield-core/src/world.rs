@@ -2,7 +2,7 @@
 //! share: what one step gives ([`WorldStep`], with its [`Measure`]), and [`step_many`], which
 //! steps N worlds of one kind in one call.
 
-use rayon::prelude::*;
+use smallvec::SmallVec;
 
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
@@ -154,26 +154,30 @@ pub fn step_many<W: World>(
         world.observe_row(monitor, states, row);
         Ok(Some(out))
     };
-    let results: Vec<Result<Option<WorldStep>, ShieldError>> = if rows < crate::parallel::MIN_ROWS {
-        worlds
-            .iter_mut()
-            .zip(monitors.iter_mut())
-            .zip(actions.chunks(2).zip(obs.chunks_mut(width).zip(active)))
-            .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
-            .collect()
-    } else {
-        crate::parallel::install(|| {
-            worlds
-                .par_iter_mut()
-                .zip(monitors.par_iter_mut())
-                .zip(
-                    actions
-                        .par_chunks(2)
-                        .zip(obs.par_chunks_mut(width).zip(active)),
-                )
-                .map(|((w, m), (a, (row, &on)))| if on { step(w, m, a, row) } else { Ok(None) })
-                .collect()
-        })
-    };
+    let mut results: Vec<Result<Option<WorldStep>, ShieldError>> = Vec::new();
+    results.resize_with(rows, || Ok(None));
+    // Contiguous parts of rows, claimed by the calling thread and the pool's.
+    let chunk = crate::parallel::part_len(rows, crate::parallel::MIN_ROWS);
+    let mut parts: SmallVec<[_; 16]> = worlds
+        .chunks_mut(chunk)
+        .zip(monitors.chunks_mut(chunk))
+        .zip(actions.chunks(2 * chunk))
+        .zip(obs.chunks_mut(width * chunk))
+        .zip(active.chunks(chunk))
+        .zip(results.chunks_mut(chunk))
+        .collect();
+    crate::parallel::for_each_part(&mut parts, |(((((w, m), a), o), on), r)| {
+        for i in 0..w.len() {
+            if on[i] {
+                r[i] = step(
+                    w[i],
+                    m[i],
+                    &a[2 * i..2 * i + 2],
+                    &mut o[i * width..(i + 1) * width],
+                );
+            }
+        }
+    });
+    drop(parts);
     results.into_iter().collect()
 }

@@ -328,90 +328,66 @@ impl Shield {
         let k = cotangents.count(m);
         let sn = if out.states.is_empty() { 0 } else { n };
         let with_action = !out.action.is_empty();
-        let run = |threads: usize, out: &mut BatchGradient| {
-            let chunk = len.div_ceil(threads).max(1);
-            let actions: SmallVec<[Option<&mut [f64]>; 8]> = match with_action {
-                true => out.action.chunks_mut(chunk * m).map(Some).collect(),
-                false => SmallVec::new(),
-            };
-            let states: SmallVec<[Option<&mut [f64]>; 8]> = match sn {
-                0 => SmallVec::new(),
-                _ => out.states.chunks_mut(chunk * k * sn).map(Some).collect(),
-            };
-            let mut actions = actions.into_iter();
-            let mut states = states.into_iter();
-            let mut parts: SmallVec<[_; 8]> = out
-                .a_rl
-                .chunks_mut(chunk * k * m)
-                .zip(out.flags.chunks_mut(chunk))
-                .enumerate()
-                .map(|(c, (ga, f))| {
-                    let act = actions.next().flatten();
-                    let gs = states.next().flatten();
-                    (c, ga, f, act, gs)
-                })
-                .collect();
-            let work = |(c, ga, flags, act, gs): &mut Part<'_>| {
-                self.with_workspace(n, |ws| {
-                    let mut unit = [0.0; 16];
-                    for i in 0..flags.len() {
-                        let row = *c * chunk + i;
-                        let call = rows.call(row, a_rl, dynamics, drift, m);
-                        let (s, q, a) = (call.s, call.q, call.a_rl);
-                        self.step(ws, call, Want::Solution);
-                        if let Some(act) = act.as_deref_mut() {
-                            act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
-                        }
-                        let (mut f, ready) = self.row_factor(ws);
-                        if ready && sn > 0 && ws.program.has_goal {
-                            let Workspace { program, grad, .. } = &mut *ws;
-                            if self.goal_jacobian(s, q, &program.goal, grad) {
-                                f |= GRAD_DEGENERATE;
-                            }
-                        }
-                        for j in 0..k {
-                            let v = cotangents.get(row, j, m, &mut unit);
-                            let at = (i * k + j) * m;
-                            let ga = &mut ga[at..at + m];
-                            ga.copy_from_slice(v);
-                            let gs = gs.as_deref_mut().map(|g| {
-                                let at = (i * k + j) * sn;
-                                let g = &mut g[at..at + sn];
-                                g.fill(0.0);
-                                g
-                            });
-                            if ready {
-                                f |= self.row_chain(ws, s, a, v, ga, gs);
-                            }
-                        }
-                        flags[i] = f;
+        let chunk = crate::parallel::part_len(len, GRADIENT_PARALLEL_MIN_ROWS);
+        let actions: SmallVec<[Option<&mut [f64]>; 16]> = match with_action {
+            true => out.action.chunks_mut(chunk * m).map(Some).collect(),
+            false => SmallVec::new(),
+        };
+        let states: SmallVec<[Option<&mut [f64]>; 16]> = match sn {
+            0 => SmallVec::new(),
+            _ => out.states.chunks_mut(chunk * k * sn).map(Some).collect(),
+        };
+        let mut actions = actions.into_iter();
+        let mut states = states.into_iter();
+        let mut parts: SmallVec<[_; 16]> = out
+            .a_rl
+            .chunks_mut(chunk * k * m)
+            .zip(out.flags.chunks_mut(chunk))
+            .enumerate()
+            .map(|(c, (ga, f))| {
+                let act = actions.next().flatten();
+                let gs = states.next().flatten();
+                (c, ga, f, act, gs)
+            })
+            .collect();
+        let work = |(c, ga, flags, act, gs): &mut Part<'_>| {
+            self.with_workspace(n, |ws| {
+                let mut unit = [0.0; 16];
+                for i in 0..flags.len() {
+                    let row = *c * chunk + i;
+                    let call = rows.call(row, a_rl, dynamics, drift, m);
+                    let (s, q, a) = (call.s, call.q, call.a_rl);
+                    self.step(ws, call, Want::Solution);
+                    if let Some(act) = act.as_deref_mut() {
+                        act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
                     }
-                });
-            };
-            if threads == 1 {
-                parts.iter_mut().for_each(work);
-                return;
-            }
-            // The caller takes the first chunk itself; the pool's threads the others.
-            let (first, rest) = parts.split_first_mut().expect("at least one chunk");
-            crate::parallel::in_place_scope(|scope| match scope {
-                Some(scope) => {
-                    for part in rest {
-                        scope.spawn(|_| work(part));
+                    let (mut f, ready) = self.row_factor(ws);
+                    if ready && sn > 0 && ws.program.has_goal {
+                        let Workspace { program, grad, .. } = &mut *ws;
+                        if self.goal_jacobian(s, q, &program.goal, grad) {
+                            f |= GRAD_DEGENERATE;
+                        }
                     }
-                    work(first);
-                }
-                None => {
-                    work(first);
-                    rest.iter_mut().for_each(work);
+                    for j in 0..k {
+                        let v = cotangents.get(row, j, m, &mut unit);
+                        let at = (i * k + j) * m;
+                        let ga = &mut ga[at..at + m];
+                        ga.copy_from_slice(v);
+                        let gs = gs.as_deref_mut().map(|g| {
+                            let at = (i * k + j) * sn;
+                            let g = &mut g[at..at + sn];
+                            g.fill(0.0);
+                            g
+                        });
+                        if ready {
+                            f |= self.row_chain(ws, s, a, v, ga, gs);
+                        }
+                    }
+                    flags[i] = f;
                 }
             });
         };
-        if len < GRADIENT_PARALLEL_MIN_ROWS {
-            run(1, out);
-        } else {
-            run(crate::parallel::threads().max(1), out);
-        }
+        crate::parallel::for_each_part(&mut parts, work);
     }
 
     /// The CLF goal's Jacobian over the centre dimensions (`b.goal_jac`, goal length x

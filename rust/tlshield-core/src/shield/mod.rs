@@ -28,7 +28,6 @@
 
 use std::sync::Arc;
 
-use rayon::prelude::*;
 use smallvec::SmallVec;
 
 use crate::automaton::Automaton;
@@ -890,9 +889,9 @@ impl Shield {
         Ok(Some(n))
     }
 
-    /// The rows of a validated batch: one contiguous chunk of rows per worker thread, each
-    /// with its own workspace; small batches stay on the calling thread (waking the pool
-    /// costs more than they do).
+    /// The rows of a validated batch in contiguous parts, each with its own workspace, claimed
+    /// by the calling thread and the pool's ([`crate::parallel::for_each_part`]); small batches
+    /// stay on the calling thread (waking the pool costs more than they do).
     fn run_batch(
         &self,
         rows: BatchRows<'_>,
@@ -901,35 +900,15 @@ impl Shield {
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) {
-        if rows.len() < PARALLEL_MIN_ROWS {
-            self.batch_rows(rows, a_rl, dynamics, drift, out, 1);
-        } else {
-            crate::parallel::install(|| {
-                let threads = rayon::current_num_threads().max(1);
-                self.batch_rows(rows, a_rl, dynamics, drift, out, threads);
-            });
-        }
-    }
-
-    /// The rows of a validated batch in `threads` contiguous chunks of rows, each worker with
-    /// its own workspace.
-    fn batch_rows(
-        &self,
-        rows: BatchRows<'_>,
-        a_rl: &[f64],
-        dynamics: Option<BatchDynamics<'_>>,
-        drift: Option<&[f64]>,
-        out: &mut BatchOutput,
-        threads: usize,
-    ) {
         let (m, n) = (self.m, rows.state_len());
-        let chunk = rows.len().div_ceil(threads).max(1);
-        // One output view per chunk, on the stack (no allocation for up to 8 workers).
-        let mut parts: SmallVec<[OutRows<'_>; 8]> = out.rows_mut(chunk, m).collect();
-        parts.par_iter_mut().enumerate().for_each(|(c, part)| {
+        let chunk = crate::parallel::part_len(rows.len(), PARALLEL_MIN_ROWS);
+        // One output view per part, on the stack (no allocation for up to 16 parts).
+        let mut parts: SmallVec<[(usize, OutRows<'_>); 16]> =
+            out.rows_mut(chunk, m).enumerate().collect();
+        crate::parallel::for_each_part(&mut parts, |(c, part)| {
             self.with_workspace(n, |ws| {
                 for i in 0..part.delta.len() {
-                    let row = c * chunk + i;
+                    let row = *c * chunk + i;
                     let call = rows.call(row, a_rl, dynamics, drift, m);
                     self.step(ws, call, Want::Solution);
                     part.write(i, m, &ws.out);
