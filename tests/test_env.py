@@ -363,9 +363,16 @@ def test_gymnasium_vector_shield_equals_per_env_shield() -> None:
     for _ in range(30):
         actions = rng.uniform(-1, 1, size=(n, 2))
         obs, _, _, _, infos = shielded.step(actions)
-        expected = [env.step(a)[0] for env, a in zip(singles, actions, strict=True)]
-        np.testing.assert_allclose(obs, np.stack(expected), atol=1e-12)
-        assert len(infos["shield"]) == n
+        steps = [env.step(a) for env, a in zip(singles, actions, strict=True)]
+        np.testing.assert_allclose(obs, np.stack([st[0] for st in steps]), atol=1e-12)
+        # Gymnasium's vector infos: a dict of arrays, one row per sub-env, each row the
+        # single env's correction.
+        shield = infos["shield"]
+        assert {k: v.shape[0] for k, v in shield.items()} == dict.fromkeys(shield, n)
+        for key in ("a_rl", "a_cbf", "a_clf"):
+            want = np.stack([st[4]["shield"][key] for st in steps])
+            np.testing.assert_allclose(shield[key], want, atol=1e-12)
+        assert shield["status"].tolist() == [st[4]["shield"]["status"].value for st in steps]
 
 
 def test_sb3_vecenv_shield_equals_per_env_shield() -> None:

@@ -435,6 +435,17 @@ class WorldsStep:
     def solver(self) -> NDArray[np.uint8]: ...
     @property
     def active(self) -> NDArray[np.bool_]: ...
+    def infos(
+        self,
+        constraints: tuple[str, str],
+        shield: bool,
+        status_of: dict[int, Any],
+        solver_of: dict[int, Any],
+    ) -> list[dict[str, Any]]:
+        """Each row's ``info`` as the single env's ``step`` gives it, but the CLF goal and the
+        barrier list (None and empty): ``constraints`` names the two constraints, ``shield``
+        says whether rows carry ``info["shield"]``, and ``status_of`` / ``solver_of`` map the
+        status and solver codes to their enum members (a code they lack gives None)."""
 
 def step_worlds(
     worlds: Sequence[ChannelWorld] | Sequence[PointMassWorld],

@@ -99,8 +99,8 @@ class WorldVecEnv(IndependentCopies, VecEnv):  # type: ignore[misc]
         rewards = out.reward.astype(np.float32)  # DummyVecEnv's reward buffer is float32
         dones = out.terminated | out.truncated
         infos = self.batch.infos(out)
-        for i, info in enumerate(infos):
-            info["TimeLimit.truncated"] = bool(out.truncated[i] and not out.terminated[i])
+        for info, cut in zip(infos, (out.truncated & ~out.terminated).tolist(), strict=True):
+            info["TimeLimit.truncated"] = cut
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = self.batch.obs[i].copy()
             _, self.reset_infos[i] = self.batch.reset_env(int(i))

@@ -2,7 +2,7 @@
 :class:`PointMassVectorEnv`: the bundled worlds as Gymnasium ``VectorEnv`` s whose N envs step
 in one core call (:class:`WorldBatch`, as EnvPool does for Atari and MuJoCo).
 :class:`ShieldedVectorEnv`: any FSA-augmented vector env shielded in one ``filter_batch``
-call, with the per-env ``info["shield"]`` of a batch and the layout of FSA-augmented
+call, with ``info["shield"]`` as a dict of arrays and the layout of FSA-augmented
 observations. The Stable-Baselines3 twins, :class:`tlshield.sb3.WorldVecEnv` and
 :class:`tlshield.sb3.ShieldedVecEnv`, live apart so that SB3 and torch load only when they are
 used."""
@@ -56,6 +56,21 @@ def batch_infos(out: FilterBatch, a_rl: NDArray[np.float64]) -> list[dict[str, A
     ]
 
 
+def shield_arrays(out: FilterBatch, a_rl: NDArray[np.float64]) -> dict[str, NDArray[Any]]:
+    """A batch's ``info["shield"]`` the Gymnasium vector way, a dict of arrays with one row per
+    sub-env: ``a_rl``, ``a_cbf``, ``a_clf`` ``(N, m)``, ``delta``, ``slack`` and the
+    ``status`` and ``solver`` codes ``(N,)`` (``tlshield.Status(code)`` names one)."""
+    return {
+        "a_rl": a_rl,
+        "a_cbf": out.a_cbf,
+        "a_clf": out.a_clf,
+        "delta": out.delta,
+        "status": out.status,
+        "slack": out.slack,
+        "solver": out.solver,
+    }
+
+
 def rl_actions(actions: Any, action_fn: ActionFn | None) -> NDArray[np.float64]:
     """The batch's RL actions in the shield's units, as one C-ordered float64 array."""
     a = np.asarray(actions, dtype=np.float64)
@@ -74,7 +89,8 @@ class ShieldedVectorEnv(IndependentCopies, gym.vector.VectorWrapper):
     the state vector followed by the one-hot FSA state, and whose ``step`` takes the applied
     action (as ``tlshield/Channel-v0`` with ``shield_in_env=False``). ``action_fn`` maps the
     policy's actions ``(N, m)`` to the RL actions in the shield's units (default: as they
-    are). ``infos["shield"]`` holds one dict per sub-env.
+    are). ``infos["shield"]`` is a dict of arrays, one row per sub-env, as Gymnasium's vector
+    infos are (:func:`shield_arrays`).
     """
 
     def __init__(
@@ -99,7 +115,7 @@ class ShieldedVectorEnv(IndependentCopies, gym.vector.VectorWrapper):
         out = self.shield.filter_batch(states, qs, a_rl)
         obs, rewards, terminated, truncated, infos = self.env.step(out.action)
         self._obs = np.asarray(obs, dtype=np.float64)
-        infos = {**infos, "shield": batch_infos(out, a_rl)}
+        infos = {**infos, "shield": shield_arrays(out, a_rl)}
         return obs, rewards, terminated, truncated, infos
 
 
@@ -150,61 +166,13 @@ class WorldBatch(IndependentCopies):
 
     def infos(self, out: WorldsStep) -> list[dict[str, Any]]:
         """Each env's ``info`` as its own ``step`` gives it (a batch does not return the CLF
-        goal and the barrier list: None and empty)."""
+        goal and the barrier list: None and empty), built in the core call
+        ``WorldsStep.infos``."""
         first = self.envs[0]
         shielded = first.shield is not None and getattr(first, "shield_in_env", True)
-        # The enum members by value (a dict lookup: calling the enum per row cost a third of
-        # this function).
-        status_of, solver_of = (_MEMBERS[Status], _MEMBERS[Solver]) if shielded else ({}, {})
         with_shield = shielded or first.SHIELD_INFO_ALWAYS
-        name_1, name_2 = first.CONSTRAINTS
-        columns = zip(
-            out.q.tolist(),
-            out.action,
-            out.accepted.tolist(),
-            out.trapped.tolist(),
-            out.tl_reward.tolist(),
-            out.constraints.tolist(),
-            out.min_obstacle_distance.tolist(),
-            out.collision.tolist(),
-            out.violation.tolist(),
-            out.a_rl,
-            out.a_cbf,
-            out.a_clf,
-            out.delta.tolist(),
-            out.status.tolist(),
-            out.slack.tolist(),
-            out.solver.tolist(),
-            strict=True,
-        )
-        infos = []
-        for q, action, ok, trap, r_tl, (h1, h2), d, hit, out_of, a_rl, cbf, clf, *qp in columns:
-            info = {
-                "fsa_state": q,
-                "action": action,
-                "success": ok,
-                "trap": trap,
-                "tl_reward": r_tl,
-                "constraints": {name_1: h1, name_2: h2},
-                "min_obstacle_distance": d,
-                "collision": hit,
-                "violation": out_of,
-            }
-            if with_shield:
-                delta, status, slack, solver = qp
-                info["shield"] = {
-                    "a_rl": a_rl,
-                    "a_cbf": cbf,
-                    "a_clf": clf,
-                    "delta": delta,
-                    "status": status_of.get(status),
-                    "slack": slack,
-                    "solver": solver_of.get(solver),
-                    "goal": None,
-                    "barriers": {},
-                }
-            infos.append(info)
-        return infos
+        status_of, solver_of = (_MEMBERS[Status], _MEMBERS[Solver]) if shielded else ({}, {})
+        return out.infos(first.CONSTRAINTS, with_shield, status_of, solver_of)
 
 
 class ChannelBatch(WorldBatch):

@@ -19,6 +19,7 @@ mod progress;
 mod shield;
 mod spec;
 mod world;
+mod world_infos;
 mod world_step;
 
 use pyo3::prelude::*;

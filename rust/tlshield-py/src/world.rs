@@ -73,47 +73,47 @@ where
 #[pyclass(name = "WorldsStep", module = "tlshield._core", frozen, get_all)]
 pub struct PyWorldsStep {
     /// The observations (N, D), one-hot FSA states included (inactive rows: as given).
-    observation: Py<PyArray2<f64>>,
+    pub(crate) observation: Py<PyArray2<f64>>,
     /// The environments' rewards (N,).
-    reward: Py<PyArray1<f64>>,
+    pub(crate) reward: Py<PyArray1<f64>>,
     /// Episode ended (N,).
-    terminated: Py<PyArray1<bool>>,
+    pub(crate) terminated: Py<PyArray1<bool>>,
     /// Horizon reached (N,).
-    truncated: Py<PyArray1<bool>>,
+    pub(crate) truncated: Py<PyArray1<bool>>,
     /// FSA states (N,).
-    q: Py<PyArray1<i64>>,
+    pub(crate) q: Py<PyArray1<i64>>,
     /// Task rewards (N,).
-    tl_reward: Py<PyArray1<f64>>,
+    pub(crate) tl_reward: Py<PyArray1<f64>>,
     /// Task done (N,).
-    accepted: Py<PyArray1<bool>>,
+    pub(crate) accepted: Py<PyArray1<bool>>,
     /// In the trap (N,).
-    trapped: Py<PyArray1<bool>>,
+    pub(crate) trapped: Py<PyArray1<bool>>,
     /// Channel constraints (N, 2): c1, c2.
-    constraints: Py<PyArray2<f64>>,
+    pub(crate) constraints: Py<PyArray2<f64>>,
     /// Distance to the nearer obstacle (N,).
-    min_obstacle_distance: Py<PyArray1<f64>>,
+    pub(crate) min_obstacle_distance: Py<PyArray1<f64>>,
     /// In collision (N,).
-    collision: Py<PyArray1<bool>>,
+    pub(crate) collision: Py<PyArray1<bool>>,
     /// Outside the channel (N,).
-    violation: Py<PyArray1<bool>>,
+    pub(crate) violation: Py<PyArray1<bool>>,
     /// RL actions in physical units (N, 2).
-    a_rl: Py<PyArray2<f64>>,
+    pub(crate) a_rl: Py<PyArray2<f64>>,
     /// Applied actions (N, 2).
-    action: Py<PyArray2<f64>>,
+    pub(crate) action: Py<PyArray2<f64>>,
     /// Safety corrections (N, 2).
-    a_cbf: Py<PyArray2<f64>>,
+    pub(crate) a_cbf: Py<PyArray2<f64>>,
     /// Task corrections (N, 2).
-    a_clf: Py<PyArray2<f64>>,
+    pub(crate) a_clf: Py<PyArray2<f64>>,
     /// CLF relaxations (N,).
-    delta: Py<PyArray1<f64>>,
+    pub(crate) delta: Py<PyArray1<f64>>,
     /// Largest barrier slacks (N,).
-    slack: Py<PyArray1<f64>>,
+    pub(crate) slack: Py<PyArray1<f64>>,
     /// ``tlshield.Status`` values (N,) (rows without a shield: 0).
-    status: Py<PyArray1<u8>>,
+    pub(crate) status: Py<PyArray1<u8>>,
     /// ``tlshield.Solver`` values (N,).
-    solver: Py<PyArray1<u8>>,
+    pub(crate) solver: Py<PyArray1<u8>>,
     /// Whether the row was stepped (N,).
-    active: Py<PyArray1<bool>>,
+    pub(crate) active: Py<PyArray1<bool>>,
 }
 
 /// Steps the worlds (all ``ChannelWorld`` or all ``PointMassWorld``) in one call (parallel
