@@ -212,6 +212,22 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return call
 
+    def run_tlshield_cuda(n: int) -> Callable[[], tuple[np.ndarray, np.ndarray]]:
+        """The layer with every tensor on the GPU (the result and gradient come back there)."""
+        dev = torch.device("cuda")
+        s_t, q = torch.from_numpy(states[:n]).to(dev), torch.from_numpy(qs[:n]).to(dev)
+        v, a0 = torch.from_numpy(upstream[:n]).to(dev), torch.from_numpy(actions[:n]).to(dev)
+
+        def call() -> tuple[np.ndarray, np.ndarray]:
+            a = a0.clone().requires_grad_(True)
+            out = layer(s_t, q, a)
+            (out * v).sum().backward()
+            assert a.grad is not None
+            torch.cuda.synchronize()
+            return out.detach().cpu().numpy(), a.grad.cpu().numpy()
+
+        return call
+
     def run_qpth(n: int) -> Callable[[], tuple[np.ndarray, np.ndarray]]:
         data, a_np = problems(n)
         qmat = torch.diag(q_diag).expand(n, 5, 5)
@@ -330,6 +346,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for n in batches:
         base = percentiles(run_tlshield(n), budget, 20)
         line = {"B": n, "tlshield": base}
+        if torch.cuda.is_available():
+            line["cuda"] = percentiles(run_tlshield_cuda(n), budget / 2, 20)
         line["core"] = percentiles(run_core(n), budget / 2, 20)
         line["floor"] = percentiles(run_torch_floor(n), budget / 2, 20)
         for name, make in runners.items():
@@ -390,6 +408,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"| {line['B']:,} | {c[0] * 1e3:.3f} / {c[1] * 1e3:.3f} "
             f"| {f[0] * 1e3:.3f} / {f[1] * 1e3:.3f} | {t[0] * 1e3:.3f} / {t[1] * 1e3:.3f} |"
         )
+    print()
+    if torch.cuda.is_available():
+        print("The layer with CUDA tensors against CPU tensors, p50 / p99 in ms (target: adds")
+        print("<= 0.15 ms at 1,024 rows):\n")
+        print("| batch | CPU tensors | CUDA tensors | added (p50) |")
+        print("|---:|---:|---:|---:|")
+        for line in rows_out:
+            t, c = line["tlshield"], line["cuda"]
+            print(
+                f"| {line['B']:,} | {ms(t[0])} / {ms(t[1])} | {ms(c[0])} / {ms(c[1])} "
+                f"| {ms(c[0] - t[0])} |"
+            )
+    else:
+        print("No CUDA device: the layer with CUDA tensors is not timed here.")
     print()
     print(
         "steps each baseline solved as tlshield did (agreement check): "

@@ -229,6 +229,36 @@ def test_layer_dtypes_and_what_it_returns() -> None:
         ShieldLayer("not a shield")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_layer_packed_transfer_equals_the_direct_path(dtype: str) -> None:
+    """The GPU path's packing (every input to the host in one block, the actions and both
+    gradients back in one), run on the CPU: the same actions and gradients as the direct path,
+    bit for bit, FSA states given as a tensor, states asking for gradients."""
+    from tlshield.torch import ShieldLayer
+
+    shield = task_shield()
+    s, q, a = _layer_rows(shield, 12, 6)
+    tdtype = getattr(torch, dtype)
+    weights = torch.linspace(-1, 1, 24, dtype=tdtype).reshape(12, 2)
+    results = []
+    for pack in (False, True):
+        layer = ShieldLayer(shield)
+        layer._pack = pack
+        a_t = torch.tensor(a, dtype=tdtype, requires_grad=True)
+        s_t = torch.tensor(s, dtype=tdtype, requires_grad=True)
+        out = layer(s_t, torch.tensor(q), a_t)
+        (out * weights).sum().backward()
+        assert out.dtype == tdtype and a_t.grad is not None and s_t.grad is not None
+        results.append((out.detach(), a_t.grad, s_t.grad))
+    for direct, packed in zip(*results, strict=True):
+        torch.testing.assert_close(packed, direct, rtol=0, atol=0)
+    assert results[0][2].abs().sum() > 0  # the states' gradient is not trivially zero
+    layer = ShieldLayer(shield)
+    layer._pack = True
+    with pytest.raises(TypeError, match="qs"):
+        layer(torch.tensor(s), torch.tensor(q, dtype=torch.float64), torch.tensor(a))
+
+
 def test_layer_on_monitors_differentiates_the_step_taken() -> None:
     """layer(monitors, a_rl) equals layer(states, qs, a_rl), and its backward pass after the
     monitors have advanced still differentiates the rows of the forward pass."""

@@ -9,8 +9,12 @@ the states (first-order rows and a built-in model; see ``Shield.vjp_batch``). Wi
 gradient (``torch.no_grad()``, or nothing requiring one) the forward pass is ``filter_batch``.
 
 Numbers: the core computes in float64. float32 and float64 tensors are accepted and the result
-has ``a_rl``'s dtype and device. CUDA tensors are copied to the host for the solve and the
-result is copied back (a device-to-host and a host-to-device copy per call, each way).
+has ``a_rl``'s dtype and device. Tensors on a GPU cross to the host once each way per pass:
+the forward pass packs ``a_rl``, the states, the FSA states and the drift into one float64
+block on the device and copies it to pinned host memory in one transfer, and the safe actions
+go back in one non-blocking copy from pinned memory; the Jacobians stay on the host until the
+backward pass, which sends its upstream gradient down and the gradients (``a_rl``'s and the
+states' together) back up, one transfer each.
 
 The forward pass keeps the Jacobians of the rows it solved, so a backward pass after the
 monitors have moved on still differentiates the step taken.
@@ -50,6 +54,44 @@ def _like(values: NDArray[np.float64], like: torch.Tensor) -> torch.Tensor:
     return out
 
 
+def _to_host(parts: list[torch.Tensor], names: list[str]) -> list[NDArray[np.float64]]:
+    """Tensors of ``B`` rows each (on one device) as float64 host arrays ``(B, k_i)``, in one
+    transfer: packed side by side on the device, copied once (into pinned memory when a GPU
+    is there), split on the host (views)."""
+    for t, name in zip(parts, names, strict=True):
+        if t.is_complex():
+            raise TypeError(f"{name}: expected a real tensor, got {t.dtype}")
+    rows = parts[0].shape[0]
+    flat = [t.detach().reshape(rows, -1).to(torch.float64) for t in parts]
+    packed = torch.cat(flat, dim=1)
+    host = torch.empty(packed.shape, dtype=torch.float64, pin_memory=torch.cuda.is_available())
+    host.copy_(packed, non_blocking=True)
+    if packed.device.type == "cuda":
+        torch.cuda.current_stream(packed.device).synchronize()
+    values = host.numpy()
+    out, at = [], 0
+    for t in flat:
+        out.append(values[:, at : at + t.shape[1]])
+        at += t.shape[1]
+    return out
+
+
+def _to_device(values: list[NDArray[np.float64]], like: torch.Tensor) -> list[torch.Tensor]:
+    """Host arrays of ``B`` rows as tensors with ``like``'s dtype and device, in one transfer
+    (one block, pinned when a GPU is there, copied without blocking, split on the device)."""
+    rows = values[0].shape[0]
+    block = torch.from_numpy(np.concatenate([v.reshape(rows, -1) for v in values], axis=1))
+    if torch.cuda.is_available():
+        block = block.pin_memory()
+    on_device = block.to(like.device, non_blocking=True).to(like.dtype)
+    out, at = [], 0
+    for v in values:
+        k = v[:1].size
+        out.append(on_device[:, at : at + k].reshape(v.shape))
+        at += k
+    return out
+
+
 def _qs(qs: Any) -> NDArray[np.int64]:
     if isinstance(qs, torch.Tensor):
         if qs.is_floating_point() or qs.is_complex():
@@ -72,8 +114,9 @@ class ShieldFunction(torch.autograd.Function):
         qs: NDArray[np.int64],
         host_states: NDArray[np.float64],
         drift: NDArray[np.float64] | None,
+        host_a: NDArray[np.float64] | None = None,
     ) -> torch.Tensor:
-        a = _host(a_rl, "a_rl")
+        a = _host(a_rl, "a_rl") if host_a is None else host_a
         want_states = states is not None and states.requires_grad
         if a_rl.requires_grad or want_states:
             action, jac_a, jac_s, flags = layer.shield.jacobian_batch(
@@ -84,6 +127,9 @@ class ShieldFunction(torch.autograd.Function):
         else:
             action = layer.shield.filter_batch(host_states, qs, a, drift).action
             ctx.jacobians = None
+        ctx.packed = host_a is not None
+        if ctx.packed:
+            return _to_device([action], a_rl)[0]
         return _like(action, a_rl)
 
     @staticmethod
@@ -92,14 +138,20 @@ class ShieldFunction(torch.autograd.Function):
     ) -> tuple[torch.Tensor | None, ...]:
         jac_a, jac_s = ctx.jacobians
         # dL/da_rl_j = sum_k dL/da_k * da_k/da_rl_j, per row (and likewise for the states).
-        g = _host(grad, "grad")
-        a_rl_grad = None
+        g = _to_host([grad], ["grad"])[0] if ctx.packed else _host(grad, "grad")
+        wanted = []
         if ctx.needs_input_grad[0]:
-            a_rl_grad = _like(np.einsum("bk,bkj->bj", g, jac_a), grad)
-        states_grad = None
+            wanted.append(("a_rl", np.einsum("bk,bkj->bj", g, jac_a)))
         if ctx.needs_input_grad[1] and jac_s is not None:
-            states_grad = _like(np.einsum("bk,bkj->bj", g, jac_s), grad)
-        return a_rl_grad, states_grad, None, None, None, None
+            wanted.append(("states", np.einsum("bk,bkj->bj", g, jac_s)))
+        if not wanted:
+            grads = {}
+        elif ctx.packed:  # both gradients up in one transfer
+            up = _to_device([v for _, v in wanted], grad)
+            grads = dict(zip([k for k, _ in wanted], up, strict=True))
+        else:
+            grads = {k: _like(v, grad) for k, v in wanted}
+        return grads.get("a_rl"), grads.get("states"), None, None, None, None, None
 
 
 class ShieldLayer(torch.nn.Module):
@@ -143,9 +195,50 @@ class ShieldLayer(torch.nn.Module):
             if not isinstance(a_rl, torch.Tensor):
                 raise TypeError(f"a_rl: expected a tensor, got {type(a_rl).__name__}")
             states_t = states if isinstance(states, torch.Tensor) else None
-            host_states, q = _host(states, "states"), _qs(qs)
-        d = None if drift is None else _host(drift, "drift")
-        return ShieldFunction.apply(a_rl, states_t, self, q, host_states, d)
+            host_states, q = None, qs
+        d: Any = drift
+        host_a = None
+        if a_rl.device.type != "cpu" or self._pack:
+            # One transfer down for every tensor on the device (see the module docs).
+            host_a, host_states, q, d = self._pack_down(a_rl, states, host_states, q, drift)
+        if host_states is None:
+            host_states, q = _host(states, "states"), _qs(q)
+        d = None if d is None else _host(d, "drift")
+        return ShieldFunction.apply(a_rl, states_t, self, q, host_states, d, host_a)
+
+    #: Packs the inputs for one transfer each way even on the CPU (the tests' way to run the
+    #: GPU path's packing on a machine without a GPU).
+    _pack = False
+
+    def _pack_down(
+        self, a_rl: torch.Tensor, states: Any, host_states: Any, qs: Any, drift: Any
+    ) -> tuple[NDArray[np.float64], Any, Any, Any]:
+        """``a_rl`` and the other inputs on ``a_rl``'s device to the host in one transfer."""
+        device = a_rl.device
+        parts, names = [a_rl], ["a_rl"]
+        for value, name in ((states, "states"), (qs, "qs"), (drift, "drift")):
+            if isinstance(value, torch.Tensor):
+                if value.device != device:
+                    raise ValueError(
+                        f"{name} is on {value.device} and a_rl on {device}: put them on one device"
+                    )
+                if name == "qs" and (value.is_floating_point() or value.is_complex()):
+                    raise TypeError(f"qs: expected an integer tensor, got {value.dtype}")
+                if name != "qs" and not value.is_floating_point():
+                    raise TypeError(f"{name}: expected a floating-point tensor, got {value.dtype}")
+                parts.append(value)
+                names.append(name)
+        if not a_rl.is_floating_point():
+            raise TypeError(f"a_rl: expected a floating-point tensor, got {a_rl.dtype}")
+        host = dict(zip(names, _to_host(parts, names), strict=True))
+        a = host["a_rl"].reshape(a_rl.shape)
+        if "states" in host:
+            host_states = host["states"].reshape(states.shape)
+        if "qs" in host:  # exact: FSA states are small integers
+            qs = host["qs"].reshape(-1).astype(np.int64)
+        if "drift" in host:
+            drift = host["drift"].reshape(drift.shape)
+        return a, host_states, qs, drift
 
     def extra_repr(self) -> str:
         return repr(self.shield)
