@@ -17,6 +17,7 @@ Run: ``.venv/bin/python benches/ray_scaling.py [--workers 1 2 3 4] [--updates 20
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import math
 import os
@@ -65,16 +66,25 @@ def _start(args: list[str]) -> subprocess.Popen[bytes]:
     )
 
 
-def _wait_for_cpus(address: str, cpus: int) -> None:
+def _wait_for_cpus(address: str, cpus: int, node: subprocess.Popen[bytes]) -> bool:
+    """Waits until the cluster has ``cpus`` CPUs (True), or until the node that should bring
+    the last one has exited (False: on a loaded machine a joining raylet can time out
+    registering with the head and quit)."""
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:
         status = subprocess.run(
             [RAY, "status", "--address", address], capture_output=True, text=True, env=NODE_ENV
         ).stdout
         if f"/{float(cpus)} CPU" in status:
-            return
+            return True
+        if node.poll() is not None:
+            return False
         time.sleep(1)
     raise RuntimeError(f"the cluster at {address} never reached {cpus} CPUs")
+
+
+#: Tries per worker node: a node that quit while joining is started again (fresh ports).
+NODE_TRIES = 3
 
 
 def with_cluster(workers: int, run: list[str]) -> float:
@@ -91,9 +101,13 @@ def with_cluster(workers: int, run: list[str]) -> float:
             # Nodes sharing a machine need their own ports (the defaults would collide and
             # the later raylet dies), and start one at a time (started together, one timed
             # out registering with the head).
-            ports = [f"--{name}-port={_free_port()}" for name in NODE_PORTS]
-            nodes.append(_start([f"--address={address}", "--num-cpus=1", *ports, *common]))
-            _wait_for_cpus(address, k + 1)
+            for _ in range(NODE_TRIES):
+                ports = [f"--{name}-port={_free_port()}" for name in NODE_PORTS]
+                nodes.append(_start([f"--address={address}", "--num-cpus=1", *ports, *common]))
+                if _wait_for_cpus(address, k + 1, nodes[-1]):
+                    break
+            else:
+                raise RuntimeError(f"no worker node joined {address} in {NODE_TRIES} tries")
         # The driver finds the cluster by --address and decides on a token itself.
         env = {k: v for k, v in os.environ.items() if k not in ("RAY_ADDRESS", "RAY_AUTH_MODE")}
         start = time.perf_counter()
@@ -101,7 +115,8 @@ def with_cluster(workers: int, run: list[str]) -> float:
         return time.perf_counter() - start
     finally:
         for node in reversed(nodes):
-            os.killpg(node.pid, signal.SIGTERM)
+            with contextlib.suppress(ProcessLookupError):  # a node that quit while joining
+                os.killpg(node.pid, signal.SIGTERM)
             node.wait(timeout=120)
 
 

@@ -1,4 +1,4 @@
-//! `WorldsStep.infos`: every row's ``info`` dict as the single env's ``step`` builds it, in one
+//! Every row's ``info`` dict of a `WorldsStep` as the single env's ``step`` builds it, in one
 //! call (the same loop in Python cost about 1 us per env, a fifth of an SB3 vector env's step).
 
 use numpy::{PyArrayMethods, PyUntypedArrayMethods};
