@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import subprocess
 import sys
@@ -130,6 +131,23 @@ def test_the_room_trains_and_evaluates_from_the_command_line(tmp_path: Path) -> 
         done = _cli("train", "--env", bad, "--updates", "1", "--out", str(tmp_path / "x"),
                     "--quiet", cwd=tmp_path)  # fmt: skip
         assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+
+
+def test_the_guides_command_works_from_the_console_script(tmp_path: Path) -> None:
+    """The guide's command as written, with the ``tlshield`` console script (not ``python -m``,
+    which puts the working folder on sys.path itself) and no PYTHONPATH: the module is found
+    in the folder the command runs in."""
+    script = Path(sys.executable).with_name("tlshield")
+    assert script.exists(), f"no console script at {script}"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    run = tmp_path / "run"
+    done = subprocess.run(
+        [str(script), "train", "--env", "bicycle_room:BicycleRoom-v0", "--updates", "1",
+         "--out", str(run), "--quiet"],
+        cwd=EXAMPLES, env=env, capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert json.loads((run / "run.json").read_text())["env_id"] == "bicycle_room:BicycleRoom-v0"
 
 
 def test_what_cannot_be_measured_is_said_so_never_zero() -> None:

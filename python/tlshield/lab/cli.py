@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import os
 import shutil
 import subprocess
 import sys
@@ -569,8 +570,18 @@ def _one_line(err: BaseException) -> str:
     return " ".join(text.split())
 
 
+def working_folder_first() -> None:
+    """Puts the working folder first on ``sys.path``, as ``python -m tlshield`` does: the
+    ``tlshield`` console script starts with its own folder there instead, and ``--env
+    module:Env-v0`` and ``--import`` must find a module where the user runs the command."""
+    here = os.getcwd()
+    if here not in sys.path and "" not in sys.path:
+        sys.path.insert(0, here)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tlshield`` and ``python -m tlshield``."""
+    working_folder_first()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
