@@ -1,4 +1,4 @@
-"""No size takes the interpreter down (issue 31): every public constructor and batch call
+"""No size takes the interpreter down: every public constructor and batch call
 that allocates by an argument's size, given 10**12, 2**62 and sys.maxsize (as counts, lengths,
 ``range`` objects or broadcast numpy views, which name that many values without holding
 them), raises a Python exception in a child process -- never a signal. And every batch call
@@ -74,6 +74,18 @@ CALLS = {
     "SingleIntegrator(pos=range(N))": "tlshield.SingleIntegrator(pos=range(N))",
     "DoubleIntegrator(pos=range(N), vel)": "tlshield.DoubleIntegrator(range(N), [2, 3])",
     "Automaton.progress_reward(horizon=N)": "aut.progress_reward(horizon=N)",
+    "ControlAffine(state_dim=N)": (
+        "tlshield.ControlAffine(lambda s: np.zeros(len(s)), lambda s: np.ones((len(s), 1)), "
+        "state_dim=N, inputs=1)"
+    ),
+    "ControlAffine(inputs=N)": (
+        "tlshield.ControlAffine(lambda s: np.zeros(2), lambda s: np.ones((2, 1)), state_dim=2, "
+        "inputs=N)"
+    ),
+    "ControlAffine(state_dim=N, probe=(1, N))": (
+        "tlshield.ControlAffine(lambda s: np.zeros(len(s)), lambda s: np.ones((len(s), 1)), "
+        "state_dim=N, inputs=1, probe=B(1, N))"
+    ),
     "step_worlds(actions (N, 2))": (
         "step_worlds([env._world], [env.tracker.monitor], B(N, 2), np.zeros((1, 26)))"
     ),

@@ -10,6 +10,7 @@
 //! dependence that holds on an open set, which is what "not identically zero" means for the
 //! smooth models the shield supports.
 
+use crate::alloc::{checked_len, try_vec, try_with_capacity};
 use crate::error::InputError;
 use crate::validate::check_finite;
 
@@ -27,19 +28,24 @@ pub const PROBES: usize = 8;
 
 /// The default probe states: `count` states of length `n`, uniform in `[-2, 2]`, from a fixed
 /// seed (the same on every machine), so the structure found never depends on the run.
-pub fn probe_states(n: usize, count: usize) -> Vec<f64> {
+/// A size past memory is [`InputError::TooLarge`], not an abort.
+pub fn probe_states(n: usize, count: usize) -> Result<Vec<f64>, InputError> {
+    let len = checked_len(
+        "ControlAffine probe states (state_dim x probes)",
+        &[n, count],
+    )?;
+    let mut out = try_with_capacity("ControlAffine probe states", len)?;
     // splitmix64: a fixed, portable sequence.
     let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
-    (0..n * count)
-        .map(|_| {
-            x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = x;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            -2.0 + 4.0 * (z >> 11) as f64 / (1u64 << 53) as f64
-        })
-        .collect()
+    out.extend((0..len).map(|_| {
+        x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = x;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        -2.0 + 4.0 * (z >> 11) as f64 / (1u64 << 53) as f64
+    }));
+    Ok(out)
 }
 
 /// Central differences of `f` at `s`: `out` (n x n, row-major) `[i][j] = df_i/ds_j`, with step
@@ -87,7 +93,7 @@ impl CustomModel {
             });
         }
         let mark = |what: &str, dims: &[usize]| -> Result<Vec<bool>, InputError> {
-            let mut out = vec![false; n];
+            let mut out = try_vec("ControlAffine state_dim", n, false)?;
             for &d in dims {
                 if d >= n {
                     return Err(InputError::Value {
@@ -135,8 +141,16 @@ impl CustomModel {
             }
             .into());
         }
-        let (mut f, mut g, mut jac) = (vec![0.0; n], vec![0.0; n * m], vec![0.0; n * n]);
-        let (mut actuated, mut reads) = (vec![false; n], vec![false; n * n]);
+        // Sized by the user: a size past memory is an error, not an abort.
+        let (nm, nn) = (
+            checked_len("ControlAffine g (state_dim x inputs)", &[n, m])?,
+            checked_len("ControlAffine jacobian (state_dim x state_dim)", &[n, n])?,
+        );
+        let mut f = try_vec("ControlAffine f (state_dim)", n, 0.0)?;
+        let mut g = try_vec("ControlAffine g (state_dim x inputs)", nm, 0.0)?;
+        let mut jac = try_vec("ControlAffine jacobian (state_dim x state_dim)", nn, 0.0)?;
+        let mut actuated = try_vec("ControlAffine state_dim", n, false)?;
+        let mut reads = try_vec("ControlAffine jacobian (state_dim x state_dim)", nn, false)?;
         for s in states.chunks_exact(n) {
             eval(s, &mut f, &mut g, &mut jac)?;
             let at = |what: &str| format!("ControlAffine {what} at the probe state {s:?}");
@@ -236,8 +250,11 @@ mod tests {
             Dynamics::kinematic_bicycle(0.5, 0, 1, 2, 3).unwrap(),
         ] {
             let m = model.inputs();
-            let probed =
-                CustomModel::probe::<InputError>(n, m, &probe_states(n, PROBES), |s, f, g, jac| {
+            let probed = CustomModel::probe::<InputError>(
+                n,
+                m,
+                &probe_states(n, PROBES).unwrap(),
+                |s, f, g, jac| {
                     model.eval(s, f, g);
                     let mut fd = |x: &[f64], out: &mut [f64]| {
                         let mut g = vec![0.0; n * m];
@@ -245,8 +262,9 @@ mod tests {
                         Ok::<(), InputError>(())
                     };
                     jacobian_by_differences(s, &mut fd, jac)
-                })
-                .unwrap();
+                },
+            )
+            .unwrap();
             for d in 0..n {
                 assert_eq!(probed.actuates(d), model.actuates(d), "{model} dim {d}");
                 assert_eq!(

@@ -228,7 +228,7 @@ impl PyControlAffine {
                 }
                 array.values().to_vec()
             }
-            None => probe_states(state_dim, PROBES),
+            None => map(probe_states(state_dim, PROBES))?,
         };
         let inner = map(CustomModel::probe::<PyCoreError>(
             state_dim,
