@@ -71,7 +71,7 @@ ROUTED = {
     "route_clearance": 1.0,
 }
 #: The rows the benchmark knows, by name (``--configs``): the four configurations as they are,
-#: and the levers of learning through the shield (issue 45), one change each.
+#: and the levers of learning through the shield (366bc2d..4e1fc91), one change each.
 VARIANTS: dict[str, Variant] = {
     **{c: Variant(c) for c in ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf")},
     # A penalty on the shield's correction |u - u_rl| (Krasowski et al. 2023).

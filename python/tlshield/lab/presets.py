@@ -49,7 +49,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # PPO learns from the action it sampled (SB3's own; learn_from "sampled"). Learning
         # from the executed action without the CLF's part helped Channel-v0's tuning seeds but
         # not its fresh ones, and on PointMass-v0 it lost rl_cbf on 3 of 3 seeds, where this
-        # preset finds it on 3 of 3 (docs/learning.md, issue 34).
+        # preset finds it on 3 of 3 (docs/learning.md, "Learning at scale").
         "learn_from": "sampled",
         # Every 10 updates the deterministic policy runs 20 validation episodes (reset seeds
         # from tlshield.lab.seeds.validation_seed, never used for evaluation); the best checkpoint

@@ -35,7 +35,7 @@ from tlshield import (
 
 LAYOUTS = ("line", "off_line", "u_shape", "random8")
 ROBOTS = ("single", "unicycle", "double")
-#: Robots that must turn at acceleration level (issue 44's point 2), measured beside ROBOTS.
+#: Robots that must turn at acceleration level, measured beside ROBOTS.
 TURNING = ("accel_unicycle", "thrust_turn")
 ENCODINGS = ("formula", "barriers")
 DRIVERS = ("shield", "seeker")
