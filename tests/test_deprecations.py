@@ -11,7 +11,6 @@ import gymnasium as gym
 import pytest
 
 import tlshield.envs
-from tlshield import _moved
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.params import as_flat
 from tlshield.lab import settings
@@ -90,26 +89,17 @@ def test_monitor_overloads_warn_and_equal_the_named_methods() -> None:
     assert old_batch.action.tolist() == new_batch.action.tolist()
 
 
-@pytest.mark.parametrize("old", sorted(_moved.MOVED))
-def test_old_module_names_warn_and_are_the_lab_modules(old: str) -> None:
-    """Issue 36: ``tlshield.NAME`` (0.1) is ``tlshield.lab.NAME``, the same module object,
-    with a DeprecationWarning; a submodule of a moved package too, never a second copy."""
-    new = importlib.import_module(f"tlshield.lab.{old}")
-    sys.modules.pop(f"tlshield.{old}", None)
-    with pytest.warns(DeprecationWarning, match=f"tlshield.{old} moved to tlshield.lab.{old}"):
-        module = importlib.import_module(f"tlshield.{old}")
-    assert module is new
-    if old == "plots":
-        sys.modules.pop("tlshield.plots.curves", None)
-        with pytest.warns(DeprecationWarning, match="tlshield.lab.plots.curves"):
-            from tlshield.plots.curves import _plot_learning_curves as old_function
-        from tlshield.lab.plots.curves import _plot_learning_curves as current
+@pytest.mark.parametrize("old", ["training", "plots", "plots.curves", "cli", "benchmark"])
+def test_the_0_1_module_names_are_gone(old: str) -> None:
+    """0.3 removed the lab modules' 0.1 names and the import finder that answered for them:
+    ``import tlshield`` puts nothing of its own on ``sys.meta_path``, and an old name is a
+    plain ModuleNotFoundError (the module lives under ``tlshield.lab``)."""
+    import tlshield
 
-        assert old_function is current
-
-
-def test_unmoved_names_are_not_answered_by_the_old_name_finder() -> None:
-    assert _moved.new_name("tlshield.envs.channel") is None
-    assert _moved.new_name("tlshield.wrappers") is None
-    assert _moved.new_name("tlshield_other.training") is None
-    assert _moved.new_name("tlshield.plots.curves") == "tlshield.lab.plots.curves"
+    finders = [f for f in sys.meta_path if type(f).__module__.startswith("tlshield")]
+    assert finders == [], finders
+    assert "tlshield._moved" not in sys.modules
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(f"tlshield.{old}")
+    assert importlib.import_module(f"tlshield.lab.{old}").__name__ == f"tlshield.lab.{old}"
+    assert tlshield.__name__ == "tlshield"

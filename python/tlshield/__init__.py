@@ -39,10 +39,7 @@ from tlshield._core import (
     __version__,
     formula_atoms,
 )
-from tlshield._moved import install as _install_old_names
 from tlshield.codes import GradFlag, Solver, Status
-
-_install_old_names()  # tlshield.training & co. moved to tlshield.lab (deprecated names)
 
 __all__ = [
     "AccelerationUnicycle",

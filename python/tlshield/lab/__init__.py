@@ -12,6 +12,6 @@ on Ray (:mod:`~tlshield.lab.cluster`, :mod:`~tlshield.lab.tune`,
 :mod:`~tlshield.lab.settings`), the benchmarks (:mod:`~tlshield.lab.benchmark`,
 :mod:`~tlshield.lab.benchmark_safety_gym`) and the report (:mod:`~tlshield.lab.report`,
 :mod:`~tlshield.lab.plots`). The library never imports the lab; ``import tlshield`` loads none
-of it. Until 0.3 each module is also importable by its 0.1 name (``tlshield.training``, ...),
-with a DeprecationWarning (:mod:`tlshield._moved`).
+of it. The 0.1 names of these modules (top-level ``training``, ``plots``, ...) were removed in
+0.3.
 """
