@@ -1,16 +1,18 @@
-"""The spellings of tlshield 0.1 (CHANGELOG.md, 0.2.0): renamed parameters and classes still
-work with a DeprecationWarning; a swapped argument order fails with a hint
-(``test_automaton``); a record written by 0.1 still loads (``test_cli_errors``)."""
+"""The spellings of tlshield 0.1 (CHANGELOG.md, 0.2.0), removed in 0.3: renamed parameters are
+errors that name the new spelling, renamed classes and module names are gone; a swapped
+argument order fails with a hint (``test_automaton``); a record written by 0.1 still loads
+(``test_cli_errors``)."""
 
 from __future__ import annotations
 
 import importlib
+import json
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
 
-import tlshield.envs
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.params import as_flat
 from tlshield.lab import settings
@@ -18,42 +20,40 @@ from tlshield.lab.runs import Run
 
 
 @pytest.mark.parametrize("env_id", [ENV_ID, POINT_MASS_ID, FLATWORLD_ID])
-def test_renamed_parameters_warn_and_still_apply(env_id: str) -> None:
-    with pytest.warns(DeprecationWarning, match="'K' is now called 'k'"):
-        env = gym.make(env_id, K=123.0)
+def test_renamed_parameters_are_errors_that_name_the_new_one(env_id: str) -> None:
+    """0.3 removed the 0.1 spellings: each is a TypeError naming its new spelling, ``env.cfg``
+    is gone."""
+    with pytest.raises(TypeError, match="'K' is now called 'k'"):
+        gym.make(env_id, K=123.0)
+    with pytest.raises(TypeError, match="'cbf_margin' is now called 'margin'"):
+        gym.make(env_id, cbf_margin=0.05)
+    env = gym.make(env_id, k=123.0)
     assert as_flat(env.unwrapped.params)["k"] == 123.0
-    with pytest.warns(DeprecationWarning, match="'cbf_margin' is now called 'margin'"):
-        env = gym.make(env_id, cbf_margin=0.05)
-    assert as_flat(env.unwrapped.params)["margin"] == 0.05
-    with pytest.warns(DeprecationWarning, match="env.cfg is deprecated: use env.params"):
-        assert env.unwrapped.cfg is env.unwrapped.params
-    with pytest.raises(TypeError, match="'K' and 'k' given"):
-        gym.make(env_id, K=1.0, k=2.0)
+    assert not hasattr(env.unwrapped, "cfg")
 
 
 @pytest.mark.parametrize(
-    ("module", "old", "new"),
+    ("module", "old"),
     [
-        ("tlshield.envs", "ChannelConfig", "ChannelParams"),
-        ("tlshield.envs.channel", "ChannelConfig", "ChannelParams"),
-        ("tlshield.envs.point_mass", "PointMassConfig", "PointMassParams"),
-        ("tlshield.envs.flatworld", "FlatWorldConfig", "FlatWorldParams"),
+        ("tlshield.envs", "ChannelConfig"),
+        ("tlshield.envs.channel", "ChannelConfig"),
+        ("tlshield.envs.point_mass", "PointMassConfig"),
+        ("tlshield.envs.flatworld", "FlatWorldConfig"),
     ],
 )
-def test_renamed_classes_warn_and_are_the_new_ones(module: str, old: str, new: str) -> None:
-    mod = importlib.import_module(module)
-    with pytest.warns(DeprecationWarning, match=f"{old} is now called {new}"):
-        cls = getattr(mod, old)
-    assert cls is getattr(mod, new)
-    with pytest.raises(AttributeError, match="NoSuchConfig"):
-        tlshield.envs.NoSuchConfig  # noqa: B018
+def test_renamed_classes_are_gone(module: str, old: str) -> None:
+    with pytest.raises(AttributeError, match=old):
+        getattr(importlib.import_module(module), old)
 
 
-def test_settings_accept_the_old_names_with_a_warning() -> None:
-    with pytest.warns(DeprecationWarning, match="--set: 'K' is now called 'k'"):
-        assert settings.parse_assignments(["K=100"]) == {"k": 100}
-    with pytest.warns(DeprecationWarning):
-        assert settings.split({"cbf_margin": 0.01})["margin"] == 0.01
+def test_settings_refuse_the_old_names_and_files_still_read(tmp_path: Path) -> None:
+    with pytest.raises(TypeError, match="--set: 'K' is now called 'k'"):
+        settings.parse_assignments(["K=100"])
+    with pytest.raises(TypeError, match="'cbf_margin' is now called 'margin'"):
+        settings.split({"cbf_margin": 0.01})
+    old_file = tmp_path / "settings.json"
+    old_file.write_text(json.dumps({"K": 100.0}))  # written by 0.1: data, still read
+    assert settings.load(old_file)[0] == {"k": 100.0}
 
 
 def test_a_0_1_record_reads_its_old_names_silently(recwarn: pytest.WarningsRecorder) -> None:

@@ -18,7 +18,6 @@ from tlshield.envs.channel import (
     channel_shield,
     channel_task_spec,
 )
-from tlshield.envs.params import renamed_class
 
 ENV_ID = "tlshield/Channel-v0"
 POINT_MASS_ID = "tlshield/PointMass-v0"
@@ -180,8 +179,3 @@ __all__ = [
     "make",
     "scored_by_return",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    """The 0.1 names of the classes exported here, with a DeprecationWarning."""
-    return renamed_class(globals(), __name__, name)

@@ -41,14 +41,14 @@ from tlshield.envs.channel_task import (
     task_spec,
 )
 from tlshield.envs.layout import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, THETA, X, Y
-from tlshield.envs.params import FULL, ParamsAlias, build, renamed_class, shielded_config
+from tlshield.envs.params import FULL, build, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Length of the relative observation before the one-hot FSA state.
 SQRT2 = math.sqrt(2.0)
 
 
-class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """``tlshield/Channel-v0``: the paper's case study (Li & Belta, Sec. VI) as one Gymnasium
     environment.
 
@@ -383,11 +383,6 @@ class ChannelEnv(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], ND
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def __getattr__(name: str) -> Any:
-    """The 0.1 names of this module's classes, with a DeprecationWarning."""
-    return renamed_class(globals(), __name__, name)
 
 
 __all__ = [

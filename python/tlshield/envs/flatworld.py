@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, ParamsAlias, build, renamed_class, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, build, shielded_config
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -158,7 +158,7 @@ def flatworld_shield(params: FlatWorldParams, config: str, spec: Spec) -> Shield
     )
 
 
-class FlatWorld(IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
+class FlatWorld(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """The physics alone: a point in a square with coloured discs, no task.
 
     Observation: the position ``[x, y]``. Action: ``u`` in ``[-1, 1]^2`` (clipped); each step
@@ -266,8 +266,3 @@ def make_flatworld(
     if shield is not None:
         env = Shielded(env, shield)
     return env
-
-
-def __getattr__(name: str) -> Any:
-    """The 0.1 names of this module's classes, with a DeprecationWarning."""
-    return renamed_class(globals(), __name__, name)

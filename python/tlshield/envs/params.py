@@ -1,9 +1,9 @@
 """An environment's parameters from keyword overrides, for every bundled environment: one check
-of the names, and the spellings of tlshield 0.1 accepted with a ``DeprecationWarning``."""
+of the names. The spellings of tlshield 0.1 were removed in 0.3: given now, each is an error
+that names its new spelling; files written by 0.1 (run records, settings files) still read."""
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, fields, replace
 from typing import Any, TypeVar
@@ -16,23 +16,6 @@ CONFIGS = {
     "rl_clf": (False, True),
     "rl_cbf_clf": (True, True),
 }
-
-
-class ParamsAlias:
-    """``env.cfg``, the 0.2 name of an environment's ``env.params``: still readable, with a
-    ``DeprecationWarning`` (removed in 0.3)."""
-
-    params: Any
-
-    @property
-    def cfg(self) -> Any:
-        warnings.warn(
-            "env.cfg is deprecated: use env.params (an environment's constants are its "
-            "parameters; 'config' is the shield configuration)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return self.params
 
 
 #: The configuration with every part on: the tlshield default and the paper's method.
@@ -52,37 +35,29 @@ def shielded_config(config: str, evaluation: bool) -> str:
 
 
 #: Parameters renamed in 0.2 (old -> new): one lower-case name per concept, ``margin`` as the
-#: shield calls it.
+#: shield calls it. The old names were removed in 0.3 (see :func:`upgrade`).
 RENAMED = {"K": "k", "cbf_margin": "margin"}
-#: Classes renamed in 0.2: "config" now means only a configuration of the shield (rl, rl_cbf,
-#: rl_clf, rl_cbf_clf); an environment's constants are its parameters.
-RENAMED_CLASSES = {
-    "ChannelConfig": "ChannelParams",
-    "PointMassConfig": "PointMassParams",
-    "FlatWorldConfig": "FlatWorldParams",
-}
 
 P = TypeVar("P")
 
 
-def upgrade(overrides: Mapping[str, Any], where: str, *, warn: bool = True) -> dict[str, Any]:
-    """``overrides`` with 0.1 names replaced by their new ones (a ``DeprecationWarning`` each,
-    unless ``warn`` is False, as for files written by 0.1). Both spellings at once is a
-    TypeError."""
+def upgrade(overrides: Mapping[str, Any], where: str, *, from_file: bool = False) -> dict[str, Any]:
+    """``overrides`` by their current names. An old (0.1) name read from a file written then
+    (``from_file``: a run record, a settings file) becomes its new one; given now, it is a
+    TypeError naming the new one. Both spellings at once is a TypeError."""
     out: dict[str, Any] = {}
     for name, value in overrides.items():
         new = RENAMED.get(name)
         if new is None:
             out[name] = value
             continue
+        if not from_file:
+            raise TypeError(
+                f"{where}: {name!r} is now called {new!r} (renamed in tlshield 0.2; the old "
+                "name was removed in 0.3)"
+            )
         if new in overrides:
             raise TypeError(f"{where}: {name!r} and {new!r} given; {name!r} is the old name")
-        if warn:
-            warnings.warn(
-                f"{where}: {name!r} is now called {new!r} (tlshield 0.2)",
-                DeprecationWarning,
-                stacklevel=3,
-            )
         out[new] = value
     return out
 
@@ -120,14 +95,3 @@ def build(cls: type[P], overrides: Mapping[str, Any], where: str) -> P:
     params = from_flat(cls, overrides)
     params.check()  # type: ignore[attr-defined]
     return params
-
-
-def renamed_class(namespace: Mapping[str, Any], module: str, name: str) -> Any:
-    """A module ``__getattr__``: the new class for a 0.1 class name, with a warning."""
-    new = RENAMED_CLASSES.get(name)
-    if new is None or new not in namespace:
-        raise AttributeError(f"module {module!r} has no attribute {name!r}")
-    warnings.warn(
-        f"{module}.{name} is now called {new} (tlshield 0.2)", DeprecationWarning, stacklevel=3
-    )
-    return namespace[new]

@@ -32,7 +32,7 @@ from tlshield._core import (
     Spec,
 )
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, ParamsAlias, build, renamed_class, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, build, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Visit a, then b; stay out of both obstacles until b.
@@ -181,9 +181,7 @@ def point_mass_shield(
     )
 
 
-class PointMassEnv(
-    IndependentCopies, ParamsAlias, gym.Env[NDArray[np.float64], NDArray[np.float64]]
-):
+class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.float64]]):
     """``tlshield/PointMass-v0`` (see the module docs and :func:`make_point_mass`).
 
     Observation: ``[x, y, vx, vy]`` then the one-hot automaton state. Action: the acceleration
@@ -301,8 +299,3 @@ def make_point_mass(config: str = FULL, evaluation: bool = False, **overrides: A
     override. See :class:`PointMassEnv` for the observation, reward and ``info``.
     """
     return PointMassEnv(config, evaluation, **overrides)
-
-
-def __getattr__(name: str) -> Any:
-    """The 0.1 names of this module's classes, with a DeprecationWarning."""
-    return renamed_class(globals(), __name__, name)

@@ -173,7 +173,7 @@ def json_tuples(value: Any) -> Any:
 def _env_params(record: dict[str, Any]) -> ChannelParams:
     env = record.get("env")
     # A 0.1 record spells some parameters the old way: read them as data, without a warning.
-    env = upgrade(env, "run record", warn=False) if isinstance(env, dict) else {}
+    env = upgrade(env, "run record", from_file=True) if isinstance(env, dict) else {}
     known = set(ChannelParams.flat_names())
     values = {k: json_tuples(v) for k, v in env.items() if k in known}
     try:

@@ -118,7 +118,7 @@ def load(path: str | Path) -> tuple[dict[str, Any], str | None]:
     if not isinstance(settings, dict):
         raise ValueError(f"{path}: expected a JSON object of settings, {{name: value}}")
     config = data.get("config") if "settings" in data else None
-    settings = upgrade(settings, str(path))
+    settings = upgrade(settings, str(path), from_file=True)
     check_names(settings, data.get("env_id", ENV_ID), where=str(path))
     return settings, config
 
