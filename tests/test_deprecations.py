@@ -63,30 +63,26 @@ def test_a_0_1_record_reads_its_old_names_silently(recwarn: pytest.WarningsRecor
     assert not [w for w in recwarn if issubclass(w.category, DeprecationWarning)]
 
 
-def test_monitor_overloads_warn_and_equal_the_named_methods() -> None:
+def test_the_monitor_overloads_are_gone() -> None:
     """``filter(monitor, a_rl)`` and ``filter_batch(monitors, a_rl)`` (0.2's overloads by
-    argument type) warn and give what ``filter_monitor`` and ``filter_monitors`` give."""
+    argument type, deprecated) were removed in 0.3: ``a_rl`` is required, and a monitor where
+    the state goes is a TypeError naming the method that takes it."""
     import numpy as np
 
     import tlshield
     from tests.fixtures import task_shield
 
     shield = task_shield()
-    s = np.zeros(13)
-    s[3:9] = [4.0, 4.0, 4.5, 6.5, 9.0, 9.0]
     monitor = tlshield.Monitor(shield.automaton)
-    monitor.reset(s)
-    a_rl = np.array([1.0, -2.0])
-    with pytest.warns(DeprecationWarning, match="use Shield.filter_monitor"):
-        old = shield.filter(monitor, a_rl)
-    assert old.action.tolist() == shield.filter_monitor(monitor, a_rl).action.tolist()
+    monitor.reset(np.zeros(13))
+    with pytest.raises(TypeError, match="a_rl"):
+        shield.filter(monitor, np.array([1.0, -2.0]))  # type: ignore[call-arg]
     batch = tlshield.MonitorBatch(shield.automaton, 2)
-    batch.reset(np.stack([s, s]))
-    actions = np.stack([a_rl, -a_rl])
-    with pytest.warns(DeprecationWarning, match="use Shield.filter_monitors"):
-        old_batch = shield.filter_batch(batch, actions)
-    new_batch = shield.filter_monitors(batch, actions)
-    assert old_batch.action.tolist() == new_batch.action.tolist()
+    batch.reset(np.zeros((2, 13)))
+    with pytest.raises(TypeError, match="a_rl"):
+        shield.filter_batch(batch, np.zeros((2, 2)))  # type: ignore[call-arg]
+    with pytest.raises(TypeError, match="use filter_monitors"):
+        shield.filter_batch(batch, np.zeros(2, dtype=int), np.zeros((2, 2)))
 
 
 @pytest.mark.parametrize("old", ["training", "plots", "plots.curves", "cli", "benchmark"])

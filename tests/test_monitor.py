@@ -86,9 +86,9 @@ def test_monitor_misuse_is_a_clear_error():
     with pytest.raises(ValueError, match="NaN"):
         monitor.reset(np.full(13, np.nan))
     monitor.reset(np.zeros(13))
-    with pytest.raises(TypeError, match="RL action second"):
+    with pytest.raises(TypeError, match="s is a Monitor; use filter_monitor"):
         shield.filter(monitor, np.zeros(2), np.zeros(2))
-    with pytest.raises(TypeError, match="missing the RL action"):
+    with pytest.raises(TypeError, match="a_rl"):
         shield.filter(np.zeros(13), 0)
     with pytest.raises(ValueError, match="a_rl"):
         shield.filter_monitor(monitor, np.zeros(3))
@@ -249,9 +249,9 @@ def test_monitor_batch_misuse_is_a_clear_error():
         batch.reset(np.zeros((1, 13)), rows=[0.5])
     with pytest.raises(ValueError, match="a_rl"):
         shield.filter_monitors(batch, np.zeros((2, 2)))
-    with pytest.raises(TypeError, match="RL actions second"):
+    with pytest.raises(TypeError, match="states is a MonitorBatch; use filter_monitors"):
         shield.filter_batch(batch, np.zeros((3, 2)), np.zeros((3, 2)))
-    with pytest.raises(TypeError, match="missing the RL actions"):
+    with pytest.raises(TypeError, match="a_rl"):
         shield.filter_batch(states, np.zeros(3, dtype=int))
     # An equal spec shares the automaton (so copies and pickles do); a different one is refused.
     spec = channel_task_spec()

@@ -704,13 +704,13 @@ class Shield:
         self,
         s: ArrayLike,
         q: int,
-        a_rl: ArrayLike | None = None,
+        a_rl: ArrayLike,
         f: ArrayLike | None = None,
         g: ArrayLike | None = None,
         drift: ArrayLike | None = None,
     ) -> FilterResult:
-        """One shield step at ``(s, q)`` for ``a_rl`` (required; ``filter(monitor, a_rl)`` is
-        the deprecated spelling of ``filter_monitor``)."""
+        """One shield step at ``(s, q)`` for ``a_rl`` (at a ``Monitor``'s state:
+        ``filter_monitor``)."""
     def filter_monitor(
         self,
         monitor: Monitor,
@@ -724,11 +724,10 @@ class Shield:
         self,
         states: ArrayLike,
         qs: ArrayLike,
-        a_rl: ArrayLike | None = None,
+        a_rl: ArrayLike,
         drift: ArrayLike | None = None,
     ) -> FilterBatch:
-        """A batch of steps (``a_rl`` required; ``filter_batch(monitors, a_rl)`` is the
-        deprecated spelling of ``filter_monitors``)."""
+        """A batch of steps (at a ``MonitorBatch``'s rows: ``filter_monitors``)."""
     def filter_monitors(
         self, monitors: MonitorBatch, a_rl: ArrayLike, drift: ArrayLike | None = None
     ) -> FilterBatch:

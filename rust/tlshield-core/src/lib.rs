@@ -53,8 +53,6 @@ pub use monitor::{Monitor, MonitorBatch, MonitorState, TaskReward, TaskStep};
 pub use predicate::{Ball, Center, Halfspace, Offset, Predicate};
 pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
-#[allow(deprecated)]
-pub use shield::ShieldConfig;
 pub use shield::{
     Barrier, BarrierSource, BatchDynamics, BatchGradient, BatchOutput, Bounds, ControlAffine,
     Filtered, Shield, ShieldParams, SolvedBy, SolverChoice, Status,

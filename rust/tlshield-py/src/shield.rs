@@ -508,36 +508,24 @@ impl PyShield {
     /// RL action ``a_rl`` (m,). ``f`` (n,) and ``g`` (n, m) override the dynamics model.
     /// ``drift`` (n,) is added to ``f``: the motion measured for this step of state dimensions
     /// the agent does not control (e.g. moving obstacles read by ``center_dims``). At a
-    /// ``Monitor``'s state, use ``filter_monitor`` (``filter(monitor, a_rl)`` is its deprecated
-    /// spelling).
-    #[pyo3(signature = (s, q, a_rl=None, f=None, g=None, drift=None))]
+    /// ``Monitor``'s state, use ``filter_monitor``.
+    #[pyo3(signature = (s, q, a_rl, f=None, g=None, drift=None))]
     #[allow(clippy::too_many_arguments)]
     fn filter(
         &self,
         py: Python<'_>,
         s: &Bound<'_, PyAny>,
         q: &Bound<'_, PyAny>,
-        a_rl: Option<&Bound<'_, PyAny>>,
+        a_rl: &Bound<'_, PyAny>,
         f: Option<&Bound<'_, PyAny>>,
         g: Option<&Bound<'_, PyAny>>,
         drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
-        if let Ok(monitor) = s.cast::<PyMonitor>() {
-            if a_rl.is_some() {
-                return Err(PyTypeError::new_err(
-                    "filter(monitor, a_rl): the monitor holds the state and the FSA state; pass \
-                     the RL action second (better: filter_monitor(monitor, a_rl))",
-                ));
-            }
-            crate::errors::deprecated(
-                py,
-                "Shield.filter(monitor, a_rl) is deprecated: use Shield.filter_monitor(monitor, a_rl)",
-            )?;
-            return self.filter_monitor(py, monitor, q, f, g, drift);
+        if s.cast::<PyMonitor>().is_ok() {
+            return Err(PyTypeError::new_err(
+                "filter(s, q, a_rl): s is a Monitor; use filter_monitor(monitor, a_rl)",
+            ));
         }
-        let a_rl = a_rl.ok_or_else(|| {
-            PyTypeError::new_err("filter(s, q, a_rl): missing the RL action a_rl")
-        })?;
         let drift = drift.map(|d| vector(d, "drift")).transpose()?;
         let drift = drift.as_deref();
         let s = vector(s, "s")?;
@@ -632,34 +620,22 @@ impl PyShield {
     /// ``action``, ``a_cbf``, ``a_clf`` (B, m), ``delta``, ``slack`` (B,), ``status`` (B,)
     /// ``tlshield.Status`` values and ``solver`` (B,) ``tlshield.Solver`` values (uint8).
     /// ``drift`` (B, n), optional, is added to each row's ``f`` (see ``filter``).
-    /// At the rows of a ``MonitorBatch``, use ``filter_monitors`` (``filter_batch(monitors,
-    /// a_rl)`` is its deprecated spelling).
-    #[pyo3(signature = (states, qs, a_rl=None, drift=None))]
+    /// At the rows of a ``MonitorBatch``, use ``filter_monitors``.
+    #[pyo3(signature = (states, qs, a_rl, drift=None))]
     fn filter_batch<'py>(
         &self,
         py: Python<'py>,
         states: &Bound<'py, PyAny>,
         qs: &Bound<'py, PyAny>,
-        a_rl: Option<&Bound<'py, PyAny>>,
+        a_rl: &Bound<'py, PyAny>,
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<PyFilterBatch> {
-        if let Ok(monitors) = states.cast::<PyMonitorBatch>() {
-            if a_rl.is_some() {
-                return Err(PyTypeError::new_err(
-                    "filter_batch(monitors, a_rl): the monitors hold the states and the FSA \
-                     states; pass the RL actions second (better: filter_monitors(monitors, a_rl))",
-                ));
-            }
-            crate::errors::deprecated(
-                py,
-                "Shield.filter_batch(monitors, a_rl) is deprecated: use \
-                 Shield.filter_monitors(monitors, a_rl)",
-            )?;
-            return self.filter_monitors(py, monitors, qs, drift);
+        if states.cast::<PyMonitorBatch>().is_ok() {
+            return Err(PyTypeError::new_err(
+                "filter_batch(states, qs, a_rl): states is a MonitorBatch; use \
+                 filter_monitors(monitors, a_rl)",
+            ));
         }
-        let a_rl = a_rl.ok_or_else(|| {
-            PyTypeError::new_err("filter_batch(states, qs, a_rl): missing the RL actions a_rl")
-        })?;
         let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
         let drift = drift
             .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))

@@ -55,8 +55,6 @@ use inputs::{BatchRows, Call, Want};
 use order::Orders;
 use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
-#[allow(deprecated)]
-pub use params::ShieldConfig;
 pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
 use workspace::Workspace;
 
@@ -418,12 +416,6 @@ impl Shield {
     /// The parameters.
     pub fn params(&self) -> &ShieldParams {
         &self.params
-    }
-
-    /// The parameters (the 0.1 name of [`Shield::params`]).
-    #[deprecated(since = "0.2.0", note = "renamed `params`")]
-    pub fn config(&self) -> &ShieldParams {
-        self.params()
     }
 
     /// Number of inputs m.

@@ -201,11 +201,6 @@ impl RoundBound {
     }
 }
 
-/// The 0.1 name of [`ShieldParams`] ("config" now means only a configuration of the case
-/// study: rl, rl_cbf, rl_clf, rl_cbf_clf).
-#[deprecated(since = "0.2.0", note = "renamed `ShieldParams`")]
-pub type ShieldConfig = ShieldParams;
-
 /// The shield's parameters (names as in the paper).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShieldParams {
