@@ -28,18 +28,18 @@ trajectory generator):
    "g1 or g2 visited").
 
 2. **Per-step FSA work** at an automaton state q (every non-accepting, non-trap state) for a
-   state vector s: what an RL loop asks of the automaton every step, next state, Eq. 5A1
-   reward for leaving q and the Eq. 5C1 safe set at (s, q') for the next action. tlshield: one
-   call, ``aut.advance(q, s, c_r)`` (the three separate calls ``aut.step(s, q)``,
-   ``aut.reward(s, q, c_r)``, ``aut.safe_set(s, q')`` are timed too and must give the same
-   result). The Python alternative, as reference
-   implementations of the paper do it: the five predicate robustness values with numpy, then
-   the guard strings of ``aut.edges()`` (parsed once, at setup, into cubes of literals)
-   evaluated in Python: the next state is the edge whose guard holds; the reward is
-   ``min(rho(D_q), c_r * -rho(psi_trap))`` with the robustness of a DNF the max over its cubes
-   of the min over their literals (``rho(D_q)`` alone without a trap edge); the safe set keeps
-   per clause of ``aut.trap_cnf(q')`` the literal with the largest robustness (in the trap: of
-   the clauses every state with a trap edge has, ``aut.recovery_cnf``). Before timing,
+   state vector s: what an RL loop asks of the automaton every step, next state, Eq. 5A1 reward
+   for leaving q and the Eq. 5C1 safe set at (s, q') for the next action. tlshield: the three
+   calls ``aut.step(s, q)``, ``aut.reward(s, q, c_r)``, ``aut.safe_set(s, q')`` (0.2's fused
+   ``Automaton.advance`` was removed in 0.3; in an episode loop ``Monitor.advance`` reads the
+   atoms once for the step and the reward, and the shield reuses that reading). The Python
+   alternative, as reference implementations of the paper do it: the five predicate robustness
+   values with numpy, then the guard strings of ``aut.edges()`` (parsed once, at setup, into
+   cubes of literals) evaluated in Python: the next state is the edge whose guard holds; the
+   reward is ``min(rho(D_q), c_r * -rho(psi_trap))`` with the robustness of a DNF the max over
+   its cubes of the min over their literals (``rho(D_q)`` alone without a trap edge); the safe
+   set keeps per clause of ``aut.trap_cnf(q')`` the literal with the largest robustness (in the
+   trap: of the clauses every state with a trap edge has, ``aut.recovery_cnf``). Before timing,
    both must agree on 2000 random (q, s) pairs: the same next state, the reward within 1e-12,
    the same safe-set literals with robustness within 1e-12.
 
@@ -64,7 +64,6 @@ import re
 import shutil
 import subprocess
 import sys
-import warnings
 from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -96,11 +95,6 @@ TARGET_STEP = 20.0
 Cube = tuple[tuple[int, bool, float], ...]  # literals (predicate index, positive, sign)
 Dnf = tuple[Cube, ...]
 SafeSet = list[tuple[str, float]]  # (literal text "g3" / "!g3", robustness)
-
-# The single-call row times ``Automaton.advance``, deprecated in 0.2 for ``Monitor.advance``;
-# it stays for continuity with the earlier numbers (the Monitor also keeps q and the reward's
-# state, which the Python reference does not).
-warnings.filterwarnings("ignore", "Automaton.advance is deprecated", DeprecationWarning)
 
 
 # --------------------------------------------------------------------------------------------
@@ -291,10 +285,8 @@ def check_step(
     for q, s in pairs:
         atom_rho = np.asarray(spec.atom_robustness(s))[perm]
         atom_diff = float(np.max(np.abs(atom_rho - np.array(predicate_values(s)))))
-        got = aut.advance(q, s, C_R)
-        separate = (aut.step(s, q), aut.reward(s, q, C_R), aut.safe_set(s, got[0]))
-        if separate != got:
-            failures.append(f"q={q} s={s.tolist()}: advance {got} != separate calls {separate}")
+        nxt = aut.step(s, q)
+        got = (nxt, aut.reward(s, q, C_R), aut.safe_set(s, nxt))
         want = pyfsa.evaluate(q, s, C_R)
         taken[(q, want[0])] += 1
         reward_diff = 0.0 if got[1] == want[1] else abs(got[1] - want[1])
@@ -541,10 +533,9 @@ def print_tables(
     print("| measurement | tlshield | Python (numpy predicates, parsed guards) |")
     print("|---|---:|---:|")
     print(
-        "| step + reward + safe set (tlshield: `advance`; Python: predicates once, then guards) | "
+        "| step + reward + safe set (tlshield: 3 calls; Python: predicates once, then guards) | "
         f"{fmt(step_us.get('tlshield'))} | {fmt(step_us.get('python'))} |"
     )
-    print(f"| the same as 3 tlshield calls | {fmt(step_us.get('tlshield 3 calls'))} | - |")
     print(
         f"| next state only | {fmt(step_us.get('tlshield step'))} | "
         f"{fmt(step_us.get('python predicates + next state'))} (with the predicates) |"
@@ -703,9 +694,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return pyfsa.next_state(q, [value > 0.0 for value in predicate_values(s)])
 
     plans: dict[str, Callable[[Any], object]] = {
-        "tlshield": lambda item: aut.advance(item[0], item[1], C_R),
+        "tlshield": tlshield_separate,
         "python": lambda item: pyfsa.evaluate(item[0], item[1], C_R),
-        "tlshield 3 calls": tlshield_separate,
         "tlshield step": lambda item: aut.step(item[1], item[0]),
         "tlshield reward": lambda item: aut.reward(item[1], item[0], C_R),
         "tlshield safe_set": lambda item: aut.safe_set(item[1], item[0]),
@@ -736,14 +726,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             None,
         ),
         (
-            "per step: tlshield `advance` vs Python",
+            "per step: tlshield step + reward + safe_set (3 calls) vs Python",
             ratio(step_us["python"], step_us["tlshield"]),
             TARGET_STEP,
-        ),
-        (
-            "per step: tlshield step + reward + safe_set (3 calls) vs Python",
-            ratio(step_us["python"], step_us["tlshield 3 calls"]),
-            None,
         ),
     ]
     print_tables(build_ms, step_us, states, ratios, versions)

@@ -26,3 +26,23 @@ def task_shield(model: object | None = None, **overrides: object) -> tlshield.Sh
     }
     model = tlshield.Unicycle(0.1) if model is None else model
     return tlshield.Shield(channel_task_spec(), model, **kwargs)  # type: ignore[arg-type]
+
+
+def progress_step(
+    aut: tlshield.Automaton, progress: tlshield.ProgressReward, q: int, phi: float, s: object
+) -> tuple[int, float, float]:
+    """One step of the progress reward from ``(q, phi)`` into ``s``, ``(q_next, reward,
+    phi_next)``, written from its definition (the trap pays its penalty, an accepted task
+    nothing more, the step into acceptance ``-phi - step_cost + bonus``, any other
+    ``phi_next - phi - step_cost``): the reference ``Monitor`` is checked against."""
+    q_next = aut.step(s, q)
+    phi_next = progress.potential(s, q_next)
+    if q_next == aut.trap:
+        reward = progress.trap_penalty
+    elif q in aut.accepting:
+        reward = 0.0
+    elif q_next in aut.accepting:
+        reward = -phi - progress.step_cost + progress.bonus
+    else:
+        reward = phi_next - phi - progress.step_cost
+    return q_next, reward, phi_next

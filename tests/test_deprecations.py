@@ -99,3 +99,30 @@ def test_the_0_1_module_names_are_gone(old: str) -> None:
         importlib.import_module(f"tlshield.{old}")
     assert importlib.import_module(f"tlshield.lab.{old}").__name__ == f"tlshield.lab.{old}"
     assert tlshield.__name__ == "tlshield"
+
+
+def test_every_deprecation_names_its_removal_and_is_in_the_changelog() -> None:
+    """The inventory of what warns: every place in the library that emits a deprecation
+    (Python ``DeprecationWarning``, a stub's ``@deprecated``, Rust ``#[deprecated]``) says in
+    which version the name goes, and the CHANGELOG's unreleased section lists deprecations
+    exactly when the sources have some. 0.3 removed every 0.1 name, so today both are empty."""
+    import re
+
+    root = Path(__file__).resolve().parent.parent
+    sources = [*(root / "python" / "tlshield").rglob("*.py")]
+    sources += [*(root / "python" / "tlshield").rglob("*.pyi")]
+    sources += [*(root / "rust").rglob("src/**/*.rs")]
+    pattern = re.compile(r"DeprecationWarning|@deprecated\(|#\[deprecated")
+    sites = []
+    for path in sources:
+        lines = path.read_text().splitlines()
+        for i, line in enumerate(lines):
+            if pattern.search(line) and not line.lstrip().startswith(("//", "#:", "# ")):
+                context = " ".join(lines[max(0, i - 3) : i + 4])
+                sites.append((f"{path.relative_to(root)}:{i + 1}", context))
+    for where, context in sites:
+        assert re.search(r"removed in \d+\.\d+|since = ", context), f"{where}: no removal version"
+    changelog = (root / "CHANGELOG.md").read_text()
+    unreleased = changelog.split("## [Unreleased]", 1)[1].split("\n## [", 1)[0]
+    listed = "### Deprecated" in unreleased
+    assert listed == bool(sites), (listed, [w for w, _ in sites])

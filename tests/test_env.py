@@ -12,6 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import tlshield
+from tests.fixtures import progress_step
 from tlshield.envs import CONFIGS, ENV_ID, ChannelEnv, channel_shield
 from tlshield.envs.channel import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, ChannelParams
 from tlshield.wrappers import FsaAugmented, Shielded, ShieldedVecEnv, ShieldedVectorEnv
@@ -331,16 +332,16 @@ def test_fsa_augmented_reset_reports_a_start_in_the_trap() -> None:
     assert not info["trap"]
 
 
-@pytest.mark.filterwarnings("ignore:ProgressReward.advance is deprecated:DeprecationWarning")
 def test_fsa_augmented_pays_the_progress_reward_by_default() -> None:
     spec = point_spec()
     env = FsaAugmented(PointEnv(), spec, gamma=0.9, scale=2.0)
-    progress = spec.automaton().progress_reward(gamma=0.9, scale=2.0)
+    aut = spec.automaton()
+    progress = aut.progress_reward(gamma=0.9, scale=2.0)
     obs, _ = env.reset(seed=0)
     q, phi = env.fsa_state, 0.0
     for _ in range(5):
         obs, reward, _, _, info = env.step(np.array([1.0, 0.0]))
-        q, expected, phi = progress.advance(q, phi, obs[:2])  # the 0.1 call, as the reference
+        q, expected, phi = progress_step(aut, progress, q, phi, obs[:2])
         assert reward == pytest.approx(expected) and info["tl_reward"] == pytest.approx(expected)
     with pytest.raises(ValueError, match="reward"):
         FsaAugmented(PointEnv(), spec, reward="eq5a1")

@@ -26,9 +26,6 @@ from tlshield import _core
 from tlshield.envs.channel import ChannelEnv, channel_task_spec
 from tlshield.envs.point_mass import PointMassEnv
 
-#: The deprecated ``advance`` calls keep their layout checks while they exist.
-pytestmark = pytest.mark.filterwarnings("ignore:.*advance is deprecated:DeprecationWarning")
-
 STUB = Path(_core.__file__).with_name("_core.pyi")
 
 
@@ -219,14 +216,8 @@ CASES: dict[str, Case] = {
         lambda: AUT, "reward", {"q": Q, "s_next": S, "c_r": 1.0, "trap_penalty": -10.0}
     ),
     "Automaton.safe_set": Case(lambda: AUT, "safe_set", {"q": Q, "s": S}),
-    "Automaton.advance": Case(
-        lambda: AUT, "advance", {"q": Q, "s_next": S, "c_r": 1.0, "trap_penalty": -10.0}
-    ),
     "Automaton.goal": Case(lambda: AUT, "goal", {"q": Q, "s": S}),
     "ProgressReward.potential": Case(lambda: AUT.progress_reward(), "potential", {"q": Q, "s": S}),
-    "ProgressReward.advance": Case(
-        lambda: AUT.progress_reward(), "advance", {"q": Q, "phi": 0.0, "s_next": S}
-    ),
     **{
         f"{name}.{method}": Case(
             _model(cls, *ctor),

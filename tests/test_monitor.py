@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tlshield
-from tests.fixtures import task_shield
+from tests.fixtures import progress_step, task_shield
 from tlshield.envs.channel import channel_task_spec
 
 
@@ -26,7 +26,6 @@ def _episode(rng: np.random.Generator, steps: int) -> np.ndarray:
     return s
 
 
-@pytest.mark.filterwarnings("ignore:ProgressReward.advance is deprecated:DeprecationWarning")
 @pytest.mark.parametrize("reward", ["progress", "paper"])
 def test_monitor_equals_the_separate_calls(reward):
     shield = task_shield()
@@ -46,7 +45,7 @@ def test_monitor_equals_the_separate_calls(reward):
         for s in traj[1:]:
             got = monitor.advance(s)
             if reward == "progress":
-                q_next, r, phi = progress.advance(q, phi, s)  # the 0.1 call, as the reference
+                q_next, r, phi = progress_step(aut, progress, q, phi, s)
             else:
                 r = aut.reward(s, q, 2.0, trap_penalty=-30.0)
                 q_next = aut.step(s, q)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+import tlshield
 from tests.scripted import discounted_return, finish, first_goal, park, towards
 from tlshield import Ball, Spec
 from tlshield.envs.channel import ChannelEnv, ChannelParams, task_spec
@@ -41,7 +42,7 @@ def test_ranks_count_transitions_with_exclusive_goals() -> None:
     assert aut.progress_reward(horizon=50).bonus < loose.bonus
 
 
-def test_potential_and_advance_agree() -> None:
+def test_potential_and_the_monitors_reward_agree() -> None:
     aut = automaton()
     r = aut.progress_reward(gamma=0.9, scale=2.0, exclusive=[["g1", "g2", "g3"]])
     s = np.zeros(13)
@@ -51,10 +52,13 @@ def test_potential_and_advance_agree() -> None:
     q = aut.step(s, aut.initial)
     phi = r.potential(s, q)
     assert -3.0 < phi <= -2.0
-    with pytest.warns(DeprecationWarning, match="use tlshield.Monitor"):
-        q2, reward, phi2 = r.advance(q, phi, s2)
-    assert q2 == q and phi2 == pytest.approx(r.potential(s2, q))
-    assert reward == pytest.approx(phi2 - phi - r.step_cost)
+    monitor = tlshield.Monitor(aut, r)
+    monitor.reset(s)  # an episode starts at phi = 0; one step at s makes it Phi(s, q)
+    monitor.advance(s)
+    step = monitor.advance(s2)
+    phi2 = r.potential(s2, q)
+    assert step.q == q
+    assert step.reward == pytest.approx(phi2 - phi - r.step_cost)
     assert phi2 > phi  # closer to g1
 
 
@@ -84,10 +88,8 @@ def test_bad_parameters_raise(kwargs: dict, match: str) -> None:
 
 def test_bad_calls_raise() -> None:
     r = automaton().progress_reward()
-    with pytest.raises(ValueError, match="phi"), pytest.warns(DeprecationWarning):
-        r.advance(0, math.nan, np.zeros(13))  # the first call of r warns
     with pytest.raises(ValueError, match="state 99 does not exist"):
-        r.advance(99, 0.0, np.zeros(13))
+        r.potential(np.zeros(13), 99)
     with pytest.raises(ValueError, match="state length: expected 13, got 3"):
         r.potential(np.zeros(3), 0)
     with pytest.raises(ValueError, match="another automaton"):

@@ -5,7 +5,7 @@ from typing import Any, ClassVar, Literal, TypeAlias, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from typing_extensions import Self, deprecated
+from typing_extensions import Self
 
 from tlshield.codes import Solver, Status
 
@@ -173,10 +173,6 @@ class Automaton:
     def safe_set(
         self, s: ArrayLike, q: int, preserve_progress: bool = False
     ) -> list[tuple[str, float]]: ...
-    @deprecated("use tlshield.Monitor")
-    def advance(
-        self, q: int, s_next: ArrayLike, c_r: float, trap_penalty: float | None = None
-    ) -> tuple[int, float, list[tuple[str, float]]]: ...
     def goal(self, s: ArrayLike, q: int) -> NDArray[np.float64] | None: ...
     def progress_reward(
         self,
@@ -213,8 +209,6 @@ class ProgressReward:
     @property
     def goal_span(self) -> float: ...
     def potential(self, s: ArrayLike, q: int) -> float: ...
-    @deprecated("use tlshield.Monitor(automaton, progress)")
-    def advance(self, q: int, phi: float, s_next: ArrayLike) -> tuple[int, float, float]: ...
 
 @final
 class TaskStep:

@@ -1,6 +1,5 @@
 //! `Automaton`: the FSA of a spec, its stepper, reward and safe sets.
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use numpy::{IntoPyArray, PyArray1};
@@ -10,8 +9,7 @@ use pyo3::types::{PyDict, PyString, PyTuple};
 use tlshield_core::cnf::{dnf_text, Literal};
 use tlshield_core::{progress, Automaton, ProgressParams, Spec, Trajectory};
 
-use crate::convert::{batch_order_hint, order_hint, state, vector, FloatArray};
-use crate::errors::deprecated;
+use crate::convert::{state, vector, FloatArray};
 use crate::errors::map;
 use crate::literals::LiteralNames;
 use crate::pickling::reduce;
@@ -70,9 +68,6 @@ pub struct PyAutomaton {
     pub(crate) inner: Arc<Automaton>,
     /// The literals' text, made once (results reuse it).
     literals: LiteralNames,
-    /// Whether the deprecated ``advance`` has warned (once per object: a warning costs more
-    /// than the call).
-    warned: AtomicBool,
 }
 
 impl PyAutomaton {
@@ -82,7 +77,6 @@ impl PyAutomaton {
         PyAutomaton {
             inner,
             literals,
-            warned: AtomicBool::new(false),
         }
     }
 
@@ -101,16 +95,6 @@ impl PyAutomaton {
         state(q, "q", &self.inner)
     }
 
-    /// The FSA state ``q`` of a ``(s, q)`` call, after checking the order (see [`order_hint`]).
-    fn state_after(
-        &self,
-        s: &Bound<'_, PyAny>,
-        q: &Bound<'_, PyAny>,
-        s_name: &str,
-    ) -> PyResult<usize> {
-        order_hint(s, q, s_name)?;
-        self.state(q)
-    }
 }
 
 #[pymethods]
@@ -186,7 +170,7 @@ impl PyAutomaton {
 
     /// The state after reading state vector ``s`` from state ``q``.
     fn step(&self, s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>) -> PyResult<usize> {
-        let q = self.state_after(s, q, "s")?;
+        let q = self.state(q)?;
         map(self.inner.step(&vector(s, "s")?, q))
     }
 
@@ -198,7 +182,6 @@ impl PyAutomaton {
         states: &Bound<'py, PyAny>,
         qs: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        batch_order_hint(states, qs)?;
         let qs = crate::convert::states(qs, "qs", &self.inner)?;
         let arr = FloatArray::extract(states, "states", 2, "(B, n)")?;
         if arr.shape()[0] != qs.len() {
@@ -248,7 +231,7 @@ impl PyAutomaton {
         c_r: f64,
         trap_penalty: Option<f64>,
     ) -> PyResult<f64> {
-        let q = self.state_after(s_next, q, "s_next")?;
+        let q = self.state(q)?;
         map(self
             .inner
             .reward(&vector(s_next, "s_next")?, q, c_r, trap_penalty))
@@ -314,41 +297,9 @@ impl PyAutomaton {
         q: &Bound<'_, PyAny>,
         preserve_progress: bool,
     ) -> PyResult<Vec<(Bound<'py, PyString>, f64)>> {
-        let q = self.state_after(s, q, "s")?;
+        let q = self.state(q)?;
         let kept = map(self.inner.safe_set(&vector(s, "s")?, q, preserve_progress))?;
         Ok(self.kept(py, &kept))
-    }
-
-    /// One step of the loop from a single evaluation of the atoms at ``s_next``:
-    /// ``(q_next, reward, safe_set)`` with ``q_next = step(s_next, q)``,
-    /// ``reward = reward(s_next, q, c_r, trap_penalty)`` and
-    /// ``safe_set = safe_set(q_next, s_next)`` (the constraints for the next action).
-    ///
-    /// Deprecated (a ``DeprecationWarning`` on the first call of each automaton object):
-    /// ``Monitor.advance`` does this and keeps ``q``.
-    #[pyo3(signature = (q, s_next, c_r, trap_penalty=None))]
-    #[allow(clippy::type_complexity)]
-    fn advance<'py>(
-        &self,
-        py: Python<'py>,
-        q: &Bound<'_, PyAny>,
-        s_next: &Bound<'py, PyAny>,
-        c_r: f64,
-        trap_penalty: Option<f64>,
-    ) -> PyResult<(usize, f64, Vec<(Bound<'py, PyString>, f64)>)> {
-        if !self.warned.swap(true, Ordering::Relaxed) {
-            deprecated(
-                py,
-                "Automaton.advance is deprecated: use tlshield.Monitor (reset, advance)",
-            )?;
-        }
-        let q = self.state(q)?;
-        let mut kept = Vec::new();
-        let (next, reward) =
-            map(self
-                .inner
-                .advance(&vector(s_next, "s_next")?, q, c_r, trap_penalty, &mut kept))?;
-        Ok((next, reward, self.kept(py, &kept)))
     }
 
     /// The CLF goal at ``(s, q)`` (paper Eq. 5B1, rank-aware): among ``q``'s edges to states
@@ -361,7 +312,7 @@ impl PyAutomaton {
         s: &Bound<'py, PyAny>,
         q: &Bound<'_, PyAny>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        let q = self.state_after(s, q, "s")?;
+        let q = self.state(q)?;
         Ok(map(self.inner.goal(&vector(s, "s")?, q))?.map(|g| g.into_pyarray(py)))
     }
 

@@ -10,7 +10,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyFloat, PyInt};
+use pyo3::types::{PyBool, PyFloat};
 use tlshield_core::Automaton;
 
 use crate::errors::{map, AutomatonError};
@@ -159,45 +159,6 @@ pub fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
         }
     }
     Ok(FloatArray::extract(obj, name, 1, "(n,)")?.values().to_vec())
-}
-
-/// Refuses a `(s, q)` call made in the old `(q, s)` order (an integer where the state vector
-/// goes, an array where the FSA state goes) with a `TypeError` that says so, rather than a
-/// conversion error about the wrong argument. `s_name` names the vector argument.
-pub fn order_hint(s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>, s_name: &str) -> PyResult<()> {
-    // Cheap type checks only: this runs on every per-step call.
-    let int = |o: &Bound<'_, PyAny>| o.is_instance_of::<PyInt>() && !o.is_instance_of::<PyBool>();
-    if int(s) && !int(q) {
-        return Err(PyTypeError::new_err(format!(
-            "{s_name}: expected a state vector, got an integer: the arguments are ({s_name}, q), \
-             the state first (the order was (q, {s_name}) in tlshield 0.1)"
-        )));
-    }
-    Ok(())
-}
-
-/// [`order_hint`] for the batch calls: `(B,)` FSA states where the `(B, n)` states go and a
-/// `(B, n)` array where the FSA states go.
-pub fn batch_order_hint(states: &Bound<'_, PyAny>, qs: &Bound<'_, PyAny>) -> PyResult<()> {
-    let ndim = |o: &Bound<'_, PyAny>| -> Option<usize> {
-        if let Ok(array) = o.cast::<PyUntypedArray>() {
-            return Some(array.ndim());
-        }
-        let array = o
-            .py()
-            .import("numpy")
-            .ok()?
-            .call_method1("asarray", (o,))
-            .ok()?;
-        Some(array.cast::<PyUntypedArray>().ok()?.ndim())
-    };
-    if ndim(states) == Some(1) && ndim(qs) == Some(2) {
-        return Err(PyTypeError::new_err(
-            "states: expected a (B, n) array, got a (B,) one: the arguments are (states, qs), the \
-             states first (the order was (qs, states) in tlshield 0.1)",
-        ));
-    }
-    Ok(())
 }
 
 /// An FSA state argument: a Python or numpy integer in `0..automaton.num_states()`; a bool, a

@@ -87,10 +87,3 @@ impl From<PyCoreError> for PyErr {
 pub fn map<T, E: Into<PyCoreError>>(result: Result<T, E>) -> Result<T, PyErr> {
     result.map_err(|e| e.into().into())
 }
-
-/// Emits a `DeprecationWarning` (an error when warnings are errors) from the caller's line.
-pub fn deprecated(py: pyo3::Python<'_>, message: &str) -> pyo3::PyResult<()> {
-    let category = py.get_type::<pyo3::exceptions::PyDeprecationWarning>();
-    let message = std::ffi::CString::new(message).expect("a warning text has no NUL");
-    PyErr::warn(py, category.as_any(), &message, 1)
-}

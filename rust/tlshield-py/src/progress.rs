@@ -1,13 +1,11 @@
 //! `ProgressReward`: the progress-aware task reward of an automaton (core `progress`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use pyo3::prelude::*;
 use tlshield_core::{Automaton, ProgressParams, ProgressReward};
 
-use crate::convert::{order_hint, state, vector};
-use crate::errors::deprecated;
+use crate::convert::{state, vector};
 use crate::errors::map;
 
 /// The progress-aware task reward of an automaton (beyond the paper's Eq. 5A1): a potential
@@ -28,8 +26,6 @@ pub struct PyProgressReward {
     pub(crate) inner: ProgressReward,
     /// The parameters it was built with (its pickle rebuilds it from them).
     pub(crate) params: ProgressParams,
-    /// Whether the deprecated ``advance`` has warned (once per object).
-    warned: AtomicBool,
 }
 
 impl PyProgressReward {
@@ -49,7 +45,6 @@ impl PyProgressReward {
             automaton,
             inner,
             params,
-            warned: AtomicBool::new(false),
         })
     }
 }
@@ -106,34 +101,9 @@ impl PyProgressReward {
 
     /// ``Phi(s, q)``.
     fn potential(&self, s: &Bound<'_, PyAny>, q: &Bound<'_, PyAny>) -> PyResult<f64> {
-        order_hint(s, q, "s")?;
         let q = state(q, "q", &self.automaton)?;
         let s = vector(s, "s")?;
         Ok(self.inner.potential(&map(self.automaton.read(&s))?, q))
-    }
-
-    /// One step from ``(q, phi)`` into ``s_next``: ``(q_next, reward, phi_next)``. Start an
-    /// episode with ``q = automaton.step(s_0, automaton.initial)`` and ``phi = 0``.
-    ///
-    /// Deprecated (a ``DeprecationWarning`` on the first call of each object): a ``Monitor``
-    /// with this reward does this and keeps ``q`` and ``phi``.
-    fn advance(
-        &self,
-        py: Python<'_>,
-        q: &Bound<'_, PyAny>,
-        phi: f64,
-        s_next: &Bound<'_, PyAny>,
-    ) -> PyResult<(usize, f64, f64)> {
-        if !self.warned.swap(true, Ordering::Relaxed) {
-            deprecated(
-                py,
-                "ProgressReward.advance is deprecated: use tlshield.Monitor(automaton, progress)",
-            )?;
-        }
-        let q = state(q, "q", &self.automaton)?;
-        map(self
-            .inner
-            .advance(&self.automaton, &vector(s_next, "s_next")?, q, phi))
     }
 
     fn __repr__(&self) -> String {

@@ -319,30 +319,6 @@ impl Automaton {
         Ok(reading.reward(q, c_r))
     }
 
-    /// One step of the FSA-augmented loop from one reading of `s_next`: the next state
-    /// `q' = step(s_next, q)`, the reward of Eq. 5A1 for leaving `q` ([`Automaton::reward`]),
-    /// and the safe set at `(s_next, q')` written into `safe` ([`Reading::safe_set`]).
-    pub fn advance(
-        &self,
-        s_next: &[f64],
-        q: usize,
-        c_r: f64,
-        trap_penalty: Option<f64>,
-        safe: &mut Vec<(Literal, f64)>,
-    ) -> Result<(usize, f64), AutomatonError> {
-        self.check_state("q", q)?;
-        let reading = self.read(s_next)?;
-        check_weight(c_r)?;
-        let reward = if Some(q) == self.trap {
-            trap_reward(q, trap_penalty)?
-        } else {
-            reading.reward(q, c_r)
-        };
-        let next = reading.step(q);
-        reading.safe_set(next, safe);
-        Ok((next, reward))
-    }
-
     /// The CBF safe set of Eq. 5C1 at `(s, q)` ([`Reading::safe_set`]), or with
     /// `preserve_progress` the progress-preserving one ([`Reading::progress_safe_set`]),
     /// checked.

@@ -537,33 +537,6 @@ mod tests {
     }
 
     #[test]
-    fn advance_fuses_step_reward_and_safe_set() {
-        let aut = running_example();
-        let mut safe = Vec::new();
-        for (q, s) in [
-            (0, [2.0, 0.0]),
-            (0, [8.0, 0.0]),
-            (2, [4.5, 0.0]),
-            (0, [0.5, 0.0]),
-        ] {
-            let (next, reward) = aut.advance(&s, q, 2.0, None, &mut safe).unwrap();
-            assert_eq!(next, aut.step(&s, q).unwrap());
-            assert_eq!(reward, aut.reward(&s, q, 2.0, None).unwrap());
-            assert_eq!(safe, aut.safe_set(&s, next, false).unwrap());
-        }
-        crate::tests_support::assert_error(
-            aut.advance(&[0.0, 0.0], 1, 2.0, None, &mut safe),
-            "TrapReward",
-            "trap",
-        );
-        assert_eq!(
-            aut.advance(&[0.0, 0.0], 1, 2.0, Some(-3.0), &mut safe)
-                .unwrap(),
-            (1, -3.0)
-        );
-    }
-
-    #[test]
     fn a_formula_alone_gives_the_same_automaton_and_reads_no_state() {
         let task = task();
         let alone = Automaton::build(&Spec::from_formula(crate::fixtures::TASK).unwrap()).unwrap();
