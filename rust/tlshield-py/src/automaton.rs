@@ -74,10 +74,7 @@ impl PyAutomaton {
     /// Wraps a built automaton.
     pub fn new(py: Python<'_>, inner: Arc<Automaton>) -> Self {
         let literals = LiteralNames::new(py, inner.spec().atoms());
-        PyAutomaton {
-            inner,
-            literals,
-        }
+        PyAutomaton { inner, literals }
     }
 
     /// A safe set as ``(literal, robustness)`` pairs.
@@ -94,7 +91,6 @@ impl PyAutomaton {
     fn state(&self, q: &Bound<'_, PyAny>) -> PyResult<usize> {
         state(q, "q", &self.inner)
     }
-
 }
 
 #[pymethods]
