@@ -33,13 +33,15 @@ use smallvec::SmallVec;
 use crate::automaton::Automaton;
 use crate::custom::CustomModel;
 use crate::dynamics::{Dynamics, Structure};
-use crate::error::{AutomatonError, InputError, ShieldError};
+use crate::error::{AutomatonError, ShieldError};
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{DenseQp, QpStatus};
 use crate::slots::Slots;
 use crate::validate::check_finite;
 
+mod check;
+use check::{check_cover, positive};
 mod gradient;
 mod inputs;
 mod order;
@@ -111,95 +113,6 @@ impl std::fmt::Debug for Shield {
             .field("inputs", &self.m)
             .finish()
     }
-}
-
-fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(ShieldError::Config(format!(
-            "{what} = {value}: expected a finite number > 0"
-        )))
-    }
-}
-
-/// Checks that applying no action stays feasible for every RL action in `rl`: the CBF box must
-/// be able to cancel it (`cbf ⊇ -rl`, for steps without a goal, where `a_clf` is absent), and
-/// with the CLF on, `cbf + clf ⊇ -rl` (only binding when the CLF box excludes 0), and actuator
-/// limits must allow 0. Without that authority the barrier rows can become infeasible, and the
-/// relaxed answer breaks them. (For the driftless models, unicycle and single integrator,
-/// applying nothing keeps every barrier where it is; the CBF row then holds for any h >= margin.)
-fn check_cover(params: &ShieldParams, rl: &Bounds) -> Result<(), ShieldError> {
-    let (cbf, clf) = (&params.cbf_bounds, &params.clf_bounds);
-    for j in 0..rl.lo.len() {
-        let (need_lo, need_hi) = (-rl.hi[j], -rl.lo[j]);
-        if cbf.lo[j] > need_lo || cbf.hi[j] < need_hi {
-            return Err(ShieldError::Config(format!(
-                "cbf_bounds[{j}] = ({}, {}) cannot cancel every RL action: rl_bounds[{j}] = \
-                 ({}, {}), so the CBF box must contain ({need_lo}, {need_hi}) for the barriers \
-                 to stay feasible",
-                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j]
-            )));
-        }
-        let (sum_lo, sum_hi) = (cbf.lo[j] + clf.lo[j], cbf.hi[j] + clf.hi[j]);
-        if params.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
-            return Err(ShieldError::Config(format!(
-                "cbf_bounds[{j}] = ({}, {}) plus clf_bounds[{j}] = ({}, {}) reach ({sum_lo}, \
-                 {sum_hi}), which cannot cancel every RL action in rl_bounds[{j}] = ({}, {}): \
-                 widen cbf_bounds or let the CLF box contain 0",
-                cbf.lo[j], cbf.hi[j], clf.lo[j], clf.hi[j], rl.lo[j], rl.hi[j]
-            )));
-        }
-        if let Some(act) = &params.action_bounds {
-            if act.lo[j] > 0.0 || act.hi[j] < 0.0 {
-                return Err(ShieldError::Config(format!(
-                    "action_bounds[{j}] = ({}, {}) exclude 0: the shield needs to be able to \
-                     apply no action",
-                    act.lo[j], act.hi[j]
-                )));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Checks that every row of `a` (rows of `lo.len()` values) lies in `b`, up to rounding
-/// (1e-9 of the bound's size, so a policy action scaled onto the box's edge passes).
-fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), ShieldError> {
-    let m = b.lo.len();
-    for (k, &v) in a.iter().enumerate() {
-        let j = k % m;
-        let (lo, hi) = (b.lo[j], b.hi[j]);
-        let slack = 1e-9 * (1.0 + lo.abs().max(hi.abs()));
-        if v < lo - slack || v > hi + slack {
-            let at = if a.len() > m {
-                format!("{what}[{}, {j}]", k / m)
-            } else {
-                format!("{what}[{j}]")
-            };
-            return Err(InputError::Value {
-                what: at,
-                expected: format!("a value in rl_bounds ({lo}, {hi})"),
-                got: v.to_string(),
-            }
-            .into());
-        }
-    }
-    Ok(())
-}
-
-/// Checks a drift of `rows` rows of length `n`.
-fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
-    if d.len() != rows * n {
-        return Err(InputError::Shape {
-            what: "drift".into(),
-            expected: format!("{rows} x {n} (one value per state dimension)"),
-            got: format!("{} values", d.len()),
-        }
-        .into());
-    }
-    check_finite("drift", d, n)?;
-    Ok(())
 }
 
 impl Shield {
@@ -447,149 +360,6 @@ impl Shield {
         self.pool.with(|| Workspace::new(n, self.m), run)
     }
 
-    /// Checks the state length, finiteness and the barrier dimensions.
-    fn check_state(&self, what: &str, s: &[f64]) -> Result<(), ShieldError> {
-        self.check_state_len(what, s.len())
-    }
-
-    /// Checks a state length `n` against the spec, the dynamics and the barriers (an empty
-    /// batch still says how long its rows are).
-    fn check_state_len(&self, what: &str, n: usize) -> Result<(), ShieldError> {
-        self.automaton.spec().check_state_len(n)?;
-        if n < self.min_dim {
-            return Err(InputError::Shape {
-                what: format!("{what} length"),
-                expected: format!("at least {} (dynamics, barriers and pos)", self.min_dim),
-                got: n.to_string(),
-            }
-            .into());
-        }
-        for b in &self.params.barriers {
-            b.predicate.check_dim(n)?;
-        }
-        Ok(())
-    }
-
-    /// Checks a batch's `(rows, m)` RL actions: shape, finiteness and the RL box.
-    fn check_batch_actions(&self, a_rl: &[f64], rows: usize) -> Result<(), ShieldError> {
-        let m = self.m;
-        if a_rl.len() != rows * m {
-            return Err(InputError::Shape {
-                what: "a_rl".into(),
-                expected: format!("({rows}, {m})"),
-                got: format!("{} values", a_rl.len()),
-            }
-            .into());
-        }
-        check_finite("a_rl", a_rl, m)?;
-        if let Some(rl) = &self.params.rl_bounds {
-            check_within("a_rl", a_rl, rl)?;
-        }
-        Ok(())
-    }
-
-    fn check_action(&self, what: &str, a: &[f64]) -> Result<(), ShieldError> {
-        if a.len() != self.m {
-            return Err(InputError::Shape {
-                what: format!("{what} length"),
-                expected: format!("{} (one value per input)", self.m),
-                got: a.len().to_string(),
-            }
-            .into());
-        }
-        check_finite(what, a, a.len())?;
-        if let Some(rl) = &self.params.rl_bounds {
-            check_within(what, a, rl)?;
-        }
-        Ok(())
-    }
-
-    fn check_dynamics(&self, n: usize, fg: Option<ControlAffine<'_>>) -> Result<(), ShieldError> {
-        let Some(ControlAffine { f, g, jacobian }) = fg else {
-            if self.dynamics.is_some() {
-                return Ok(());
-            }
-            return Err(ShieldError::Config(match &self.custom {
-                Some(c) => format!("the model {c} is evaluated by the caller: pass f and g"),
-                None => "this shield has no dynamics model: pass f and g with every call".into(),
-            }));
-        };
-        if let Some(c) = &self.custom {
-            if n != c.state_len() {
-                return Err(InputError::Shape {
-                    what: "s length".into(),
-                    expected: format!("{} (the model's state_dim)", c.state_len()),
-                    got: n.to_string(),
-                }
-                .into());
-            }
-        }
-        if f.len() != n {
-            return Err(InputError::Shape {
-                what: "f length".into(),
-                expected: format!("{n} (the state length)"),
-                got: f.len().to_string(),
-            }
-            .into());
-        }
-        if g.len() != n * self.m {
-            return Err(InputError::Shape {
-                what: "g size".into(),
-                expected: format!("{n} x {} (state length x inputs)", self.m),
-                got: g.len().to_string(),
-            }
-            .into());
-        }
-        check_finite("f", f, n)?;
-        check_finite("g", g, self.m)?;
-        match jacobian {
-            Some(jac) => {
-                if jac.len() != n * n {
-                    return Err(InputError::Shape {
-                        what: "jacobian size".into(),
-                        expected: format!("{n} x {n} (df_i/ds_j)"),
-                        got: jac.len().to_string(),
-                    }
-                    .into());
-                }
-                check_finite("jacobian", jac, n)?;
-            }
-            None if self.custom.is_some() && self.orders.second_order() => {
-                return Err(ShieldError::Config(
-                    "this shield has second-order rows under its ControlAffine model: pass the \
-                     drift's Jacobian with f and g"
-                        .into(),
-                ));
-            }
-            None => {}
-        }
-        if self.dynamics.is_none() && self.custom.is_none() {
-            self.orders
-                .check_authority(&self.automaton, &self.params, g, n)?;
-        }
-        Ok(())
-    }
-
-    /// Validates the arguments of one step.
-    fn check_call(
-        &self,
-        s: &[f64],
-        q: usize,
-        a_rl: &[f64],
-        fg: Option<ControlAffine<'_>>,
-        drift: Option<&[f64]>,
-    ) -> Result<(), ShieldError> {
-        self.check_state("s", s)?;
-        check_finite("s", s, s.len())?;
-        self.automaton.check_state("q", q)?;
-        self.check_action("a_rl", a_rl)?;
-        self.check_dynamics(s.len(), fg)?;
-        if let Some(d) = drift {
-            check_drift(d, s.len(), 1)?;
-        }
-        Ok(())
-    }
-
     /// One shield step at state `s` in FSA state `q` for the RL action `a_rl`; `fg`
     /// overrides the dynamics model for this call. `drift` (length n) is added to `f`: the
     /// motion, measured for this step, of state dimensions the agent does not control (moving
@@ -716,35 +486,6 @@ impl Shield {
         self.filter_batch_with(states, n, qs, a_rl, None, drift, out)
     }
 
-    /// Checks a batch's per-row dynamics (or, with none, that the shield has a model).
-    fn check_batch_dynamics(
-        &self,
-        rows: usize,
-        n: usize,
-        dynamics: Option<BatchDynamics<'_>>,
-    ) -> Result<(), ShieldError> {
-        let Some(d) = dynamics else {
-            return self.check_dynamics(n, None);
-        };
-        let m = self.m;
-        let sizes = [
-            ("f", d.f.len(), n),
-            ("g", d.g.len(), n * m),
-            ("jacobian", d.jacobian.map_or(0, <[f64]>::len), n * n),
-        ];
-        for (what, got, per_row) in sizes {
-            if (what != "jacobian" || d.jacobian.is_some()) && got != rows * per_row {
-                return Err(InputError::Shape {
-                    what: what.into(),
-                    expected: format!("{rows} rows of {per_row} values"),
-                    got: format!("{got} values"),
-                }
-                .into());
-            }
-        }
-        (0..rows).try_for_each(|i| self.check_dynamics(n, Some(d.row(i, n, m))))
-    }
-
     /// [`Shield::filter_batch`] with each row's `f`, `g` (and Jacobian) given: the batch of a
     /// shield built on a [`CustomModel`] or without a model.
     #[allow(clippy::too_many_arguments)]
@@ -770,35 +511,6 @@ impl Shield {
             out,
         );
         Ok(())
-    }
-
-    /// Checks the input of a batch over given states (see [`Shield::filter_batch_with`]).
-    fn check_state_batch(
-        &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
-        a_rl: &[f64],
-        dynamics: Option<BatchDynamics<'_>>,
-        drift: Option<&[f64]>,
-    ) -> Result<(), ShieldError> {
-        let rows = qs.len();
-        if n == 0 || rows.checked_mul(n) != Some(states.len()) {
-            return Err(InputError::Shape {
-                what: "states".into(),
-                expected: format!("{rows} rows (one per q) of length n > 0"),
-                got: format!("{} values with n = {n}", states.len()),
-            }
-            .into());
-        }
-        self.check_batch_actions(a_rl, rows)?;
-        self.check_state_len("states row", n)?;
-        self.check_batch_dynamics(rows, n, dynamics)?;
-        check_finite("states", states, n)?;
-        if let Some(d) = drift {
-            check_drift(d, n, rows)?;
-        }
-        Ok(self.automaton.check_states("qs", qs)?)
     }
 
     /// [`Shield::filter_batch`] at the monitors' last states and FSA states, reusing their
@@ -838,47 +550,6 @@ impl Shield {
             );
         }
         Ok(())
-    }
-
-    /// Checks the input of a batch over monitors (see [`Shield::filter_monitors_with`]);
-    /// returns the state length, `None` for an empty batch.
-    fn check_monitor_batch(
-        &self,
-        batch: &MonitorBatch,
-        a_rl: &[f64],
-        dynamics: Option<BatchDynamics<'_>>,
-        drift: Option<&[f64]>,
-    ) -> Result<Option<usize>, ShieldError> {
-        let monitors = batch.monitors();
-        if !Arc::ptr_eq(batch.automaton(), &self.automaton) {
-            return Err(ShieldError::Config(
-                "monitors: they watch another automaton; build them from this shield's \
-                 automaton (shield.automaton)"
-                    .into(),
-            ));
-        }
-        if let Some(row) = monitors.iter().position(|m| !m.started()) {
-            return Err(InputError::Value {
-                what: format!("monitors row {row}"),
-                expected: "a started episode (reset it first)".into(),
-                got: "a monitor without one".into(),
-            }
-            .into());
-        }
-        let rows = monitors.len();
-        self.check_batch_actions(a_rl, rows)?;
-        let Some(first) = monitors.first() else {
-            // An empty batch: nothing to check a state length against, nothing to solve.
-            return Ok(None);
-        };
-        // Every monitor of the batch read a state of its automaton: one length for all.
-        let n = first.state().len();
-        self.check_state("monitor state", first.state())?;
-        self.check_batch_dynamics(rows, n, dynamics)?;
-        if let Some(d) = drift {
-            check_drift(d, n, rows)?;
-        }
-        Ok(Some(n))
     }
 
     /// The rows of a validated batch in contiguous parts, each with its own workspace, claimed
