@@ -41,7 +41,7 @@ from tlshield.envs.channel_task import (
     task_spec,
 )
 from tlshield.envs.layout import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, THETA, X, Y
-from tlshield.envs.params import FULL, build, shielded_config
+from tlshield.envs.params import FULL, build, check_config, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Length of the relative observation before the one-hot FSA state.
@@ -128,8 +128,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         shield_in_env: bool = True,
         **overrides: Any,
     ) -> None:
-        if config not in CONFIGS:
-            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        check_config(config)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode = {render_mode!r}: expected 'rgb_array', 'human' or None"

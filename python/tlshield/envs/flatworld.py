@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, build, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, build, check_config, shielded_config
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The discs as published: centre, radius, colour.
@@ -248,8 +248,7 @@ def make_flatworld(
     violated) and on leaving the square (both failures, paying the trap penalty); truncated at
     the horizon. Any :class:`FlatWorldParams` field is a keyword override.
     """
-    if config not in CONFIGS:
-        raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+    check_config(config)
     params = build(FlatWorldParams, overrides, "FlatWorld-v0")
     spec = flatworld_spec(formula)
     env: gym.Env = FsaAugmented(

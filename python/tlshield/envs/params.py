@@ -22,12 +22,19 @@ CONFIGS = {
 FULL = "rl_cbf_clf"
 
 
+def check_config(config: object, where: str = "config") -> str:
+    """``config`` if it is one of :data:`CONFIGS`, else a ValueError naming ``where`` and the
+    four: the one check of a shield configuration, wherever one is given."""
+    if not isinstance(config, str) or config not in CONFIGS:
+        raise ValueError(f"{where} = {config!r}: expected one of {', '.join(CONFIGS)}")
+    return config
+
+
 def shielded_config(config: str, evaluation: bool) -> str:
     """The shield an environment builds for ``config``: the paper's evaluation rule turns the
     CBF on in every configuration (``rl`` -> ``rl_cbf``, ``rl_clf`` -> ``rl_cbf_clf``); in
     training it is ``config`` itself."""
-    if config not in CONFIGS:
-        raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+    check_config(config)
     cbf, clf = CONFIGS[config]
     if evaluation and not cbf:
         return FULL if clf else "rl_cbf"

@@ -32,7 +32,7 @@ from tlshield._core import (
     Spec,
 )
 from tlshield.copying import IndependentCopies
-from tlshield.envs.params import CONFIGS, FULL, build, shielded_config
+from tlshield.envs.params import CONFIGS, FULL, build, check_config, shielded_config
 from tlshield.tracking import FsaTracker, shield_info
 
 #: Visit a, then b; stay out of both obstacles until b.
@@ -200,8 +200,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
     def __init__(self, config: str = FULL, evaluation: bool = False, **overrides: Any) -> None:
-        if config not in CONFIGS:
-            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        check_config(config)
         params = build(PointMassParams, overrides, "PointMass-v0")
         self.params = params
         self.config = config

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tlshield._core import Automaton, Ball, ControlAffine, Monitor, Shield, Spec, ThrustTurn
-from tlshield.envs.params import CONFIGS, FULL, build
+from tlshield.envs.params import CONFIGS, FULL, build, check_config
 from tlshield.tracking import shield_info
 
 #: The versions the adapter was written and tested against (it patches exactly these).
@@ -436,8 +436,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         evaluation: bool = False,
         **overrides: Any,
     ) -> None:
-        if config not in CONFIGS:
-            raise ValueError(f"config = {config!r}: expected one of {sorted(CONFIGS)}")
+        check_config(config)
         if task not in TASKS:
             raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
         self.params = build(SafetyGoalParams, overrides, task)

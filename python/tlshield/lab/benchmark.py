@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs.params import FULL
+from tlshield.envs.params import FULL, check_config
 from tlshield.lab.presets import PRESETS
 from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
 
@@ -261,14 +261,13 @@ def flatworld(
 ) -> Path:
     """Runs the benchmark into ``out`` (resumable: finished jobs are kept) and writes
     ``flatworld.csv``, ``flatworld.md`` and ``flatworld_paths.png``."""
-    from tlshield.envs.flatworld import CONFIGS, FORMULAS, flatworld_spec
+    from tlshield.envs.flatworld import FORMULAS, flatworld_spec
 
     formulas = list(formulas or FORMULAS)
     for f in formulas:
         flatworld_spec(f)  # a formula over unknown colours fails here, before any job
     for c in configs:
-        if c not in CONFIGS:
-            raise ValueError(f"config {c!r}: expected one of {', '.join(CONFIGS)}")
+        check_config(c)
     check_block(episodes, "episodes")
     if not (isinstance(steps, int) and steps > 0):
         raise ValueError(f"steps = {steps!r}: expected a positive integer")

@@ -21,7 +21,7 @@ from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 from tlshield.envs.params import FULL
 from tlshield.envs.safety_gym import MissingStack
-from tlshield.lab.presets import DEFAULT_UPDATES
+from tlshield.lab.presets import DEFAULT_TRIALS, DEFAULT_UPDATES, STUDY_UPDATES
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.
 TRAINING_MODULES = frozenset(
@@ -396,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--out", required=True, help="run folder to write")
     train.add_argument("--evaluate", action="store_true", help="evaluate after training")
-    train.add_argument("--trials", type=_positive, default=100, help="evaluation trials")
+    train.add_argument("--trials", type=_positive, default=DEFAULT_TRIALS, help="evaluation trials")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_schedule(train)
     _add_preset(train)
@@ -405,7 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     evaluate = sub.add_parser("evaluate", help="evaluate saved runs (CBF on, paper's rules)")
     evaluate.add_argument("runs", nargs="+", help="run folders")
-    evaluate.add_argument("--trials", type=_positive, default=100)
+    evaluate.add_argument("--trials", type=_positive, default=DEFAULT_TRIALS)
     evaluate.add_argument(
         "--policy",
         choices=("kept", "last"),
@@ -430,7 +430,9 @@ def build_parser() -> argparse.ArgumentParser:
     repro.add_argument(
         "--updates", type=_positive, default=DEFAULT_UPDATES, help="PPO updates per run"
     )
-    repro.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
+    repro.add_argument(
+        "--trials", type=_positive, default=DEFAULT_TRIALS, help="evaluation trials per run"
+    )
     _add_ray(repro)
     repro.add_argument("--quiet", action="store_true")
     _add_schedule(repro)
@@ -443,8 +445,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     abl.add_argument("--out", default="results_ablation", help="folder (default: results_ablation)")
     abl.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    abl.add_argument("--updates", type=_positive, default=300, help="PPO updates per run")
-    abl.add_argument("--trials", type=_positive, default=100, help="evaluation trials per run")
+    abl.add_argument("--updates", type=_positive, default=STUDY_UPDATES, help="PPO updates per run")
+    abl.add_argument(
+        "--trials", type=_positive, default=DEFAULT_TRIALS, help="evaluation trials per run"
+    )
     _add_ray(abl)
     abl.add_argument("--quiet", action="store_true")
     abl.set_defaults(handler=_ablation)
@@ -454,7 +458,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tune.add_argument("--config", choices=sorted(CONFIGS), default=FULL)
     tune.add_argument("--samples", type=_positive, default=32, help="samples (default 32)")
-    tune.add_argument("--updates", type=_positive, default=300, help="PPO updates per sample")
+    tune.add_argument(
+        "--updates", type=_positive, default=STUDY_UPDATES, help="PPO updates per sample"
+    )
     tune.add_argument("--out", default="results_tune", help="folder (default: results_tune)")
     tune.add_argument(
         "--search",

@@ -19,6 +19,7 @@ from tlshield.envs import ENV_ID, env_horizon, import_modules, make, scored_by_r
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.lab import measures
+from tlshield.lab.presets import DEFAULT_TRIALS
 from tlshield.lab.runs import read_record
 from tlshield.lab.seeds import EVAL_SEED, MAX_TRIALS
 
@@ -120,7 +121,7 @@ EVALUATION_FILES = {
 
 def evaluate(
     run: str | Path,
-    trials: int = 100,
+    trials: int = DEFAULT_TRIALS,
     seed: int = EVAL_SEED,
     policy: Callable[[np.ndarray], np.ndarray] | None = None,
     *,

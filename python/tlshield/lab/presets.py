@@ -11,6 +11,11 @@ from typing import Any
 #: 0.90-0.99 on the tuning seeds 0-4 at 600 updates and 0.87-0.96 at 300; rl_cbf_clf
 #: 0.98-1.00 and 0.87-0.99 (docs/learning.md).
 DEFAULT_UPDATES = 600
+#: PPO updates of each run of a study of many runs: the ablation (docs/reproduction.md) and
+#: each tuning sample, measured at this budget before the default grew to 600.
+STUDY_UPDATES = 300
+#: Evaluation episodes per trained policy (reset seeds from 10,000: never trained or tuned on).
+DEFAULT_TRIALS = 100
 
 #: PPO settings by preset: environments, SB3 PPO keywords and the networks, and tlshield's own
 #: keys (read by :func:`tlshield.lab.training.train`): ``policy``

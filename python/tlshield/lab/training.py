@@ -50,14 +50,16 @@ from tlshield.envs import (
     scored_by_return,
 )
 from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
-from tlshield.envs.params import FULL, as_flat
+from tlshield.envs.params import FULL, as_flat, check_config
 from tlshield.lab.evaluation import evaluate
 from tlshield.lab.presets import (
     DEFAULT_FINAL_SCALE,
     DEFAULT_SCHEDULE,
+    DEFAULT_TRIALS,
     DEFAULT_UPDATES,
     PRESETS,
     SCHEDULES,
+    STUDY_UPDATES,
 )
 from tlshield.lab.runs import RUN_FILE, is_finished, load_run
 from tlshield.lab.seeds import check_seeds, learner_seed, train_seed
@@ -68,8 +70,7 @@ def _check_run_args(
 ) -> None:
     if preset not in PRESETS:
         raise ValueError(f"preset {preset!r}: expected one of {', '.join(PRESETS)}")
-    if config not in CONFIGS:
-        raise ValueError(f"config {config!r}: expected one of {', '.join(CONFIGS)}")
+    check_config(config)
     if not (isinstance(updates, int) and updates > 0):
         raise ValueError(f"updates = {updates!r}: expected a positive integer")
     if schedule not in SCHEDULES:
@@ -430,7 +431,7 @@ def reproduce(
     configs: tuple[str, ...] = tuple(CONFIGS),
     seeds: tuple[int, ...] = (0, 1),
     updates: int = DEFAULT_UPDATES,
-    trials: int = 100,
+    trials: int = DEFAULT_TRIALS,
     workers: int | None = None,
     address: str | None = None,
     progress: bool = True,
@@ -481,8 +482,8 @@ def ablation(
     *,
     config: str = FULL,
     seeds: tuple[int, ...] = (0, 1),
-    updates: int = 300,
-    trials: int = 100,
+    updates: int = STUDY_UPDATES,
+    trials: int = DEFAULT_TRIALS,
     workers: int | None = None,
     address: str | None = None,
     progress: bool = True,

@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from tlshield.envs.channel import CONFIGS, ChannelParams
-from tlshield.envs.params import FULL
-from tlshield.lab.presets import DEFAULT_SCHEDULE, PRESETS, SCHEDULES
+from tlshield.envs.params import FULL, check_config
+from tlshield.lab.presets import DEFAULT_SCHEDULE, PRESETS, SCHEDULES, STUDY_UPDATES
 from tlshield.lab.seeds import MAX_TRIALS, TUNE_SEED
 from tlshield.lab.settings import split
 
@@ -116,8 +116,7 @@ def to_settings(params: dict[str, Any], config: str) -> dict[str, Any]:
 
 
 def _check(config: str, names: Sequence[str], samples: int, updates: int, trials: int) -> None:
-    if config not in CONFIGS:
-        raise ValueError(f"config {config!r}: expected one of {', '.join(CONFIGS)}")
+    check_config(config)
     known = searchable(config)
     unknown = sorted(set(names) - set(known))
     if unknown:
@@ -204,7 +203,7 @@ def tune(
     *,
     config: str = FULL,
     samples: int = 32,
-    updates: int = 300,
+    updates: int = STUDY_UPDATES,
     search: Sequence[str] | None = None,
     seed: int = 3,
     trials: int = 50,
