@@ -1,5 +1,4 @@
-//! The shield's input checks: parameters against each other (the RL box inside the correction
-//! boxes, the drift's shape) and every call's input (state lengths, finiteness, actions, the
+//! The shield's input checks: every call's input (state lengths, finiteness, actions, the
 //! per-call dynamics, batches and monitors), each a `ShieldError` naming what was wrong.
 
 use std::sync::Arc;
@@ -9,58 +8,8 @@ use crate::monitor::MonitorBatch;
 use crate::validate::check_finite;
 
 use super::inputs::{BatchDynamics, ControlAffine};
-use super::params::{Bounds, ShieldParams};
+use super::params::Bounds;
 use super::Shield;
-
-pub(super) fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(ShieldError::Config(format!(
-            "{what} = {value}: expected a finite number > 0"
-        )))
-    }
-}
-
-/// Checks that applying no action stays feasible for every RL action in `rl`: the CBF box must
-/// be able to cancel it (`cbf ⊇ -rl`, for steps without a goal, where `a_clf` is absent), and
-/// with the CLF on, `cbf + clf ⊇ -rl` (only binding when the CLF box excludes 0), and actuator
-/// limits must allow 0. Without that authority the barrier rows can become infeasible, and the
-/// relaxed answer breaks them. (For the driftless models, unicycle and single integrator,
-/// applying nothing keeps every barrier where it is; the CBF row then holds for any h >= margin.)
-pub(super) fn check_cover(params: &ShieldParams, rl: &Bounds) -> Result<(), ShieldError> {
-    let (cbf, clf) = (&params.cbf_bounds, &params.clf_bounds);
-    for j in 0..rl.lo.len() {
-        let (need_lo, need_hi) = (-rl.hi[j], -rl.lo[j]);
-        if cbf.lo[j] > need_lo || cbf.hi[j] < need_hi {
-            return Err(ShieldError::Config(format!(
-                "cbf_bounds[{j}] = ({}, {}) cannot cancel every RL action: rl_bounds[{j}] = \
-                 ({}, {}), so the CBF box must contain ({need_lo}, {need_hi}) for the barriers \
-                 to stay feasible",
-                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j]
-            )));
-        }
-        let (sum_lo, sum_hi) = (cbf.lo[j] + clf.lo[j], cbf.hi[j] + clf.hi[j]);
-        if params.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
-            return Err(ShieldError::Config(format!(
-                "cbf_bounds[{j}] = ({}, {}) plus clf_bounds[{j}] = ({}, {}) reach ({sum_lo}, \
-                 {sum_hi}), which cannot cancel every RL action in rl_bounds[{j}] = ({}, {}): \
-                 widen cbf_bounds or let the CLF box contain 0",
-                cbf.lo[j], cbf.hi[j], clf.lo[j], clf.hi[j], rl.lo[j], rl.hi[j]
-            )));
-        }
-        if let Some(act) = &params.action_bounds {
-            if act.lo[j] > 0.0 || act.hi[j] < 0.0 {
-                return Err(ShieldError::Config(format!(
-                    "action_bounds[{j}] = ({}, {}) exclude 0: the shield needs to be able to \
-                     apply no action",
-                    act.lo[j], act.hi[j]
-                )));
-            }
-        }
-    }
-    Ok(())
-}
 
 /// Checks that every row of `a` (rows of `lo.len()` values) lies in `b`, up to rounding
 /// (1e-9 of the bound's size, so a policy action scaled onto the box's edge passes).

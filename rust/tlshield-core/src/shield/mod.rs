@@ -41,7 +41,6 @@ use crate::slots::Slots;
 use crate::validate::check_finite;
 
 mod check;
-use check::{check_cover, positive};
 mod gradient;
 mod inputs;
 mod order;
@@ -144,115 +143,13 @@ impl Shield {
         custom: Option<CustomModel>,
         params: ShieldParams,
     ) -> Result<Self, ShieldError> {
-        positive("alpha", params.alpha)?;
-        if let Some(a2) = params.alpha2 {
-            positive("alpha2", a2)?;
-        }
-        positive("clf_gain", params.clf_gain)?;
-        positive("c3", params.c3)?;
-        positive("k", params.k)?;
-        positive("slack_penalty", params.slack_penalty)?;
-        if let Some(h) = params.heading.filter(|h| params.pos.contains(h)) {
-            return Err(ShieldError::Config(format!(
-                "heading = {h}: it is one of the CLF's position dimensions pos = {:?}; the \
-                 heading is the angle a turn input steers",
-                params.pos
-            )));
-        }
-        if !(params.route_clearance.is_finite() && params.route_clearance >= 0.0) {
-            return Err(ShieldError::Config(format!(
-                "route_clearance = {}: expected a finite number >= 0 (a fraction of each \
-                 obstacle's radius)",
-                params.route_clearance
-            )));
-        }
-        if !(params.margin.is_finite() && params.margin > 0.0) {
-            return Err(ShieldError::Config(format!(
-                "margin = {}: expected a finite number > 0 (an atom holds only while its \
-                 robustness is > 0, so barriers held at h >= 0 would let a state settle at \
-                 h = 0, or just below it after a discrete step, where the task counts it \
-                 violated)",
-                params.margin
-            )));
-        }
-        for (i, &(d, w)) in params.disturbance.iter().enumerate() {
-            if !(w.is_finite() && w >= 0.0) {
-                return Err(ShieldError::Config(format!(
-                    "disturbance bound of dimension {d} = {w}: expected a finite number >= 0"
-                )));
-            }
-            if params.disturbance[..i].iter().any(|&(e, _)| e == d) {
-                return Err(ShieldError::Config(format!(
-                    "disturbance: dimension {d} is given twice"
-                )));
-            }
-        }
-        for b in &params.barriers {
-            positive(
-                &format!("slack weight of barrier {:?}", b.name),
-                b.slack_weight,
-            )?;
-        }
         let m = match (&dynamics, &custom) {
             (Some(d), _) => d.inputs(),
             (None, Some(c)) => c.inputs(),
             (None, None) => params.cbf_bounds.lo.len(),
         };
-        if m == 0 {
-            return Err(ShieldError::Config(
-                "the system has no inputs (bounds are empty)".into(),
-            ));
-        }
-        params.cbf_bounds.check("cbf_bounds", m)?;
-        if let Some(round) = &params.clf_round {
-            round.check("clf_round", m)?;
-        }
-        params.clf_bounds.check("clf_bounds", m)?;
-        if let Some(b) = &params.action_bounds {
-            b.check("action_bounds", m)?;
-        }
-        if let Some(rl) = &params.rl_bounds {
-            rl.check("rl_bounds", m)?;
-            if params.use_cbf {
-                check_cover(&params, rl)?;
-            }
-        }
-        if params.pos.is_empty()
-            || (1..params.pos.len()).any(|i| params.pos[..i].contains(&params.pos[i]))
-        {
-            return Err(ShieldError::Config(format!(
-                "pos = {:?}: expected at least one distinct state dimension",
-                params.pos
-            )));
-        }
+        params.validate(m, automaton.spec())?;
         let spec = automaton.spec();
-        if !spec.is_bound() {
-            return Err(ShieldError::Config(
-                "the automaton was built from a formula alone (no predicates): build it from a \
-                 Spec with predicates to shield states"
-                    .into(),
-            ));
-        }
-        if params.use_clf {
-            for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
-                for leaf in crate::region::alternatives(p)
-                    .into_iter()
-                    .flatten()
-                    .flatten()
-                {
-                    if let Predicate::Ball(ball) = leaf {
-                        if ball.pos().len() != params.pos.len() {
-                            return Err(ShieldError::Config(format!(
-                                "pos has {} dimensions but the goal ball {name:?} has {}; the \
-                                 CLF drives s[pos] to points inside balls, so they must match",
-                                params.pos.len(),
-                                ball.pos().len()
-                            )));
-                        }
-                    }
-                }
-            }
-        }
         let mut min_dim = spec
             .predicates()
             .iter()

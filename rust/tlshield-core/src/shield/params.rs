@@ -2,6 +2,7 @@
 //! [`Bounds`] of the corrections and the [`SolverChoice`].
 
 use crate::predicate::Predicate;
+use crate::spec::Spec;
 
 use super::ShieldError;
 
@@ -409,9 +410,196 @@ impl ShieldParams {
     }
 }
 
+impl ShieldParams {
+    /// Checks the parameters on their own and for a system of `m` inputs shielding the task of
+    /// `spec`: every gain and weight a finite number > 0, `margin` > 0, the routing clearance
+    /// and the disturbance bounds >= 0, every box of `m` values and the RL box inside what the
+    /// corrections can cancel, `pos` distinct dimensions matching the goal balls, and a spec
+    /// with predicates. Each failure names the parameter ([`ShieldError::Config`]).
+    pub fn validate(&self, m: usize, spec: &Spec) -> Result<(), ShieldError> {
+        positive("alpha", self.alpha)?;
+        if let Some(a2) = self.alpha2 {
+            positive("alpha2", a2)?;
+        }
+        positive("clf_gain", self.clf_gain)?;
+        positive("c3", self.c3)?;
+        positive("k", self.k)?;
+        positive("slack_penalty", self.slack_penalty)?;
+        if let Some(h) = self.heading.filter(|h| self.pos.contains(h)) {
+            return Err(ShieldError::Config(format!(
+                "heading = {h}: it is one of the CLF's position dimensions pos = {:?}; the \
+                 heading is the angle a turn input steers",
+                self.pos
+            )));
+        }
+        if !(self.route_clearance.is_finite() && self.route_clearance >= 0.0) {
+            return Err(ShieldError::Config(format!(
+                "route_clearance = {}: expected a finite number >= 0 (a fraction of each \
+                 obstacle's radius)",
+                self.route_clearance
+            )));
+        }
+        if !(self.margin.is_finite() && self.margin > 0.0) {
+            return Err(ShieldError::Config(format!(
+                "margin = {}: expected a finite number > 0 (an atom holds only while its \
+                 robustness is > 0, so barriers held at h >= 0 would let a state settle at \
+                 h = 0, or just below it after a discrete step, where the task counts it \
+                 violated)",
+                self.margin
+            )));
+        }
+        for (i, &(d, w)) in self.disturbance.iter().enumerate() {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(ShieldError::Config(format!(
+                    "disturbance bound of dimension {d} = {w}: expected a finite number >= 0"
+                )));
+            }
+            if self.disturbance[..i].iter().any(|&(e, _)| e == d) {
+                return Err(ShieldError::Config(format!(
+                    "disturbance: dimension {d} is given twice"
+                )));
+            }
+        }
+        for b in &self.barriers {
+            positive(
+                &format!("slack weight of barrier {:?}", b.name),
+                b.slack_weight,
+            )?;
+        }
+        if m == 0 {
+            return Err(ShieldError::Config(
+                "the system has no inputs (bounds are empty)".into(),
+            ));
+        }
+        self.cbf_bounds.check("cbf_bounds", m)?;
+        if let Some(round) = &self.clf_round {
+            round.check("clf_round", m)?;
+        }
+        self.clf_bounds.check("clf_bounds", m)?;
+        if let Some(b) = &self.action_bounds {
+            b.check("action_bounds", m)?;
+        }
+        if let Some(rl) = &self.rl_bounds {
+            rl.check("rl_bounds", m)?;
+            if self.use_cbf {
+                check_cover(self, rl)?;
+            }
+        }
+        if self.pos.is_empty() || (1..self.pos.len()).any(|i| self.pos[..i].contains(&self.pos[i]))
+        {
+            return Err(ShieldError::Config(format!(
+                "pos = {:?}: expected at least one distinct state dimension",
+                self.pos
+            )));
+        }
+        if !spec.is_bound() {
+            return Err(ShieldError::Config(
+                "the automaton was built from a formula alone (no predicates): build it from a \
+                 Spec with predicates to shield states"
+                    .into(),
+            ));
+        }
+        if self.use_clf {
+            for (name, p) in spec.atoms().iter().zip(spec.predicates()) {
+                for leaf in crate::region::alternatives(p)
+                    .into_iter()
+                    .flatten()
+                    .flatten()
+                {
+                    if let Predicate::Ball(ball) = leaf {
+                        if ball.pos().len() != self.pos.len() {
+                            return Err(ShieldError::Config(format!(
+                                "pos has {} dimensions but the goal ball {name:?} has {}; the \
+                                 CLF drives s[pos] to points inside balls, so they must match",
+                                self.pos.len(),
+                                ball.pos().len()
+                            )));
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn positive(what: &str, value: f64) -> Result<(), ShieldError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(ShieldError::Config(format!(
+            "{what} = {value}: expected a finite number > 0"
+        )))
+    }
+}
+
+/// Checks that applying no action stays feasible for every RL action in `rl`: the CBF box must
+/// be able to cancel it (`cbf ⊇ -rl`, for steps without a goal, where `a_clf` is absent), and
+/// with the CLF on, `cbf + clf ⊇ -rl` (only binding when the CLF box excludes 0), and actuator
+/// limits must allow 0. Without that authority the barrier rows can become infeasible, and the
+/// relaxed answer breaks them. (For the driftless models, unicycle and single integrator,
+/// applying nothing keeps every barrier where it is; the CBF row then holds for any h >= margin.)
+fn check_cover(params: &ShieldParams, rl: &Bounds) -> Result<(), ShieldError> {
+    let (cbf, clf) = (&params.cbf_bounds, &params.clf_bounds);
+    for j in 0..rl.lo.len() {
+        let (need_lo, need_hi) = (-rl.hi[j], -rl.lo[j]);
+        if cbf.lo[j] > need_lo || cbf.hi[j] < need_hi {
+            return Err(ShieldError::Config(format!(
+                "cbf_bounds[{j}] = ({}, {}) cannot cancel every RL action: rl_bounds[{j}] = \
+                 ({}, {}), so the CBF box must contain ({need_lo}, {need_hi}) for the barriers \
+                 to stay feasible",
+                cbf.lo[j], cbf.hi[j], rl.lo[j], rl.hi[j]
+            )));
+        }
+        let (sum_lo, sum_hi) = (cbf.lo[j] + clf.lo[j], cbf.hi[j] + clf.hi[j]);
+        if params.use_clf && (sum_lo > need_lo || sum_hi < need_hi) {
+            return Err(ShieldError::Config(format!(
+                "cbf_bounds[{j}] = ({}, {}) plus clf_bounds[{j}] = ({}, {}) reach ({sum_lo}, \
+                 {sum_hi}), which cannot cancel every RL action in rl_bounds[{j}] = ({}, {}): \
+                 widen cbf_bounds or let the CLF box contain 0",
+                cbf.lo[j], cbf.hi[j], clf.lo[j], clf.hi[j], rl.lo[j], rl.hi[j]
+            )));
+        }
+        if let Some(act) = &params.action_bounds {
+            if act.lo[j] > 0.0 || act.hi[j] < 0.0 {
+                return Err(ShieldError::Config(format!(
+                    "action_bounds[{j}] = ({}, {}) exclude 0: the shield needs to be able to \
+                     apply no action",
+                    act.lo[j], act.hi[j]
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `validate` alone, without building a shield: each bad setting is refused by name.
+    #[test]
+    fn validate_names_the_bad_setting() {
+        let spec = crate::fixtures::task_spec();
+        let b = |lo: f64, hi: f64| Bounds {
+            lo: vec![lo; 2],
+            hi: vec![hi; 2],
+        };
+        let good = ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5));
+        good.validate(2, &spec).unwrap();
+        let err = |p: ShieldParams, m: usize| p.validate(m, &spec).unwrap_err().to_string();
+        let mut bad = good.clone();
+        bad.alpha = -1.0;
+        assert!(err(bad, 2).contains("alpha"));
+        let mut bad = good.clone();
+        bad.margin = 0.0;
+        assert!(err(bad, 2).contains("margin"));
+        assert!(err(good.clone(), 3).contains("cbf_bounds"));
+        assert!(err(good.clone(), 0).contains("no inputs"));
+        let unbound = Spec::from_formula("F a").unwrap();
+        let alone = good.validate(2, &unbound).unwrap_err().to_string();
+        assert!(alone.contains("formula alone"), "{alone}");
+    }
 
     #[test]
     fn the_round_bound_is_the_inscribed_polygon() {
