@@ -263,3 +263,18 @@ def test_monitor_batch_misuse_is_a_clear_error():
     other.reset(states)
     with pytest.raises(tlshield.ShieldError, match="another automaton"):
         shield.filter_monitors(other, np.zeros((3, 2)))
+
+
+def test_one_error_for_a_monitor_without_an_episode() -> None:
+    """Wherever a monitor is read before its episode starts (one monitor, a batch's rows, the
+    batch's states), the error is the same kind, AutomatonError (a ValueError), and names the
+    row of a batch."""
+    shield = task_shield()
+    monitor = tlshield.Monitor(shield.automaton)
+    with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
+        shield.filter_monitor(monitor, np.zeros(2))
+    batch = tlshield.MonitorBatch(shield.automaton, 2)
+    for call in (lambda: shield.filter_monitors(batch, np.zeros((2, 2))), lambda: batch.states):
+        with pytest.raises(tlshield.AutomatonError, match="monitors row 0 has no episode yet"):
+            call()
+    assert issubclass(tlshield.AutomatonError, ValueError)

@@ -148,9 +148,13 @@ pub enum AutomatonError {
     /// The trap state has no task reward (the environment pays a trap penalty there).
     #[error("q = {0} is the trap state, which has no task reward; pass trap_penalty to reward it")]
     TrapReward(usize),
-    /// A task monitor was advanced before its episode started.
-    #[error("the monitor has no episode yet: call reset(s0) before advance(s_next)")]
-    NotReset,
+    /// A task monitor was used before its episode started (`row`: which monitor of a batch);
+    /// the one error for "not started", wherever a monitor is read.
+    #[error("{}", not_reset(.row))]
+    NotReset {
+        /// The batch row, for a monitor of a batch.
+        row: Option<usize>,
+    },
     /// Bad numeric input.
     #[error(transparent)]
     Input(#[from] InputError),
@@ -183,5 +187,13 @@ fn human_bytes(bytes: usize) -> String {
         format!("{bytes} bytes")
     } else {
         format!("{value:.1} {}", UNITS[unit])
+    }
+}
+
+/// The text of [`AutomatonError::NotReset`].
+fn not_reset(row: &Option<usize>) -> String {
+    match row {
+        None => "the monitor has no episode yet: call reset(s0) before advance(s_next)".into(),
+        Some(r) => format!("monitors row {r} has no episode yet: call reset(s0) on it first"),
     }
 }

@@ -139,7 +139,7 @@ impl Monitor {
     /// Reads `s_next`: moves `q` to `step(s_next, q)` and returns the reward of that transition.
     pub fn advance(&mut self, s_next: &[f64]) -> Result<TaskStep, AutomatonError> {
         if !self.started {
-            return Err(AutomatonError::NotReset);
+            return Err(AutomatonError::NotReset { row: None });
         }
         self.check("s_next", s_next)?;
         Ok(self.advance_checked(s_next))
@@ -529,7 +529,7 @@ mod tests {
         .unwrap();
         assert_eq!(
             monitor.advance(&[0.0; 13]).unwrap_err(),
-            AutomatonError::NotReset
+            AutomatonError::NotReset { row: None }
         );
         crate::tests_support::assert_error(monitor.reset(&[0.0; 12]), "Input(Shape", "s0 length");
         crate::tests_support::assert_error(

@@ -318,9 +318,9 @@ impl PyMonitorBatch {
     fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let monitors = self.inner.monitors();
         if let Some(row) = monitors.iter().position(|m| !m.started()) {
-            return Err(PyValueError::new_err(format!(
-                "states: monitors row {row} has no episode yet (reset it first)"
-            )));
+            return map(Err(tlshield_core::AutomatonError::NotReset {
+                row: Some(row),
+            }));
         }
         let n = monitors.first().map_or(0, |m| m.state().len());
         let values: Vec<f64> = monitors.iter().flat_map(|m| m.state()).copied().collect();

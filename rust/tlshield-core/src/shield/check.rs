@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use crate::error::{InputError, ShieldError};
+use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::MonitorBatch;
 use crate::validate::check_finite;
 
@@ -274,12 +274,7 @@ impl Shield {
             ));
         }
         if let Some(row) = monitors.iter().position(|m| !m.started()) {
-            return Err(InputError::Value {
-                what: format!("monitors row {row}"),
-                expected: "a started episode (reset it first)".into(),
-                got: "a monitor without one".into(),
-            }
-            .into());
+            return Err(AutomatonError::NotReset { row: Some(row) }.into());
         }
         let rows = monitors.len();
         self.check_batch_actions(a_rl, rows)?;

@@ -314,7 +314,7 @@ impl Shield {
             ));
         }
         if !monitor.started() {
-            return Err(AutomatonError::NotReset.into());
+            return Err(AutomatonError::NotReset { row: None }.into());
         }
         let call = Call {
             s: monitor.state(),

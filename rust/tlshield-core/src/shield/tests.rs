@@ -617,8 +617,8 @@ fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
     let mut out = BatchOutput::default();
     crate::tests_support::assert_error(
         sh.filter_monitors(&batch, &vec![0.0; 2 * rows], None, &mut out),
-        "Input(Value",
-        "monitors row 0",
+        "Automaton(NotReset",
+        "monitors row 0 has no episode yet",
     );
     for t in 0..30 {
         let states: Vec<f64> = (0..rows)
