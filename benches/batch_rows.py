@@ -40,29 +40,12 @@ def worker(rows: list[int], budget: float, seed: int) -> dict[str, dict[str, flo
     """Seconds per row of each call at each batch size, in this process (its thread count)."""
     sys.path.insert(0, str(HERE))
     from compare_robustness import measure
-    from compare_shield import make_steps
+    from compare_shield import make_shield, make_steps
 
-    import tlshield
-    from tlshield.envs.channel import channel_task_spec
-
-    sys.path.insert(0, str(ROOT))
-    from tests.shield_reference import Params, Task
-
-    params, task = Params(), Task()
-    kwargs = dict(
-        alpha=params.alpha,
-        c3=params.c3,
-        k=params.k,
-        cbf_bounds=params.cbf,
-        clf_bounds=params.clf,
-        margin=params.margin,
-    )
     try:  # the Eq. 5D2 QP as the baselines pose it; builds before routing have no `route`
-        shield = tlshield.Shield(
-            channel_task_spec(), tlshield.Unicycle(task.eps), route=False, **kwargs
-        )
+        shield = make_shield()
     except TypeError:
-        shield = tlshield.Shield(channel_task_spec(), tlshield.Unicycle(task.eps), **kwargs)
+        shield = make_shield(route=None)
     aut = shield.automaton
     out: dict[str, dict[str, float]] = {}
     for n in rows:

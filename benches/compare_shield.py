@@ -66,10 +66,12 @@ def make_steps(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.nd
     return steps
 
 
-def make_shield(solver: str = "auto", route: bool = False) -> Any:
+def make_shield(solver: str = "auto", route: bool | None = False) -> Any:
     """The paper's task shield with the reference parameters (tests/shield_reference.Params),
     by default without routing: the QP of Eq. 5D2 exactly as the baselines build it (routing
-    aims the CLF elsewhere; its cost is timed on its own, ``route=True``)."""
+    aims the CLF elsewhere; its cost is timed on its own, ``route=True``). ``route=None``
+    leaves the argument out, for builds from before routing (``benches/batch_rows.py
+    --against``)."""
     import tlshield
     from tlshield.envs.channel import channel_task_spec
 
@@ -84,7 +86,7 @@ def make_shield(solver: str = "auto", route: bool = False) -> Any:
         clf_bounds=params.clf,
         margin=params.margin,
         solver=solver,
-        route=route,
+        **({} if route is None else {"route": route}),
     )
 
 
