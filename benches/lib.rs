@@ -33,10 +33,7 @@ pub fn random_trajectories(count: usize, steps: usize, seed: u64) -> Vec<f64> {
 /// The case-study shield (unicycle, eps = 0.1; alpha 2, c3 1, K 1e4; CBF box +-6, CLF box
 /// +-0.5), as `tests/shield_reference.py` and `benches/compare_shield.py` use it.
 pub fn task_shield(automaton: Arc<Automaton>, solver: SolverChoice) -> Shield {
-    let bounds = |v: f64| Bounds {
-        lo: vec![-v; 2],
-        hi: vec![v; 2],
-    };
+    let bounds = |v: f64| Bounds::new(vec![-v; 2], vec![v; 2]);
     let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(6.0), bounds(0.5)).with_solver(solver);
     let unicycle = Dynamics::unicycle(0.1, 0, 1, 2).unwrap();
     Shield::new(automaton, Some(unicycle), params).unwrap()

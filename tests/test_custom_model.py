@@ -165,7 +165,7 @@ def test_without_a_model_a_call_that_cannot_act_is_an_error_not_a_silent_pass() 
     # Scalar bounds do not say how many inputs a model-less shield has.
     with pytest.raises(ValueError, match="inputs=m, or per-input bounds"):
         tlshield.Shield(spec, None, cbf_bounds=(-4.0, 4.0), clf_bounds=(-1.0, 1.0), **kw)  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="inputs=3, but the model has 2"):
+    with pytest.raises(ValueError, match="inputs = 3, but the model has 2 inputs"):
         shield(tlshield.DoubleIntegrator([0, 1], [2, 3]), inputs=3)
     per_input = tlshield.Shield(
         spec, None, cbf_bounds=([-4.0], [4.0]), clf_bounds=([-1.0], [1.0]), **kw

@@ -11,7 +11,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use tlshield_bench::{shield_instances, task_shield};
 use tlshield_core::active_set::ActiveSetQp;
 use tlshield_core::qp::{ClarabelQp, QpSolution, QpStatus};
-use tlshield_core::{Automaton, BatchGradient, BatchOutput, SolverChoice};
+use tlshield_core::{Automaton, BatchGradient, BatchOutput, SolverChoice, StateBatch};
 
 fn shield(c: &mut Criterion) {
     let automaton = Arc::new(Automaton::build(&tlshield_bench::task_spec()).unwrap());
@@ -90,8 +90,13 @@ fn batch(c: &mut Criterion) {
     let mut out = BatchOutput::default();
     group.bench_function("filter_batch", |b| {
         b.iter(|| {
-            sh.filter_batch(black_box(&states), n, &qs, &a_rl, None, &mut out)
-                .unwrap()
+            sh.filter_batch(
+                StateBatch::new(black_box(&states), n, &qs),
+                &a_rl,
+                None,
+                &mut out,
+            )
+            .unwrap()
         })
     });
     let mut grad = BatchGradient::default();
@@ -103,8 +108,15 @@ fn batch(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter(|| {
                 let states = black_box(&states);
-                sh.jacobian_batch(states, n, &qs, &a_rl, None, None, want_states, &mut grad)
-                    .unwrap()
+                sh.jacobian_batch(
+                    StateBatch::new(states, n, &qs),
+                    &a_rl,
+                    None,
+                    None,
+                    want_states,
+                    &mut grad,
+                )
+                .unwrap()
             })
         });
     }

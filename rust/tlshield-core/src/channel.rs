@@ -13,7 +13,7 @@ use std::f64::consts::SQRT_2;
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
-use crate::shield::Shield;
+use crate::shield::{Shield, Want};
 use crate::world::{Measure, ShieldStep, World, WorldStep};
 
 /// State length: x, y, theta, three goal centres, two obstacle centres.
@@ -229,7 +229,7 @@ impl ChannelWorld {
         scale: bool,
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-        record: bool,
+        want: Want,
     ) -> Result<WorldStep, ShieldError> {
         let p = &self.params;
         if let Some(i) = action.iter().position(|a| !a.is_finite()) {
@@ -243,7 +243,7 @@ impl ChannelWorld {
         let filtered = match shield {
             Some(shield) => {
                 let drift = p.obstacle_drift.then_some(&self.drift[..]);
-                Some(ShieldStep::filter(shield, monitor, a_rl, drift, record)?)
+                Some(ShieldStep::filter(shield, monitor, a_rl, drift, want)?)
             }
             None => None,
         };
@@ -378,7 +378,7 @@ impl World for ChannelWorld {
         monitor: &mut Monitor,
         shield: Option<&Shield>,
     ) -> Result<WorldStep, ShieldError> {
-        self.step(action, scale, monitor, shield, false)
+        self.step(action, scale, monitor, shield, Want::Action)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {

@@ -55,7 +55,7 @@ pub use progress::{ProgressParams, ProgressReward};
 pub use robustness::{Scratch, Trajectory, TrajectoryBatch};
 pub use shield::{
     Barrier, BarrierSource, BatchDynamics, BatchGradient, BatchOutput, Bounds, ControlAffine,
-    Filtered, Shield, ShieldParams, SolvedBy, SolverChoice, Status,
+    Filtered, Shield, ShieldParams, SolvedBy, SolverChoice, StateBatch, Status, Want,
 };
 pub use spec::Spec;
 

@@ -9,7 +9,7 @@
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
-use crate::shield::Shield;
+use crate::shield::{Shield, Want};
 use crate::world::{Measure, ShieldStep, World, WorldStep};
 
 /// State length: position `x, y`, velocity `vx, vy`.
@@ -91,14 +91,14 @@ impl PointMassWorld {
     }
 
     /// One step for the RL action `a_rl` (accelerations), shielded by `shield` when given.
-    /// `monitor` must have read the current state (its reset or last advance). `record` keeps
-    /// the shield's whole answer (goal, barriers) in the step.
+    /// `monitor` must have read the current state (its reset or last advance). [`Want::Record`]
+    /// keeps the shield's whole answer (goal, barriers) in the step.
     pub fn step(
         &mut self,
         a_rl: [f64; 2],
         monitor: &mut Monitor,
         shield: Option<&Shield>,
-        record: bool,
+        want: Want,
     ) -> Result<WorldStep, ShieldError> {
         if let Some(i) = a_rl.iter().position(|a| !a.is_finite()) {
             return Err(InputError::NonFinite {
@@ -109,7 +109,7 @@ impl PointMassWorld {
         }
         let p = &self.params;
         let filtered = match shield {
-            Some(shield) => Some(ShieldStep::filter(shield, monitor, a_rl, None, record)?),
+            Some(shield) => Some(ShieldStep::filter(shield, monitor, a_rl, None, want)?),
             None => None,
         };
         let wanted = filtered.as_ref().map_or(a_rl, |f| f.action);
@@ -174,7 +174,7 @@ impl World for PointMassWorld {
         monitor: &mut Monitor,
         shield: Option<&Shield>,
     ) -> Result<WorldStep, ShieldError> {
-        self.step(action, monitor, shield, false)
+        self.step(action, monitor, shield, Want::Action)
     }
 
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]) {
@@ -215,17 +215,21 @@ mod tests {
         let mut world = PointMassWorld::new(params());
         world.reset([0.05, 1.0, -1.0, 0.0]);
         monitor.reset(world.state()).unwrap();
-        let step = world.step([5.0, 0.0], &mut monitor, None, true).unwrap();
+        let step = world
+            .step([5.0, 0.0], &mut monitor, None, Want::Record)
+            .unwrap();
         assert_eq!(step.applied, [1.0, 0.0]); // clipped to the box
         assert_eq!(world.state()[0], 0.0); // x = 0.05 - 0.1 left the room: held at the wall
         assert_eq!(world.state()[2], 0.0); // and its velocity into the wall is gone
         assert!(!step.truncated);
         for t in 2..=5 {
-            let step = world.step([0.0, 0.0], &mut monitor, None, true).unwrap();
+            let step = world
+                .step([0.0, 0.0], &mut monitor, None, Want::Record)
+                .unwrap();
             assert_eq!(step.truncated, t == 5);
         }
         crate::tests_support::assert_error(
-            world.step([f64::NAN, 0.0], &mut monitor, None, true),
+            world.step([f64::NAN, 0.0], &mut monitor, None, Want::Record),
             "Input(NonFinite",
             "action[0]",
         );

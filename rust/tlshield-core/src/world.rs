@@ -6,7 +6,7 @@ use smallvec::SmallVec;
 
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{Filtered, Shield, SolvedBy, Status};
+use crate::shield::{Filtered, Shield, SolvedBy, Status, Want};
 
 /// What a world measures at a state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,15 +68,15 @@ pub struct ShieldStep {
 
 impl ShieldStep {
     /// The shield's answer for `a_rl` at `monitor`'s last state (`drift` as in
-    /// [`Shield::filter`]); `record` keeps the whole answer (one allocation per step).
+    /// [`Shield::filter`]); [`Want::Record`] keeps the whole answer (one allocation per step).
     pub fn filter(
         shield: &Shield,
         monitor: &Monitor,
         a_rl: [f64; 2],
         drift: Option<&[f64]>,
-        record: bool,
+        want: Want,
     ) -> Result<ShieldStep, ShieldError> {
-        shield.filter_monitor_with(monitor, &a_rl, None, drift, record, |f| {
+        shield.filter_monitor_with(monitor, &a_rl, None, drift, want, |f| {
             let pair = |v: &[f64]| [v[0], v[1]];
             ShieldStep {
                 action: pair(&f.action),
@@ -86,7 +86,7 @@ impl ShieldStep {
                 slack: f.slack,
                 status: f.status,
                 solver: f.solver,
-                record: record.then(|| f.clone()),
+                record: (want == Want::Record).then(|| f.clone()),
             }
         })
     }

@@ -27,10 +27,7 @@ impl Rng {
 }
 
 fn bounds(v: f64, m: usize) -> Bounds {
-    Bounds {
-        lo: vec![-v; m],
-        hi: vec![v; m],
-    }
+    Bounds::new(vec![-v; m], vec![v; m])
 }
 
 /// A shield keeping `s[0..2]`, or the body point `along` metres ahead of it on the heading

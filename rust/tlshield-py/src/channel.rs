@@ -8,6 +8,7 @@ use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::channel::{
     self, ChannelParams, ChannelState, ChannelWorld, Obstacle, STATE_DIM,
 };
+use tlshield_core::Want;
 
 use crate::convert::{sequence, FloatArray};
 use crate::dynamics::PyUnicycle;
@@ -278,7 +279,7 @@ impl PyChannelWorld {
             scale,
             &mut monitor.inner,
             shield.as_deref().map(PyShield::core),
-            true,
+            Want::Record,
         ))?;
         let obs = self.observation(&monitor.inner);
         PyWorldStep::new(py, step, obs, shield)

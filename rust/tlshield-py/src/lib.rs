@@ -17,6 +17,7 @@ mod point_mass;
 mod predicate;
 mod progress;
 mod shield;
+mod shield_batch;
 mod shield_filter;
 mod shield_grad;
 mod shield_pickle;

@@ -6,6 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::point_mass::{PointMassParams, PointMassWorld, STATE_DIM};
+use tlshield_core::Want;
 
 use crate::convert::FloatArray;
 use crate::errors::map;
@@ -111,7 +112,7 @@ impl PyPointMassWorld {
             a,
             &mut monitor.inner,
             shield.as_deref().map(PyShield::core),
-            true,
+            Want::Record,
         ))?;
         let n = monitor.inner.automaton().num_states();
         let mut obs = vec![0.0; STATE_DIM + n];

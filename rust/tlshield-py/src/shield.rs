@@ -32,19 +32,21 @@ fn pair<'py>(obj: &Bound<'py, PyAny>) -> Option<[Bound<'py, PyAny>; 2]> {
     items.try_into().ok()
 }
 
-/// Bounds from `(lo, hi)`, each a scalar (broadcast to m) or a length-m sequence.
-fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
+/// Bounds from `(lo, hi)`: two numbers (the same bounds for every input, broadcast by the core
+/// once it knows m), or per-input sequences (a number beside a sequence is repeated to its
+/// length).
+fn bounds(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Bounds> {
     let pair_error = || {
         PyTypeError::new_err(format!(
-            "{name}: expected a pair (lo, hi) of numbers or of length-{m} sequences"
+            "{name}: expected a pair (lo, hi) of numbers or of per-input sequences"
         ))
     };
     let [lo, hi] = pair(obj).ok_or_else(pair_error)?;
-    let side = |v: &Bound<'_, PyAny>| -> PyResult<Vec<f64>> {
+    let side = |v: &Bound<'_, PyAny>| -> PyResult<Result<f64, Vec<f64>>> {
         if let Ok(x) = v.extract::<f64>() {
-            return Ok(vec![x; m]);
+            return Ok(Ok(x));
         }
-        convert::sequence::<f64>(v, name).map_err(|e| {
+        convert::sequence::<f64>(v, name).map(Err).map_err(|e| {
             if e.is_instance_of::<pyo3::exceptions::PyMemoryError>(v.py()) {
                 e
             } else {
@@ -52,9 +54,11 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str, m: usize) -> PyResult<Bounds> {
             }
         })
     };
-    Ok(Bounds {
-        lo: side(&lo)?,
-        hi: side(&hi)?,
+    Ok(match (side(&lo)?, side(&hi)?) {
+        (Ok(lo), Ok(hi)) => Bounds::uniform(lo, hi),
+        (Err(lo), Err(hi)) => Bounds::new(lo, hi),
+        (Ok(lo), Err(hi)) => Bounds::new(vec![lo; hi.len()], hi),
+        (Err(lo), Ok(hi)) => Bounds::new(lo.clone(), vec![hi; lo.len()]),
     })
 }
 
@@ -199,36 +203,6 @@ impl PyShield {
             Some(_) => None,
             None => model_of(dynamics)?,
         };
-        // m from the model, else from `inputs`, else from per-input CBF bounds; scalar bounds
-        // alone do not say how many inputs there are.
-        let from_model = match (&dynamics, &custom) {
-            (Some(d), _) => Some(d.inputs()),
-            (None, Some(c)) => Some(c.get().inner.inputs()),
-            (None, None) => None,
-        };
-        let m = match (from_model, inputs) {
-            (Some(m), Some(given)) if given != m => {
-                return Err(PyValueError::new_err(format!(
-                    "inputs={given}, but the model has {m} inputs"
-                )))
-            }
-            (Some(m), _) => m,
-            (None, Some(0)) => {
-                return Err(PyValueError::new_err("inputs: expected at least 1, got 0"))
-            }
-            (None, Some(given)) => given,
-            (None, None) => {
-                let [lo, _] = pair(cbf_bounds)
-                    .ok_or_else(|| PyTypeError::new_err("cbf_bounds: expected a pair (lo, hi)"))?;
-                lo.len().map_err(|_| {
-                    PyValueError::new_err(
-                        "cbf_bounds: with dynamics=None the number of inputs is not known from \
-                         scalar bounds; pass inputs=m, or per-input bounds ([lo_1, ..., lo_m], \
-                         [hi_1, ..., hi_m])",
-                    )
-                })?
-            }
-        };
         let pos = match pos {
             Some(p) => crate::convert::indices(p, "pos")?,
             None => ShieldParams::DEFAULT_POS.to_vec(),
@@ -237,15 +211,15 @@ impl PyShield {
             alpha,
             c3,
             k,
-            bounds(cbf_bounds, "cbf_bounds", m)?,
-            bounds(clf_bounds, "clf_bounds", m)?,
+            bounds(cbf_bounds, "cbf_bounds")?,
+            bounds(clf_bounds, "clf_bounds")?,
         )
         .with_action_bounds(
             action_bounds
-                .map(|b| bounds(b, "action_bounds", m))
+                .map(|b| bounds(b, "action_bounds"))
                 .transpose()?,
         )
-        .with_rl_bounds(rl_bounds.map(|b| bounds(b, "rl_bounds", m)).transpose()?)
+        .with_rl_bounds(rl_bounds.map(|b| bounds(b, "rl_bounds")).transpose()?)
         .with_barriers(
             barriers
                 .map(self::barriers)
@@ -266,6 +240,7 @@ impl PyShield {
             route_clearance.unwrap_or(tlshield_core::route::DEFAULT_CLEARANCE),
         )
         .with_heading(heading)
+        .with_inputs(inputs)
         .with_clf_round(
             clf_round.map(|(i, j, radius)| tlshield_core::shield::RoundBound {
                 inputs: [i, j],

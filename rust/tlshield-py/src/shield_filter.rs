@@ -7,10 +7,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use tlshield_core::{BarrierSource, BatchDynamics, BatchOutput, ControlAffine, Filtered, Shield};
 
-use crate::convert::{self, state, vector, FloatArray};
+use crate::convert::{state, vector, FloatArray};
 use crate::errors::map;
 use crate::monitor::{PyMonitor, PyMonitorBatch};
 use crate::shield::{PyFilterBatch, PyFilterResult, PyShield};
+use crate::shield_batch::BatchInput;
 
 impl PyShield {
     /// The core shield.
@@ -47,25 +48,21 @@ impl PyShield {
                 jacobian: Some(&jac),
             }));
         }
-        match (f, g) {
-            (None, None) => call(None),
-            (Some(f), Some(g)) => {
-                let f = FloatArray::extract(f, "f", 1, "(n,)")?;
-                let g = FloatArray::extract(g, "g", 2, "(n, m)")?;
-                if g.shape()[1] != self.inner.inputs() {
-                    return Err(PyValueError::new_err(format!(
-                        "g: expected shape (n, {}), got ({}, {})",
-                        self.inner.inputs(),
-                        g.shape()[0],
-                        g.shape()[1]
-                    )));
-                }
-                call(Some(ControlAffine::new(f.values(), g.values())))
-            }
-            _ => Err(PyValueError::new_err(
-                "pass both f and g (the control-affine dynamics at s), or neither",
-            )),
+        let f = f.map(|f| FloatArray::extract(f, "f", 1, "(n,)")).transpose()?;
+        let g = g.map(|g| FloatArray::extract(g, "g", 2, "(n, m)")).transpose()?;
+        if let Some(g) = g.as_ref().filter(|g| g.shape()[1] != self.inner.inputs()) {
+            return Err(PyValueError::new_err(format!(
+                "g: expected shape (n, {}), got ({}, {})",
+                self.inner.inputs(),
+                g.shape()[0],
+                g.shape()[1]
+            )));
         }
+        let fg = map(ControlAffine::given(
+            f.as_ref().map(FloatArray::values),
+            g.as_ref().map(FloatArray::values),
+        ))?;
+        call(fg)
     }
 
     /// A `ControlAffine` model's `f`, `g` and `J_f` at every row of `states`; `None` for a
@@ -266,51 +263,21 @@ impl PyShield {
                  filter_monitors(monitors, a_rl)",
             ));
         }
-        let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
-        let drift = drift
-            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
-            .transpose()?;
-        if let Some(d) = &drift {
-            if d.shape() != states.shape() {
-                return Err(PyValueError::new_err(format!(
-                    "filter_batch: drift must have the shape of states {}, got {}",
-                    crate::convert::shape_text(states.shape()),
-                    crate::convert::shape_text(d.shape())
-                )));
-            }
-        }
-        let drift_values = drift.as_ref().map(|d| d.values());
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
-        let qs_usize = convert::states(qs, "qs", self.inner.automaton())?;
-        let (rows, n, m) = (states.shape()[0], states.shape()[1], self.inner.inputs());
-        if qs_usize.len() != rows || a_rl.shape() != [rows, m] {
-            return Err(PyValueError::new_err(format!(
-                "filter_batch: expected qs ({rows},) and a_rl ({rows}, {m}) for {rows} states, \
-                 got qs ({},) and a_rl {}",
-                qs_usize.len(),
-                crate::convert::shape_text(a_rl.shape())
-            )));
-        }
-        let (values, actions) = (states.values(), a_rl.values());
+        let input = BatchInput::extract(self, py, "filter_batch", [states, qs, a_rl], drift)?;
+        let rows = input.rows().len();
         let shield = &self.inner;
         let mut out = BatchOutput::default();
-        let drift = drift_values;
-        let evaluated = match &self.custom {
-            Some(model) if n != model.get().inner.state_len() => {
-                return Err(PyValueError::new_err(format!(
-                    "states: expected rows of {} values (the model's state_dim), got {n}",
-                    model.get().inner.state_len()
-                )))
-            }
-            _ => self.evaluate_rows(py, values)?,
-        };
-        let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
-            f,
-            g,
-            jacobian: Some(j),
-        });
+        // Slices only cross into the GIL-free closure (the arrays' handles stay here).
+        let (batch, a_rl, dynamics, drift) =
+            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
         map(py.detach(|| {
-            shield.filter_batch_with(values, n, &qs_usize, actions, dynamics, drift, &mut out)
+            shield.filter_batch_with(
+                batch,
+                a_rl,
+                dynamics,
+                drift,
+                &mut out,
+            )
         }))?;
         self.batch_result(py, out, rows)
     }

@@ -1,13 +1,15 @@
-//! `Shield`'s gradients: `vjp_batch` and `jacobian_batch` (inputs checked in `GradientInput`).
+//! `Shield`'s gradients: `vjp_batch` and `jacobian_batch` (their arrays converted by
+//! `shield_batch::BatchInput`).
 
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use tlshield_core::{BatchDynamics, BatchGradient};
+use tlshield_core::BatchGradient;
 
 use crate::convert::{self, FloatArray};
 use crate::errors::map;
 use crate::shield::PyShield;
+use crate::shield_batch::BatchInput;
 
 #[pymethods]
 impl PyShield {
@@ -34,8 +36,8 @@ impl PyShield {
         state_grad: bool,
     ) -> PyResult<GradientTuple> {
         let grad = FloatArray::extract(grad_action, "grad_action", 2, "(B, m)")?;
-        let input = GradientInput::extract(self, py, "vjp_batch", states, qs, a_rl, drift)?;
-        let (rows, n, m) = (input.rows, input.n, self.inner.inputs());
+        let input = BatchInput::extract(self, py, "vjp_batch", [states, qs, a_rl], drift)?;
+        let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
         if grad.shape() != [rows, m] {
             return Err(PyValueError::new_err(format!(
                 "vjp_batch: expected grad_action ({rows}, {m}) for {rows} states, got {}",
@@ -44,11 +46,18 @@ impl PyShield {
         }
         let mut out = BatchGradient::default();
         let shield = &self.inner;
-        let (grads, values, actions) = (grad.values(), input.states.values(), input.a_rl.values());
-        let (dynamics, drift, qs) = (input.dynamics(), input.drift(), &input.qs);
+        let (batch, a_rl, dynamics, drift) =
+            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
+        let grads = grad.values();
         map(py.detach(|| {
             shield.vjp_batch(
-                values, n, qs, actions, grads, dynamics, drift, state_grad, &mut out,
+                batch,
+                a_rl,
+                grads,
+                dynamics,
+                drift,
+                state_grad,
+                &mut out,
             )
         }))?;
         let (a_rl, states, flags) = gradient_arrays(py, out, rows, &[m], state_grad.then_some(n))?;
@@ -72,15 +81,20 @@ impl PyShield {
         drift: Option<&Bound<'py, PyAny>>,
         state_grad: bool,
     ) -> PyResult<JacobianTuple> {
-        let input = GradientInput::extract(self, py, "jacobian_batch", states, qs, a_rl, drift)?;
-        let (rows, n, m) = (input.rows, input.n, self.inner.inputs());
+        let input = BatchInput::extract(self, py, "jacobian_batch", [states, qs, a_rl], drift)?;
+        let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
         let mut out = BatchGradient::default();
         let shield = &self.inner;
-        let (values, actions) = (input.states.values(), input.a_rl.values());
-        let (dynamics, drift, qs) = (input.dynamics(), input.drift(), &input.qs);
+        let (batch, a_rl, dynamics, drift) =
+            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
         map(py.detach(|| {
             shield.jacobian_batch(
-                values, n, qs, actions, dynamics, drift, state_grad, &mut out,
+                batch,
+                a_rl,
+                dynamics,
+                drift,
+                state_grad,
+                &mut out,
             )
         }))?;
         let action =
@@ -102,77 +116,6 @@ type JacobianTuple = (
     Option<Py<PyAny>>,
     Py<PyArray1<u8>>,
 );
-
-/// The checked input of a gradient call: states, FSA states, RL actions, drift and (for a
-/// user's model) each row's dynamics.
-struct GradientInput<'py> {
-    states: FloatArray<'py>,
-    qs: Vec<usize>,
-    a_rl: FloatArray<'py>,
-    drift: Option<FloatArray<'py>>,
-    evaluated: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
-    rows: usize,
-    n: usize,
-}
-
-impl<'py> GradientInput<'py> {
-    #[allow(clippy::too_many_arguments)]
-    fn extract(
-        shield: &PyShield,
-        py: Python<'py>,
-        call: &str,
-        states: &Bound<'py, PyAny>,
-        qs: &Bound<'py, PyAny>,
-        a_rl: &Bound<'py, PyAny>,
-        drift: Option<&Bound<'py, PyAny>>,
-    ) -> PyResult<Self> {
-        let states = FloatArray::extract(states, "states", 2, "(B, n)")?;
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
-        let drift = drift
-            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
-            .transpose()?;
-        let qs = convert::states(qs, "qs", shield.inner.automaton())?;
-        let (rows, n, m) = (states.shape()[0], states.shape()[1], shield.inner.inputs());
-        let shapes = [
-            ("qs", vec![qs.len()], vec![rows]),
-            ("a_rl", a_rl.shape().to_vec(), vec![rows, m]),
-        ];
-        let drift_shape = drift
-            .as_ref()
-            .map(|d| ("drift", d.shape().to_vec(), vec![rows, n]));
-        for (what, got, want) in shapes.into_iter().chain(drift_shape) {
-            if got != want {
-                return Err(PyValueError::new_err(format!(
-                    "{call}: expected {what} {} for {rows} states, got {}",
-                    convert::shape_text(&want),
-                    convert::shape_text(&got)
-                )));
-            }
-        }
-        let evaluated = shield.evaluate_rows(py, states.values())?;
-        Ok(GradientInput {
-            states,
-            qs,
-            a_rl,
-            drift,
-            evaluated,
-            rows,
-            n,
-        })
-    }
-
-    fn dynamics(&self) -> Option<BatchDynamics<'_>> {
-        self.evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
-            f,
-            g,
-            jacobian: Some(j),
-        })
-    }
-
-    fn drift(&self) -> Option<&[f64]> {
-        self.drift.as_ref().map(|d| d.values())
-    }
-}
 
 /// The gradient's arrays as numpy: `a_rl` as `(rows, *shape)`, `states` as `(rows, *shape[..-1],
 /// n)` when `n` is given, flags `(rows,)`.

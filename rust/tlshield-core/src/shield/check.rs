@@ -7,7 +7,7 @@ use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::MonitorBatch;
 use crate::validate::check_finite;
 
-use super::inputs::{BatchDynamics, ControlAffine};
+use super::inputs::{BatchDynamics, ControlAffine, StateBatch};
 use super::params::Bounds;
 use super::Shield;
 
@@ -227,17 +227,26 @@ impl Shield {
         (0..rows).try_for_each(|i| self.check_dynamics(n, Some(d.row(i, n, m))))
     }
 
-    /// Checks the input of a batch over given states (see [`Shield::filter_batch_with`]).
-    pub(super) fn check_state_batch(
+    /// Checks the rows of a batch over states before any dynamics are read: the states'
+    /// layout and values, each row's FSA state, the RL actions `(B, m)` and the drift
+    /// `(B, n)`. A caller that evaluates a model at each row (a binding's `ControlAffine`)
+    /// calls it first; every batch call over states runs it too.
+    pub fn check_rows(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        batch: StateBatch<'_>,
         a_rl: &[f64],
-        dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
     ) -> Result<(), ShieldError> {
+        let StateBatch { states, n, qs } = batch;
         let rows = qs.len();
+        if n > 0 && states.len() % n == 0 && states.len() / n != rows {
+            return Err(InputError::Shape {
+                what: "qs".into(),
+                expected: format!("{} FSA states (one per row of states)", states.len() / n),
+                got: rows.to_string(),
+            }
+            .into());
+        }
         if n == 0 || rows.checked_mul(n) != Some(states.len()) {
             return Err(InputError::Shape {
                 what: "states".into(),
@@ -248,12 +257,23 @@ impl Shield {
         }
         self.check_batch_actions(a_rl, rows)?;
         self.check_state_len("states row", n)?;
-        self.check_batch_dynamics(rows, n, dynamics)?;
         check_finite("states", states, n)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
         }
         Ok(self.automaton.check_states("qs", qs)?)
+    }
+
+    /// [`Shield::check_rows`] and the rows' dynamics, when given.
+    pub(super) fn check_state_batch(
+        &self,
+        batch: StateBatch<'_>,
+        a_rl: &[f64],
+        dynamics: Option<BatchDynamics<'_>>,
+        drift: Option<&[f64]>,
+    ) -> Result<(), ShieldError> {
+        self.check_rows(batch, a_rl, drift)?;
+        self.check_batch_dynamics(batch.len(), batch.n, dynamics)
     }
 
     /// Checks the input of a batch over monitors (see [`Shield::filter_monitors_with`]);

@@ -22,7 +22,7 @@
 
 use smallvec::SmallVec;
 
-use super::{BatchDynamics, BatchRows, Shield, Status, Want, Workspace};
+use super::{BatchDynamics, BatchRows, Shield, Stage, StateBatch, Status, Want, Workspace};
 use crate::automaton::GoalChoice;
 use crate::error::{InputError, ShieldError};
 use crate::linalg::dot;
@@ -230,9 +230,7 @@ impl Shield {
     #[allow(clippy::too_many_arguments)]
     pub fn vjp_batch(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        rows: StateBatch<'_>,
         a_rl: &[f64],
         grad_action: &[f64],
         dynamics: Option<BatchDynamics<'_>>,
@@ -240,10 +238,16 @@ impl Shield {
         want_states: bool,
         out: &mut BatchGradient,
     ) -> Result<(), ShieldError> {
-        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
-        self.check_gradient(Some(grad_action), qs.len(), want_states, dynamics.is_some())?;
-        out.resize(qs.len(), 1, self.m, if want_states { n } else { 0 }, false)?;
-        let rows = BatchRows::States { states, n, qs };
+        self.check_state_batch(rows, a_rl, dynamics, drift)?;
+        self.check_gradient(
+            Some(grad_action),
+            rows.len(),
+            want_states,
+            dynamics.is_some(),
+        )?;
+        let sn = if want_states { rows.n } else { 0 };
+        out.resize(rows.len(), 1, self.m, sn, false)?;
+        let rows = BatchRows::States(rows);
         let cotangents = Cotangents::Given(grad_action);
         self.gradient_rows(rows, a_rl, cotangents, dynamics, drift, out);
         Ok(())
@@ -253,23 +257,21 @@ impl Shield {
     /// solve and one factorisation per row): `out.action` `(B, m)`, `out.a_rl` `(B, m, m)` and,
     /// with `want_states`, `out.states` `(B, m, n)`; `[b, k, .]` is the gradient of action
     /// component `k`. A layer's backward pass is then a product with the upstream gradient.
-    #[allow(clippy::too_many_arguments)]
     pub fn jacobian_batch(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        rows: StateBatch<'_>,
         a_rl: &[f64],
         dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         want_states: bool,
         out: &mut BatchGradient,
     ) -> Result<(), ShieldError> {
-        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
-        self.check_gradient(None, qs.len(), want_states, dynamics.is_some())?;
+        self.check_state_batch(rows, a_rl, dynamics, drift)?;
+        self.check_gradient(None, rows.len(), want_states, dynamics.is_some())?;
         let m = self.m;
-        out.resize(qs.len(), m, m, if want_states { n } else { 0 }, true)?;
-        let rows = BatchRows::States { states, n, qs };
+        let sn = if want_states { rows.n } else { 0 };
+        out.resize(rows.len(), m, m, sn, true)?;
+        let rows = BatchRows::States(rows);
         self.gradient_rows(rows, a_rl, Cotangents::Identity, dynamics, drift, out);
         Ok(())
     }
@@ -357,7 +359,7 @@ impl Shield {
                     let row = *c * chunk + i;
                     let call = rows.call(row, a_rl, dynamics, drift, m);
                     let (s, q, a) = (call.s, call.q, call.a_rl);
-                    self.step(ws, call, Want::Solution);
+                    self.step(ws, call, Stage::Filter(Want::Action));
                     if let Some(act) = act.as_deref_mut() {
                         act[i * m..(i + 1) * m].copy_from_slice(&ws.out.action);
                     }
@@ -690,10 +692,7 @@ mod tests {
     use std::sync::Arc;
 
     fn paper_shield(use_cbf: bool, use_clf: bool) -> Shield {
-        let b = |lo: f64, hi: f64| Bounds {
-            lo: vec![lo; 2],
-            hi: vec![hi; 2],
-        };
+        let b = |lo: f64, hi: f64| Bounds::new(vec![lo; 2], vec![hi; 2]);
         let params = ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5))
             .with_solver(SolverChoice::Auto)
             .with_action_bounds(Some(b(-4.0, 4.0)))
@@ -732,7 +731,7 @@ mod tests {
             let aut: &Automaton = sh.automaton();
             let q = aut.read(&s).unwrap().step(aut.initial());
             let mut out = BatchGradient::default();
-            sh.vjp_batch(&s, N, &[q], &a, &v, None, None, true, &mut out).unwrap();
+            sh.vjp_batch(StateBatch::new(&s, N, &[q]), &a, &v, None, None, true, &mut out).unwrap();
             prop_assume!(out.flags[0] == 0);
             let eps = 1e-6;
             for j in 0..2 {
@@ -852,19 +851,39 @@ mod tests {
             actions.extend_from_slice(&[3.0 * (t * 0.3).cos(), 2.0 * (t * 0.5).sin()]);
         }
         let mut jac = BatchGradient::default();
-        sh.jacobian_batch(&states, N, &qs, &actions, None, None, true, &mut jac)
-            .unwrap();
+        sh.jacobian_batch(
+            StateBatch::new(&states, N, &qs),
+            &actions,
+            None,
+            None,
+            true,
+            &mut jac,
+        )
+        .unwrap();
         let mut filtered = crate::shield::BatchOutput::default();
-        sh.filter_batch(&states, N, &qs, &actions, None, &mut filtered)
-            .unwrap();
+        sh.filter_batch(
+            StateBatch::new(&states, N, &qs),
+            &actions,
+            None,
+            &mut filtered,
+        )
+        .unwrap();
         assert_eq!(jac.action, filtered.action);
         for k in 0..2 {
             let unit: Vec<f64> = (0..40)
                 .flat_map(|_| [f64::from(k == 0), f64::from(k == 1)])
                 .collect();
             let mut vjp = BatchGradient::default();
-            sh.vjp_batch(&states, N, &qs, &actions, &unit, None, None, true, &mut vjp)
-                .unwrap();
+            sh.vjp_batch(
+                StateBatch::new(&states, N, &qs),
+                &actions,
+                &unit,
+                None,
+                None,
+                true,
+                &mut vjp,
+            )
+            .unwrap();
             assert_eq!(vjp.flags, jac.flags);
             for b in 0..40 {
                 let row = (b * 2 + k) * 2;
@@ -877,10 +896,7 @@ mod tests {
 
     #[test]
     fn second_order_rows_refuse_state_gradients_but_not_action_gradients() {
-        let b = |lo: f64, hi: f64| Bounds {
-            lo: vec![lo; 2],
-            hi: vec![hi; 2],
-        };
+        let b = |lo: f64, hi: f64| Bounds::new(vec![lo; 2], vec![hi; 2]);
         let params =
             ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5)).with_alpha2(Some(2.0));
         let model = Dynamics::acceleration_unicycle(0, 1, 2, 12).unwrap();
@@ -895,9 +911,7 @@ mod tests {
         let mut out = BatchGradient::default();
         let err = sh
             .vjp_batch(
-                &s,
-                N,
-                &[q],
+                StateBatch::new(&s, N, &[q]),
                 &[1.0, 0.0],
                 &[1.0, 1.0],
                 None,
@@ -908,9 +922,7 @@ mod tests {
             .unwrap_err();
         assert!(err.to_string().contains("second-order"), "{err}");
         sh.vjp_batch(
-            &s,
-            N,
-            &[q],
+            StateBatch::new(&s, N, &[q]),
             &[1.0, 0.0],
             &[1.0, 1.0],
             None,

@@ -1,6 +1,7 @@
 //! The inputs of a shield call: per-call dynamics ([`ControlAffine`], [`BatchDynamics`]), the
 //! rows of a batch, one call's arguments and what it is asked for.
 
+use crate::error::InputError;
 use crate::monitor::Monitor;
 
 /// Per-call dynamics `f(s)` (length n) and `g(s)` (n x m, row-major), overriding the model,
@@ -24,6 +25,20 @@ impl<'a> ControlAffine<'a> {
             f,
             g,
             jacobian: None,
+        }
+    }
+
+    /// Per-call dynamics from what a caller passed: both `f` and `g` (the control-affine
+    /// dynamics at the call's state), or neither (the shield's model).
+    pub fn given(f: Option<&'a [f64]>, g: Option<&'a [f64]>) -> Result<Option<Self>, InputError> {
+        match (f, g) {
+            (Some(f), Some(g)) => Ok(Some(ControlAffine::new(f, g))),
+            (None, None) => Ok(None),
+            (f, _) => Err(InputError::Value {
+                what: "f, g".into(),
+                expected: "both f and g (the control-affine dynamics at s), or neither".into(),
+                got: format!("only {}", if f.is_some() { "f" } else { "g" }),
+            }),
         }
     }
 }
@@ -51,15 +66,45 @@ impl<'a> BatchDynamics<'a> {
     }
 }
 
+/// The rows of a batch given as states: `(B, n)` states, row-major, and their `(B,)` FSA
+/// states. Sizes are checked by the call that takes it (`states.len() == qs.len() * n`, n > 0).
+#[derive(Debug, Clone, Copy)]
+pub struct StateBatch<'a> {
+    /// The states, row after row.
+    pub states: &'a [f64],
+    /// The state length n.
+    pub n: usize,
+    /// Each row's FSA state.
+    pub qs: &'a [usize],
+}
+
+impl<'a> StateBatch<'a> {
+    /// `(B, n)` states row-major and their FSA states.
+    pub fn new(states: &'a [f64], n: usize, qs: &'a [usize]) -> Self {
+        StateBatch { states, n, qs }
+    }
+
+    /// The number of rows B.
+    pub fn len(&self) -> usize {
+        self.qs.len()
+    }
+
+    /// Whether the batch has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.qs.is_empty()
+    }
+
+    /// Row `i`'s state.
+    pub fn state(&self, i: usize) -> &'a [f64] {
+        &self.states[i * self.n..(i + 1) * self.n]
+    }
+}
+
 /// Where the rows of a batch read their state and FSA state.
 #[derive(Clone, Copy)]
 pub(super) enum BatchRows<'a> {
-    /// Given: `(B, n)` states row-major and `(B,)` FSA states.
-    States {
-        states: &'a [f64],
-        n: usize,
-        qs: &'a [usize],
-    },
+    /// Given states and FSA states.
+    States(StateBatch<'a>),
     /// Each row's task monitor (its last state, FSA state, reading and goal).
     Monitors(&'a [Monitor]),
 }
@@ -67,14 +112,14 @@ pub(super) enum BatchRows<'a> {
 impl<'a> BatchRows<'a> {
     pub(super) fn len(&self) -> usize {
         match self {
-            BatchRows::States { qs, .. } => qs.len(),
+            BatchRows::States(batch) => batch.len(),
             BatchRows::Monitors(monitors) => monitors.len(),
         }
     }
 
     pub(super) fn state_len(&self) -> usize {
         match self {
-            BatchRows::States { n, .. } => *n,
+            BatchRows::States(batch) => batch.n,
             BatchRows::Monitors(monitors) => monitors[0].state().len(),
         }
     }
@@ -104,7 +149,7 @@ impl<'a> BatchRows<'a> {
     /// Row `i`: its state, FSA state and monitor (if any).
     pub(super) fn row(&self, i: usize) -> (&'a [f64], usize, Option<&'a Monitor>) {
         match *self {
-            BatchRows::States { states, n, qs } => (&states[i * n..(i + 1) * n], qs[i], None),
+            BatchRows::States(batch) => (batch.state(i), batch.qs[i], None),
             BatchRows::Monitors(monitors) => {
                 let monitor = &monitors[i];
                 (monitor.state(), monitor.q(), Some(monitor))
@@ -125,13 +170,24 @@ pub(super) struct Call<'a> {
     pub(super) task: Option<&'a Monitor>,
 }
 
-/// What a shield step is asked for.
+/// What a filtering call fills in: the corrected action alone, or everything a caller may
+/// inspect.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Want {
+pub enum Want {
+    /// The corrected action and the solve's outcome (`a_cbf`, `a_clf`, `delta`, slack, status,
+    /// solver); [`Filtered::goal`](super::Filtered::goal) and
+    /// [`Filtered::barriers`](super::Filtered::barriers) are left empty: what a batch row or a
+    /// vector environment's step needs.
+    Action,
+    /// Also the CLF goal and the enforced barriers ([`Shield::filter`](super::Shield::filter)).
+    Record,
+}
+
+/// How far a shield step goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Stage {
     /// The QP only ([`Shield::problem`](super::Shield::problem)).
     Problem,
-    /// The corrected action (the batch path: no goal, no barrier list).
-    Solution,
-    /// The corrected action, the goal and the enforced barriers ([`Shield::filter`](super::Shield::filter)).
-    Recorded,
+    /// The filtered action, with what `Want` asks for.
+    Filter(Want),
 }

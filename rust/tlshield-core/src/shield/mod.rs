@@ -51,8 +51,8 @@ mod workspace;
 pub use gradient::{
     BatchGradient, GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_ROUTED, GRAD_SINGULAR,
 };
-pub use inputs::{BatchDynamics, ControlAffine};
-use inputs::{BatchRows, Call, Want};
+pub use inputs::{BatchDynamics, ControlAffine, StateBatch, Want};
+use inputs::{BatchRows, Call, Stage};
 use order::Orders;
 use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
@@ -141,13 +141,14 @@ impl Shield {
         automaton: Arc<Automaton>,
         dynamics: Option<Dynamics>,
         custom: Option<CustomModel>,
-        params: ShieldParams,
+        mut params: ShieldParams,
     ) -> Result<Self, ShieldError> {
-        let m = match (&dynamics, &custom) {
-            (Some(d), _) => d.inputs(),
-            (None, Some(c)) => c.inputs(),
-            (None, None) => params.cbf_bounds.lo.len(),
-        };
+        let m = params.input_count(match (&dynamics, &custom) {
+            (Some(d), _) => Some(d.inputs()),
+            (None, Some(c)) => Some(c.inputs()),
+            (None, None) => None,
+        })?;
+        params.broadcast(m);
         params.validate(m, automaton.spec())?;
         let spec = automaton.spec();
         let mut min_dim = spec
@@ -278,7 +279,7 @@ impl Shield {
             drift,
             task: None,
         };
-        self.checked_step(call, Want::Recorded, |ws| ws.out.clone())
+        self.checked_step(call, Stage::Filter(Want::Record), |ws| ws.out.clone())
     }
 
     /// [`Shield::filter`] at the task monitor's last state and FSA state, reusing its reading
@@ -291,19 +292,19 @@ impl Shield {
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
     ) -> Result<Filtered, ShieldError> {
-        self.filter_monitor_with(monitor, a_rl, fg, drift, true, Filtered::clone)
+        self.filter_monitor_with(monitor, a_rl, fg, drift, Want::Record, Filtered::clone)
     }
 
     /// [`Shield::filter_monitor`] handing the answer to `take` in place: nothing is allocated
-    /// when `take` copies what it needs (a vector environment's rows). With `record` false the
-    /// goal and the barrier list are not filled in (as in a batch).
+    /// when `take` copies what it needs (a vector environment's rows). With [`Want::Action`]
+    /// the goal and the barrier list are not filled in (as in a batch).
     pub fn filter_monitor_with<R>(
         &self,
         monitor: &Monitor,
         a_rl: &[f64],
         fg: Option<ControlAffine<'_>>,
         drift: Option<&[f64]>,
-        record: bool,
+        want: Want,
         take: impl FnOnce(&Filtered) -> R,
     ) -> Result<R, ShieldError> {
         if !Arc::ptr_eq(monitor.automaton(), &self.automaton) {
@@ -324,12 +325,7 @@ impl Shield {
             drift,
             task: Some(monitor),
         };
-        let want = if record {
-            Want::Recorded
-        } else {
-            Want::Solution
-        };
-        self.checked_step(call, want, |ws| take(&ws.out))
+        self.checked_step(call, Stage::Filter(want), |ws| take(&ws.out))
     }
 
     /// The QP [`Shield::filter`] would solve at this step (before any relaxation), for
@@ -351,62 +347,48 @@ impl Shield {
             drift,
             task: None,
         };
-        self.checked_step(call, Want::Problem, |ws| ws.qp.clone())
+        self.checked_step(call, Stage::Problem, |ws| ws.qp.clone())
     }
 
     /// Checks one call's input, runs the step it wants and takes its result from the workspace.
     fn checked_step<R>(
         &self,
         c: Call<'_>,
-        want: Want,
+        stage: Stage,
         take: impl FnOnce(&Workspace) -> R,
     ) -> Result<R, ShieldError> {
         self.check_call(c.s, c.q, c.a_rl, c.fg, c.drift)?;
         Ok(self.with_workspace(c.s.len(), |ws| {
-            self.step(ws, c, want);
+            self.step(ws, c, stage);
             take(ws)
         }))
     }
 
-    /// [`Shield::filter`] for a batch: `states` is `(B, n)` row-major, `qs` `(B,)`, `a_rl`
-    /// `(B, m)`, `drift` (optional) `(B, n)`. Rows are processed in parallel; the model's
-    /// dynamics are used.
+    /// [`Shield::filter`] for a batch of `rows`: `a_rl` `(B, m)`, `drift` (optional) `(B, n)`.
+    /// Rows are processed in parallel; the model's dynamics are used.
     pub fn filter_batch(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        rows: StateBatch<'_>,
         a_rl: &[f64],
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
-        self.filter_batch_with(states, n, qs, a_rl, None, drift, out)
+        self.filter_batch_with(rows, a_rl, None, drift, out)
     }
 
     /// [`Shield::filter_batch`] with each row's `f`, `g` (and Jacobian) given: the batch of a
     /// shield built on a [`CustomModel`] or without a model.
-    #[allow(clippy::too_many_arguments)]
     pub fn filter_batch_with(
         &self,
-        states: &[f64],
-        n: usize,
-        qs: &[usize],
+        rows: StateBatch<'_>,
         a_rl: &[f64],
         dynamics: Option<BatchDynamics<'_>>,
         drift: Option<&[f64]>,
         out: &mut BatchOutput,
     ) -> Result<(), ShieldError> {
-        self.check_state_batch(states, n, qs, a_rl, dynamics, drift)?;
-        out.resize(qs.len(), self.m)?;
-        // One contiguous chunk of rows per worker thread, each with its own workspace; small
-        // batches stay on the calling thread (waking the pool costs more than they do).
-        self.run_batch(
-            BatchRows::States { states, n, qs },
-            a_rl,
-            dynamics,
-            drift,
-            out,
-        );
+        self.check_state_batch(rows, a_rl, dynamics, drift)?;
+        out.resize(rows.len(), self.m)?;
+        self.run_batch(BatchRows::States(rows), a_rl, dynamics, drift, out);
         Ok(())
     }
 
@@ -470,7 +452,7 @@ impl Shield {
                 for i in 0..part.delta.len() {
                     let row = *c * chunk + i;
                     let call = rows.call(row, a_rl, dynamics, drift, m);
-                    self.step(ws, call, Want::Solution);
+                    self.step(ws, call, Stage::Filter(Want::Action));
                     part.write(i, m, &ws.out);
                 }
             });
@@ -479,9 +461,9 @@ impl Shield {
 
     /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
     /// only the problem is wanted.
-    fn step(&self, ws: &mut Workspace, call: Call<'_>, want: Want) {
+    fn step(&self, ws: &mut Workspace, call: Call<'_>, stage: Stage) {
         let a_rl = call.a_rl;
-        let record = want == Want::Recorded;
+        let record = stage == Stage::Filter(Want::Record);
         let params = &self.params;
         ws.out.barriers.clear();
         ws.program.rows(
@@ -517,7 +499,7 @@ impl Shield {
         }
 
         program.assemble(params, a_rl, &mut ws.qp, false);
-        if want == Want::Problem {
+        if stage == Stage::Problem {
             return;
         }
         let mut status = Status::Solved;

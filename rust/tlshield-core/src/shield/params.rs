@@ -121,16 +121,51 @@ impl SolverChoice {
     }
 }
 
-/// Lower and upper bounds per input (length m, finite, `lo <= hi`).
+/// Lower and upper bounds per input (length m, finite, `lo <= hi`), or one pair for every
+/// input ([`Bounds::uniform`]) that the shield broadcasts to its m inputs when it is built.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bounds {
     /// Lower bounds.
     pub lo: Vec<f64>,
     /// Upper bounds.
     pub hi: Vec<f64>,
+    /// Given once for every input: `lo` and `hi` hold one value each until the shield, which
+    /// knows m, broadcasts them.
+    pub uniform: bool,
 }
 
 impl Bounds {
+    /// One `(lo, hi)` per input.
+    pub fn new(lo: Vec<f64>, hi: Vec<f64>) -> Self {
+        Bounds {
+            lo,
+            hi,
+            uniform: false,
+        }
+    }
+
+    /// The same `(lo, hi)` for every input, however many the shield has.
+    pub fn uniform(lo: f64, hi: f64) -> Self {
+        Bounds {
+            lo: vec![lo],
+            hi: vec![hi],
+            uniform: true,
+        }
+    }
+
+    /// The number of inputs these bounds are given for (`None` when uniform).
+    pub fn inputs(&self) -> Option<usize> {
+        (!self.uniform).then_some(self.lo.len())
+    }
+
+    /// Uniform bounds repeated for `m` inputs; bounds per input are left as given.
+    pub(super) fn broadcast(&mut self, m: usize) {
+        if self.uniform && self.lo.len() == 1 && self.hi.len() == 1 {
+            (self.lo, self.hi) = (vec![self.lo[0]; m], vec![self.hi[0]; m]);
+            self.uniform = false;
+        }
+    }
+
     /// Checks lengths, finiteness and order; `what` names the argument in the message.
     pub(super) fn check(&self, what: &str, m: usize) -> Result<(), ShieldError> {
         if self.lo.len() != m || self.hi.len() != m {
@@ -273,6 +308,10 @@ pub struct ShieldParams {
     pub heading: Option<usize>,
     /// A round bound on two inputs of `a_clf`, beside `clf_bounds` (see [`RoundBound`]).
     pub clf_round: Option<RoundBound>,
+    /// The number of inputs m, for a shield whose model does not say it (no model, and
+    /// uniform `cbf_bounds`); when a model is given it must agree (see
+    /// [`ShieldParams::input_count`]).
+    pub inputs: Option<usize>,
 }
 
 impl ShieldParams {
@@ -313,6 +352,7 @@ impl ShieldParams {
             route_clearance: crate::route::DEFAULT_CLEARANCE,
             heading: None,
             clf_round: None,
+            inputs: None,
         }
     }
 
@@ -401,6 +441,47 @@ impl ShieldParams {
     pub fn with_heading(mut self, heading: Option<usize>) -> Self {
         self.heading = heading;
         self
+    }
+
+    /// The number of inputs, for a shield without a model (see [`ShieldParams::inputs`]).
+    pub fn with_inputs(mut self, inputs: Option<usize>) -> Self {
+        self.inputs = inputs;
+        self
+    }
+
+    /// The shield's number of inputs m: the model's (`model`, which [`ShieldParams::inputs`]
+    /// must match when given), else [`ShieldParams::inputs`], else the length of per-input
+    /// `cbf_bounds`. Uniform bounds alone do not say it.
+    pub fn input_count(&self, model: Option<usize>) -> Result<usize, ShieldError> {
+        match (model, self.inputs) {
+            (Some(m), Some(given)) if given != m => Err(ShieldError::Config(format!(
+                "inputs = {given}, but the model has {m} inputs"
+            ))),
+            (Some(m), _) => Ok(m),
+            (None, Some(0)) => Err(ShieldError::Config(
+                "inputs: expected at least 1, got 0".into(),
+            )),
+            (None, Some(given)) => Ok(given),
+            (None, None) => self.cbf_bounds.inputs().ok_or_else(|| {
+                ShieldError::Config(
+                    "cbf_bounds: without a model the number of inputs is not known from scalar \
+                     bounds; pass inputs=m, or per-input bounds ([lo_1, ..., lo_m], \
+                     [hi_1, ..., hi_m])"
+                        .into(),
+                )
+            }),
+        }
+    }
+
+    /// Every uniform bound repeated for `m` inputs.
+    pub(super) fn broadcast(&mut self, m: usize) {
+        for b in [&mut self.cbf_bounds, &mut self.clf_bounds]
+            .into_iter()
+            .chain(self.action_bounds.as_mut())
+            .chain(self.rl_bounds.as_mut())
+        {
+            b.broadcast(m);
+        }
     }
 
     /// The gain of the second-order CLF.
@@ -581,10 +662,7 @@ mod tests {
     #[test]
     fn validate_names_the_bad_setting() {
         let spec = crate::fixtures::task_spec();
-        let b = |lo: f64, hi: f64| Bounds {
-            lo: vec![lo; 2],
-            hi: vec![hi; 2],
-        };
+        let b = |lo: f64, hi: f64| Bounds::new(vec![lo; 2], vec![hi; 2]);
         let good = ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5));
         good.validate(2, &spec).unwrap();
         let err = |p: ShieldParams, m: usize| p.validate(m, &spec).unwrap_err().to_string();

@@ -13,10 +13,7 @@ fn task() -> Arc<Automaton> {
 }
 
 fn bounds(lo: f64, hi: f64) -> Bounds {
-    Bounds {
-        lo: vec![lo; 2],
-        hi: vec![hi; 2],
-    }
+    Bounds::new(vec![lo; 2], vec![hi; 2])
 }
 
 fn params(solver: SolverChoice) -> ShieldParams {
@@ -226,8 +223,13 @@ fn drift_adds_to_the_model_and_batches_agree() {
         .flat_map(|i| [1.0, -0.5 + 0.02 * i as f64])
         .collect();
     let mut out = BatchOutput::default();
-    sh.filter_batch(&states, N, &qs, &a_rl, Some(&drifts), &mut out)
-        .unwrap();
+    sh.filter_batch(
+        StateBatch::new(&states, N, &qs),
+        &a_rl,
+        Some(&drifts),
+        &mut out,
+    )
+    .unwrap();
     for i in 0..rows {
         let single = sh
             .filter(
@@ -253,7 +255,12 @@ fn drift_adds_to_the_model_and_batches_agree() {
         "drift[3]",
     );
     crate::tests_support::assert_error(
-        sh.filter_batch(&states, N, &qs, &a_rl, Some(&drifts[N..]), &mut out),
+        sh.filter_batch(
+            StateBatch::new(&states, N, &qs),
+            &a_rl,
+            Some(&drifts[N..]),
+            &mut out,
+        ),
         "Input(Shape",
         "drift",
     );
@@ -297,14 +304,8 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
         "{err}"
     );
     // An asymmetric RL box needs the mirrored CBF box.
-    let mut lopsided = params(SolverChoice::Auto).with_rl_bounds(Some(Bounds {
-        lo: vec![0.0, -1.0],
-        hi: vec![5.0, 1.0],
-    }));
-    lopsided.cbf_bounds = Bounds {
-        lo: vec![-5.0, -1.0],
-        hi: vec![0.0, 1.0],
-    };
+    let mut lopsided = params(SolverChoice::Auto).with_rl_bounds(Some(Bounds::new(vec![0.0, -1.0], vec![5.0, 1.0])));
+    lopsided.cbf_bounds = Bounds::new(vec![-5.0, -1.0], vec![0.0, 1.0]);
     assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_ok());
     lopsided.cbf_bounds.lo[0] = -4.9;
     crate::tests_support::assert_error(
@@ -314,20 +315,14 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
     );
     // A CLF box without 0 must still leave the sum able to cancel.
     lopsided.cbf_bounds.lo[0] = -5.0;
-    lopsided.clf_bounds = Bounds {
-        lo: vec![0.1, -0.5],
-        hi: vec![0.5, 0.5],
-    };
+    lopsided.clf_bounds = Bounds::new(vec![0.1, -0.5], vec![0.5, 0.5]);
     let err = Shield::new(task(), unicycle(), lopsided.clone())
         .unwrap_err()
         .to_string();
     assert!(err.contains("clf_bounds[0]"), "{err}");
     // Actuator limits must allow applying nothing.
     lopsided.clf_bounds = bounds(-0.5, 0.5);
-    let positive = Bounds {
-        lo: vec![0.5, -1.0],
-        hi: vec![5.0, 1.0],
-    };
+    let positive = Bounds::new(vec![0.5, -1.0], vec![5.0, 1.0]);
     let err = Shield::new(
         task(),
         unicycle(),
@@ -349,9 +344,7 @@ fn an_rl_action_outside_rl_bounds_is_refused() {
     let mut out = BatchOutput::default();
     let err = sh
         .filter_batch(
-            &[s.clone(), s].concat(),
-            N,
-            &[q, q],
+            StateBatch::new(&[s.clone(), s].concat(), N, &[q, q]),
             &[0.0, 0.0, 0.0, -2.0],
             None,
             &mut out,
@@ -475,10 +468,7 @@ fn bad_input_is_an_error() {
         ),
         (
             ShieldParams {
-                clf_bounds: Bounds {
-                    lo: vec![0.0],
-                    hi: vec![1.0],
-                },
+                clf_bounds: Bounds::new(vec![0.0], vec![1.0]),
                 ..params(SolverChoice::Auto)
             },
             "clf_bounds",
@@ -527,7 +517,7 @@ fn batch_equals_single_calls() {
         a_rl.extend([rng.uniform(-2.0, 2.0), rng.uniform(-3.0, 3.0)]);
     }
     let mut out = BatchOutput::default();
-    sh.filter_batch(&states, N, &qs, &a_rl, None, &mut out)
+    sh.filter_batch(StateBatch::new(&states, N, &qs), &a_rl, None, &mut out)
         .unwrap();
     for i in 0..rows {
         let single = sh
@@ -545,14 +535,14 @@ fn batch_equals_single_calls() {
         assert_eq!(out.solver[i], single.solver as u8);
     }
     crate::tests_support::assert_error(
-        sh.filter_batch(&states, N, &qs[1..], &a_rl, None, &mut out),
+        sh.filter_batch(StateBatch::new(&states, N, &qs[1..]), &a_rl, None, &mut out),
         "Input(Shape",
         "states",
     );
     let mut bad_q = qs.clone();
     bad_q[3] = 99;
     let err = sh
-        .filter_batch(&states, N, &bad_q, &a_rl, None, &mut out)
+        .filter_batch(StateBatch::new(&states, N, &bad_q), &a_rl, None, &mut out)
         .unwrap_err();
     assert!(err.to_string().contains("qs[3]"), "{err}");
 }
@@ -642,7 +632,7 @@ fn the_monitor_batch_path_equals_the_state_batch_and_single_monitors() {
         let qs: Vec<usize> = steps.iter().map(|s| s.q).collect();
         sh.filter_monitors(&batch, &a_rl, None, &mut out).unwrap();
         let mut by_state = BatchOutput::default();
-        sh.filter_batch(&states, N, &qs, &a_rl, None, &mut by_state)
+        sh.filter_batch(StateBatch::new(&states, N, &qs), &a_rl, None, &mut by_state)
             .unwrap();
         assert_eq!(out, by_state, "step {t}");
         for (i, single) in singles.iter_mut().enumerate() {
@@ -795,7 +785,7 @@ proptest! {
                 drift: None,
                 task: None,
             };
-            auto.step(ws, call, Want::Solution);
+            auto.step(ws, call, Stage::Filter(Want::Action));
             let (qp, ours) = (&ws.qp, &ws.solvers.solution);
             let scale = 1.0 + qp.c.iter().chain(&qp.h).fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(kkt_residual(qp, &ours.x, &ours.z) < 1e-7 * scale);
@@ -815,10 +805,7 @@ fn wall_task() -> (Arc<Automaton>, ShieldParams) {
     let goal = Predicate::halfspace(vec![1.0, 0.0], -5.0).unwrap();
     let spec = crate::spec::Spec::new("F g", [("g", goal)]).unwrap();
     let wall = Predicate::halfspace(vec![-1.0, 0.0], 1.0).unwrap();
-    let one = |lo: f64, hi: f64| Bounds {
-        lo: vec![lo],
-        hi: vec![hi],
-    };
+    let one = |lo: f64, hi: f64| Bounds::new(vec![lo], vec![hi]);
     let params = ShieldParams::new(2.0, 1.0, 1e4, one(-4.0, 4.0), one(-1.0, 1.0))
         .with_barriers(vec![Barrier::inside("wall", wall)])
         .with_pos(vec![0])
@@ -896,7 +883,7 @@ fn a_custom_double_integrator_equals_the_built_in_one() {
     let qs = vec![0; 200];
     let (mut want, mut got) = (BatchOutput::default(), BatchOutput::default());
     built_in
-        .filter_batch(&states, 2, &qs, &actions, None, &mut want)
+        .filter_batch(StateBatch::new(&states, 2, &qs), &actions, None, &mut want)
         .unwrap();
     let dynamics = BatchDynamics {
         f: &fs,
@@ -904,7 +891,13 @@ fn a_custom_double_integrator_equals_the_built_in_one() {
         jacobian: Some(&jacs),
     };
     custom
-        .filter_batch_with(&states, 2, &qs, &actions, Some(dynamics), None, &mut got)
+        .filter_batch_with(
+            StateBatch::new(&states, 2, &qs),
+            &actions,
+            Some(dynamics),
+            None,
+            &mut got,
+        )
         .unwrap();
     for (a, b) in want.action.iter().zip(&got.action) {
         assert!((a - b).abs() <= 1e-9);
