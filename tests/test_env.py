@@ -528,3 +528,14 @@ def test_end_on_trap_ends_a_training_episode_where_it_leaves_the_channel() -> No
         env.reset(seed=3)
         shielded[end] = [env.step(np.array([1.0, -0.3]))[1] for _ in range(60)]
     assert shielded[False] == shielded[True]
+
+
+def test_the_core_world_is_built_from_one_params_object() -> None:
+    """ChannelWorld reads every setting from the env's ChannelParams (one spelling of each
+    constant); an object that is not one is a TypeError naming the missing field."""
+    from tlshield._core import ChannelWorld
+
+    env = ChannelEnv(config="rl_cbf_clf", end_on_trap=False)
+    ChannelWorld(env.model, env.params, evaluation=True, channel_atoms=(0, 1))
+    with pytest.raises(TypeError, match=r"params: expected a ChannelParams \(no agent\.dt\)"):
+        ChannelWorld(env.model, object(), evaluation=True, channel_atoms=(0, 1))

@@ -8,6 +8,7 @@ from numpy.typing import ArrayLike, NDArray
 from typing_extensions import Self
 
 from tlshield.codes import Solver, Status
+from tlshield.envs.channel_task import ChannelParams
 
 __version__: str
 
@@ -349,22 +350,10 @@ class ChannelWorld:
     def __new__(
         cls,
         model: Unicycle,
+        params: ChannelParams,
         *,
-        dt: float,
-        horizon: int,
-        arena: tuple[float, float],
-        half_width: float,
-        obstacle_radius: float,
-        safe_distance: float,
-        w: float,
-        collision_penalty: float,
-        intervention_penalty: float,
-        relative: bool,
-        rl_bounds: tuple[Sequence[float], Sequence[float]],
-        obstacle_drift: bool,
         evaluation: bool,
         channel_atoms: tuple[int, int],
-        end_on_trap: bool = False,
     ) -> Self: ...
     def reset(self, s0: ArrayLike, obstacles: ArrayLike) -> None: ...
     def step(
@@ -456,6 +445,10 @@ def step_worlds(
 class PointMassWorld:
     """``tlshield/PointMass-v0`` stepped in the core: shield call, acceleration box, double
     integrator, walls, task monitor, reward and observation in one call."""
+
+    STATE_DIM: ClassVar[int]
+    POS: ClassVar[tuple[int, int]]
+    VEL: ClassVar[tuple[int, int]]
 
     def __new__(
         cls,

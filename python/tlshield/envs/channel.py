@@ -185,22 +185,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         #: The world the core steps: plant, obstacles, shield call, monitor, reward terms and
         #: observation in one call (this class draws the episodes and builds ``info``).
         self._world = ChannelWorld(
-            self.model,
-            dt=params.agent.dt,
-            horizon=params.task.horizon,
-            arena=params.agent.arena,
-            half_width=params.task.half_width,
-            obstacle_radius=params.obstacles.obstacle_radius,
-            safe_distance=params.obstacles.safe_distance,
-            w=params.obstacles.w,
-            collision_penalty=params.obstacles.collision_penalty,
-            intervention_penalty=params.shield.intervention_penalty,
-            relative=params.observation.kind == "relative",
-            rl_bounds=params.agent.rl_bounds,
-            obstacle_drift=params.shield.obstacle_drift,
-            evaluation=evaluation,
-            channel_atoms=self._channel_atoms,
-            end_on_trap=params.task.end_on_trap,
+            self.model, params, evaluation=evaluation, channel_atoms=self._channel_atoms
         )
         #: The barrier slack of the last shielded step (> 0 only when the QP was relaxed).
         self.last_slack = 0.0

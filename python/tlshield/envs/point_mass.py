@@ -39,9 +39,12 @@ from tlshield.tracking import FsaTracker, shield_info
 TASK = "F a & F b & (!b U a) & ((!o1 & !o2) U b)"
 
 
+# Read from the core, which steps the world: one model of the layout (point_mass.rs).
 #: The state: position ``x, y`` and velocity ``vx, vy``.
-STATE_DIM = 4
-POS, VEL = (0, 1), (2, 3)
+STATE_DIM: int = PointMassWorld.STATE_DIM
+#: The position's and the velocity's state dimensions.
+POS: tuple[int, int] = PointMassWorld.POS
+VEL: tuple[int, int] = PointMassWorld.VEL
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,10 @@ use crate::world::{Measure, ShieldStep, World, WorldStep};
 
 /// State length: position `x, y`, velocity `vx, vy`.
 pub const STATE_DIM: usize = 4;
-const POS: [usize; 2] = [0, 1];
-const VEL: [usize; 2] = [2, 3];
+/// The state's position dimensions `(x, y)`.
+pub const POS: [usize; 2] = [0, 1];
+/// The state's velocity dimensions `(vx, vy)`.
+pub const VEL: [usize; 2] = [2, 3];
 
 /// The constants a step reads (the Python `PointMassParams` holds and checks them all).
 #[derive(Debug, Clone)]

@@ -25,6 +25,8 @@ use crate::world_step::PyWorldStep;
 #[pyclass(name = "ChannelWorld", module = "tlshield._core")]
 pub struct PyChannelWorld {
     pub(crate) inner: ChannelWorld,
+    /// The `ChannelParams` it was built from (pickled with it).
+    params: Py<PyAny>,
 }
 
 fn pair(values: Vec<f64>, name: &str) -> PyResult<[f64; 2]> {
@@ -109,79 +111,85 @@ impl PyChannelWorld {
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
+    /// The world of ``model`` under ``params`` (a ``tlshield.envs.ChannelParams``: every
+    /// field the world reads is taken from it by name), in evaluation or training, with the
+    /// channel atoms' indices in the automaton.
     #[new]
-    #[pyo3(signature = (
-        model, *, dt, horizon, arena, half_width, obstacle_radius, safe_distance, w,
-        collision_penalty, intervention_penalty, relative, rl_bounds, obstacle_drift,
-        evaluation, channel_atoms, end_on_trap=false,
-    ))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (model, params, *, evaluation, channel_atoms))]
     fn new(
         model: PyRef<'_, PyUnicycle>,
-        dt: f64,
-        horizon: u32,
-        arena: (f64, f64),
-        half_width: f64,
-        obstacle_radius: f64,
-        safe_distance: f64,
-        w: f64,
-        collision_penalty: f64,
-        intervention_penalty: f64,
-        relative: bool,
-        rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>),
-        obstacle_drift: bool,
+        params: &Bound<'_, PyAny>,
         evaluation: bool,
         channel_atoms: (usize, usize),
-        end_on_trap: bool,
     ) -> PyResult<Self> {
-        let params = ChannelParams {
-            dt,
-            horizon,
-            arena,
-            half_width,
-            obstacle_radius,
-            safe_distance,
-            w,
-            collision_penalty,
-            intervention_penalty,
-            relative,
+        let field = |group: &str, name: &str| -> PyResult<Bound<'_, PyAny>> {
+            params.getattr(group)?.getattr(name).map_err(|_| {
+                pyo3::exceptions::PyTypeError::new_err(format!(
+                    "params: expected a ChannelParams (no {group}.{name})"
+                ))
+            })
+        };
+        fn number<'py, T: for<'a> FromPyObject<'a, 'py>>(
+            value: PyResult<Bound<'py, PyAny>>,
+            what: &str,
+        ) -> PyResult<T> {
+            value?.extract().map_err(|_| {
+                pyo3::exceptions::PyTypeError::new_err(format!(
+                    "params.{what}: expected a {}",
+                    std::any::type_name::<T>()
+                ))
+            })
+        }
+        let rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>) = field("agent", "rl_bounds")?
+            .extract()
+            .map_err(|_| {
+                pyo3::exceptions::PyTypeError::new_err(
+                    "params.agent.rl_bounds: expected a pair (lo, hi)",
+                )
+            })?;
+        let kind: String = number(field("observation", "kind"), "observation.kind")?;
+        let core = ChannelParams {
+            dt: number(field("agent", "dt"), "agent.dt")?,
+            horizon: number(field("task", "horizon"), "task.horizon")?,
+            arena: number(field("agent", "arena"), "agent.arena")?,
+            half_width: number(field("task", "half_width"), "task.half_width")?,
+            obstacle_radius: number(
+                field("obstacles", "obstacle_radius"),
+                "obstacles.obstacle_radius",
+            )?,
+            safe_distance: number(field("obstacles", "safe_distance"), "obstacles.safe_distance")?,
+            w: number(field("obstacles", "w"), "obstacles.w")?,
+            collision_penalty: number(
+                field("obstacles", "collision_penalty"),
+                "obstacles.collision_penalty",
+            )?,
+            intervention_penalty: number(
+                field("shield", "intervention_penalty"),
+                "shield.intervention_penalty",
+            )?,
+            relative: kind == "relative",
             rl_bounds: (
                 pair(sequence(&rl_bounds.0, "rl_bounds[0]")?, "rl_bounds[0]")?,
                 pair(sequence(&rl_bounds.1, "rl_bounds[1]")?, "rl_bounds[1]")?,
             ),
-            obstacle_drift,
+            obstacle_drift: number(field("shield", "obstacle_drift"), "shield.obstacle_drift")?,
             evaluation,
-            end_on_trap,
+            end_on_trap: number(field("task", "end_on_trap"), "task.end_on_trap")?,
             channel_atoms: [channel_atoms.0, channel_atoms.1],
         };
         Ok(PyChannelWorld {
-            inner: ChannelWorld::new(params, model.inner.clone()),
+            inner: ChannelWorld::new(core, model.inner.clone()),
+            params: params.clone().unbind(),
         })
     }
 
-    /// Pickled as its constructor's arguments and its state ``(s, drift, obstacles, t)``.
+    /// Pickled as its constructor's arguments (the model and the params object) and its state ``(s, drift, obstacles, t)``.
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let world = &slf.borrow().inner;
         let p = world.params();
         let kwargs = PyDict::new(py);
-        kwargs.set_item("dt", p.dt)?;
-        kwargs.set_item("horizon", p.horizon)?;
-        kwargs.set_item("arena", p.arena)?;
-        kwargs.set_item("half_width", p.half_width)?;
-        kwargs.set_item("obstacle_radius", p.obstacle_radius)?;
-        kwargs.set_item("safe_distance", p.safe_distance)?;
-        kwargs.set_item("w", p.w)?;
-        kwargs.set_item("collision_penalty", p.collision_penalty)?;
-        kwargs.set_item("intervention_penalty", p.intervention_penalty)?;
-        kwargs.set_item("relative", p.relative)?;
-        kwargs.set_item(
-            "rl_bounds",
-            (p.rl_bounds.0.to_vec(), p.rl_bounds.1.to_vec()),
-        )?;
-        kwargs.set_item("obstacle_drift", p.obstacle_drift)?;
         kwargs.set_item("evaluation", p.evaluation)?;
-        kwargs.set_item("end_on_trap", p.end_on_trap)?;
         kwargs.set_item("channel_atoms", (p.channel_atoms[0], p.channel_atoms[1]))?;
         let model = crate::dynamics::to_python(py, world.model())?;
         let snap = world.snapshot();
@@ -193,7 +201,7 @@ impl PyChannelWorld {
         let state = (snap.s.to_vec(), snap.drift.to_vec(), paths, snap.t).into_pyobject(py)?;
         reduce(
             slf.get_type().into_any(),
-            PyTuple::new(py, [model])?,
+            PyTuple::new(py, [model, slf.borrow().params.bind(py).clone()])?,
             Some(kwargs),
             Some(state.into_any()),
         )

@@ -5,7 +5,7 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use tlshield_core::point_mass::{PointMassParams, PointMassWorld, STATE_DIM};
+use tlshield_core::point_mass::{self, PointMassParams, PointMassWorld, STATE_DIM};
 use tlshield_core::Want;
 
 use crate::convert::FloatArray;
@@ -34,6 +34,24 @@ fn values<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 
 
 #[pymethods]
 impl PyPointMassWorld {
+    /// Length of the state vector ``[x, y, vx, vy]`` (the core's `point_mass::STATE_DIM`).
+    #[classattr]
+    const STATE_DIM: usize = STATE_DIM;
+
+    /// The position's state dimensions ``(x, y)``.
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn POS() -> (usize, usize) {
+        (point_mass::POS[0], point_mass::POS[1])
+    }
+
+    /// The velocity's state dimensions ``(vx, vy)``.
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn VEL() -> (usize, usize) {
+        (point_mass::VEL[0], point_mass::VEL[1])
+    }
+
     #[new]
     #[pyo3(signature = (
         *, dt, horizon, room, max_accel, obstacles, obstacle_radius, collision_penalty
