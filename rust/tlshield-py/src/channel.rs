@@ -123,11 +123,14 @@ impl PyChannelWorld {
         channel_atoms: (usize, usize),
     ) -> PyResult<Self> {
         let field = |group: &str, name: &str| -> PyResult<Bound<'_, PyAny>> {
-            params.getattr(group)?.getattr(name).map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(format!(
-                    "params: expected a ChannelParams (no {group}.{name})"
-                ))
-            })
+            params
+                .getattr(group)
+                .and_then(|g| g.getattr(name))
+                .map_err(|_| {
+                    pyo3::exceptions::PyTypeError::new_err(format!(
+                        "params: expected a ChannelParams (no {group}.{name})"
+                    ))
+                })
         };
         fn number<'py, T: for<'a> FromPyObject<'a, 'py>>(
             value: PyResult<Bound<'py, PyAny>>,
@@ -140,9 +143,8 @@ impl PyChannelWorld {
                 ))
             })
         }
-        let rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>) = field("agent", "rl_bounds")?
-            .extract()
-            .map_err(|_| {
+        let rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>) =
+            field("agent", "rl_bounds")?.extract().map_err(|_| {
                 pyo3::exceptions::PyTypeError::new_err(
                     "params.agent.rl_bounds: expected a pair (lo, hi)",
                 )
@@ -157,7 +159,10 @@ impl PyChannelWorld {
                 field("obstacles", "obstacle_radius"),
                 "obstacles.obstacle_radius",
             )?,
-            safe_distance: number(field("obstacles", "safe_distance"), "obstacles.safe_distance")?,
+            safe_distance: number(
+                field("obstacles", "safe_distance"),
+                "obstacles.safe_distance",
+            )?,
             w: number(field("obstacles", "w"), "obstacles.w")?,
             collision_penalty: number(
                 field("obstacles", "collision_penalty"),

@@ -48,8 +48,12 @@ impl PyShield {
                 jacobian: Some(&jac),
             }));
         }
-        let f = f.map(|f| FloatArray::extract(f, "f", 1, "(n,)")).transpose()?;
-        let g = g.map(|g| FloatArray::extract(g, "g", 2, "(n, m)")).transpose()?;
+        let f = f
+            .map(|f| FloatArray::extract(f, "f", 1, "(n,)"))
+            .transpose()?;
+        let g = g
+            .map(|g| FloatArray::extract(g, "g", 2, "(n, m)"))
+            .transpose()?;
         if let Some(g) = g.as_ref().filter(|g| g.shape()[1] != self.inner.inputs()) {
             return Err(PyValueError::new_err(format!(
                 "g: expected shape (n, {}), got ({}, {})",
@@ -270,15 +274,7 @@ impl PyShield {
         // Slices only cross into the GIL-free closure (the arrays' handles stay here).
         let (batch, a_rl, dynamics, drift) =
             (input.rows(), input.a_rl(), input.dynamics(), input.drift());
-        map(py.detach(|| {
-            shield.filter_batch_with(
-                batch,
-                a_rl,
-                dynamics,
-                drift,
-                &mut out,
-            )
-        }))?;
+        map(py.detach(|| shield.filter_batch_with(batch, a_rl, dynamics, drift, &mut out)))?;
         self.batch_result(py, out, rows)
     }
 

@@ -50,15 +50,7 @@ impl PyShield {
             (input.rows(), input.a_rl(), input.dynamics(), input.drift());
         let grads = grad.values();
         map(py.detach(|| {
-            shield.vjp_batch(
-                batch,
-                a_rl,
-                grads,
-                dynamics,
-                drift,
-                state_grad,
-                &mut out,
-            )
+            shield.vjp_batch(batch, a_rl, grads, dynamics, drift, state_grad, &mut out)
         }))?;
         let (a_rl, states, flags) = gradient_arrays(py, out, rows, &[m], state_grad.then_some(n))?;
         Ok((a_rl, states, flags))
@@ -87,16 +79,9 @@ impl PyShield {
         let shield = &self.inner;
         let (batch, a_rl, dynamics, drift) =
             (input.rows(), input.a_rl(), input.dynamics(), input.drift());
-        map(py.detach(|| {
-            shield.jacobian_batch(
-                batch,
-                a_rl,
-                dynamics,
-                drift,
-                state_grad,
-                &mut out,
-            )
-        }))?;
+        map(
+            py.detach(|| shield.jacobian_batch(batch, a_rl, dynamics, drift, state_grad, &mut out))
+        )?;
         let action =
             numpy::ndarray::Array2::from_shape_vec((rows, m), std::mem::take(&mut out.action))
                 .map(|a| a.into_pyarray(py).unbind())

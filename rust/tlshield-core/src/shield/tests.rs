@@ -304,7 +304,8 @@ fn a_cbf_box_that_cannot_cancel_the_rl_box_is_refused() {
         "{err}"
     );
     // An asymmetric RL box needs the mirrored CBF box.
-    let mut lopsided = params(SolverChoice::Auto).with_rl_bounds(Some(Bounds::new(vec![0.0, -1.0], vec![5.0, 1.0])));
+    let mut lopsided = params(SolverChoice::Auto)
+        .with_rl_bounds(Some(Bounds::new(vec![0.0, -1.0], vec![5.0, 1.0])));
     lopsided.cbf_bounds = Bounds::new(vec![-5.0, -1.0], vec![0.0, 1.0]);
     assert!(Shield::new(task(), unicycle(), lopsided.clone()).is_ok());
     lopsided.cbf_bounds.lo[0] = -4.9;
