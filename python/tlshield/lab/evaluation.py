@@ -15,10 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, env_horizon, import_modules, make, scored_by_return
+from tlshield.envs import ENV_ID
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.lab import measures
+from tlshield.lab.envs import env_horizon, import_modules, make, scored_by_return
 from tlshield.lab.presets import DEFAULT_TRIALS
 from tlshield.lab.runs import read_record
 from tlshield.lab.seeds import EVAL_SEED, MAX_TRIALS
@@ -48,7 +49,7 @@ def rollouts(
     undiscounted ``return`` (the task's own reward, ``info["task_reward"]`` where the env
     shapes it) and ``cost`` (``info["cost"]`` summed; ``None`` where the env reports none).
 
-    An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
+    An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
     the unshielded ``rl`` unshielded, and every episode runs to the horizon (a met goal moves,
     it does not end the task); its ``success`` says whether any goal was met.
 
@@ -160,7 +161,7 @@ def evaluate(
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
     folder's pickled statistics load (see :mod:`tlshield.lab.saved`). ``evaluation.json`` also
     has the trials' mean undiscounted ``return_mean`` and ``cost_mean`` (None where the env
-    reports no cost). An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) is
+    reports no cost). An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) is
     evaluated as :func:`rollouts` says: as it trained, to the horizon."""
     if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
         raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")
