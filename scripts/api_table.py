@@ -27,6 +27,7 @@ MODULES = (
     "tlshield.envs.flatworld",
     "tlshield.lab.presets",
     "tlshield.lab.seeds",
+    "tlshield.lab.envs",
     "tlshield.lab.training",
     "tlshield.lab.evaluation",
     "tlshield.lab.benchmark",

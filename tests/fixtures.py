@@ -14,7 +14,7 @@ def task_shield(model: object | None = None, **overrides: object) -> tlshield.Sh
     """A shield of the paper's task (unicycle eps = 0.1 unless ``model`` is given) with the
     reference parameters of :class:`tests.shield_reference.Params`; keywords override. Without
     routing, so that its QP is Eq. 5D2's as the references build it (routing is tested in
-    test_routing.py)."""
+    tests/lab/test_routing.py)."""
     kwargs: dict[str, object] = {
         "route": False,
         "alpha": PARAMS.alpha,

@@ -14,7 +14,6 @@ from hypothesis.extra.numpy import arrays
 import tlshield
 from tests.shield_reference import literal
 from tlshield.envs.channel import STATE_DIM, channel_task_spec
-from tlshield.lab.cli import main
 
 from .reference import satisfied, to_text
 from .test_properties import REFERENCE_PREDICATES, RUST_PREDICATES, co_safe, values
@@ -234,28 +233,6 @@ def test_many_atoms_build_what_the_formula_needs() -> None:
 
 
 # --- command line -------------------------------------------------------------------------
-
-
-def test_cli_fsa(capsys: pytest.CaptureFixture[str], tmp_path) -> None:
-    dot = tmp_path / "task.dot"
-    assert main(["fsa", "--dot", str(dot)]) == 0
-    out = capsys.readouterr().out
-    assert "q1 (trap)" in out and "q2 (accepting)" in out
-    assert "(g3 | c1) & (g3 | c2) & (g1 | g2 | !g3)" in out
-    assert dot.read_text().startswith("digraph fsa")
-    assert main(["fsa", "F a & X b"]) == 0
-
-
-def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["fsa", "G a"]) == 2
-    assert "`G` (always) is not allowed" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as info:
-        main(["--help"])
-    assert info.value.code == 0
-    with pytest.raises(SystemExit) as info:
-        main(["nonsense"])
-    assert info.value.code == 2
-    assert main(["demo", "--steps", "1"]) == 2
 
 
 def test_the_deprecated_advance_methods_are_gone() -> None:

@@ -1,7 +1,7 @@
 """The spellings of tlshield 0.1 (CHANGELOG.md, 0.2.0), removed in 0.3: renamed parameters are
 errors that name the new spelling, renamed classes and module names are gone; a swapped
 argument order fails with a hint (``test_automaton``); a record written by 0.1 still loads
-(``test_cli_errors``)."""
+(``tests/lab/test_cli_errors``)."""
 
 from __future__ import annotations
 

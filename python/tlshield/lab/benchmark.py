@@ -32,7 +32,9 @@ from typing import Any
 
 import numpy as np
 
+from tlshield.envs import FLATWORLD_ID
 from tlshield.envs.params import FULL, check_config
+from tlshield.lab.evaluation import rollouts
 from tlshield.lab.presets import PRESETS
 from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
 
@@ -96,20 +98,6 @@ GAMMA = PRESETS[PRESET]["ppo"]["gamma"]
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
 
-def _make(formula: str, config: str, evaluation: bool, **overrides: Any) -> Any:
-    import gymnasium as gym
-
-    return gym.make(
-        "tlshield/FlatWorld-v0",
-        formula=formula,
-        config=config,
-        evaluation=evaluation,
-        gamma=GAMMA,
-        disable_env_checker=True,
-        **overrides,
-    )
-
-
 def run_episodes(
     formula: str,
     config: str,
@@ -119,49 +107,44 @@ def run_episodes(
     batch: int = 50,
     **overrides: Any,
 ) -> dict[str, Any]:
-    """Evaluation: ``episodes`` episodes (``batch`` side by side, one policy call per step),
-    CBF on unless ``config == "rl"``. Returns the success rate, the mean steps of successful
-    episodes (DeepLTL's measure), trap entries (``violations``: the formula's safety part
-    broken), box exits and a few paths for the figure. ``overrides``: FlatWorld settings."""
+    """Evaluation: ``episodes`` episodes (``batch`` side by side, one policy call per step,
+    through :func:`tlshield.lab.evaluation.rollouts`), CBF on unless ``config == "rl"``.
+    Returns the success rate, the mean steps of successful episodes (DeepLTL's measure), trap
+    entries (``violations``: the formula's safety part broken), box exits and a few paths for
+    the figure. ``overrides``: FlatWorld settings."""
     rng = np.random.default_rng(eval_block_seed(seed, 0))
-    evaluation = config != "rl"
-    successes, steps, violations, exits = 0, [], 0, 0
-    paths: list[tuple[np.ndarray, bool]] = []
+    make_kwargs = {"formula": formula, "gamma": GAMMA, "disable_env_checker": True, **overrides}
+    ended: list[dict[str, Any]] = []  # every episode's outcome, in the order the episodes ended
     for start in range(0, episodes, batch):
-        idx = list(range(start, min(start + batch, episodes)))
-        envs = [_make(formula, config, evaluation, **overrides) for _ in idx]
-        obs = np.stack(
-            [e.reset(seed=eval_block_seed(seed, k))[0] for e, k in zip(envs, idx, strict=True)]
-        )
-        active = list(range(len(idx)))
-        t = 0
-        while active:
-            t += 1
-            actions = policy(obs[active], rng)
-            still = []
-            for i, a in zip(active, actions, strict=True):
-                o, _, term, trunc, info = envs[i].step(a)
-                obs[i] = o
-                violations += int(info["trap"] and term)
-                if term or trunc:
-                    exits += int(info["box_exit"])
-                    if info["success"]:
-                        successes += 1
-                        steps.append(t)
-                    if len(paths) < 12:
-                        world = envs[i].unwrapped
-                        paths.append((np.asarray(world.path), bool(info["success"])))
-                else:
-                    still.append(i)
-            active = still
-        for e in envs:
-            e.close()
+        seeds = [eval_block_seed(seed, k) for k in range(start, min(start + batch, episodes))]
+        outcomes = rollouts(
+            config,
+            make_kwargs,
+            lambda obs: policy(obs, rng),
+            seeds,
+            FLATWORLD_ID,
+            evaluation=config != "rl",
+            extra=_episode_end,
+        )[0]
+        # A batch's episodes end by step, and by index within a step (a stable sort).
+        ended += sorted(outcomes, key=lambda o: o["steps"])
+    steps = [o["steps"] for o in ended if o["success"]]
     return {
-        "success_rate": successes / episodes,
+        "success_rate": len(steps) / episodes,
         "mean_steps": float(np.mean(steps)) if steps else math.nan,
-        "violations": violations,
-        "box_exits": exits,
-        "paths": paths,
+        "violations": sum(o["trap_entry"] for o in ended),
+        "box_exits": sum(o["box_exit"] for o in ended),
+        "paths": [(o["path"], o["success"]) for o in ended[:12]],
+    }
+
+
+def _episode_end(env: Any, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
+    """What the benchmark reads from a FlatWorld episode's last step: whether it entered the
+    trap, whether it left the square, and its path."""
+    return {
+        "trap_entry": int(info["trap"] and terminated),
+        "box_exit": int(info["box_exit"]),
+        "path": np.asarray(env.unwrapped.path),
     }
 
 
@@ -198,7 +181,6 @@ def job(
     :func:`~tlshield.lab.training.learn` into ``folder`` (a run folder: ``run.json``,
     ``metrics.csv``, the model), evaluate the trained policy, and write ``result.json`` and
     ``paths.npz`` beside them (a Ray task)."""
-    from tlshield.envs import FLATWORLD_ID
     from tlshield.lab.training import learn, prepare
 
     start = time.perf_counter()

@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
-from tlshield.envs import scored_by_return
+from tlshield.lab.envs import scored_by_return
 from tlshield.lab.evaluation import rollouts
 from tlshield.lab.measures import step_violation
 from tlshield.lab.presets import clf_scale
@@ -195,7 +195,7 @@ class ClfSchedule(BaseCallback):  # type: ignore[misc]
 class Validation(BaseCallback):  # type: ignore[misc]
     """Every ``validate_every`` updates, the validation episodes of the deterministic policy;
     the best so far (ties: the later) is saved as the run's kept model. Best means the highest
-    success rate, or, for an env :func:`tlshield.envs.scored_by_return`, the highest mean
+    success rate, or, for an env :func:`tlshield.lab.envs.scored_by_return`, the highest mean
     return (its cost is recorded beside it)."""
 
     def __init__(self, run: TrainingRun) -> None:

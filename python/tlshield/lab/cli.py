@@ -17,10 +17,11 @@ import numpy as np
 from gymnasium import error as gym_error
 
 from tlshield._core import Automaton, SpecError
-from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID, import_modules
+from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 from tlshield.envs.params import FULL
 from tlshield.envs.safety_gym import MissingStack
+from tlshield.lab.envs import import_modules
 from tlshield.lab.presets import DEFAULT_TRIALS, DEFAULT_UPDATES, STUDY_UPDATES
 
 #: Top-level modules of the ``train`` extra (pyproject.toml), for a clear message when missing.

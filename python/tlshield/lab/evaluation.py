@@ -15,15 +15,20 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, env_horizon, import_modules, make, scored_by_return
+from tlshield.envs import ENV_ID
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
 from tlshield.lab import measures
+from tlshield.lab.envs import env_horizon, import_modules, make, scored_by_return
 from tlshield.lab.presets import DEFAULT_TRIALS
 from tlshield.lab.runs import read_record
 from tlshield.lab.seeds import EVAL_SEED, MAX_TRIALS
 
 __all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
+
+#: What :func:`rollouts` adds to a trial's outcome, read after its last step:
+#: ``extra(env, info, terminated) -> fields``.
+Extra = Callable[[Any, dict[str, Any], bool], dict[str, Any]]
 
 
 def rollouts(
@@ -32,6 +37,9 @@ def rollouts(
     policy: Callable[[np.ndarray], np.ndarray],
     seeds: list[int],
     env_id: str = ENV_ID,
+    *,
+    evaluation: bool | None = None,
+    extra: Extra | None = None,
 ) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
     by side with one batched policy call per step: per-trial outcomes, start states, agent
@@ -41,12 +49,20 @@ def rollouts(
     undiscounted ``return`` (the task's own reward, ``info["task_reward"]`` where the env
     shapes it) and ``cost`` (``info["cost"]`` summed; ``None`` where the env reports none).
 
-    An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
+    An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
     the unshielded ``rl`` unshielded, and every episode runs to the horizon (a met goal moves,
-    it does not end the task); its ``success`` says whether any goal was met."""
+    it does not end the task); its ``success`` says whether any goal was met.
+
+    ``evaluation``: the env factory's ``evaluation=`` (default: the rules above, the CBF on
+    except for an env scored by return); ``overrides`` go to the factory as keywords. ``extra``,
+    if given, is called once per trial after the last step with the trial's env, that step's
+    ``info`` and its ``terminated``, and what it returns is added to the trial's outcome. The
+    envs are closed before this returns."""
     by_return = scored_by_return(env_id)
-    # The paper's evaluation rules: the CBF on in every configuration.
-    envs = [make(env_id, config, evaluation=not by_return, **overrides) for _ in seeds]
+    if evaluation is None:
+        # The paper's evaluation rules: the CBF on in every configuration.
+        evaluation = not by_return
+    envs = [make(env_id, config, evaluation=evaluation, **overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
     channel = env_id == ENV_ID
     starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))
@@ -65,6 +81,7 @@ def rollouts(
         for s in seeds
     ]
     trapped = [False] * len(seeds)
+    last: list[tuple[dict[str, Any], bool]] = [({}, False)] * len(seeds)  # info, terminated
     horizon = env_horizon(envs[0]) or 1000
     active = list(range(len(seeds)))
     for t in range(horizon):
@@ -75,6 +92,7 @@ def rollouts(
         for i, action in zip(active, actions, strict=True):
             o, reward, terminated, truncated, info = envs[i].step(action)
             obs[i] = o
+            last[i] = info, bool(terminated)
             if channel:
                 paths[i].append(envs[i].state[[X, Y]])
                 obstacle_paths[i].append(_obstacles(envs[i]))
@@ -99,6 +117,10 @@ def rollouts(
             else:
                 still.append(i)
         active = still
+    for env, out, (info, terminated) in zip(envs, outcomes, last, strict=True):
+        if extra is not None:
+            out.update(extra(env, info, terminated))
+        env.close()
     return (
         outcomes,
         starts,
@@ -139,7 +161,7 @@ def evaluate(
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
     folder's pickled statistics load (see :mod:`tlshield.lab.saved`). ``evaluation.json`` also
     has the trials' mean undiscounted ``return_mean`` and ``cost_mean`` (None where the env
-    reports no cost). An env :func:`tlshield.envs.scored_by_return` (Safety-Gymnasium's) is
+    reports no cost). An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) is
     evaluated as :func:`rollouts` says: as it trained, to the horizon."""
     if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
         raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")

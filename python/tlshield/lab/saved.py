@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import ENV_ID, make
+from tlshield.envs import ENV_ID
+from tlshield.lab.envs import make
 from tlshield.lab.runs import read_record
 
 __all__ = [

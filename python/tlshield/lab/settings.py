@@ -143,9 +143,10 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
 def _params_class(env_id: str) -> Any:
     """The parameters class of a bundled environment; None for a user's registered one (an
     unregistered id is an error)."""
-    from tlshield.envs import ChannelParams, check_env_id
+    from tlshield.envs import ChannelParams
     from tlshield.envs.flatworld import FlatWorldParams
     from tlshield.envs.point_mass import PointMassParams
+    from tlshield.lab.envs import check_env_id
 
     classes = {ENV_ID: ChannelParams, POINT_MASS_ID: PointMassParams, FLATWORLD_ID: FlatWorldParams}
     check_env_id(env_id)

@@ -40,8 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from tlshield.envs import (
-    ENV_ID,
+from tlshield.envs import ENV_ID
+from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
+from tlshield.envs.params import FULL, as_flat, check_config
+from tlshield.lab.envs import (
     check_env_id,
     check_task_env,
     factory_takes,
@@ -49,8 +51,6 @@ from tlshield.envs import (
     make,
     scored_by_return,
 )
-from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
-from tlshield.envs.params import FULL, as_flat, check_config
 from tlshield.lab.evaluation import evaluate
 from tlshield.lab.presets import (
     DEFAULT_FINAL_SCALE,

@@ -2,7 +2,7 @@
 <what, and where>``, and exit code 2, never a traceback (issue 20, point 4).
 
 The subcommands come from the parser itself, so a new one without cases fails
-:func:`test_every_subcommand_has_cases`. ``python -m tests.test_cli_errors`` prints the table.
+:func:`test_every_subcommand_has_cases`. ``python -m tests.lab.test_cli_errors`` prints the table.
 """
 
 from __future__ import annotations

@@ -128,7 +128,7 @@ def _script(name: str, *args: str) -> str:
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     done = subprocess.run(
         [sys.executable, str(root / "scripts" / name), *args],
         capture_output=True,
