@@ -537,5 +537,7 @@ def test_the_core_world_is_built_from_one_params_object() -> None:
 
     env = ChannelEnv(config="rl_cbf_clf", end_on_trap=False)
     ChannelWorld(env.model, env.params, evaluation=True, channel_atoms=(0, 1))
-    with pytest.raises(TypeError, match=r"params: expected a ChannelParams \(no agent\.rl_bounds\)"):
+    with pytest.raises(
+        TypeError, match=r"params: expected a ChannelParams \(no agent\.rl_bounds\)"
+    ):
         ChannelWorld(env.model, object(), evaluation=True, channel_atoms=(0, 1))
