@@ -64,6 +64,15 @@ CALLS = {
         "tlshield.Shield(spec, None, alpha=1.0, c3=1.0, k=1e4, cbf_bounds=(range(N), range(N)), "
         "clf_bounds=(-1.0, 1.0))"
     ),
+    "Shield(inputs=N, scalar bounds)": (
+        "tlshield.Shield(spec, None, alpha=1.0, c3=1.0, k=1e4, cbf_bounds=(-1.0, 1.0), "
+        "clf_bounds=(-1.0, 1.0), inputs=N)"
+    ),
+    "ChannelWorld(params with horizon=N)": (
+        "import dataclasses; p = env.params; "
+        "tlshield._core.ChannelWorld(env.model, dataclasses.replace(p, task="
+        "dataclasses.replace(p.task, horizon=N)), evaluation=True, channel_atoms=(0, 1))"
+    ),
     "Automaton.step_batch(states (N, 13), qs (N,))": "aut.step_batch(B(N, 13), B(N, dtype=int))",
     "Automaton.run(traj (N, 13))": "aut.run(B(N, 13))",
     "Spec.robustness_batch(trajs (N, 2, 13))": "spec.robustness_batch(B(N, 2, 13))",

@@ -148,7 +148,7 @@ impl Shield {
             (None, Some(c)) => Some(c.inputs()),
             (None, None) => None,
         })?;
-        params.broadcast(m);
+        params.broadcast(m)?;
         params.validate(m, automaton.spec())?;
         let spec = automaton.spec();
         let mut min_dim = spec

@@ -158,12 +158,15 @@ impl Bounds {
         (!self.uniform).then_some(self.lo.len())
     }
 
-    /// Uniform bounds repeated for `m` inputs; bounds per input are left as given.
-    pub(super) fn broadcast(&mut self, m: usize) {
+    /// Uniform bounds repeated for `m` inputs; bounds per input are left as given. An `m`
+    /// whose bounds cannot fit in memory is an error, not an abort.
+    pub(super) fn broadcast(&mut self, what: &str, m: usize) -> Result<(), ShieldError> {
         if self.uniform && self.lo.len() == 1 && self.hi.len() == 1 {
-            (self.lo, self.hi) = (vec![self.lo[0]; m], vec![self.hi[0]; m]);
+            self.lo = crate::alloc::try_vec(what, m, self.lo[0])?;
+            self.hi = crate::alloc::try_vec(what, m, self.hi[0])?;
             self.uniform = false;
         }
+        Ok(())
     }
 
     /// Checks lengths, finiteness and order; `what` names the argument in the message.
@@ -474,14 +477,16 @@ impl ShieldParams {
     }
 
     /// Every uniform bound repeated for `m` inputs.
-    pub(super) fn broadcast(&mut self, m: usize) {
-        for b in [&mut self.cbf_bounds, &mut self.clf_bounds]
-            .into_iter()
-            .chain(self.action_bounds.as_mut())
-            .chain(self.rl_bounds.as_mut())
-        {
-            b.broadcast(m);
+    pub(super) fn broadcast(&mut self, m: usize) -> Result<(), ShieldError> {
+        self.cbf_bounds.broadcast("cbf_bounds", m)?;
+        self.clf_bounds.broadcast("clf_bounds", m)?;
+        if let Some(b) = &mut self.action_bounds {
+            b.broadcast("action_bounds", m)?;
         }
+        if let Some(b) = &mut self.rl_bounds {
+            b.broadcast("rl_bounds", m)?;
+        }
+        Ok(())
     }
 
     /// The gain of the second-order CLF.
