@@ -206,8 +206,11 @@ def test_bad_callables_are_clear_errors_at_construction() -> None:
         tlshield.ControlAffine(lambda s: np.full(4, np.nan), di_g, state_dim=4, inputs=2)
     with pytest.raises(ValueError, match="g is zero everywhere"):
         tlshield.ControlAffine(di_f, lambda s: np.zeros((4, 2)), state_dim=4, inputs=2)
-    with pytest.raises(ValueError, match="state_dim >= 1"):
+    at_least_one = "state_dim, inputs: expected at least one state value and one input"
+    with pytest.raises(ValueError, match=f"{at_least_one}, got state_dim=0, inputs=2"):
         tlshield.ControlAffine(di_f, di_g, state_dim=0, inputs=2)
+    with pytest.raises(ValueError, match=f"{at_least_one}, got state_dim=4, inputs=0"):
+        tlshield.ControlAffine(di_f, di_g, state_dim=4, inputs=0)
     with pytest.raises(RuntimeError, match="boom"):
 
         def fails(s: np.ndarray) -> np.ndarray:

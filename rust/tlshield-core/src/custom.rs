@@ -77,6 +77,19 @@ pub fn jacobian_by_differences<E>(
 }
 
 impl CustomModel {
+    /// Checks a model's sizes before anything is built for them: at least one state value
+    /// and one input.
+    pub fn check_sizes(n: usize, m: usize) -> Result<(), InputError> {
+        if n == 0 || m == 0 {
+            return Err(InputError::Value {
+                what: "ControlAffine state_dim, inputs".into(),
+                expected: "at least one state value and one input".into(),
+                got: format!("state_dim={n}, inputs={m}"),
+            });
+        }
+        Ok(())
+    }
+
     /// A model over `n` state values and `m` inputs whose inputs move the dimensions
     /// `actuated` directly and `integrated` through one integration.
     pub fn new(
@@ -85,13 +98,7 @@ impl CustomModel {
         actuated: &[usize],
         integrated: &[usize],
     ) -> Result<Self, InputError> {
-        if n == 0 || m == 0 {
-            return Err(InputError::Value {
-                what: "ControlAffine state_dim, inputs".into(),
-                expected: "at least one state value and one input".into(),
-                got: format!("state_dim={n}, inputs={m}"),
-            });
-        }
+        Self::check_sizes(n, m)?;
         let mark = |what: &str, dims: &[usize]| -> Result<Vec<bool>, InputError> {
             let mut out = try_vec("ControlAffine state_dim", n, false)?;
             for &d in dims {

@@ -2,7 +2,7 @@
 //! `WorldStep`, and `step_worlds` steps many: both in `world`).
 
 use numpy::{IntoPyArray, PyArray1, PyArray2};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::channel::{
@@ -32,6 +32,27 @@ pub struct PyChannelWorld {
 fn pair(values: Vec<f64>, name: &str) -> PyResult<[f64; 2]> {
     <[f64; 2]>::try_from(values)
         .map_err(|v| PyValueError::new_err(format!("{name}: expected 2 values, got {}", v.len())))
+}
+
+/// `params.group.name` of a `ChannelParams`, converted; a missing field or a value of
+/// another kind is a `TypeError` naming it.
+fn setting<'py, T: for<'a> FromPyObject<'a, 'py>>(
+    params: &Bound<'py, PyAny>,
+    group: &str,
+    name: &str,
+    expected: &str,
+) -> PyResult<T> {
+    let value = params
+        .getattr(group)
+        .and_then(|g| g.getattr(name))
+        .map_err(|_| {
+            PyTypeError::new_err(format!(
+                "params: expected a ChannelParams (no {group}.{name})"
+            ))
+        })?;
+    value
+        .extract()
+        .map_err(|_| PyTypeError::new_err(format!("params.{group}.{name}: expected {expected}")))
 }
 
 impl PyChannelWorld {
@@ -122,64 +143,30 @@ impl PyChannelWorld {
         evaluation: bool,
         channel_atoms: (usize, usize),
     ) -> PyResult<Self> {
-        let field = |group: &str, name: &str| -> PyResult<Bound<'_, PyAny>> {
-            params
-                .getattr(group)
-                .and_then(|g| g.getattr(name))
-                .map_err(|_| {
-                    pyo3::exceptions::PyTypeError::new_err(format!(
-                        "params: expected a ChannelParams (no {group}.{name})"
-                    ))
-                })
-        };
-        fn number<'py, T: for<'a> FromPyObject<'a, 'py>>(
-            value: PyResult<Bound<'py, PyAny>>,
-            what: &str,
-        ) -> PyResult<T> {
-            value?.extract().map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(format!(
-                    "params.{what}: expected a {}",
-                    std::any::type_name::<T>()
-                ))
-            })
-        }
+        const NUMBER: &str = "a number";
+        const FLAG: &str = "a bool";
+        let p = params;
         let rl_bounds: (Bound<'_, PyAny>, Bound<'_, PyAny>) =
-            field("agent", "rl_bounds")?.extract().map_err(|_| {
-                pyo3::exceptions::PyTypeError::new_err(
-                    "params.agent.rl_bounds: expected a pair (lo, hi)",
-                )
-            })?;
-        let kind: String = number(field("observation", "kind"), "observation.kind")?;
+            setting(p, "agent", "rl_bounds", "a pair (lo, hi)")?;
+        let kind: String = setting(p, "observation", "kind", "a str")?;
         let core = ChannelParams {
-            dt: number(field("agent", "dt"), "agent.dt")?,
-            horizon: number(field("task", "horizon"), "task.horizon")?,
-            arena: number(field("agent", "arena"), "agent.arena")?,
-            half_width: number(field("task", "half_width"), "task.half_width")?,
-            obstacle_radius: number(
-                field("obstacles", "obstacle_radius"),
-                "obstacles.obstacle_radius",
-            )?,
-            safe_distance: number(
-                field("obstacles", "safe_distance"),
-                "obstacles.safe_distance",
-            )?,
-            w: number(field("obstacles", "w"), "obstacles.w")?,
-            collision_penalty: number(
-                field("obstacles", "collision_penalty"),
-                "obstacles.collision_penalty",
-            )?,
-            intervention_penalty: number(
-                field("shield", "intervention_penalty"),
-                "shield.intervention_penalty",
-            )?,
+            dt: setting(p, "agent", "dt", NUMBER)?,
+            horizon: setting(p, "task", "horizon", "a whole number in [0, 2**32)")?,
+            arena: setting(p, "agent", "arena", "a pair of numbers")?,
+            half_width: setting(p, "task", "half_width", NUMBER)?,
+            obstacle_radius: setting(p, "obstacles", "obstacle_radius", NUMBER)?,
+            safe_distance: setting(p, "obstacles", "safe_distance", NUMBER)?,
+            w: setting(p, "obstacles", "w", NUMBER)?,
+            collision_penalty: setting(p, "obstacles", "collision_penalty", NUMBER)?,
+            intervention_penalty: setting(p, "shield", "intervention_penalty", NUMBER)?,
             relative: kind == "relative",
             rl_bounds: (
                 pair(sequence(&rl_bounds.0, "rl_bounds[0]")?, "rl_bounds[0]")?,
                 pair(sequence(&rl_bounds.1, "rl_bounds[1]")?, "rl_bounds[1]")?,
             ),
-            obstacle_drift: number(field("shield", "obstacle_drift"), "shield.obstacle_drift")?,
+            obstacle_drift: setting(p, "shield", "obstacle_drift", FLAG)?,
             evaluation,
-            end_on_trap: number(field("task", "end_on_trap"), "task.end_on_trap")?,
+            end_on_trap: setting(p, "task", "end_on_trap", FLAG)?,
             channel_atoms: [channel_atoms.0, channel_atoms.1],
         };
         Ok(PyChannelWorld {
@@ -188,7 +175,8 @@ impl PyChannelWorld {
         })
     }
 
-    /// Pickled as its constructor's arguments (the model and the params object) and its state ``(s, drift, obstacles, t)``.
+    /// Pickled as its constructor's arguments (the model and the params object) and its state
+    /// ``(s, drift, obstacles, t)``.
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let world = &slf.borrow().inner;

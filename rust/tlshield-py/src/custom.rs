@@ -198,12 +198,7 @@ impl PyControlAffine {
         jacobian: Option<&Bound<'_, PyAny>>,
         probe: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        if state_dim == 0 || inputs == 0 {
-            return Err(PyValueError::new_err(format!(
-                "ControlAffine: expected state_dim >= 1 and inputs >= 1, got state_dim={state_dim}, \
-                 inputs={inputs}"
-            )));
-        }
+        map(CustomModel::check_sizes(state_dim, inputs))?;
         let (n, m) = (state_dim, inputs);
         let fns = Callables {
             f: Source::new(f, "f", &[n])?,
