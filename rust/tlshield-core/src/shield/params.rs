@@ -717,4 +717,53 @@ mod tests {
         assert!(!Barrier::outside("wall", p).named_for_its_side());
         assert_eq!(Barrier::default_name(3), "h3");
     }
+
+    /// The number of inputs: the model's, else `inputs`, else per-input bounds; uniform
+    /// bounds are repeated for it, and a count past memory is an error, not an abort.
+    #[test]
+    fn inputs_are_counted_and_uniform_bounds_broadcast() {
+        let uniform = || {
+            ShieldParams::new(
+                1.0,
+                1.0,
+                1.0,
+                Bounds::uniform(-1.0, 1.0),
+                Bounds::uniform(-2.0, 2.0),
+            )
+        };
+        assert_eq!(uniform().input_count(Some(3)).unwrap(), 3);
+        assert_eq!(uniform().with_inputs(Some(4)).input_count(None).unwrap(), 4);
+        let msg = |r: Result<usize, ShieldError>| r.unwrap_err().to_string();
+        assert!(msg(uniform().input_count(None)).contains("pass inputs=m"));
+        assert!(msg(uniform().with_inputs(Some(0)).input_count(None)).contains("at least 1"));
+        assert!(msg(uniform().with_inputs(Some(2)).input_count(Some(3)))
+            .contains("inputs = 2, but the model has 3 inputs"));
+        let per_input = ShieldParams::new(
+            1.0,
+            1.0,
+            1.0,
+            Bounds::new(vec![-1.0; 5], vec![1.0; 5]),
+            Bounds::uniform(-2.0, 2.0),
+        );
+        assert_eq!(per_input.input_count(None).unwrap(), 5);
+
+        let mut p = uniform().with_action_bounds(Some(Bounds::uniform(-3.0, 3.0)));
+        p.broadcast(3).unwrap();
+        assert_eq!(p.cbf_bounds, Bounds::new(vec![-1.0; 3], vec![1.0; 3]));
+        assert_eq!(p.clf_bounds, Bounds::new(vec![-2.0; 3], vec![2.0; 3]));
+        assert_eq!(
+            p.action_bounds,
+            Some(Bounds::new(vec![-3.0; 3], vec![3.0; 3]))
+        );
+        assert!(p.rl_bounds.is_none());
+        // Per-input bounds are left as given (their length is checked by validate).
+        let mut q = per_input.clone();
+        q.broadcast(3).unwrap();
+        assert_eq!(q.cbf_bounds, per_input.cbf_bounds);
+        let huge = uniform().broadcast(usize::MAX / 2).unwrap_err().to_string();
+        assert!(
+            huge.contains("cbf_bounds") && huge.contains("do not fit in memory"),
+            "{huge}"
+        );
+    }
 }
