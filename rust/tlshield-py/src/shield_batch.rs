@@ -58,9 +58,8 @@ impl<'py> BatchInput<'py> {
             drift,
             evaluated: None,
         };
-        map(shield
-            .core()
-            .check_rows(input.rows(), input.a_rl(), input.drift()))?;
+        let (rows, a_rl, _, drift) = input.parts();
+        map(shield.core().check_rows(rows, a_rl, drift))?;
         input.evaluated = shield.evaluate_rows(py, input.states.values())?;
         Ok(input)
     }
@@ -70,22 +69,24 @@ impl<'py> BatchInput<'py> {
         StateBatch::new(self.states.values(), self.states.shape()[1], &self.qs)
     }
 
-    /// The RL actions, row-major.
-    pub(crate) fn a_rl(&self) -> &[f64] {
-        self.a_rl.values()
-    }
-
-    /// The drift, row-major, when given.
-    pub(crate) fn drift(&self) -> Option<&[f64]> {
-        self.drift.as_ref().map(|d| d.values())
-    }
-
-    /// Each row's dynamics from a `ControlAffine` model; `None` for a built-in model.
-    pub(crate) fn dynamics(&self) -> Option<BatchDynamics<'_>> {
-        self.evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+    /// What the core's batch call takes: the rows, the RL actions and the drift (row-major)
+    /// and, from a `ControlAffine` model, each row's dynamics. Only these slices cross into a
+    /// GIL-free closure; the arrays' handles stay with `self`.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn parts(
+        &self,
+    ) -> (
+        StateBatch<'_>,
+        &[f64],
+        Option<BatchDynamics<'_>>,
+        Option<&[f64]>,
+    ) {
+        let dynamics = self.evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
             f,
             g,
             jacobian: Some(j),
-        })
+        });
+        let drift = self.drift.as_ref().map(|d| d.values());
+        (self.rows(), self.a_rl.values(), dynamics, drift)
     }
 }

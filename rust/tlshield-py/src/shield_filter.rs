@@ -271,9 +271,7 @@ impl PyShield {
         let rows = input.rows().len();
         let shield = &self.inner;
         let mut out = BatchOutput::default();
-        // Slices only cross into the GIL-free closure (the arrays' handles stay here).
-        let (batch, a_rl, dynamics, drift) =
-            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
+        let (batch, a_rl, dynamics, drift) = input.parts();
         map(py.detach(|| shield.filter_batch_with(batch, a_rl, dynamics, drift, &mut out)))?;
         self.batch_result(py, out, rows)
     }

@@ -46,8 +46,7 @@ impl PyShield {
         }
         let mut out = BatchGradient::default();
         let shield = &self.inner;
-        let (batch, a_rl, dynamics, drift) =
-            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
+        let (batch, a_rl, dynamics, drift) = input.parts();
         let grads = grad.values();
         map(py.detach(|| {
             shield.vjp_batch(batch, a_rl, grads, dynamics, drift, state_grad, &mut out)
@@ -77,8 +76,7 @@ impl PyShield {
         let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
         let mut out = BatchGradient::default();
         let shield = &self.inner;
-        let (batch, a_rl, dynamics, drift) =
-            (input.rows(), input.a_rl(), input.dynamics(), input.drift());
+        let (batch, a_rl, dynamics, drift) = input.parts();
         map(
             py.detach(|| shield.jacobian_batch(batch, a_rl, dynamics, drift, state_grad, &mut out))
         )?;

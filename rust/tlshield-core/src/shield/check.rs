@@ -7,7 +7,7 @@ use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::MonitorBatch;
 use crate::validate::check_finite;
 
-use super::inputs::{BatchDynamics, ControlAffine, StateBatch};
+use super::inputs::{BatchDynamics, Call, ControlAffine, StateBatch};
 use super::params::Bounds;
 use super::Shield;
 
@@ -179,14 +179,15 @@ impl Shield {
     }
 
     /// Validates the arguments of one step.
-    pub(super) fn check_call(
-        &self,
-        s: &[f64],
-        q: usize,
-        a_rl: &[f64],
-        fg: Option<ControlAffine<'_>>,
-        drift: Option<&[f64]>,
-    ) -> Result<(), ShieldError> {
+    pub(super) fn check_call(&self, call: &Call<'_>) -> Result<(), ShieldError> {
+        let Call {
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+            ..
+        } = *call;
         self.check_state("s", s)?;
         check_finite("s", s, s.len())?;
         self.automaton.check_state("q", q)?;

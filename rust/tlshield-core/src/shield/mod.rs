@@ -357,7 +357,7 @@ impl Shield {
         stage: Stage,
         take: impl FnOnce(&Workspace) -> R,
     ) -> Result<R, ShieldError> {
-        self.check_call(c.s, c.q, c.a_rl, c.fg, c.drift)?;
+        self.check_call(&c)?;
         Ok(self.with_workspace(c.s.len(), |ws| {
             self.step(ws, c, stage);
             take(ws)
