@@ -315,3 +315,35 @@ def test_the_kinematic_bicycle_keeps_its_barriers_under_attack() -> None:
                     unshielded += inside
     assert shielded == 0
     assert unshielded > 0
+
+
+def test_a_batch_of_the_wrong_width_is_refused_before_the_model_is_called() -> None:
+    """The core checks a batch's rows (width, values, FSA states) before the binding evaluates
+    the user's callables at them: a row of another width never reaches ``f`` or ``g``."""
+    calls = []
+
+    def counted_f(s: np.ndarray) -> np.ndarray:
+        calls.append(len(s))
+        return di_f(s)
+
+    sh = shield(tlshield.ControlAffine(counted_f, di_g, state_dim=4, inputs=2))
+    calls.clear()
+    rng = np.random.default_rng(0)
+    for width in (3, 5, 8):
+        rows = rng.uniform(-1.0, 1.0, (2, width))
+        expected = f"states row length: expected 4 \\(the model's state_dim\\), got {width}"
+        with pytest.raises(ValueError, match=expected):
+            sh.filter_batch(rows, [0, 0], np.zeros((2, 2)))
+        with pytest.raises(ValueError, match=expected):
+            sh.vjp_batch(rows, [0, 0], np.zeros((2, 2)), np.ones((2, 2)))
+        with pytest.raises(ValueError, match=expected):
+            sh.jacobian_batch(rows, [0, 0], np.zeros((2, 2)))
+    bad = states(rng, 2, 4)
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match="states"):
+        sh.jacobian_batch(bad, [0, 0], np.zeros((2, 2)))
+    assert calls == []
+    # Rows of the model's width do reach it (f at each row, and the differences of its
+    # Jacobian).
+    sh.filter_batch(states(rng, 2, 4), [0, 0], np.zeros((2, 2)))
+    assert calls and set(calls) == {4}

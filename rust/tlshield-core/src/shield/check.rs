@@ -60,6 +60,15 @@ impl Shield {
     /// batch still says how long its rows are).
     pub(super) fn check_state_len(&self, what: &str, n: usize) -> Result<(), ShieldError> {
         self.automaton.spec().check_state_len(n)?;
+        // A user's model is evaluated at exactly its own state length.
+        if let Some(c) = self.custom.as_ref().filter(|c| n != c.state_len()) {
+            return Err(InputError::Shape {
+                what: format!("{what} length"),
+                expected: format!("{} (the model's state_dim)", c.state_len()),
+                got: n.to_string(),
+            }
+            .into());
+        }
         if n < self.min_dim {
             return Err(InputError::Shape {
                 what: format!("{what} length"),
