@@ -50,7 +50,7 @@ def main() -> int:
     from tlshield.envs.safety_gym import SafetyGoalEnv, make_builder
 
     raw = make_builder(args.task)
-    shielded = SafetyGoalEnv(args.task, "rl_cbf_clf")
+    shielded = SafetyGoalEnv(args.task, "rl_cbf_clf", actions="native")
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, 2))
     inner = {"seconds": 0.0, "steps": 0}
     step = shielded._env.step

@@ -48,7 +48,7 @@ def goal_seeker(
                 * np.array([math.cos(angles[j]), math.sin(angles[j])])
             )
     heading = math.atan2(v[1], v[0])
-    return env.robot.drive(max(0.0, math.cos(heading)), float(np.clip(3.0 * heading, -1, 1)))
+    return env.drive(max(0.0, math.cos(heading)), float(np.clip(3.0 * heading, -1, 1)))
 
 
 def main() -> None:

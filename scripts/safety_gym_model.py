@@ -26,7 +26,7 @@ def rollouts(policy: str, episodes: int, steps: int) -> tuple[np.ndarray, ...]:
     them within the thrust's saturation; "attack": the lidar hazard attacker)."""
     from tlshield.envs.safety_gym import SafetyGoalEnv, hazard_attacker
 
-    env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl")
+    env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl", actions="native")
     rng = np.random.default_rng(0 if policy == "random" else 1)
     before, after, inputs = [], [], []
     for ep in range(episodes):
@@ -114,7 +114,7 @@ def compare_models(episodes: int, d: float) -> None:
     print("|---|---:|---:|---:|")
     names = ("ThrustTurn (HOCBF rows, heading in the state)", f"reference point {d} m ahead")
     for name in names:
-        env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
+        env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf", actions="native")
         reference = name.startswith("reference")
         if reference:  # the env steps unshielded; this loop shields the point ahead
             p = env.params

@@ -50,8 +50,8 @@ class ShieldUnits(gym.Wrapper):  # type: ignore[type-arg]
         return self._augment(obs), info
 
     def step(self, u: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        robot = self.env.unwrapped.robot
-        action = robot.env_action(np.clip(np.asarray(u, dtype=np.float64), -1.0, 1.0))
+        inner = self.env.unwrapped
+        action = inner.env_action(np.clip(np.asarray(u, dtype=np.float64), -1.0, 1.0))
         obs, reward, terminated, truncated, info = self.env.step(action)
         return self._augment(obs), reward, terminated, truncated, info
 

@@ -189,7 +189,7 @@ def test_the_car_model_is_its_equations_and_its_inputs_fit_the_wheels() -> None:
     # The shield's box is inside the diamond: what it sends, the wheels do.
     (lo0, lo1), (hi0, hi1) = car.input_box()
     assert hi0 + hi1 <= 1.0 and lo0 + lo1 >= -1.0
-    assert np.all(np.abs(car.drive(1.0, 1.0)) <= car.saturation + 1e-15)
+    assert np.all(np.abs(car.drive(1.0, 1.0)) <= 1.0 + 1e-15)
 
 
 def test_the_car_holds_its_body_origin_out_of_the_hazards() -> None:

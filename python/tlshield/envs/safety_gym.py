@@ -56,6 +56,11 @@ INSTALL = (
 TASKS = ("SafetyPointGoal1-v0", "SafetyPointGoal2-v0", "SafetyCarGoal1-v0")
 #: The tasks :func:`make_builder` makes (Safety-Gymnasium's own, unshielded).
 BUILDER_TASKS = TASKS
+#: The policy's action spaces (``actions=``). ``"robot"`` (the default): each actuator's working
+#: range as ``[-1, 1]`` (the Point's motor saturates at 0.05 of Safety-Gymnasium's box, the
+#: Car's wheels at 0.02), so that a Gaussian policy's noise is noise in what the robot does.
+#: ``"native"``: Safety-Gymnasium's own box, for rows like for like with the field's.
+ACTIONS = ("robot", "native")
 
 
 class MissingStack(ImportError):
@@ -159,6 +164,12 @@ class PointModel:
     saturation: float = 0.05
     #: The agent's part of the shield's state: ``x, y, theta, vx, vy``.
     agent_dim: ClassVar[int] = 5
+
+    @property
+    def scale(self) -> NDArray[np.float64]:
+        """Safety-Gymnasium's action per unit of the robot's own (the motor's ``saturation``,
+        the turn's 1)."""
+        return np.array([self.saturation, 1.0])
     #: The cost is measured at the state's ``x, y`` (no point of the body ahead of it).
     pivot: ClassVar[float] = 0.0
 
@@ -176,13 +187,19 @@ class PointModel:
         a0 = min(max(float(action[0]) / self.saturation, -1.0), 1.0)
         return np.array([a0, min(max(float(action[1]), -1.0), 1.0)])
 
+    def actuators(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The robot's own action (each actuator's working range as ``[-1, 1]``) for the
+        shield's input ``u``: the same two numbers."""
+        return np.array([u[0], u[1]], dtype=np.float64)
+
     def env_action(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
-        """What the env is sent for the shield's input ``u``."""
-        return np.array([self.saturation * u[0], u[1]])
+        """What Safety-Gymnasium is sent for the shield's input ``u``."""
+        return self.scale * self.actuators(u)
 
     def drive(self, thrust: float, turn: float) -> NDArray[np.float64]:
-        """The env action for a push along the heading and a turn, each in ``[-1, 1]``."""
-        return self.env_action(np.array([thrust, turn]))
+        """The robot's own action (``actions="robot"``) for a push along the heading and a
+        turn, each in ``[-1, 1]``."""
+        return self.actuators(np.array([thrust, turn]))
 
     def locate(self, model: Any) -> Any:
         """Where the agent's pose and velocity are in MuJoCo's arrays (re-read whenever
@@ -257,6 +274,12 @@ class CarModel:
     #: The agent's part of the shield's state: ``x, y, psi, v``.
     agent_dim: ClassVar[int] = 4
 
+    @property
+    def scale(self) -> NDArray[np.float64]:
+        """Safety-Gymnasium's action per unit of the robot's own (each wheel's
+        ``saturation``)."""
+        return np.array([self.saturation, self.saturation])
+
     def model(self, state_dim: int) -> ControlAffine:
         """The core model over ``[x, y, psi, v, ...]`` (``state_dim`` values, the rest fixed:
         the goal's and the obstacles' centres)."""
@@ -291,15 +314,21 @@ class CarModel:
         right = min(max(float(action[1]) / self.saturation, -1.0), 1.0)
         return np.array([(left + right) / 2.0, (left - right) / 2.0])
 
+    def actuators(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The robot's own action, the wheels' commands in ``[-1, 1]`` of their working
+        range, for the shield's input ``u``."""
+        return np.array([u[0] + u[1], u[0] - u[1]], dtype=np.float64)
+
     def env_action(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The wheel commands for the shield's input ``u``."""
-        return self.saturation * np.array([u[0] + u[1], u[0] - u[1]])
+        """The wheel commands Safety-Gymnasium is sent for the shield's input ``u``."""
+        return self.scale * self.actuators(u)
 
     def drive(self, thrust: float, turn: float) -> NDArray[np.float64]:
-        """The env action for a push along the heading and a turn, each in ``[-1, 1]``
-        (scaled into the wheels' diamond; a positive turn is counter-clockwise)."""
+        """The robot's own action (``actions="robot"``) for a push along the heading and a
+        turn, each in ``[-1, 1]`` (scaled into the wheels' diamond; a positive turn is
+        counter-clockwise)."""
         scale = 1.0 / max(1.0, abs(thrust) + abs(turn))
-        return self.env_action(np.array([thrust * scale, turn * scale]))
+        return self.actuators(np.array([thrust * scale, turn * scale]))
 
     def locate(self, model: Any) -> Any:
         """Where the agent's free joint is in MuJoCo's arrays."""
@@ -347,19 +376,24 @@ class SafetyGoalParams:
     #: Keep the agent's centre this far from a vase's centre (a vase is a 0.2 m cube and the
     #: agent a 0.1 m sphere with a 0.05 m box ahead: touching needs at most 0.32 m).
     vase_radius: float = 0.4
-    #: HOCBF gains, the CLF's and the QP's.
-    alpha: float = 1.0
-    alpha2: float = 2.0
-    c3: float = 1.0
+    #: HOCBF gains, the CLF's and the QP's. The defaults are the settings at which the shield
+    #: alone meets the most goals (docs/guides/safety-gym.md, "The defaults": tuned on reset
+    #: seeds 900-905, measured on 700-709): a CLF at full thrust (``clf_bound = 1``) with a
+    #: fast decay (``c3``, ``clf_gain``), and a HOCBF that lets it close on a hazard at
+    #: ``alpha = 2``.
+    alpha: float = 2.0
+    alpha2: float = 4.0
+    c3: float = 5.0
     k: float = 1e4
-    clf_gain: float = 1.0
+    clf_gain: float = 3.0
     #: Box on a_clf (the CLF's thrust), in units of full thrust.
-    clf_bound: float = 0.5
+    clf_bound: float = 1.0
     #: Barriers are kept this far above 0 (in h = distance - radius, metres).
     margin: float = 0.02
     #: The router's clearance: it plans around each avoided disc grown by this fraction of
-    #: its radius (``Shield(route_clearance=...)``).
-    route_clearance: float = 0.2
+    #: its radius (``Shield(route_clearance=...)``); at 1 its tangents leave the discs room
+    #: to pass at speed.
+    route_clearance: float = 1.0
     #: The shield's ``disturbance`` bounds: the model's one-step error on the position's
     #: rate (m/s, on ``x, y``) and on the velocity's rate (m/s^2, on ``vx, vy``), from
     #: ``scripts/safety_gym_model.py`` (0 turns a bound off).
@@ -434,18 +468,29 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         task: str = "SafetyPointGoal1-v0",
         config: str = FULL,
         evaluation: bool = False,
+        actions: str = "robot",
         **overrides: Any,
     ) -> None:
         check_config(config)
         if task not in TASKS:
             raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
+        if not isinstance(actions, str) or actions not in ACTIONS:
+            raise ValueError(f"actions = {actions!r}: expected one of {', '.join(ACTIONS)}")
         self.params = build(SafetyGoalParams, overrides, task)
         self.config = config
         self.task = task
+        self.actions = actions
         self.robot = robot_of(task)
         self._env = make_builder(task)
         self.observation_space = self._env.observation_space
-        self.action_space = self._env.action_space
+        native = self._env.action_space
+        # Safety-Gymnasium's action per unit of the policy's (1 for its own box).
+        self._scale = self.robot.scale if actions == "robot" else np.ones(2)
+        if actions == "robot":
+            hi = np.minimum(native.high / self._scale, 1.0)
+            self.action_space = gym.spaces.Box(-hi, hi, dtype=native.dtype)
+        else:
+            self.action_space = native
         sg = self._env.task
         self._hazards = sg.hazards.num if hasattr(sg, "hazards") else 0
         vases = getattr(sg, "vases", None)
@@ -541,10 +586,28 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         direction, counter-clockwise from the heading)."""
         return self.sensor(obs, f"{name}_lidar")
 
+    def native_action(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
+        """An action of this env's space as Safety-Gymnasium's (``actions="robot"``: scaled by
+        the robot's :attr:`~PointModel.scale`)."""
+        return self._scale * np.asarray(action, dtype=np.float64)
+
     def shield_input(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The policy's action in the shield's units (:meth:`PointModel.shield_input`,
+        """An action of this env's space in the shield's units (:meth:`PointModel.shield_input`,
         :meth:`CarModel.shield_input`)."""
-        return self.robot.shield_input(action)
+        return self.robot.shield_input(self.native_action(action))
+
+    def _own(self, robot_action: NDArray[np.float64]) -> NDArray[np.float64]:
+        # The robot's own action in this env's space.
+        return robot_action if self.actions == "robot" else self.robot.scale * robot_action
+
+    def env_action(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The action of this env's space for the shield's input ``u``."""
+        return self._own(self.robot.actuators(u))
+
+    def drive(self, thrust: float, turn: float) -> NDArray[np.float64]:
+        """The action of this env's space for a push along the heading and a turn, each in
+        ``[-1, 1]`` (:meth:`PointModel.drive`)."""
+        return self._own(self.robot.drive(thrust, turn))
 
     def step(
         self, action: NDArray[np.float64]
@@ -555,15 +618,17 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             raise ValueError(f"action: expected 2 finite values, got {action!r}")
         result = None
-        applied = action
+        applied = action  # in this env's space
         u_rl = self.shield_input(action)
         penalty = 0.0
         if self.shield is not None:
             result = self.shield.filter_monitor(self.monitor, u_rl)
             u = result.action
-            applied = self.robot.env_action(u)
+            applied = self.env_action(u)
             penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
-        obs, reward, cost, terminated, truncated, info = self._env.step(applied)
+        obs, reward, cost, terminated, truncated, info = self._env.step(
+            self.native_action(applied)
+        )
         goal_met = bool(info.get("goal_met", False))
         if goal_met:
             self._find_agent()
@@ -597,10 +662,15 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
 
 def make_safety_goal(
-    task: str, config: str = FULL, evaluation: bool = False, **overrides: Any
+    task: str,
+    config: str = FULL,
+    evaluation: bool = False,
+    actions: str = "robot",
+    **overrides: Any,
 ) -> gym.Env:
-    """``gymnasium.make("tlshield/SafetyPointGoal1-v0", config=..., evaluation=..., ...)``."""
-    return SafetyGoalEnv(task, config, evaluation, **overrides)
+    """``gymnasium.make("tlshield/SafetyPointGoal1-v0", config=..., evaluation=...,
+    actions=..., ...)``."""
+    return SafetyGoalEnv(task, config, evaluation, actions, **overrides)
 
 
 def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -611,7 +681,7 @@ def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.
     robot = env.robot
     bins = env.lidar(obs, "hazards")
     if bins.max() <= 0.0:
-        return robot.drive(1.0, 0.0)
+        return env.drive(1.0, 0.0)
     i = int(np.argmax(bins))
     angle = (i + 0.5) * 2.0 * np.pi / bins.size - robot.ahead  # from the heading
     angle = (angle + np.pi) % (2.0 * np.pi) - np.pi  # (-pi, pi]: left is positive
@@ -619,4 +689,4 @@ def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.
     speed = min(1.0, 2.0 * distance)  # wanted, towards the hazard
     forward = robot.forward_speed(env.sensor(obs, "velocimeter"))
     thrust = float(np.clip(5.0 * (speed * math.cos(angle) - forward), -1.0, 1.0))
-    return robot.drive(thrust, float(np.clip(3.0 * angle, -1.0, 1.0)))
+    return env.drive(thrust, float(np.clip(3.0 * angle, -1.0, 1.0)))

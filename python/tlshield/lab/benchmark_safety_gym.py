@@ -40,10 +40,10 @@ DEFAULT_STEPS = {
     "SafetyPointGoal2-v0": 300_000,
     "SafetyCarGoal1-v0": 1_000_000,
 }
-#: The default rows: unshielded PPO, the CBF alone, and the CLF as the base controller at the
-#: routed settings (the best of the levers on the tuning seeds 0-2; the confirmation seeds 3-5
-#: are in docs/guides/safety-gym.md).
-DEFAULT_CONFIGS = ("rl", "rl_cbf", "rl_cbf_clf+routed")
+#: The default rows: unshielded PPO, the CBF alone, and the CLF as the base controller with
+#: PPO learning on top of it, each at the env's defaults (the policy acts in the robot's
+#: units); and unshielded PPO in Safety-Gymnasium's own action space, the field's row.
+DEFAULT_CONFIGS = ("rl", "rl+native", "rl_cbf", "rl_cbf_clf")
 DEFAULT_SEEDS = (0, 1, 2)
 DEFAULT_EPISODES = 10
 #: The training preset (:data:`tlshield.lab.presets.PRESETS`).
@@ -60,27 +60,17 @@ class Variant:
     ppo: dict[str, Any] = field(default_factory=dict)
 
 
-#: The shield settings that let the shield alone meet the most goals (docs/guides/safety-gym.md:
-#: tuned on reset seeds 900-905, checked on 700-709).
-ROUTED = {
-    "clf_bound": 1.0,
-    "c3": 5.0,
-    "clf_gain": 3.0,
-    "alpha": 2.0,
-    "alpha2": 4.0,
-    "route_clearance": 1.0,
-}
-#: The rows the benchmark knows, by name (``--configs``): the four configurations as they are,
-#: and the levers of learning through the shield (366bc2d..4e1fc91), one change each.
+#: The rows the benchmark knows, by name (``--configs``): the four configurations at the env's
+#: defaults, the field's unshielded row in Safety-Gymnasium's own action space, and the levers
+#: of learning through the shield (366bc2d..4e1fc91), one change each.
 VARIANTS: dict[str, Variant] = {
     **{c: Variant(c) for c in ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf")},
+    # PPO as the field runs it: Safety-Gymnasium's action box (docs/guides/safety-gym.md).
+    "rl+native": Variant("rl", env={"actions": "native"}),
     # A penalty on the shield's correction |u - u_rl| (Krasowski et al. 2023).
     "rl_cbf+penalty": Variant("rl_cbf", env={"correction_penalty": 0.01}),
     # PPO learns from the executed action, not the sampled one.
     "rl_cbf+executed": Variant("rl_cbf", ppo={"learn_from": "executed"}),
-    # The routed CLF, at the settings that drive best alone, as the base controller; PPO
-    # learns a residual on top of it.
-    "rl_cbf_clf+routed": Variant("rl_cbf_clf", env=ROUTED),
 }
 #: The columns of ``safety_gym.csv``: per policy (``kept``: the best on validation, ``last``)
 #: the evaluation return and cost per episode; then the update the kept policy comes from, the
