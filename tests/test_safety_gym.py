@@ -88,12 +88,20 @@ def test_the_car_robot_builds_and_steps_under_numpy_2() -> None:
         model.jnt(np.array([1.5]))
 
 
+@pytest.mark.parametrize("actions", sg.ACTIONS)
 @pytest.mark.parametrize("task", sg.TASKS)
-def test_spaces_reward_and_cost_are_safety_gymnasiums(task: str) -> None:
-    env = gym.make(f"tlshield/{task}", config="rl")
+def test_spaces_reward_and_cost_are_safety_gymnasiums(task: str, actions: str) -> None:
+    """``actions="native"`` is Safety-Gymnasium's box; ``"robot"`` (the default) is each
+    actuator's working range as [-1, 1]: the same env, stepped with the action scaled."""
+    env = gym.make(f"tlshield/{task}", config="rl", actions=actions)
     raw = sg.make_builder(task)
+    scale = env.unwrapped.robot.scale if actions == "robot" else np.ones(2)
     assert env.observation_space == raw.observation_space
-    assert env.action_space == raw.action_space
+    if actions == "native":
+        assert env.action_space == raw.action_space
+    else:
+        assert env.action_space == gym.spaces.Box(-1.0, 1.0, (2,), raw.action_space.dtype)
+        assert np.all(scale * env.action_space.high <= raw.action_space.high)
     obs, _ = env.reset(seed=3)
     raw_obs, _ = raw.reset(seed=3)
     np.testing.assert_array_equal(obs, raw_obs)
@@ -101,7 +109,8 @@ def test_spaces_reward_and_cost_are_safety_gymnasiums(task: str) -> None:
     for _ in range(200):
         a = rng.uniform(-1, 1, 2)
         obs, r, terminated, truncated, info = env.step(a)
-        raw_obs, raw_r, raw_cost, raw_term, raw_trunc, _ = raw.step(a)
+        np.testing.assert_array_equal(info["action"], a)  # in the env's own space
+        raw_obs, raw_r, raw_cost, raw_term, raw_trunc, _ = raw.step(scale * a)
         np.testing.assert_array_equal(obs, raw_obs)
         assert (r, info["cost"], terminated, truncated) == (raw_r, raw_cost, raw_term, raw_trunc)
         # The privileged state is MuJoCo's: the agent where Safety-Gymnasium reads it (the
@@ -128,6 +137,47 @@ def test_the_lidar_attacker_costs_nothing_shielded(task: str) -> None:
     assert unshielded > 50  # the attack works: the shield has something to stop
     for config in ("rl_cbf", "rl_cbf_clf"):
         assert attack(sg.SafetyGoalEnv(task, config), 2, 400, seed=40) == 0.0
+
+
+@pytest.mark.parametrize("task", sg.TASKS)
+def test_the_robots_units_drive_as_safety_gymnasiums_do(task: str) -> None:
+    """The attacker (which drives through ``env.drive``) makes the same steps, bit for bit,
+    through the shield in either action space, and ``info["action"]`` is the executed action
+    in each env's own space."""
+    robot, native = (sg.SafetyGoalEnv(task, "rl_cbf", actions=a) for a in ("robot", "native"))
+    a, b = robot.reset(seed=21)[0], native.reset(seed=21)[0]
+    scale = robot.robot.scale
+    for _ in range(150):
+        a, _, _, _, info_a = robot.step(sg.hazard_attacker(robot, a))
+        b, _, _, _, info_b = native.step(sg.hazard_attacker(native, b))
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(info_a["state"], info_b["state"])
+        np.testing.assert_array_equal(scale * info_a["action"], info_b["action"])
+        assert np.all(np.abs(info_a["action"]) <= 1.0 + 1e-12)
+
+
+def test_a_bad_action_space_is_named() -> None:
+    for bad in ("Robot", "raw", None, 1):
+        with pytest.raises(ValueError, match=r"actions = .*expected one of robot, native"):
+            sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl", actions=bad)
+
+
+def test_the_defaults_route_the_shield_alone_to_goals() -> None:
+    """``gym.make(..., config="rl_cbf_clf")`` with no settings is the routed CLF at the
+    settings that drive best alone (docs/guides/safety-gym.md: 6.1 goals per episode on reset
+    seeds 700-709): with no action it meets goals, at cost 0. The settings before (a CLF at
+    half thrust, routes that grazed the hazards) met 1 in this episode, these 8."""
+    env = gym.make("tlshield/SafetyPointGoal1-v0", config="rl_cbf_clf")
+    env.reset(seed=702)
+    goals, cost = 0, 0.0
+    for _ in range(1000):
+        _, _, terminated, truncated, info = env.step(np.zeros(2))
+        goals += info["goal_met"]
+        cost += info["cost"]
+        if terminated or truncated:
+            break
+    assert cost == 0.0
+    assert goals >= 4
 
 
 def test_a_start_inside_a_hazard_is_driven_out_and_stays_out() -> None:

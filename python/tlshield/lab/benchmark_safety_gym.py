@@ -71,6 +71,13 @@ VARIANTS: dict[str, Variant] = {
     "rl_cbf+penalty": Variant("rl_cbf", env={"correction_penalty": 0.01}),
     # PPO learns from the executed action, not the sampled one.
     "rl_cbf+executed": Variant("rl_cbf", ppo={"learn_from": "executed"}),
+    # A residual on the CLF that starts small: the policy's std e^-1 = 0.37 of the robot's
+    # range instead of 1.
+    "rl_cbf_clf+small_std": Variant("rl_cbf_clf", ppo={"log_std_init": -1.0}),
+    # ... and a Gaussian whose mean is tanh-bounded (tlshield.lab.policies).
+    "rl_cbf_clf+small_std+tanh": Variant(
+        "rl_cbf_clf", ppo={"log_std_init": -1.0, "policy": "tanh_mean"}
+    ),
 }
 #: The columns of ``safety_gym.csv``: per policy (``kept``: the best on validation, ``last``)
 #: the evaluation return and cost per episode; then the update the kept policy comes from, the
