@@ -164,6 +164,9 @@ class PointModel:
     saturation: float = 0.05
     #: The agent's part of the shield's state: ``x, y, theta, vx, vy``.
     agent_dim: ClassVar[int] = 5
+    #: The robot's own defaults of :class:`SafetyGoalParams`: none, the class's are the
+    #: Point's.
+    defaults: ClassVar[dict[str, float]] = {}
 
     @property
     def scale(self) -> NDArray[np.float64]:
@@ -273,6 +276,17 @@ class CarModel:
     pivot: float = 0.043
     #: The agent's part of the shield's state: ``x, y, psi, v``.
     agent_dim: ClassVar[int] = 4
+    #: The Car's own defaults of :class:`SafetyGoalParams` (the rest are the Point's): the
+    #: Point's settings, a CLF at full thrust with a fast decay, made the shield alone meet
+    #: fewer goals with the Car (docs/guides/safety-gym.md, "The defaults").
+    defaults: ClassVar[dict[str, float]] = {
+        "alpha": 1.0,
+        "alpha2": 2.0,
+        "c3": 1.0,
+        "clf_gain": 1.0,
+        "clf_bound": 0.5,
+        "route_clearance": 0.2,
+    }
 
     @property
     def scale(self) -> NDArray[np.float64]:
@@ -368,7 +382,9 @@ def robot_of(task: str) -> PointModel | CarModel:
 
 @dataclass(frozen=True)
 class SafetyGoalParams:
-    """The shield's settings for ``tlshield/SafetyPoint*`` (each a keyword override)."""
+    """The shield's settings for ``tlshield/Safety*`` (each a keyword override). The defaults
+    are the Point's; a robot may set its own (:attr:`CarModel.defaults`), which a keyword
+    overrides in turn."""
 
     #: The hazard's cost radius is 0.2 (agent centre to hazard centre); the barrier keeps
     #: this much more.
@@ -476,7 +492,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
         if not isinstance(actions, str) or actions not in ACTIONS:
             raise ValueError(f"actions = {actions!r}: expected one of {', '.join(ACTIONS)}")
-        self.params = build(SafetyGoalParams, overrides, task)
+        self.params = build(SafetyGoalParams, {**robot_of(task).defaults, **overrides}, task)
         self.config = config
         self.task = task
         self.actions = actions
