@@ -167,14 +167,14 @@ class PointModel:
     #: The robot's own defaults of :class:`SafetyGoalParams`: none, the class's are the
     #: Point's.
     defaults: ClassVar[dict[str, float]] = {}
+    #: The cost is measured at the state's ``x, y`` (no point of the body ahead of it).
+    pivot: ClassVar[float] = 0.0
 
     @property
     def scale(self) -> NDArray[np.float64]:
         """Safety-Gymnasium's action per unit of the robot's own (the motor's ``saturation``,
         the turn's 1)."""
         return np.array([self.saturation, 1.0])
-    #: The cost is measured at the state's ``x, y`` (no point of the body ahead of it).
-    pivot: ClassVar[float] = 0.0
 
     def model(self, state_dim: int = 5) -> ThrustTurn:
         """The core model over ``[x, y, theta, vx, vy, ...]``."""
@@ -642,9 +642,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             u = result.action
             applied = self.env_action(u)
             penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
-        obs, reward, cost, terminated, truncated, info = self._env.step(
-            self.native_action(applied)
-        )
+        obs, reward, cost, terminated, truncated, info = self._env.step(self.native_action(applied))
         goal_met = bool(info.get("goal_met", False))
         if goal_met:
             self._find_agent()
