@@ -492,11 +492,11 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
         if not isinstance(actions, str) or actions not in ACTIONS:
             raise ValueError(f"actions = {actions!r}: expected one of {', '.join(ACTIONS)}")
-        self.params = build(SafetyGoalParams, {**robot_of(task).defaults, **overrides}, task)
+        self.robot = robot_of(task)
+        self.params = build(SafetyGoalParams, {**self.robot.defaults, **overrides}, task)
         self.config = config
         self.task = task
         self.actions = actions
-        self.robot = robot_of(task)
         self._env = make_builder(task)
         self.observation_space = self._env.observation_space
         native = self._env.action_space

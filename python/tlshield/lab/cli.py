@@ -498,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="CONFIG",
         help="trained configurations (default: flatworld rl_cbf_clf rl; safety-gym rl rl+native "
         "rl_cbf rl_cbf_clf); safety-gym also takes rl_clf and the levers rl_cbf+penalty "
-        "rl_cbf+executed",
+        "rl_cbf+executed rl_cbf_clf+small_std rl_cbf_clf+small_std+tanh",
     )
     bench.add_argument(
         "--seeds", nargs="+", type=int, help="default: flatworld 1 2 3; safety-gym 0 1 2"
