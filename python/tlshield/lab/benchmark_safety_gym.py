@@ -301,6 +301,9 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
     fig, axes = plt.subplots(2, len(envs), figsize=(5.5 * len(envs), 6), squeeze=False)
     methods = sorted({r["method"] for r in rows})
     colours = {m: plt.get_cmap("tab10")(k % 10) for k, m in enumerate(methods)}
+    # A method's colour, a seed's line style: the legend tells the seeds apart.
+    seeds = sorted({r["seed"] for r in rows})
+    styles = {s: ("-", "--", ":", "-.")[k % 4] for k, s in enumerate(seeds)}
     for j, e in enumerate(envs):
         for r in (r for r in rows if r["env"] == e):
             run = load_run(out / "runs" / f"{e}-{r['method']}-s{r['seed']}-{r['budget']}")
@@ -308,9 +311,9 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
                 continue
             m = run.metrics
             label = f"{r['method']} s{r['seed']}"
-            colour = colours[r["method"]]
-            axes[0, j].plot(m["timesteps"], m["task_return_mean"], color=colour, lw=1, label=label)
-            axes[1, j].plot(m["timesteps"], m["episode_cost_mean"], color=colour, lw=1)
+            look = {"color": colours[r["method"]], "ls": styles[r["seed"]], "lw": 1}
+            axes[0, j].plot(m["timesteps"], m["task_return_mean"], label=label, **look)
+            axes[1, j].plot(m["timesteps"], m["episode_cost_mean"], **look)
         axes[0, j].set_title(e)
         axes[0, j].set_ylabel("training return / episode")
         axes[1, j].set_ylabel("training cost / episode")
