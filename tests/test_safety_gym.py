@@ -180,6 +180,44 @@ def test_the_defaults_route_the_shield_alone_to_goals() -> None:
     assert goals >= 4
 
 
+def test_the_reward_reads_the_way_the_shield_drives() -> None:
+    """Under a routing shield PPO's reward pays per metre of the routed way left: Safety-
+    Gymnasium's reward plus ``reward_distance`` per metre the detour (routed way minus straight
+    line, from a monitor the shield routes) shrinks, restarted at each goal, so over each goal
+    the extra return is the detour at its start less the detour at its end (no loophole in
+    dawdling on a detour). ``info["task_reward"]`` stays Safety-Gymnasium's; without routing
+    the reward is Safety-Gymnasium's, bit for bit."""
+    env = sg.SafetyGoalEnv("SafetyPointGoal2-v0", "rl_cbf_clf")
+    unit = env._env.task.goal.reward_distance
+    env.reset(seed=703)
+    check = tlshield.Monitor(env.shield.automaton, routed_by=env.shield)
+    start, extra, detours = env.detour(), 0.0, []
+    end = start
+    for _ in range(600):
+        _, reward, terminated, truncated, info = env.step(np.zeros(2))
+        extra += reward - info["task_reward"]
+        check.reset(info["state"])
+        way, goal = check.goal_distance, check.goal
+        assert info["detour"] == pytest.approx(
+            max(0.0, way - np.hypot(*(info["state"][:2] - goal))), abs=1e-12
+        )
+        detours.append(info["detour"])
+        if info["goal_met"]:
+            assert extra == pytest.approx(unit * start - unit * end, abs=1e-9)
+            start, extra = info["detour"], 0.0
+        end = info["detour"]
+        if terminated or truncated:
+            break
+    assert extra == pytest.approx(unit * (start - end), abs=1e-9)
+    assert max(detours) > 0.1  # the hazards stood in the way
+    plain = sg.SafetyGoalEnv("SafetyPointGoal2-v0", "rl_cbf")
+    assert not plain.shield.routes
+    plain.reset(seed=703)
+    for _ in range(50):
+        _, reward, _, _, info = plain.step(np.zeros(2))
+        assert reward == info["task_reward"] and info["detour"] == 0.0
+
+
 def test_a_start_inside_a_hazard_is_driven_out_and_stays_out() -> None:
     env = sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf")
     env.reset(seed=7)

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, Monitor, ProgressReward
+from tlshield._core import Automaton, FilterResult, Monitor, ProgressReward, Shield
 
 #: The task rewards a tracker can pay: the progress reward or the paper's Eq. 5A1.
 REWARDS = ("progress", "paper")
@@ -39,8 +39,11 @@ class FsaTracker:
         c_r: float,
         trap_penalty: float,
         progress: ProgressReward | None = None,
+        routed_by: Shield | None = None,
     ) -> None:
-        self.monitor = Monitor(automaton, progress, c_r=c_r, trap_penalty=trap_penalty)
+        self.monitor = Monitor(
+            automaton, progress, c_r=c_r, trap_penalty=trap_penalty, routed_by=routed_by
+        )
         self.automaton = automaton
         self.c_r = float(c_r)
         self.progress = progress

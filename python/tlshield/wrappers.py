@@ -191,6 +191,10 @@ class Shielded(IndependentCopies, gym.Wrapper):
         except AttributeError as err:
             raise TypeError("Shielded must wrap an FsaAugmented environment") from err
         self.shield = shield
+        if shield.routes:
+            # The task reward's goal term reads the way the shield drives (the reward and the
+            # guidance agree); a tracker of another automaton is refused here, by name.
+            env.get_wrapper_attr("tracker").monitor.routed_by = shield
         k = shield.automaton.num_states
         self.state_fn = state_fn or WithoutFsaState(k)
         self.dynamics_fn = dynamics_fn

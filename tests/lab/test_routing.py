@@ -222,3 +222,110 @@ def test_gradients_through_a_round_bound_match_finite_differences() -> None:
         d[:, j] = eps
         fd = (value(states + d, a) - value(states - d, a)) / (2 * eps)
         np.testing.assert_allclose(gs[ok, j], fd[ok], atol=1e-5, rtol=1e-5)
+
+
+def _around_one_disc(p: np.ndarray, goal: np.ndarray, c: np.ndarray, r: float) -> float:
+    """The shortest way from ``p`` to ``goal`` outside the circle (``c``, ``r``), in closed form
+    (an independent reference): the straight line when it misses the circle, else the two
+    tangents and the shorter arc between their points."""
+    u, v = p - c, goal - c
+    du, dv = np.linalg.norm(u), np.linalg.norm(v)
+    d = goal - p
+    t = np.clip(-(u @ d) / (d @ d), 0.0, 1.0)
+    if np.linalg.norm(u + t * d) >= r:
+        return float(np.linalg.norm(d))
+    between = np.arccos(np.clip(u @ v / (du * dv), -1.0, 1.0))
+    arc = between - np.arccos(r / du) - np.arccos(r / dv)
+    return float(np.sqrt(du**2 - r**2) + np.sqrt(dv**2 - r**2) + r * arc)
+
+
+@pytest.mark.parametrize("encoding", ["formula", "barriers"])
+def test_the_goal_term_reads_the_way_the_shield_drives(encoding: str) -> None:
+    """A monitor routed by the shield measures the way its CLF aims along (``|p - target|``),
+    which lies between the closed-form ways around the disc grown by the clearance (less what
+    a segment from the robot may cut into it) and around the router's octagon."""
+    disc = tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])
+    goal = tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])
+    if encoding == "formula":
+        spec = tlshield.Spec("!o U goal", {"o": disc, "goal": goal})
+        barriers = None
+    else:
+        spec = tlshield.Spec("F goal", {"goal": goal})
+        barriers = {"!o": disc}
+    clearance = 0.5
+    shield = _shield(barriers, spec, route_clearance=clearance)
+    assert shield.routes
+    routed = tlshield.Monitor(shield.automaton, routed_by=shield)
+    straight = tlshield.Monitor(shield.automaton)
+    grown = 0.5 * (1.0 + clearance)
+    rng = np.random.default_rng(7)
+    detours = 0
+    for _ in range(300):
+        s = rng.uniform([-3.0, -1.5], [-0.8, 1.5])
+        routed.reset(s)
+        straight.reset(s)
+        out = shield.filter_monitor(routed, np.zeros(2))
+        way = routed.goal_distance
+        assert way == pytest.approx(np.linalg.norm(out.goal - s), rel=1e-12, abs=1e-12)
+        line = np.linalg.norm(routed.goal - s)
+        assert straight.goal_distance == pytest.approx(line, rel=1e-12)
+        assert way >= line - 1e-12
+        g = np.asarray(routed.goal)
+        lo = _around_one_disc(s, g, np.zeros(2), 0.95 * grown)
+        hi = _around_one_disc(s, g, np.zeros(2), grown / np.cos(np.pi / 8))
+        assert lo - 1e-9 <= way <= hi + 1e-9, (s, lo, way, hi)
+        detours += way > line + 1e-3
+    assert detours > 100  # most of these states see the goal behind the disc
+
+
+def test_a_routed_progress_reward_pays_by_the_way() -> None:
+    """The progress reward's goal term ``-k min(d, span)``: ``d`` is the routed way."""
+    spec = tlshield.Spec(
+        "!o U goal",
+        {
+            "o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0]),
+            "goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0]),
+        },
+    )
+    shield = _shield(None, spec)
+    aut = shield.automaton
+    k, span = 0.5, 10.0
+    progress = aut.progress_reward(gamma=0.99, horizon=200, goal_weight=k, goal_span=span)
+    routed = tlshield.Monitor(aut, progress, routed_by=shield)
+    straight = tlshield.Monitor(aut, progress)
+    s0 = np.array([-2.0, 0.05])
+    routed.reset(s0)
+    straight.reset(s0)
+    for s in (np.array([-1.9, 0.1]), np.array([-1.5, 0.2]), np.array([-1.0, -0.1])):
+        r, q = routed.advance(s), straight.advance(s)
+        extra = routed.goal_distance - straight.goal_distance
+        assert routed.goal_distance > straight.goal_distance + 1e-3
+        assert routed.phi - straight.phi == pytest.approx(-k * extra, abs=1e-12)
+        assert r.q == q.q
+
+
+def test_a_routed_monitor_is_copied_with_its_routing() -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    shield = _shield({"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}, spec)
+    monitor = tlshield.Monitor(shield.automaton, routed_by=shield)
+    monitor.reset(np.array([-2.0, 0.0]))
+    for twin in (copy.deepcopy(monitor), pickle.loads(pickle.dumps(monitor))):
+        assert twin.routed_by is not None
+        assert twin.goal_distance == monitor.goal_distance
+    batch = tlshield.MonitorBatch(shield.automaton, 2, routed_by=shield)
+    assert pickle.loads(pickle.dumps(batch)).routed_by is not None
+    monitor.routed_by = None
+    monitor.advance(np.array([-2.0, 0.0]))
+    assert monitor.goal_distance == pytest.approx(4.0)
+
+
+def test_a_shield_of_another_automaton_cannot_route_a_monitor() -> None:
+    spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
+    other = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[1.0, 0.0])})
+    with pytest.raises(ValueError, match="routed_by"):
+        tlshield.Monitor(other.automaton(), routed_by=_shield(None, spec))
+    unrouted = _shield(None, spec, route=False)
+    assert not unrouted.routes
+    monitor = tlshield.Monitor(unrouted.automaton, routed_by=unrouted)
+    monitor.reset(np.array([-2.0, 0.0]))
+    assert monitor.goal_distance == pytest.approx(4.0)

@@ -159,7 +159,15 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
                 goal_weight=params.task.goal_weight,
                 goal_span=params.task.goal_span,
             )
-        self.tracker = FsaTracker(automaton, params.task.c_r, params.trap_penalty, progress)
+        # A routing shield's way around g3 is the goal term's distance (the reward and the
+        # guidance agree).
+        self.tracker = FsaTracker(
+            automaton,
+            params.task.c_r,
+            params.trap_penalty,
+            progress,
+            routed_by=self.shield,
+        )
         lo, hi = params.agent.arena
         margin = (
             max(params.task.outside_goal_v[1], max(params.obstacles.obstacle_amplitude))

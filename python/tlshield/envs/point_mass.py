@@ -217,9 +217,12 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
             goal_weight=params.goal_weight,
             goal_span=params.goal_span,
         )
-        self.tracker = FsaTracker(automaton, DEFAULT_C_R, DEFAULT_TRAP_PENALTY, progress)
         shield_config = shielded_config(config, evaluation)
         self.shield = point_mass_shield(params, shield_config, automaton)
+        # A routing shield's way is the goal term's distance (the reward and the guidance agree).
+        self.tracker = FsaTracker(
+            automaton, DEFAULT_C_R, DEFAULT_TRAP_PENALTY, progress, routed_by=self.shield
+        )
         self._world = PointMassWorld(
             dt=params.dt,
             horizon=params.horizon,

@@ -515,10 +515,15 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         robot = self.robot
         spec = goal_spec(self._hazards, self._vases, self.params, robot.agent_dim, robot.pivot)
         self.automaton: Automaton = spec.automaton()
-        self.monitor = Monitor(self.automaton)
         use_cbf, use_clf = CONFIGS[config]
         use_cbf = use_cbf or evaluation
         self.shield = self._shield(use_cbf, use_clf)
+        # With a routing CLF the reward's goal term reads the way the shield drives (see
+        # `detour`), so the reward and the guidance pull the same way around obstacles.
+        self.monitor = Monitor(self.automaton, routed_by=self.shield)
+        self._routed = self.shield is not None and self.shield.routes
+        self._reward_distance = float(self._env.task.goal.reward_distance)
+        self._detour = 0.0
         self._state: NDArray[np.float64] | None = None
         self._entries: dict[str, NDArray[np.intp]] | None = None
 
@@ -580,7 +585,24 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._find_agent()
         self._state = self.true_state()
         self.monitor.reset(self._state)
+        self._detour = self.detour()
         return np.asarray(obs, dtype=np.float64), {**info, "state": self._state}
+
+    def detour(self) -> float:
+        """How much longer the way the shield's router drives to the goal is than the straight
+        line, at the last state (m; 0 without a routing CLF, or with nothing in the way).
+
+        Safety-Gymnasium pays ``reward_distance`` per metre the straight distance to the goal
+        shrinks. Under a routing shield PPO learns from that reward plus ``reward_distance``
+        per metre the detour shrinks: per metre of the routed way left, as the CLF drives. The
+        extra term is a difference of potentials within each goal (restarted when a goal is
+        met), so it moves no optimum; ``info["task_reward"]`` keeps Safety-Gymnasium's reward.
+        """
+        way, goal = self.monitor.goal_distance, self.monitor.goal
+        if not self._routed or way is None or goal is None or self._state is None:
+            return 0.0
+        p = self._state
+        return max(0.0, way - math.hypot(p[0] - goal[0], p[1] - goal[1]))
 
     @property
     def lidar_range(self) -> float:
@@ -651,6 +673,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             step = self.monitor.reset(self._state)
         else:
             step = self.monitor.advance(self._state)
+        detour = self.detour()
+        shaping = 0.0 if goal_met else self._reward_distance * (self._detour - detour)
+        self._detour = detour
         info = {
             **info,
             "cost": float(cost),
@@ -661,6 +686,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             "success": goal_met,
             "trap": bool(step.trapped),
             "task_reward": float(reward),
+            "detour": detour,
             "action": applied,
             "state": self._state,
         }
@@ -668,7 +694,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             info["shield"] = shield_info(result, u_rl)
         return (
             np.asarray(obs, dtype=np.float64),
-            float(reward) - penalty,
+            float(reward) + shaping - penalty,
             terminated,
             truncated,
             info,

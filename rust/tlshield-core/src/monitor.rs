@@ -9,8 +9,10 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::automaton::{Automaton, Reading, MAX_ATOMS};
+use crate::cnf::Literal;
 use crate::error::{AutomatonError, InputError};
 use crate::progress::ProgressReward;
+use crate::route::{Router, Routing};
 use crate::validate::check_finite;
 
 /// The task reward's defaults, owned by Eq. 5A1 (`automaton::guidance`), here too because a
@@ -72,6 +74,17 @@ pub struct Monitor {
     rho: [f64; MAX_ATOMS],
     goal: Vec<f64>,
     has_goal: bool,
+    /// The way to the goal at the last state: routed with [`Monitor::route_with`].
+    distance: Option<f64>,
+    route: Option<Box<Route>>,
+}
+
+/// A monitor's routing and its scratch.
+#[derive(Debug, Clone)]
+struct Route {
+    routing: Routing,
+    router: Router,
+    safe: Vec<(Literal, f64)>,
 }
 
 impl Monitor {
@@ -117,6 +130,8 @@ impl Monitor {
             rho: [0.0; MAX_ATOMS],
             goal: Vec::new(),
             has_goal: false,
+            distance: None,
+            route: None,
         })
     }
 
@@ -186,12 +201,53 @@ impl Monitor {
         self.s.extend_from_slice(s);
     }
 
-    /// Places the CLF goal of `q` at the last state read; returns its distance.
+    /// Places the CLF goal of `q` at the last state read; returns the way to it (routed
+    /// around the discs of `q`'s safe set with [`Monitor::route_with`], when the goal is a
+    /// point of the routing's plane).
     fn update_goal(&mut self) -> Option<f64> {
         let reading = Reading::from_parts(&self.automaton, &self.s, self.rho);
-        let distance = reading.goal_distance(self.q, &mut self.goal);
+        let found = reading.goal_distance_in(self.q, &mut self.goal);
+        let distance = match (found, self.route.as_deref_mut()) {
+            (Some((_, dims)), Some(route)) if dims == route.routing.pos => {
+                let goal = [self.goal[0], self.goal[1]];
+                let Route {
+                    routing,
+                    router,
+                    safe,
+                } = route;
+                Some(routing.way_left(&reading, self.q, goal, router, safe))
+            }
+            (found, _) => found.map(|(d, _)| d),
+        };
         self.has_goal = distance.is_some();
+        self.distance = distance;
         distance
+    }
+
+    /// Measures the way to the goal as `routing` drives it (a shield's
+    /// `Shield::routing`): the progress reward's goal term and
+    /// [`Monitor::goal_distance`] then read the routed way left instead of the straight
+    /// distance. `None` goes back to the straight distance. Takes effect at the next state read.
+    pub fn route_with(&mut self, routing: Option<Routing>) {
+        self.route = routing.map(|routing| {
+            Box::new(Route {
+                routing,
+                router: Router::default(),
+                safe: Vec::new(),
+            })
+        });
+    }
+
+    /// The routing the goal term reads ([`Monitor::route_with`]).
+    pub fn routing(&self) -> Option<&Routing> {
+        self.route.as_ref().map(|r| &r.routing)
+    }
+
+    /// The way from the last state to the CLF goal: the straight distance in the goal's space,
+    /// or, routed ([`Monitor::route_with`]), the length of the router's way around the discs.
+    /// `None` without a goal.
+    pub fn goal_distance(&self) -> Option<f64> {
+        self.distance.filter(|_| self.has_goal)
     }
 
     fn report(&self, reward: f64) -> TaskStep {
@@ -254,6 +310,7 @@ impl Monitor {
         } else {
             self.s.clear();
             self.has_goal = false;
+            self.distance = None;
         }
     }
 
@@ -345,6 +402,13 @@ impl MonitorBatch {
     /// Number of rows.
     pub fn len(&self) -> usize {
         self.monitors.len()
+    }
+
+    /// [`Monitor::route_with`] for every row.
+    pub fn route_with(&mut self, routing: Option<Routing>) {
+        for monitor in &mut self.monitors {
+            monitor.route_with(routing.clone());
+        }
     }
 
     /// Every row's state, as data (see [`Monitor::snapshot`]).

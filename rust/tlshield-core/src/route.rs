@@ -50,6 +50,10 @@
 
 use std::f64::consts::PI;
 
+use crate::automaton::Reading;
+use crate::cnf::Literal;
+use crate::predicate::{Center, Predicate};
+
 /// Sides of the polygon circumscribing each inflated disc.
 pub const SIDES: usize = 8;
 /// The unit vectors to the corners of the octagon, at multiples of 45 degrees.
@@ -81,6 +85,88 @@ pub struct Disc {
     pub center: [f64; 2],
     /// The radius (> 0).
     pub radius: f64,
+}
+
+/// What a shield routes around, and in which plane: enough to measure the way its CLF drives
+/// without the shield (the progress reward's goal term, `Monitor::route_with`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Routing {
+    /// The CLF's two position dimensions.
+    pub pos: [usize; 2],
+    /// The router's clearance (relative to each radius, >= 0).
+    pub clearance: f64,
+    /// The user's barriers that keep the state outside a predicate (routed when discs).
+    pub avoid: Vec<Predicate>,
+    /// Whether the safe set is the progress-preserving one (as the shield's).
+    pub preserve_progress: bool,
+}
+
+impl Routing {
+    /// The length of the way the router drives from the state read by `reading` in FSA state
+    /// `q` to `goal` (over [`Routing::pos`]): around the discs of the user's barriers and of
+    /// the safe set's avoided literals, the straight distance where nothing is in the way.
+    /// `router` and `safe` are scratch.
+    pub fn way_left(
+        &self,
+        reading: &Reading<'_>,
+        q: usize,
+        goal: [f64; 2],
+        router: &mut Router,
+        safe: &mut Vec<(Literal, f64)>,
+    ) -> f64 {
+        if self.preserve_progress {
+            reading.progress_safe_set(q, safe);
+        } else {
+            reading.safe_set(q, safe);
+        }
+        let s = reading.state();
+        let predicates = reading.automaton().spec().predicates();
+        let kept = safe
+            .iter()
+            .filter(|(lit, _)| !lit.positive)
+            .map(|(lit, _)| &predicates[lit.atom]);
+        router.load(&self.pos, s, self.avoid.iter().chain(kept));
+        let p = [s[self.pos[0]], s[self.pos[1]]];
+        router.way_left(p, goal, self.clearance)
+    }
+}
+
+/// The discs whose outside `predicate` asks for, as the router sees them, each given to
+/// `found`: a ball over `pos` (centre fixed or read from `s`), or each such ball of a union;
+/// anything else is not routed. The one rule for what the router goes around.
+pub(crate) fn each_disc(
+    predicate: &Predicate,
+    pos: &[usize],
+    s: &[f64],
+    found: &mut impl FnMut(Disc),
+) {
+    match predicate {
+        Predicate::Ball(b) if b.pos() == pos => {
+            let center = match b.center() {
+                Center::Fixed(c) => [c[0], c[1]],
+                Center::Dims(d) => [s[d[0]], s[d[1]]],
+            };
+            // A body point keeps the ball's radius from the centre, so the reference point
+            // is safe from that disc grown by the point's distance from it.
+            found(Disc {
+                center,
+                radius: b.radius() + b.offset().map_or(0.0, |o| o.length()),
+            });
+        }
+        Predicate::Union(parts) => {
+            for part in parts {
+                each_disc(part, pos, s, found);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Whether the router goes around the outside of `predicate` (see [`each_disc`]).
+pub(crate) fn is_disc(predicate: &Predicate, pos: &[usize], s: &[f64]) -> bool {
+    let mut any = false;
+    each_disc(predicate, pos, s, &mut |_| any = true);
+    any
 }
 
 /// The planner's buffers (see the module docs). One per shield workspace.
@@ -166,6 +252,27 @@ impl Router {
     /// The discs of this step.
     pub fn discs(&self) -> &[Disc] {
         &self.discs
+    }
+
+    /// Forgets the last step's discs and adds those of `avoided` (predicates whose outside the
+    /// state is kept in) over `pos` at `s` ([`each_disc`]).
+    pub(crate) fn load<'a>(
+        &mut self,
+        pos: &[usize],
+        s: &[f64],
+        avoided: impl Iterator<Item = &'a Predicate>,
+    ) {
+        self.clear();
+        for predicate in avoided {
+            each_disc(predicate, pos, s, &mut |disc| self.push(disc));
+        }
+    }
+
+    /// The length of the way from `p` to `goal` around this step's discs: the length of the
+    /// path [`Router::target`] plans (`|p - target|`, by its construction), the straight
+    /// distance when nothing is in the way, the goal is in a disc, or it is enclosed.
+    pub fn way_left(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> f64 {
+        norm(sub(self.target(p, goal, clearance), p))
     }
 
     fn visible(&self, a: [f64; 2], b: [f64; 2]) -> bool {
@@ -371,6 +478,26 @@ mod tests {
     fn a_clear_line_aims_at_the_goal() {
         let mut r = router(&[([0.0, 3.0], 1.0)]);
         assert_eq!(r.target([-2.0, 0.0], [2.0, 0.0], 0.2), [2.0, 0.0]);
+    }
+
+    #[test]
+    fn the_way_left_is_the_straight_line_or_a_way_around() {
+        let mut r = router(&[([0.0, 3.0], 1.0)]);
+        assert_eq!(r.way_left([-2.0, 0.0], [2.0, 0.0], 0.2), 4.0);
+        // Around a unit disc grown to 1.2: at least the tangents and the arc around the
+        // circle (less the slack a segment from the robot may cut), at most around the
+        // circumscribed octagon's circle.
+        let mut r = router(&[([0.0, 0.0], 1.0)]);
+        let around = |radius: f64| {
+            let leg = (9.0 - radius * radius).sqrt();
+            2.0 * leg + radius * (PI - 2.0 * (radius / 3.0).acos())
+        };
+        let way = r.way_left([-3.0, 0.0], [3.0, 0.0], 0.2);
+        assert!(way > around((1.0 - ROBOT_SLACK) * 1.2) - 1e-9, "{way}");
+        assert!(
+            way < around(1.2 / (PI / SIDES as f64).cos()) + 1e-9,
+            "{way}"
+        );
     }
 
     #[test]

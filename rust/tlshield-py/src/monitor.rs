@@ -13,6 +13,7 @@ use crate::convert::{vector, FloatArray};
 use crate::errors::map;
 use crate::pickling::reduce;
 use crate::progress::PyProgressReward;
+use crate::shield::PyShield;
 
 /// The task automaton along one episode: it holds the FSA state ``q``, the last reading of the
 /// atoms and the task reward's state. ``reset(s0)`` starts an episode and ``advance(s_next)``
@@ -20,33 +21,67 @@ use crate::progress::PyProgressReward;
 /// ``goal``) from one reading of the atoms, which ``Shield.filter_monitor(monitor, a_rl)`` reuses.
 /// With ``progress`` (a ``ProgressReward`` of ``automaton``) the reward is the progress-aware
 /// one; without it the paper's Eq. 5A1 with weight ``c_r``, ``trap_penalty`` in the trap.
+/// With ``routed_by`` (a ``Shield`` of the same automaton whose CLF routes) the goal term of the
+/// progress reward and ``goal_distance`` read the way that shield drives around the discs it
+/// keeps the robot out of, instead of the straight distance.
 #[pyclass(name = "Monitor", module = "tlshield._core")]
 pub struct PyMonitor {
     pub(crate) inner: Monitor,
     automaton: Py<PyAutomaton>,
     progress: Option<Py<PyProgressReward>>,
+    routed_by: Option<Py<PyShield>>,
 }
 
 #[pymethods]
 impl PyMonitor {
     #[new]
     #[pyo3(
-        signature = (automaton, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY),
-        text_signature = "(automaton, progress=None, *, c_r=1.0, trap_penalty=-100.0)"
+        signature = (automaton, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY, routed_by=None),
+        text_signature = "(automaton, progress=None, *, c_r=1.0, trap_penalty=-100.0, routed_by=None)"
     )]
     fn new(
         automaton: Bound<'_, PyAutomaton>,
         progress: Option<PyRef<'_, PyProgressReward>>,
         c_r: f64,
         trap_penalty: f64,
+        routed_by: Option<Bound<'_, PyShield>>,
     ) -> PyResult<Self> {
         let reward = task_reward(progress.as_deref(), c_r, trap_penalty);
         let inner = map(Monitor::new(automaton.get().inner.clone(), reward))?;
-        Ok(PyMonitor {
+        let mut monitor = PyMonitor {
             inner,
             automaton: automaton.unbind(),
             progress: progress.map(|p| p.into()),
-        })
+            routed_by: None,
+        };
+        monitor.set_routed_by(routed_by)?;
+        Ok(monitor)
+    }
+
+    /// The shield whose routing the goal term reads (see the class docs), or None: the
+    /// straight distance. Set it to route (from the next state read on).
+    #[getter]
+    fn routed_by(&self, py: Python<'_>) -> Option<Py<PyShield>> {
+        self.routed_by.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    #[setter]
+    fn set_routed_by(&mut self, shield: Option<Bound<'_, PyShield>>) -> PyResult<()> {
+        let routing = match &shield {
+            Some(shield) => routing_of(shield, self.inner.automaton())?,
+            None => None,
+        };
+        self.inner.route_with(routing);
+        self.routed_by = shield.map(Bound::unbind);
+        Ok(())
+    }
+
+    /// The way from the last state to the CLF goal: the straight distance in the goal's
+    /// space, or with ``routed_by`` the length of the way its router plans around the discs;
+    /// None without a goal.
+    #[getter]
+    fn goal_distance(&self) -> Option<f64> {
+        self.inner.goal_distance()
     }
 
     /// Pickled as its constructor's arguments and its state ``(q, phi, started, s)``: a copy
@@ -61,6 +96,9 @@ impl PyMonitor {
             None,
             this.inner.task_reward(),
         )?;
+        if let Some(shield) = &this.routed_by {
+            kwargs.set_item("routed_by", shield.clone_ref(py))?;
+        }
         let state = snapshot_to_python(py, &this.inner.snapshot())?;
         reduce(slf.get_type().into_any(), args, Some(kwargs), Some(state))
     }
@@ -202,12 +240,13 @@ impl PyTaskStep {
 /// from observations. ``reset(states, rows=None)`` starts the episodes of ``rows`` (all by
 /// default) and ``advance(states)`` moves every row on; both return a ``TaskBatch``, and
 /// ``Shield.filter_monitors(monitors, a_rl)`` reuses the rows' readings. Large batches run in
-/// parallel with the GIL released.
+/// parallel with the GIL released. ``routed_by`` is ``Monitor``'s, for every row.
 #[pyclass(name = "MonitorBatch", module = "tlshield._core")]
 pub struct PyMonitorBatch {
     pub(crate) inner: MonitorBatch,
     automaton: Py<PyAutomaton>,
     progress: Option<Py<PyProgressReward>>,
+    routed_by: Option<Py<PyShield>>,
     /// The reward every row pays (kept for the pickle: a batch may have no rows).
     reward: TaskReward,
     steps: Vec<TaskStep>,
@@ -217,8 +256,8 @@ pub struct PyMonitorBatch {
 impl PyMonitorBatch {
     #[new]
     #[pyo3(
-        signature = (automaton, num, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY),
-        text_signature = "(automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0)"
+        signature = (automaton, num, progress=None, *, c_r=DEFAULT_C_R, trap_penalty=DEFAULT_TRAP_PENALTY, routed_by=None),
+        text_signature = "(automaton, num, progress=None, *, c_r=1.0, trap_penalty=-100.0, routed_by=None)"
     )]
     fn new(
         automaton: Bound<'_, PyAutomaton>,
@@ -226,6 +265,7 @@ impl PyMonitorBatch {
         progress: Option<PyRef<'_, PyProgressReward>>,
         c_r: f64,
         trap_penalty: f64,
+        routed_by: Option<Bound<'_, PyShield>>,
     ) -> PyResult<Self> {
         let reward = task_reward(progress.as_deref(), c_r, trap_penalty);
         let inner = map(MonitorBatch::new(
@@ -233,13 +273,33 @@ impl PyMonitorBatch {
             reward.clone(),
             num,
         ))?;
-        Ok(PyMonitorBatch {
+        let mut batch = PyMonitorBatch {
             inner,
             automaton: automaton.unbind(),
             progress: progress.map(|p| p.into()),
+            routed_by: None,
             reward,
             steps: Vec::new(),
-        })
+        };
+        batch.set_routed_by(routed_by)?;
+        Ok(batch)
+    }
+
+    /// ``Monitor.routed_by``, for every row.
+    #[getter]
+    fn routed_by(&self, py: Python<'_>) -> Option<Py<PyShield>> {
+        self.routed_by.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    #[setter]
+    fn set_routed_by(&mut self, shield: Option<Bound<'_, PyShield>>) -> PyResult<()> {
+        let routing = match &shield {
+            Some(shield) => routing_of(shield, self.inner.automaton())?,
+            None => None,
+        };
+        self.inner.route_with(routing);
+        self.routed_by = shield.map(Bound::unbind);
+        Ok(())
     }
 
     /// Pickled as its constructor's arguments and every row's state (see ``Monitor``).
@@ -253,6 +313,9 @@ impl PyMonitorBatch {
             Some(this.inner.len()),
             &this.reward,
         )?;
+        if let Some(shield) = &this.routed_by {
+            kwargs.set_item("routed_by", shield.clone_ref(py))?;
+        }
         let rows = this
             .inner
             .snapshot()
@@ -409,6 +472,22 @@ fn constructor<'py>(
         kwargs.set_item("trap_penalty", trap_penalty)?;
     }
     Ok((PyTuple::new(py, args)?, kwargs))
+}
+
+/// The routing of `shield` for a monitor of `automaton` (None where its CLF does not route);
+/// a shield of another automaton is refused, as ``Shield.filter_monitor`` refuses it.
+fn routing_of(
+    shield: &Bound<'_, PyShield>,
+    automaton: &std::sync::Arc<tlshield_core::Automaton>,
+) -> PyResult<Option<tlshield_core::route::Routing>> {
+    let inner = &shield.get().inner;
+    if !std::sync::Arc::ptr_eq(inner.automaton(), automaton) {
+        return Err(PyValueError::new_err(
+            "routed_by: the shield watches another automaton; build the monitor from the \
+             shield's automaton (shield.automaton)",
+        ));
+    }
+    Ok(inner.routing())
 }
 
 /// A monitor's state as ``(q, phi, started, s)``.

@@ -277,6 +277,13 @@ impl PyShield {
         self.inner.inputs()
     }
 
+    /// Whether the CLF's target is routed around the discs the shield keeps the robot out of
+    /// (``route=True``, the CLF on, a two-dimensional ``pos``).
+    #[getter]
+    fn routes(&self) -> bool {
+        self.inner.routing().is_some()
+    }
+
     /// The automaton whose safe sets and goals the shield uses.
     #[getter]
     fn automaton(&self, py: Python<'_>) -> PyAutomaton {

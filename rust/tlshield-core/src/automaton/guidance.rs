@@ -144,15 +144,24 @@ impl<'a> Reading<'a> {
     /// written into `goal`), measured in the goal's space (the position dimensions of its
     /// region); `None` where `q` has no goal.
     pub fn goal_distance(&self, q: usize, goal: &mut Vec<f64>) -> Option<f64> {
+        self.goal_distance_in(q, goal).map(|(d, _)| d)
+    }
+
+    /// [`Reading::goal_distance`] with the goal's space.
+    pub(crate) fn goal_distance_in(
+        &self,
+        q: usize,
+        goal: &mut Vec<f64>,
+    ) -> Option<(f64, &'a [usize])> {
         let dims = self.goal_space(q, goal)?;
         let s = self.s;
-        Some(
-            dims.iter()
-                .zip(goal.iter())
-                .map(|(&i, g)| (s[i] - g).powi(2))
-                .sum::<f64>()
-                .sqrt(),
-        )
+        let d = dims
+            .iter()
+            .zip(goal.iter())
+            .map(|(&i, g)| (s[i] - g).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        Some((d, dims))
     }
 
     /// [`Reading::goal`], returning the goal's space (the state dimensions it is a point of).

@@ -37,6 +37,7 @@ use crate::error::{AutomatonError, ShieldError};
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{DenseQp, QpStatus};
+use crate::route::Routing;
 use crate::slots::Slots;
 use crate::validate::check_finite;
 
@@ -227,6 +228,24 @@ impl Shield {
     /// The parameters.
     pub fn params(&self) -> &ShieldParams {
         &self.params
+    }
+
+    /// What this shield's CLF routes around, when it routes ([`ShieldParams::route`] with the
+    /// CLF on and a two-dimensional position): for a [`Monitor`] whose goal term should read
+    /// the way the shield drives ([`Monitor::route_with`]).
+    pub fn routing(&self) -> Option<Routing> {
+        let p = &self.params;
+        (p.route && p.use_clf && p.pos.len() == 2).then(|| Routing {
+            pos: [p.pos[0], p.pos[1]],
+            clearance: p.route_clearance,
+            avoid: p
+                .barriers
+                .iter()
+                .filter(|b| !b.positive)
+                .map(|b| b.predicate.clone())
+                .collect(),
+            preserve_progress: p.preserve_progress,
+        })
     }
 
     /// Number of inputs m.

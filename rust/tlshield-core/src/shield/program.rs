@@ -23,9 +23,8 @@ use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::linalg::dot;
 use crate::monitor::Monitor;
-use crate::predicate::{Center, Predicate};
 use crate::qp::DenseQp;
-use crate::route::{Disc, Router};
+use crate::route::{is_disc, Router};
 
 /// The rows of Eq. 5D2 at one state, and the buffers they are computed in.
 #[derive(Debug, Default)]
@@ -102,39 +101,6 @@ fn jacobian_times(
         (None, Some(model)) => model.jacobian_f_times(s, u, out),
         (None, None) => unreachable!("second-order rows need a model or a Jacobian"),
     }
-}
-
-/// The discs whose outside `predicate` asks for, as the router sees them, each given to
-/// `found`: a ball over `pos` (centre fixed or read from `s`), or each such ball of a union;
-/// anything else is not routed. The one rule for what the router goes around.
-fn each_disc(predicate: &Predicate, pos: &[usize], s: &[f64], found: &mut impl FnMut(Disc)) {
-    match predicate {
-        Predicate::Ball(b) if b.pos() == pos => {
-            let center = match b.center() {
-                Center::Fixed(c) => [c[0], c[1]],
-                Center::Dims(d) => [s[d[0]], s[d[1]]],
-            };
-            // A body point keeps the ball's radius from the centre, so the reference point
-            // is safe from that disc grown by the point's distance from it.
-            found(Disc {
-                center,
-                radius: b.radius() + b.offset().map_or(0.0, |o| o.length()),
-            });
-        }
-        Predicate::Union(parts) => {
-            for part in parts {
-                each_disc(part, pos, s, found);
-            }
-        }
-        _ => {}
-    }
-}
-
-/// Whether the router goes around the outside of `predicate` (see [`each_disc`]).
-fn is_disc(predicate: &Predicate, pos: &[usize], s: &[f64]) -> bool {
-    let mut any = false;
-    each_disc(predicate, pos, s, &mut |_| any = true);
-    any
 }
 
 /// Appends a barrier row's `L = c^T g` (one value per input) to `lg`, for the row's state
@@ -534,8 +500,6 @@ impl Program {
             }
         }
         let pos = [params.pos[0], params.pos[1]];
-        let router = &mut self.router;
-        router.clear();
         let user = params
             .barriers
             .iter()
@@ -547,12 +511,10 @@ impl Program {
             .iter()
             .filter(|(lit, _)| !lit.positive)
             .map(|(lit, _)| &predicates[lit.atom]);
-        for predicate in user.chain(kept) {
-            each_disc(predicate, &pos, s, &mut |disc| router.push(disc));
-        }
+        self.router.load(&pos, s, user.chain(kept));
         let p = [s[pos[0]], s[pos[1]]];
         let goal = [self.goal[0], self.goal[1]];
-        let target = router.target(p, goal, params.route_clearance);
+        let target = self.router.target(p, goal, params.route_clearance);
         self.rerouted |= target != goal;
         self.goal.copy_from_slice(&target);
     }
