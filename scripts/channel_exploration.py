@@ -51,7 +51,9 @@ def measure(config: str, overrides: dict[str, object], episodes: int) -> dict[st
         reached = entered = False
         x0 = env.unwrapped.state[:2].copy()
         far = 0.0
-        for t in range(100_000):
+        n_steps = 0
+        while True:
+            n_steps += 1
             a = np.clip(rng.normal(size=2), -1.0, 1.0)
             _, _, terminated, truncated, info = env.step(a)
             far = max(far, float(np.linalg.norm(env.unwrapped.state[:2] - x0)))
@@ -62,7 +64,7 @@ def measure(config: str, overrides: dict[str, object], episodes: int) -> dict[st
         first += reached
         done += bool(info["success"])
         trapped += entered
-        steps.append(t + 1)
+        steps.append(n_steps)
         reach.append(far)
     env.close()
     n = float(episodes)

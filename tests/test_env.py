@@ -212,6 +212,15 @@ def test_overrides_and_bad_input() -> None:
         env.step(np.zeros(3))
 
 
+def test_a_goal_range_too_short_for_two_goals_is_rejected_at_make() -> None:
+    """g1 and g2 are drawn until apart: a range where they cannot be would draw forever."""
+    with pytest.raises(ValueError, match="near_goal_u"):
+        gym.make(ENV_ID, near_goal_u=(0.8, 1.2))
+    env = gym.make(ENV_ID, near_goal_u=(1.0, 2.0))
+    for seed in range(20):
+        env.reset(seed=seed)  # short, but wide enough: every draw ends
+
+
 def test_a_channel_too_narrow_for_the_goals_is_rejected_at_make() -> None:
     # w / sqrt(2) = 0.42 < goal_radius 0.5: no goal disc fits inside the channel. Before the
     # check, make() accepted it and reset() failed inside numpy (high - low < 0).

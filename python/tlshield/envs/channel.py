@@ -29,6 +29,7 @@ from tlshield._core import ChannelWorld
 from tlshield.copying import IndependentCopies
 from tlshield.envs.channel_task import (
     CONFIGS,
+    GOAL_GAP,
     OBSERVATIONS,
     PAPER_ENV,
     TASK,
@@ -234,7 +235,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             if outside:
                 vs[k] = rng.choice([-1.0, 1.0]) * rng.uniform(*params.task.outside_goal_v)
             near = np.array([self._xy(u, v) for u, v in zip(us, vs, strict=True)])
-            if np.linalg.norm(near[0] - near[1]) >= 2 * params.task.goal_radius + 0.2:
+            if np.linalg.norm(near[0] - near[1]) >= 2 * params.task.goal_radius + GOAL_GAP:
                 break
         far = self._xy(rng.uniform(*params.task.far_goal_u), rng.uniform(-inside_v, inside_v))
         return np.vstack([near, far]), outside

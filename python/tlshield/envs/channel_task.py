@@ -39,6 +39,10 @@ SQRT2 = math.sqrt(2.0)
 Box = tuple[tuple[float, float], tuple[float, float]]
 
 
+#: The least gap (m) between the edges of g1 and g2.
+GOAL_GAP = 0.2
+
+
 @dataclass(frozen=True)
 class ChannelTask:
     """The channel, the goals, the horizon and the task reward."""
@@ -276,6 +280,15 @@ class ChannelParams:
                 f"half_width = {task.half_width!r}, goal_radius = {task.goal_radius!r}: a goal "
                 f"disc must fit inside the channel, i.e. half_width / sqrt(2) = {inside:.3g} > "
                 "goal_radius"
+            )
+        # g1 and g2 are drawn until GOAL_GAP apart: inside the channel they must fit so.
+        du = task.near_goal_u[1] - task.near_goal_u[0]
+        apart = 2 * task.goal_radius + GOAL_GAP
+        if not (du >= 0 and math.hypot(du, 2 * (inside - task.goal_radius)) > 1.1 * apart):
+            raise ValueError(
+                f"near_goal_u = {task.near_goal_u!r}: g1 and g2 are drawn in it, inside the "
+                f"channel, {apart:.3g} m apart centre to centre (2 goal_radius + {GOAL_GAP}); "
+                "the range is too short for that (widen it)"
             )
         if task.outside_goal_v[0] < inside + task.goal_radius:
             raise ValueError(
