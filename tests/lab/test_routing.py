@@ -329,3 +329,38 @@ def test_a_shield_of_another_automaton_cannot_route_a_monitor() -> None:
     monitor = tlshield.Monitor(unrouted.automaton, routed_by=unrouted)
     monitor.reset(np.array([-2.0, 0.0]))
     assert monitor.goal_distance == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize("encoding", ["formula", "barriers"])
+@pytest.mark.parametrize("use_cbf", [True, False])
+def test_a_routed_monitor_gives_the_shield_its_answer_bit_for_bit(
+    encoding: str, use_cbf: bool
+) -> None:
+    """The shield takes the target a monitor routed the same way planned, instead of planning
+    again: its answers are those it gives with a plain monitor, bit for bit; a monitor routed
+    by a shield with another clearance is not taken at its word."""
+    disc = tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])
+    goal = tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])
+    if encoding == "formula":
+        spec, barriers = tlshield.Spec("!o U goal", {"o": disc, "goal": goal}), None
+    else:
+        spec, barriers = tlshield.Spec("F goal", {"goal": goal}), {"!o": disc}
+    shield = _shield(barriers, spec, use_cbf=use_cbf)
+    other = _shield(barriers, spec, use_cbf=use_cbf, route_clearance=0.9)
+    aut = shield.automaton
+    monitors = [
+        tlshield.Monitor(aut),
+        tlshield.Monitor(aut, routed_by=shield),
+        tlshield.Monitor(other.automaton, routed_by=other),
+    ]
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        s = rng.uniform([-3.0, -1.5], [-0.6, 1.5])
+        a = rng.uniform(-1.0, 1.0, 2)
+        outs = []
+        for monitor in monitors:
+            monitor.reset(s)
+            outs.append(shield.filter_monitor(monitor, a))
+        for out in outs[1:]:
+            assert np.array_equal(out.action, outs[0].action)
+            assert np.array_equal(out.goal, outs[0].goal)

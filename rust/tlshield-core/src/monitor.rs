@@ -85,6 +85,8 @@ struct Route {
     routing: Routing,
     router: Router,
     safe: Vec<(Literal, f64)>,
+    /// The router's target at the last state (when the goal is a point of its plane).
+    target: Option<[f64; 2]>,
 }
 
 impl Monitor {
@@ -207,6 +209,9 @@ impl Monitor {
     fn update_goal(&mut self) -> Option<f64> {
         let reading = Reading::from_parts(&self.automaton, &self.s, self.rho);
         let found = reading.goal_distance_in(self.q, &mut self.goal);
+        if let Some(route) = self.route.as_deref_mut() {
+            route.target = None;
+        }
         let distance = match (found, self.route.as_deref_mut()) {
             (Some((_, dims)), Some(route)) if dims == route.routing.pos => {
                 let goal = [self.goal[0], self.goal[1]];
@@ -214,8 +219,12 @@ impl Monitor {
                     routing,
                     router,
                     safe,
+                    target,
                 } = route;
-                Some(routing.way_left(&reading, self.q, goal, router, safe))
+                let aim = routing.target(&reading, self.q, goal, router, safe);
+                *target = Some(aim);
+                let p = [self.s[routing.pos[0]], self.s[routing.pos[1]]];
+                Some((p[0] - aim[0]).hypot(p[1] - aim[1]))
             }
             (found, _) => found.map(|(d, _)| d),
         };
@@ -234,6 +243,7 @@ impl Monitor {
                 routing,
                 router: Router::default(),
                 safe: Vec::new(),
+                target: None,
             })
         });
     }
@@ -241,6 +251,15 @@ impl Monitor {
     /// The routing the goal term reads ([`Monitor::route_with`]).
     pub fn routing(&self) -> Option<&Routing> {
         self.route.as_ref().map(|r| &r.routing)
+    }
+
+    /// The target `routing` aims the CLF at from the last state, when this monitor routes
+    /// exactly so (then a shield need not plan the same way again).
+    pub(crate) fn routed_target(&self, routing: &Routing) -> Option<[f64; 2]> {
+        let route = self.route.as_deref()?;
+        (route.routing == *routing)
+            .then_some(route.target)
+            .flatten()
     }
 
     /// The way from the last state to the CLF goal: the straight distance in the goal's space,
@@ -534,6 +553,42 @@ mod tests {
 
     fn task() -> Arc<Automaton> {
         Arc::new(task_automaton())
+    }
+
+    #[test]
+    fn a_routed_monitor_hands_its_target_only_to_the_same_routing() {
+        let aut = task();
+        let mut monitor = Monitor::new(
+            aut.clone(),
+            TaskReward::Paper {
+                c_r: 1.0,
+                trap_penalty: -100.0,
+            },
+        )
+        .unwrap();
+        let routing = Routing {
+            pos: [0, 1],
+            clearance: 0.2,
+            avoid: Vec::new(),
+            preserve_progress: false,
+        };
+        let s = [
+            0.0, 0.0, 0.5, 2.0, 2.0, 3.0, 3.5, 8.0, 8.0, 20.0, 20.0, 20.0, -20.0,
+        ];
+        monitor.reset(&s).unwrap();
+        assert_eq!(monitor.routed_target(&routing), None);
+        monitor.route_with(Some(routing.clone()));
+        monitor.reset(&s).unwrap();
+        let target = monitor
+            .routed_target(&routing)
+            .expect("a goal in the plane");
+        let way = (s[0] - target[0]).hypot(s[1] - target[1]);
+        assert_eq!(monitor.goal_distance(), Some(way));
+        let other = Routing {
+            clearance: 0.3,
+            ..routing
+        };
+        assert_eq!(monitor.routed_target(&other), None);
     }
 
     proptest! {

@@ -102,18 +102,18 @@ pub struct Routing {
 }
 
 impl Routing {
-    /// The length of the way the router drives from the state read by `reading` in FSA state
-    /// `q` to `goal` (over [`Routing::pos`]): around the discs of the user's barriers and of
-    /// the safe set's avoided literals, the straight distance where nothing is in the way.
-    /// `router` and `safe` are scratch.
-    pub fn way_left(
+    /// The router's target ([`Router::target`]) from the state read by `reading` in FSA state
+    /// `q` towards `goal` (over [`Routing::pos`]), around the discs of the user's barriers and
+    /// of the safe set's avoided literals, as the shield plans it: `|p - target|` is the length
+    /// of the way left. `router` and `safe` are scratch.
+    pub fn target(
         &self,
         reading: &Reading<'_>,
         q: usize,
         goal: [f64; 2],
         router: &mut Router,
         safe: &mut Vec<(Literal, f64)>,
-    ) -> f64 {
+    ) -> [f64; 2] {
         if self.preserve_progress {
             reading.progress_safe_set(q, safe);
         } else {
@@ -127,7 +127,7 @@ impl Routing {
             .map(|(lit, _)| &predicates[lit.atom]);
         router.load(&self.pos, s, self.avoid.iter().chain(kept));
         let p = [s[self.pos[0]], s[self.pos[1]]];
-        router.way_left(p, goal, self.clearance)
+        router.target(p, goal, self.clearance)
     }
 }
 
@@ -266,13 +266,6 @@ impl Router {
         for predicate in avoided {
             each_disc(predicate, pos, s, &mut |disc| self.push(disc));
         }
-    }
-
-    /// The length of the way from `p` to `goal` around this step's discs: the length of the
-    /// path [`Router::target`] plans (`|p - target|`, by its construction), the straight
-    /// distance when nothing is in the way, the goal is in a disc, or it is enclosed.
-    pub fn way_left(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> f64 {
-        norm(sub(self.target(p, goal, clearance), p))
     }
 
     fn visible(&self, a: [f64; 2], b: [f64; 2]) -> bool {
@@ -482,8 +475,9 @@ mod tests {
 
     #[test]
     fn the_way_left_is_the_straight_line_or_a_way_around() {
-        let mut r = router(&[([0.0, 3.0], 1.0)]);
-        assert_eq!(r.way_left([-2.0, 0.0], [2.0, 0.0], 0.2), 4.0);
+        // The way left is |p - target| (the target lies as far as the path is long).
+        let way = |r: &mut Router| norm(sub(r.target([-3.0, 0.0], [3.0, 0.0], 0.2), [-3.0, 0.0]));
+        assert_eq!(way(&mut router(&[([0.0, 3.0], 1.0)])), 6.0);
         // Around a unit disc grown to 1.2: at least the tangents and the arc around the
         // circle (less the slack a segment from the robot may cut), at most around the
         // circumscribed octagon's circle.
@@ -492,7 +486,7 @@ mod tests {
             let leg = (9.0 - radius * radius).sqrt();
             2.0 * leg + radius * (PI - 2.0 * (radius / 3.0).acos())
         };
-        let way = r.way_left([-3.0, 0.0], [3.0, 0.0], 0.2);
+        let way = way(&mut r);
         assert!(way > around((1.0 - ROBOT_SLACK) * 1.2) - 1e-9, "{way}");
         assert!(
             way < around(1.2 / (PI / SIDES as f64).cos()) + 1e-9,

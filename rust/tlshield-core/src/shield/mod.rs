@@ -58,6 +58,7 @@ use order::Orders;
 use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
 pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
+use program::Rules;
 use workspace::Workspace;
 
 /// Batches smaller than this are shielded on the calling thread.
@@ -102,6 +103,8 @@ pub struct Shield {
     min_dim: usize,
     /// One workspace per concurrent caller, reused (no allocation in steady state).
     pool: Slots<Workspace>,
+    /// What the CLF routes around ([`Shield::routing`]), made once.
+    routing: Option<Routing>,
 }
 
 impl std::fmt::Debug for Shield {
@@ -208,6 +211,7 @@ impl Shield {
             (None, None) => None,
         };
         let orders = Orders::new(&automaton, &params, structure, min_dim)?;
+        let routing = routing_of(&params);
         Ok(Shield {
             automaton,
             dynamics,
@@ -217,6 +221,7 @@ impl Shield {
             m,
             min_dim,
             pool: Slots::default(),
+            routing,
         })
     }
 
@@ -234,18 +239,7 @@ impl Shield {
     /// CLF on and a two-dimensional position): for a [`Monitor`] whose goal term should read
     /// the way the shield drives ([`Monitor::route_with`]).
     pub fn routing(&self) -> Option<Routing> {
-        let p = &self.params;
-        (p.route && p.use_clf && p.pos.len() == 2).then(|| Routing {
-            pos: [p.pos[0], p.pos[1]],
-            clearance: p.route_clearance,
-            avoid: p
-                .barriers
-                .iter()
-                .filter(|b| !b.positive)
-                .map(|b| b.predicate.clone())
-                .collect(),
-            preserve_progress: p.preserve_progress,
-        })
+        self.routing.clone()
     }
 
     /// Number of inputs m.
@@ -485,14 +479,15 @@ impl Shield {
         let record = stage == Stage::Filter(Want::Record);
         let params = &self.params;
         ws.out.barriers.clear();
-        ws.program.rows(
+        let rules = Rules {
             params,
-            &self.orders,
-            &self.automaton,
-            self.dynamics.as_ref(),
-            call,
-            record.then_some(&mut ws.out.barriers),
-        );
+            routing: self.routing.as_ref(),
+            orders: &self.orders,
+            automaton: &self.automaton,
+            model: self.dynamics.as_ref(),
+        };
+        ws.program
+            .rows(rules, call, record.then_some(&mut ws.out.barriers));
         let program = &ws.program;
         let (m, barriers, vars, has_goal) =
             (self.m, program.barriers(), program.vars(), program.has_goal);
@@ -558,6 +553,21 @@ impl Shield {
         out.status = status;
         out.solver = by;
     }
+}
+
+/// What a shield with `params` routes around (see [`Shield::routing`]).
+fn routing_of(p: &ShieldParams) -> Option<Routing> {
+    (p.route && p.use_clf && p.pos.len() == 2).then(|| Routing {
+        pos: [p.pos[0], p.pos[1]],
+        clearance: p.route_clearance,
+        avoid: p
+            .barriers
+            .iter()
+            .filter(|b| !b.positive)
+            .map(|b| b.predicate.clone())
+            .collect(),
+        preserve_progress: p.preserve_progress,
+    })
 }
 
 impl From<AutomatonError> for ShieldError {

@@ -24,7 +24,18 @@ use crate::dynamics::Dynamics;
 use crate::linalg::dot;
 use crate::monitor::Monitor;
 use crate::qp::DenseQp;
-use crate::route::{is_disc, Router};
+use crate::route::{is_disc, Router, Routing};
+
+/// What a shield fixed at construction, read by every step's rows.
+#[derive(Clone, Copy)]
+pub(super) struct Rules<'a> {
+    pub(super) params: &'a ShieldParams,
+    /// What the CLF routes around (`None`: it does not route).
+    pub(super) routing: Option<&'a Routing>,
+    pub(super) orders: &'a Orders,
+    pub(super) automaton: &'a Automaton,
+    pub(super) model: Option<&'a Dynamics>,
+}
 
 /// The rows of Eq. 5D2 at one state, and the buffers they are computed in.
 #[derive(Debug, Default)]
@@ -197,13 +208,17 @@ impl Program {
     /// path records them).
     pub(super) fn rows(
         &mut self,
-        params: &ShieldParams,
-        orders: &Orders,
-        automaton: &Automaton,
-        model: Option<&Dynamics>,
+        rules: Rules<'_>,
         call: Call<'_>,
         barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
     ) {
+        let Rules {
+            params,
+            routing,
+            orders,
+            automaton,
+            model,
+        } = rules;
         let Call {
             s,
             q,
@@ -236,7 +251,7 @@ impl Program {
         if params.use_cbf {
             self.barrier_rows(at, orders, automaton, &reading, barriers_out);
         }
-        self.clf_row(at, orders.clf, task, &reading);
+        self.clf_row(at, orders.clf, task, routing, &reading);
         self.cbf_vars = if params.use_cbf { m } else { 0 };
         self.clf_vars = if self.has_goal { m } else { 0 };
     }
@@ -344,6 +359,7 @@ impl Program {
         at: Site<'_>,
         second_order: bool,
         task: Option<&Monitor>,
+        routing: Option<&Routing>,
         reading: &Reading<'_>,
     ) {
         let Site {
@@ -369,8 +385,12 @@ impl Program {
                 None => reading.goal(q, &mut self.goal),
             };
         self.rerouted = false;
-        if self.has_goal && params.route && params.pos.len() == 2 {
-            self.route(params, s, q, reading);
+        if let (true, Some(routing)) = (self.has_goal, routing) {
+            // A monitor routed the same way has planned this state's way already.
+            match task.and_then(|monitor| monitor.routed_target(routing)) {
+                Some(target) => self.aim_at(target),
+                None => self.route(params, s, q, reading),
+            }
         }
         self.clf_rhs = 0.0;
         self.delta_0 = 0.0;
@@ -515,7 +535,12 @@ impl Program {
         let p = [s[pos[0]], s[pos[1]]];
         let goal = [self.goal[0], self.goal[1]];
         let target = self.router.target(p, goal, params.route_clearance);
-        self.rerouted |= target != goal;
+        self.aim_at(target);
+    }
+
+    /// Puts the router's `target` in place of the goal.
+    fn aim_at(&mut self, target: [f64; 2]) {
+        self.rerouted |= target != [self.goal[0], self.goal[1]];
         self.goal.copy_from_slice(&target);
     }
 
