@@ -326,6 +326,26 @@ def test_fsa_augmented_and_shielded_on_a_user_env() -> None:
     assert applied.tolist() == ref.action.tolist()
 
 
+def test_shielded_routes_the_trackers_goal_term_when_it_can() -> None:
+    """A routing shield of the tracker's own automaton routes the goal term; one of another
+    task's automaton cannot, and says so instead of failing."""
+    spec = point_spec()
+    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[1.5, 0.0])}
+    settings = dict(alpha=5.0, c3=1.0, k=1e4, cbf_bounds=(-3, 3), clf_bounds=(-0.5, 0.5))
+    model = tlshield.SingleIntegrator([0, 1])
+    env = FsaAugmented(PointEnv(), spec)
+    Shielded(env, tlshield.Shield(spec, model, barriers=barriers, **settings))
+    monitor = env.tracker.monitor
+    assert monitor.routed_by is not None
+    env.reset(seed=0)
+    assert monitor.goal_distance > np.hypot(3.0, 0.5) + 1e-3  # the way round the disc
+    elsewhere = {"goal": tlshield.Ball([0, 1], 0.3, center=[2.5, 0.0])}
+    other = FsaAugmented(PointEnv(), tlshield.Spec("F goal", elsewhere))
+    with pytest.warns(UserWarning, match="straight distance"):
+        Shielded(other, tlshield.Shield(spec, model, barriers=barriers, **settings))
+    assert other.tracker.monitor.routed_by is None
+
+
 def test_fsa_augmented_reset_reports_a_start_in_the_trap() -> None:
     # The wrapped env starts above the y < 1 line: the automaton is in the trap from s_0.
     class AboveEnv(PointEnv):

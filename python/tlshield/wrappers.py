@@ -15,6 +15,7 @@ from the same two parts.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, SupportsFloat
 
@@ -193,8 +194,17 @@ class Shielded(IndependentCopies, gym.Wrapper):
         self.shield = shield
         if shield.routes:
             # The task reward's goal term reads the way the shield drives (the reward and the
-            # guidance agree); a tracker of another automaton is refused here, by name.
-            env.get_wrapper_attr("tracker").monitor.routed_by = shield
+            # guidance agree), when the tracker watches the shield's own automaton.
+            try:
+                env.get_wrapper_attr("tracker").monitor.routed_by = shield
+            except ValueError:
+                warnings.warn(
+                    "Shielded: the shield's automaton is not the FsaAugmented tracker's (build "
+                    "both from one Spec), so the task reward's goal term keeps the straight "
+                    "distance instead of the shield's routed way",
+                    UserWarning,
+                    stacklevel=2,
+                )
         k = shield.automaton.num_states
         self.state_fn = state_fn or WithoutFsaState(k)
         self.dynamics_fn = dynamics_fn

@@ -266,7 +266,7 @@ impl Monitor {
     /// or, routed ([`Monitor::route_with`]), the length of the router's way around the discs.
     /// `None` without a goal.
     pub fn goal_distance(&self) -> Option<f64> {
-        self.distance.filter(|_| self.has_goal)
+        self.distance
     }
 
     fn report(&self, reward: f64) -> TaskStep {
