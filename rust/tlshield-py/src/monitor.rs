@@ -67,11 +67,8 @@ impl PyMonitor {
 
     #[setter]
     fn set_routed_by(&mut self, shield: Option<Bound<'_, PyShield>>) -> PyResult<()> {
-        let routing = match &shield {
-            Some(shield) => routing_of(shield, self.inner.automaton())?,
-            None => None,
-        };
-        self.inner.route_with(routing);
+        self.inner
+            .route_with(routing_of(shield.as_ref(), self.inner.automaton())?);
         self.routed_by = shield.map(Bound::unbind);
         Ok(())
     }
@@ -293,11 +290,8 @@ impl PyMonitorBatch {
 
     #[setter]
     fn set_routed_by(&mut self, shield: Option<Bound<'_, PyShield>>) -> PyResult<()> {
-        let routing = match &shield {
-            Some(shield) => routing_of(shield, self.inner.automaton())?,
-            None => None,
-        };
-        self.inner.route_with(routing);
+        self.inner
+            .route_with(routing_of(shield.as_ref(), self.inner.automaton())?);
         self.routed_by = shield.map(Bound::unbind);
         Ok(())
     }
@@ -474,12 +468,16 @@ fn constructor<'py>(
     Ok((PyTuple::new(py, args)?, kwargs))
 }
 
-/// The routing of `shield` for a monitor of `automaton` (None where its CLF does not route);
-/// a shield of another automaton is refused, as ``Shield.filter_monitor`` refuses it.
+/// The routing of `shield` for a monitor of `automaton` (None without a shield, or where its
+/// CLF does not route); a shield of another automaton is refused, as ``Shield.filter_monitor``
+/// refuses it.
 fn routing_of(
-    shield: &Bound<'_, PyShield>,
+    shield: Option<&Bound<'_, PyShield>>,
     automaton: &std::sync::Arc<tlshield_core::Automaton>,
 ) -> PyResult<Option<tlshield_core::route::Routing>> {
+    let Some(shield) = shield else {
+        return Ok(None);
+    };
     let inner = &shield.get().inner;
     if !std::sync::Arc::ptr_eq(inner.automaton(), automaton) {
         return Err(PyValueError::new_err(
