@@ -248,11 +248,6 @@ impl Monitor {
         });
     }
 
-    /// The routing the goal term reads ([`Monitor::route_with`]).
-    pub fn routing(&self) -> Option<&Routing> {
-        self.route.as_ref().map(|r| &r.routing)
-    }
-
     /// The target `routing` aims the CLF at from the last state, when this monitor routes
     /// exactly so (then a shield need not plan the same way again).
     pub(crate) fn routed_target(&self, routing: &Routing) -> Option<[f64; 2]> {

@@ -485,7 +485,7 @@ fn routing_of(
              shield's automaton (shield.automaton)",
         ));
     }
-    Ok(inner.routing())
+    Ok(inner.routing().cloned())
 }
 
 /// A monitor's state as ``(q, phi, started, s)``.

@@ -238,8 +238,8 @@ impl Shield {
     /// What this shield's CLF routes around, when it routes ([`ShieldParams::route`] with the
     /// CLF on and a two-dimensional position): for a [`Monitor`] whose goal term should read
     /// the way the shield drives ([`Monitor::route_with`]).
-    pub fn routing(&self) -> Option<Routing> {
-        self.routing.clone()
+    pub fn routing(&self) -> Option<&Routing> {
+        self.routing.as_ref()
     }
 
     /// Number of inputs m.
