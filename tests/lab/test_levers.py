@@ -13,6 +13,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
+from tlshield.envs.safety_gym import load_builder
 from tlshield.lab import settings
 from tlshield.lab.callbacks import ExecutedActions
 from tlshield.lab.evaluation import evaluate
@@ -122,6 +123,53 @@ def test_without_the_clf_the_rollout_holds_the_safety_correction_only() -> None:
     inside = np.all(np.abs(check.actions) <= 1.0, axis=-1)
     assert inside.sum() > 0 and np.abs(np.stack(check.clf)).max() > 0.1
     np.testing.assert_allclose(mapped[inside], wanted[inside], atol=1e-5)
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # gymnasium's Box casts
+@pytest.mark.parametrize("task", ["SafetyPointGoal1-v0", "SafetyCarGoal1-v0"])
+@pytest.mark.parametrize("without_clf", [False, True])
+def test_safety_gym_rollout_holds_what_the_robot_did(task: str, without_clf: bool) -> None:
+    # Safety-Gymnasium's policy acts in the robot's units, not the shield's: the rollout holds
+    # info["action"] (already in the policy's units), or, without the CLF, the env's action for
+    # the shield's input less the CLF's part (a_rl + a_cbf), recomputed here from the shield's
+    # own parts.
+    load_builder()  # make test installs the stack; without it, this is the error that says so
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    venv = DummyVecEnv([lambda: gym.make(f"tlshield/{task}", config="rl_cbf_clf")])
+    venv.seed(5)
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=32, seed=0, device="cpu")
+    check = Check()
+    parts: list[np.ndarray] = []
+
+    class Parts(BaseCallback):  # type: ignore[misc]
+        def _on_step(self) -> bool:
+            info = self.locals["infos"][0]
+            parts.append(info["shield"]["a_rl"] + info["shield"]["a_cbf"])
+            return True
+
+    callback = ExecutedActions(venv, without_clf=without_clf)
+    model.learn(total_timesteps=32, callback=[Parts(), callback, check])
+    env = venv.envs[0].unwrapped
+    executed = np.stack(check.executed)[:, 0]
+    if without_clf:
+        wanted = np.stack([env.env_action(p) for p in parts])
+        # the CLF pushed, so this is not the executed action
+        assert np.abs(np.stack(check.clf)).max() > 0.1
+        assert np.abs(wanted - executed).max() > 1e-3
+    else:
+        wanted = executed
+    np.testing.assert_allclose(check.actions[:, 0], wanted, atol=1e-6)
+    np.testing.assert_allclose(check.stored, check.log_prob, rtol=1e-5, atol=1e-5)
+
+
+def test_the_learning_rate_schedule_is_a_setting(tmp_path: Path) -> None:
+    run = train("rl_cbf", 0, 2, tmp_path / "c", progress=False, ppo={"lr_schedule": "constant"})
+    assert json.loads((run / "run.json").read_text())["ppo"]["lr_schedule"] == "constant"
+    with pytest.raises(ValueError, match="lr_schedule = 'cosine': expected one of"):
+        train("rl_cbf", 0, 1, tmp_path / "x", ppo={"lr_schedule": "cosine"})
+    assert not (tmp_path / "x").exists()
 
 
 def _script(name: str, *args: str) -> str:

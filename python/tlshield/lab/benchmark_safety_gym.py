@@ -78,6 +78,11 @@ VARIANTS: dict[str, Variant] = {
     "rl_cbf_clf+small_std+tanh": Variant(
         "rl_cbf_clf", ppo={"log_std_init": -1.0, "policy": "tanh_mean"}
     ),
+    # PPO learns from the executed action less the CLF's part (the residual plus the shield's
+    # safety correction), so the log-probabilities describe what the robot did beyond its guide.
+    "rl_cbf_clf+executed": Variant("rl_cbf_clf", ppo={"learn_from": "executed_without_clf"}),
+    # The learning rate decays linearly to 0 over the run (late updates cannot undo early ones).
+    "rl_cbf_clf+lr_linear": Variant("rl_cbf_clf", ppo={"lr_schedule": "linear"}),
 }
 #: The columns of ``safety_gym.csv``: per policy (``kept``: the best on validation, ``last``)
 #: the evaluation return and cost per episode; then the update the kept policy comes from, the

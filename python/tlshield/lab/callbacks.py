@@ -370,30 +370,44 @@ class ExecutedActions(BaseCallback):  # type: ignore[misc]
     ratio PPO clips is the ratio of what was done. With ``without_clf``, the CLF's part of the
     correction (``info["shield"]["a_clf"]``) is taken out first: the policy learns the shield's
     safety correction, while the CLF stays a guide of the environment (learning the CLF's push
-    as its own action makes the CLF push again on top of it). The map back is the inverse of
-    the env's ``rl_action`` (affine per dimension: Channel-v0), or the identity for an env
-    whose actions are already in the shield's units (PointMass-v0)."""
+    as its own action makes the CLF push again on top of it). The map back is the env's
+    ``env_action`` (Safety-Gymnasium: ``info["action"]`` is already in the policy's units),
+    the inverse of its ``rl_action`` (affine per dimension: Channel-v0), or the identity for an
+    env whose actions are already in the shield's units (PointMass-v0)."""
 
     def __init__(self, inner: Any, without_clf: bool = False) -> None:
         super().__init__()
         self.without_clf = without_clf
         m = inner.action_space.shape[0]
+        self.centre, self.half = np.zeros(m), np.ones(m)
+        # An env whose policy acts in other units than the shield's says how to map the
+        # shield's input back: Safety-Gymnasium's env_action (linear), or Channel-v0's
+        # rl_action (affine, inverted here).
+        self.env_action: Any = None
         try:
-            rl_action = inner.get_attr("rl_action", [0])[0]
+            self.env_action = inner.get_attr("env_action", [0])[0]
         except AttributeError:
-            self.centre, self.half = np.zeros(m), np.ones(m)
-        else:
-            self.centre = np.asarray(rl_action(np.zeros(m)), dtype=np.float64)
-            self.half = np.asarray(rl_action(np.ones(m)), dtype=np.float64) - self.centre
+            try:
+                rl_action = inner.get_attr("rl_action", [0])[0]
+            except AttributeError:
+                pass
+            else:
+                self.centre = np.asarray(rl_action(np.zeros(m)), dtype=np.float64)
+                self.half = np.asarray(rl_action(np.ones(m)), dtype=np.float64) - self.centre
 
     def _executed(self, info: dict[str, Any]) -> Any:
         if "action" not in info:
             raise ValueError(
                 "learn_from: the environment's info has no 'action' (the executed action)"
             )
-        if self.without_clf and "shield" in info:
-            return info["action"] - info["shield"]["a_clf"]
-        return info["action"]
+        if not (self.without_clf and "shield" in info):
+            return info["action"]
+        shield = info["shield"]
+        if self.env_action is not None:
+            # info["action"] is already in the policy's units; the CLF's part is taken out in
+            # the shield's, where the input is a_rl + a_cbf + a_clf.
+            return self.env_action(shield["a_rl"] + shield["a_cbf"])
+        return info["action"] - shield["a_clf"]
 
     def _on_step(self) -> bool:
         infos = self.locals["infos"]

@@ -222,6 +222,9 @@ def _clf_rescaler(
 #: (SB3's own), the executed one, or the executed one without the CLF's part
 #: (:class:`tlshield.lab.callbacks.ExecutedActions`).
 LEARN_FROM = ("sampled", "executed", "executed_without_clf")
+#: How PPO's learning rate moves over a run (setting ``lr_schedule``): held, or decayed
+#: linearly to 0.
+LR_SCHEDULES = ("constant", "linear")
 
 
 @dataclass(frozen=True)
@@ -242,8 +245,8 @@ class PpoSettings:
 
 def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
-    ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``) are taken out of SB3's
-    keywords."""
+    ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``, ``lr_schedule``) are taken
+    out of SB3's keywords."""
     from tlshield.lab.policies import policy_class
     from tlshield.lab.saved import activation_class
 
@@ -259,12 +262,16 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         learn_from=str(kwargs.pop("learn_from", spec.get("learn_from", "sampled"))),
         ppo=kwargs,
         net_arch=spec["net_arch"],
-        lr_schedule=spec.get("lr_schedule", "constant"),
+        lr_schedule=str(kwargs.pop("lr_schedule", spec.get("lr_schedule", "constant"))),
     )
     policy_class(settings.policy)  # an unknown name fails here, before any environment is built
     activation_class(settings.activation)
     if settings.learn_from not in LEARN_FROM:
         raise ValueError(f"learn_from = {settings.learn_from!r}: expected one of {LEARN_FROM}")
+    if settings.lr_schedule not in LR_SCHEDULES:
+        raise ValueError(
+            f"lr_schedule = {settings.lr_schedule!r}: expected one of {LR_SCHEDULES}"
+        )
     if settings.ppo.get("use_sde") and settings.policy != "gaussian":
         # SB3's gSDE replaces the policy's Gaussian head: only its own policy has one.
         raise ValueError(f"use_sde needs policy 'gaussian', not {settings.policy!r}")
