@@ -269,9 +269,7 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     if settings.learn_from not in LEARN_FROM:
         raise ValueError(f"learn_from = {settings.learn_from!r}: expected one of {LEARN_FROM}")
     if settings.lr_schedule not in LR_SCHEDULES:
-        raise ValueError(
-            f"lr_schedule = {settings.lr_schedule!r}: expected one of {LR_SCHEDULES}"
-        )
+        raise ValueError(f"lr_schedule = {settings.lr_schedule!r}: expected one of {LR_SCHEDULES}")
     if settings.ppo.get("use_sde") and settings.policy != "gaussian":
         # SB3's gSDE replaces the policy's Gaussian head: only its own policy has one.
         raise ValueError(f"use_sde needs policy 'gaussian', not {settings.policy!r}")
