@@ -1,9 +1,16 @@
-"""TD3 with the exact shield inside its actor, on Safety-Gymnasium (issue 45's fourth lever):
-the critic's gradient flows through ``tlshield.torch.ShieldLayer``, as Dalal et al. (2018)
-trained DDPG through a closed-form safety layer.
+"""Off-policy learners through the shield on Safety-Gymnasium: TD3 with the exact shield inside
+its actor (``--algo td3_layer``, issue 45's fourth lever: the critic's gradient flows through
+``tlshield.torch.ShieldLayer``, as Dalal et al. (2018) trained DDPG through a closed-form safety
+layer), or SAC or TD3 with the shield in the env only (``--algo sac``, ``--algo td3``, on
+``--config``, by default ``rl_cbf_clf``: the policy is a residual on the routed CLF in the
+robot's units, as PPO's ``rl_cbf_clf`` row).
 
     .venv/bin/python scripts/safety_gym_td3_layer.py --seed 0 [--steps 200000] \\
+        [--algo td3_layer|td3|sac] [--config rl_cbf_clf] \\
         [--env SafetyPointGoal1-v0] [--episodes 10] [--out results_td3]
+
+Both off-policy learners take SB3's defaults but for 64-64 networks (as PPO's rows; a CPU
+budget) and, for TD3, Gaussian action noise 0.1.
 
 The actor maps Safety-Gymnasium's standard observation to an action in the shield's units
 (thrust and turn in ``[-1, 1]``), then through the shield of ``rl_cbf`` at the privileged state
@@ -89,12 +96,16 @@ def policy_class(layer: Any, n_obs: int, n_state: int) -> type:
     return LayerPolicy
 
 
-def evaluate(model: Any, env_id: str, episodes: int) -> tuple[list[float], list[float]]:
-    """Return (Safety-Gymnasium's reward) and cost of the deterministic policy per episode."""
+def evaluate(
+    model: Any, env_id: str, episodes: int, config: str = "rl_cbf", layer: bool = True
+) -> tuple[list[float], list[float]]:
+    """Return (Safety-Gymnasium's reward) and cost of the deterministic policy per episode, in
+    the env it trained in."""
     from tlshield.envs.safety_gym import SafetyGoalEnv
     from tlshield.lab.seeds import EVAL_SEED
 
-    env = ShieldUnits(SafetyGoalEnv(env_id, "rl_cbf"))
+    inner = SafetyGoalEnv(env_id, config)
+    env: Any = ShieldUnits(inner) if layer else inner
     returns, costs = [], []
     for k in range(episodes):
         obs, _ = env.reset(seed=EVAL_SEED + k)
@@ -119,9 +130,15 @@ def main() -> None:
     parser.add_argument("--env", default="SafetyPointGoal1-v0")
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--out", default="results_td3")
+    parser.add_argument("--algo", choices=("td3_layer", "td3", "sac"), default="td3_layer")
+    parser.add_argument(
+        "--config",
+        default="rl_cbf_clf",
+        help="the env's shield for --algo td3/sac (td3_layer: rl_cbf, the layer's own)",
+    )
     args = parser.parse_args()
     import torch
-    from stable_baselines3 import TD3
+    from stable_baselines3 import SAC, TD3
     from stable_baselines3.common.noise import NormalActionNoise
 
     from tlshield.envs.safety_gym import SafetyGoalEnv
@@ -130,20 +147,26 @@ def main() -> None:
 
     torch.set_num_threads(1)
     start = time.perf_counter()
-    inner = SafetyGoalEnv(args.env, "rl_cbf")
-    env = ShieldUnits(inner)
+    layer = args.algo == "td3_layer"
+    config = "rl_cbf" if layer else args.config
+    inner = SafetyGoalEnv(args.env, config)
+    env: Any = ShieldUnits(inner) if layer else inner
     env.reset(seed=train_seed(args.seed))
-    assert inner.shield is not None
-    policy = policy_class(ShieldLayer(inner.shield), env.n_obs, env.n_state)
-    model = TD3(
-        policy,
-        env,
-        seed=learner_seed(args.seed),
-        device="cpu",
-        action_noise=NormalActionNoise(np.zeros(2), 0.1 * np.ones(2)),
-        policy_kwargs={"net_arch": [64, 64]},
-        verbose=0,
-    )
+    common: dict[str, Any] = {
+        "seed": learner_seed(args.seed),
+        "device": "cpu",
+        "policy_kwargs": {"net_arch": [64, 64]},
+        "verbose": 0,
+    }
+    noise = NormalActionNoise(np.zeros(2), 0.1 * np.ones(2))
+    if layer:
+        assert inner.shield is not None
+        policy = policy_class(ShieldLayer(inner.shield), env.n_obs, env.n_state)
+        model: Any = TD3(policy, env, action_noise=noise, **common)
+    elif args.algo == "td3":
+        model = TD3("MlpPolicy", env, action_noise=noise, **common)
+    else:
+        model = SAC("MlpPolicy", env, **common)
     costs = {"train": 0.0}
 
     from stable_baselines3.common.callbacks import BaseCallback
@@ -154,10 +177,10 @@ def main() -> None:
             return True
 
     model.learn(total_timesteps=args.steps, callback=Cost())
-    returns, eval_costs = evaluate(model, args.env, args.episodes)
+    returns, eval_costs = evaluate(model, args.env, args.episodes, config, layer)
     row = {
         "env": args.env,
-        "method": "rl_cbf+td3_layer",
+        "method": f"{config}+{args.algo}",
         "seed": args.seed,
         "steps": int(model.num_timesteps),
         "last_return": float(np.mean(returns)),
@@ -169,7 +192,8 @@ def main() -> None:
     }
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{args.env}-td3_layer-s{args.seed}.json").write_text(json.dumps(row, indent=2))
+    name = "td3_layer" if layer else f"{config}+{args.algo}"
+    (out / f"{args.env}-{name}-s{args.seed}.json").write_text(json.dumps(row, indent=2))
     print(json.dumps({k: v for k, v in row.items() if not isinstance(v, list)}))
 
 
