@@ -374,6 +374,32 @@ def test_the_correction_penalty_comes_off_the_reward_only() -> None:
         sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf", correction_penalty=-1.0)
 
 
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_path: Path) -> None:
+    """The off-policy levers: SAC and TD3 learn a residual on the routed CLF through the env's
+    shield (rl_cbf_clf), at cost 0 in training and in evaluation."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(root / "scripts" / "safety_gym_td3_layer.py"),
+            *("--algo", algo, "--steps", "300", "--episodes", "1", "--out", str(tmp_path)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = json.loads((tmp_path / f"SafetyPointGoal1-v0-rl_cbf_clf+{algo}-s0.json").read_text())
+    assert row["method"] == f"rl_cbf_clf+{algo}" and row["steps"] == 300
+    assert row["train_cost"] == 0.0 and row["last_cost"] == 0.0
+    assert len(row["last_returns"]) == 1 and np.isfinite(row["last_return"])
+
+
 def test_td3_trains_through_the_shield_layer(tmp_path: Path) -> None:
     """The fourth lever's script: TD3 whose actor ends in the exact shield trains, costs 0 in
     training and evaluation, and its actor's gradient reaches the network through the layer."""
