@@ -52,7 +52,7 @@ def tlshield_filter() -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         clf_bounds=(-1.0, 1.0),
         use_clf=False,
         margin=MARGIN,
-        barriers={"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)},
+        barriers={"!o": tlshield.Avoid(tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE))},
     )
     return lambda s, u: shield.filter(s, 0, u).action
 

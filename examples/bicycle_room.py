@@ -98,7 +98,7 @@ def room_spec() -> tlshield.Spec:
     return tlshield.Spec("F (a & F b)", goals)
 
 
-def barriers() -> dict[str, tlshield.Ball | tlshield.Halfspace]:
+def barriers() -> dict[str, tlshield.Avoid | tlshield.Inside]:
     """Keep out of each disc, inside the room, and below the top speed."""
     walls = {
         "west": tlshield.Halfspace([1.0, 0.0, 0.0, 0.0], -WALL),
@@ -108,8 +108,12 @@ def barriers() -> dict[str, tlshield.Ball | tlshield.Halfspace]:
         "speed": tlshield.Halfspace([0.0, 0.0, 0.0, -1.0], TOP_SPEED),
         "reverse": tlshield.Halfspace([0.0, 0.0, 0.0, 1.0], 0.5),
     }
-    discs = {name: tlshield.Ball([0, 1], r, center=c) for name, (c, r) in OBSTACLES.items()}
-    return {**discs, **walls}
+    discs = {
+        name: tlshield.Avoid(tlshield.Ball([0, 1], r, center=c))
+        for name, (c, r) in OBSTACLES.items()
+    }
+    walls_in = {name: tlshield.Inside(h) for name, h in walls.items()}
+    return {**discs, **walls_in}
 
 
 def room_shield(config: str = "rl_cbf_clf") -> tlshield.Shield:

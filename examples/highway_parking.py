@@ -119,9 +119,9 @@ def make_shield(
     ``model="body"``, every pair of a body disc and a parked car's disc, ``car_radius`` apart,
     and the walls again as barriers, so that they hold after the task is done)."""
     u = env.unwrapped
-    cars: dict[str, tlshield.Ball | tlshield.Halfspace] = {}
+    cars: dict[str, tlshield.Avoid | tlshield.Inside] = {}
     if model == "body":
-        cars.update({w: spec.predicates[w] for w in ("w1", "w2", "w3", "w4")})
+        cars.update({w: tlshield.Inside(spec.predicates[w]) for w in ("w1", "w2", "w3", "w4")})
     points = BODY if model == "body" else (None,)
     for k, car in enumerate(u.road.vehicles[1:]):
         along = 1.5 * np.array([math.cos(car.heading), math.sin(car.heading)])
@@ -130,7 +130,8 @@ def make_shield(
             for i, ahead in enumerate(points):
                 body = {} if ahead is None else {"heading": 2, "offset": (ahead, 0.0)}
                 name = f"!car{k}{end}" + ("" if ahead is None else f"b{i}")
-                cars[name] = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre, **body)
+                disc = tlshield.Ball(pos=[0, 1], radius=car_radius, center=centre, **body)
+                cars[name] = tlshield.Avoid(disc)
     if model != "unicycle":
         dynamics: Any = tlshield.KinematicBicycle(LENGTH, x=0, y=1, theta=2, v=3)
         limits = ((-MAX_ACCEL, -math.tan(MAX_STEER)), (MAX_ACCEL, math.tan(MAX_STEER)))

@@ -73,7 +73,7 @@ def make_shield() -> tlshield.Shield:
         clf_bounds=PARAMS.clf,
         margin=PARAMS.margin,
         use_clf=False,
-        barriers={"!o": obstacle},
+        barriers={"!o": tlshield.Avoid(obstacle)},
     )
 
 

@@ -167,8 +167,8 @@ def test_a_monitor_batch_copied_mid_episode_continues_bit_for_bit(how: str) -> N
 def test_a_copied_shield_gives_the_same_actions(how: str) -> None:
     spec = channel_task_spec()
     barriers = {
-        "wall": tlshield.Halfspace(np.eye(13)[0], 11.0),
-        "!pole": (tlshield.Ball([0, 1], 0.4, center=[5.0, 5.5]), 0.5),
+        "wall": tlshield.Inside(tlshield.Halfspace(np.eye(13)[0], 11.0)),
+        "!pole": (tlshield.Avoid(tlshield.Ball([0, 1], 0.4, center=[5.0, 5.5])), 0.5),
     }
     shields = [
         task_shield(barriers=barriers, action_bounds=(-3.0, 3.0), solver="clarabel", alpha2=None),

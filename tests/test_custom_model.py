@@ -60,7 +60,9 @@ def shield(model: object, **overrides: object) -> tlshield.Shield:
         **GAINS,
         "cbf_bounds": (-6.0, 6.0),
         "clf_bounds": (-0.5, 0.5),
-        "barriers": {"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)},
+        "barriers": {
+            "!o": tlshield.Avoid(tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE))
+        },
         **overrides,
     }
     return tlshield.Shield(spec, model, **kwargs)  # type: ignore[arg-type]
@@ -152,7 +154,7 @@ def test_without_a_model_a_call_that_cannot_act_is_an_error_not_a_silent_pass() 
     """The issue's 15 lines: a double integrator given only as per-call f, g, a wall x <= 1 and
     an RL action pushing +1. Before, x reached 49.75 with no error."""
     spec = tlshield.Spec("F g", {"g": tlshield.Halfspace([1.0, 0.0], -5.0)})
-    wall = {"wall": tlshield.Halfspace([-1.0, 0.0], 1.0)}
+    wall = {"wall": tlshield.Inside(tlshield.Halfspace([-1.0, 0.0], 1.0))}
     kw = {"alpha": 2.0, "c3": 1.0, "k": 1e4, "barriers": wall, "pos": [0], "use_clf": False}
     sh = tlshield.Shield(spec, None, cbf_bounds=(-4.0, 4.0), clf_bounds=(-1.0, 1.0), inputs=1, **kw)  # type: ignore[arg-type]
     s = np.zeros(2)
@@ -181,11 +183,11 @@ def test_a_custom_model_that_cannot_act_on_a_barrier_is_refused_at_construction(
     assert model.actuated == [2] and model.integrated == [0]
     spec = tlshield.Spec("F g", {"g": tlshield.Halfspace([1.0, 0.0, 0.0, 0.0], -5.0)})
     bounds = {"cbf_bounds": (-1.0, 1.0), "clf_bounds": (-1.0, 1.0)}
-    floor = {"floor": tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], 1.0)}
+    floor = {"floor": tlshield.Inside(tlshield.Halfspace([0.0, 1.0, 0.0, 0.0], 1.0))}
     with pytest.raises(tlshield.ShieldError, match=r'barrier "floor".*cannot\s+enforce'):
         tlshield.Shield(spec, model, **GAINS, **bounds, barriers=floor, pos=[0])  # type: ignore[arg-type]
     # A barrier on x has relative degree 2: without alpha2 the shield says so.
-    wall = {"wall": tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], 1.0)}
+    wall = {"wall": tlshield.Inside(tlshield.Halfspace([-1.0, 0.0, 0.0, 0.0], 1.0))}
     gains = {**GAINS, "alpha2": None}
     with pytest.raises(tlshield.ShieldError, match=r"relative degree 2.*alpha2"):
         tlshield.Shield(spec, model, **gains, **bounds, barriers=wall, pos=[0])  # type: ignore[arg-type]

@@ -105,7 +105,8 @@ def test_every_deprecation_names_its_removal_and_is_in_the_changelog() -> None:
     """The inventory of what warns: every place in the library that emits a deprecation
     (Python ``DeprecationWarning``, a stub's ``@deprecated``, Rust ``#[deprecated]``) says in
     which version the name goes, and the CHANGELOG's unreleased section lists deprecations
-    exactly when the sources have some. 0.3 removed every 0.1 name, so today both are empty."""
+    exactly when the sources have some (0.3 removed every 0.1 name; 0.4 deprecates the "!" name
+    of a bare barrier)."""
     import re
 
     root = Path(__file__).resolve().parent.parent

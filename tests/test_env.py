@@ -330,7 +330,7 @@ def test_shielded_routes_the_trackers_goal_term_when_it_can() -> None:
     """A routing shield of the tracker's own automaton routes the goal term; one of another
     task's automaton cannot, and says so instead of failing."""
     spec = point_spec()
-    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[1.5, 0.0])}
+    barriers = {"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[1.5, 0.0]))}
     settings = dict(alpha=5.0, c3=1.0, k=1e4, cbf_bounds=(-3, 3), clf_bounds=(-0.5, 0.5))
     model = tlshield.SingleIntegrator([0, 1])
     env = FsaAugmented(PointEnv(), spec)

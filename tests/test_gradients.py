@@ -300,7 +300,9 @@ def test_relaxed_and_failed_steps_are_flagged() -> None:
     # 14 barriers outside their sets: the relaxed QP has 19 variables, more than the
     # active-set solver holds, and only that solver is allowed.
     barriers = {
-        f"b{i}": tlshield.Halfspace(np.r_[1.0, -1.0, np.zeros(11)], -2.0 - 0.01 * i)
+        f"b{i}": tlshield.Inside(
+            tlshield.Halfspace(np.r_[1.0, -1.0, np.zeros(11)], -2.0 - 0.01 * i)
+        )
         for i in range(14)
     }
     failing = task_shield(barriers=barriers, solver="active_set")

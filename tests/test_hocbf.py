@@ -28,7 +28,9 @@ def make_shield(**overrides: object) -> tlshield.Shield:
         "cbf_bounds": PARAMS.cbf,
         "clf_bounds": PARAMS.clf,
         "clf_gain": CLF_GAIN,
-        "barriers": {"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)},
+        "barriers": {
+            "!o": tlshield.Avoid(tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE))
+        },
         # The QP of Eq. 5D2 as hand_rows builds it (routing aims the CLF around the obstacle).
         "route": False,
         **overrides,
@@ -98,7 +100,7 @@ def test_hocbf_equals_an_independent_solve(
 
 
 def test_first_order_models_are_unchanged_and_alpha2_is_required_where_needed() -> None:
-    obstacle = {"!o": tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE)}
+    obstacle = {"!o": tlshield.Avoid(tlshield.Ball(pos=[0, 1], radius=RADIUS, center=OBSTACLE))}
     # A velocity-level model: the barrier has relative degree 1, alpha2 is not needed.
     spec = tlshield.Spec("F g", {"g": tlshield.Ball(pos=[0, 1], radius=0.3, center=GOAL)})
     gains = {"alpha": 1.0, "c3": 1.0, "k": 1e4, "cbf_bounds": (-6.0, 6.0)}
@@ -137,6 +139,6 @@ def test_models_that_do_not_fit_are_clear_errors() -> None:
         tlshield.Shield(spec, model, **gains, **bounds)  # type: ignore[arg-type]
     # A barrier on dimensions no input reaches within two integrations.
     goal = tlshield.Spec("F g", {"g": tlshield.Ball(pos=[0, 1], radius=0.3, center=GOAL)})
-    far = {"!far": tlshield.Ball(pos=[4, 5], radius=1.0, center=[0.0, 0.0])}
+    far = {"!far": tlshield.Avoid(tlshield.Ball(pos=[4, 5], radius=1.0, center=[0.0, 0.0]))}
     with pytest.raises(tlshield.ShieldError, match=r"relative degree > 2"):
         tlshield.Shield(goal, model, **gains, **bounds, barriers=far)  # type: ignore[arg-type]

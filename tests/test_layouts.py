@@ -88,7 +88,9 @@ def _shield() -> tlshield.Shield:
         k=1e4,
         cbf_bounds=((-1.5, -3.0), (1.5, 3.0)),
         clf_bounds=((-0.3, -0.6), (0.3, 0.6)),
-        barriers={"!o1": tlshield.Ball(pos=[0, 1], radius=0.45, center_dims=[9, 10])},
+        barriers={
+            "!o1": tlshield.Avoid(tlshield.Ball(pos=[0, 1], radius=0.45, center_dims=[9, 10]))
+        },
     )
 
 

@@ -325,7 +325,7 @@ def wall_shield(**kw: Any) -> tlshield.Shield:
         k=1e4,
         cbf_bounds=(-2.0, 2.0),
         clf_bounds=(-0.5, 0.5),
-        barriers={"wall": wall},
+        barriers={"wall": tlshield.Inside(wall)},
         use_clf=False,
         **kw,
     )

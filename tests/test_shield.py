@@ -157,14 +157,14 @@ def test_infeasible_is_relaxed_with_slack_never_nan() -> None:
 
 def test_user_barriers_and_per_call_dynamics() -> None:
     wall = tlshield.Halfspace([0.0, -1.0] + [0.0] * 11, 3.0)  # y < 3
-    sh = make_shield(barriers={"wall": wall})
+    sh = make_shield(barriers={"wall": tlshield.Inside(wall)})
     s = state(2.9, 0.0, math.pi / 2)
     out = sh.filter(s, 0, [2.0, 0.0])
     assert dict(out.barriers)["wall"] == pytest.approx(3.0 - s[1])
     f, g = tlshield.Unicycle(0.1).eval(s)
     again = sh.filter(s, 0, [2.0, 0.0], f=f, g=g)
     np.testing.assert_array_equal(out.action, again.action)
-    positional = make_shield(barriers=[wall]).filter(s, 0, [2.0, 0.0])
+    positional = make_shield(barriers=[tlshield.Inside(wall)]).filter(s, 0, [2.0, 0.0])
     assert dict(positional.barriers)["h0"] == pytest.approx(3.0 - s[1])
     no_model = tlshield.Shield(
         channel_task_spec(),
@@ -192,7 +192,7 @@ def test_single_integrator_keeps_a_disc_invariant() -> None:
         k=1e4,
         cbf_bounds=(-10, 10),
         clf_bounds=(-1, 1),
-        barriers=[arena],
+        barriers=[tlshield.Inside(arena)],
     )
     p = np.array([0.0, 3.5])
     rng = np.random.default_rng(0)
@@ -246,7 +246,7 @@ BAD_CONSTRUCTION = [
     ({"pos": [0, 0]}, ValueError, "pos"),
     ({"pos": [0, 1, 2]}, ValueError, "pos"),
     ({"pos": [-1, 1]}, ValueError, "pos"),
-    ({"barriers": [1.0]}, TypeError, "Halfspace"),
+    ({"barriers": [1.0]}, TypeError, "Avoid"),
     ({"barriers": 3}, TypeError, "barriers"),
 ]
 
@@ -348,7 +348,7 @@ def test_automaton_goal_from_python(shield: tlshield.Shield) -> None:
 def obstacle_shield() -> tlshield.Shield:
     """The channel shield with obstacle 1 as an outside barrier (``"!o1"``)."""
     ball = tlshield.Ball([0, 1], 0.5, center_dims=[9, 10])
-    return make_shield(barriers={"!o1": ball}, use_clf=False)
+    return make_shield(barriers={"!o1": tlshield.Avoid(ball)}, use_clf=False)
 
 
 def test_outside_barrier_and_drift_match_an_explicit_f() -> None:

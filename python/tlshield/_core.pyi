@@ -113,6 +113,27 @@ Predicate: TypeAlias = Halfspace | Ball | Union | Intersection
 PredicateLike: TypeAlias = Predicate | Sequence[Predicate]
 
 @final
+class Avoid:
+    """A barrier that keeps the state out of the predicate's region: ``h = -rho(predicate)``
+    (``Shield(barriers={"shelf": Avoid(ball)})``)."""
+
+    def __new__(cls, predicate: PredicateLike) -> Self: ...
+    @property
+    def predicate(self) -> Predicate: ...
+
+@final
+class Inside:
+    """A barrier that keeps the state in the predicate's region: ``h = rho(predicate)``
+    (``Shield(barriers={"arena": Inside(halfspace)})``)."""
+
+    def __new__(cls, predicate: PredicateLike) -> Self: ...
+    @property
+    def predicate(self) -> Predicate: ...
+
+#: A user barrier: its side stated by its type, optionally with a slack weight.
+BarrierLike: TypeAlias = Avoid | Inside | tuple[Avoid | Inside, float]
+
+@final
 class Spec:
     """An scTLTL formula over named state predicates."""
 
@@ -658,9 +679,7 @@ class Shield:
         clf_bounds: Bounds,
         action_bounds: Bounds | None = None,
         rl_bounds: Bounds | None = None,
-        barriers: Sequence[Predicate]
-        | Mapping[str, Predicate | tuple[Predicate, float]]
-        | None = None,
+        barriers: Sequence[BarrierLike] | Mapping[str, BarrierLike] | None = None,
         pos: Sequence[int] | None = None,
         use_cbf: bool = True,
         use_clf: bool = True,
@@ -678,7 +697,7 @@ class Shield:
         clf_round: tuple[int, int, float] | None = None,
     ) -> Self:
         """``route`` aims the CLF at a target that leads around the discs the shield keeps
-        the state out of (its avoid literals and ``!`` barriers), re-planned every step, so
+        the state out of (its avoid literals and ``Avoid`` barriers), re-planned every step, so
         that the CLF-CBF QP does not park the robot in front of an obstacle
         (``FilterResult.goal`` is that target); ``route_clearance`` is how far the route keeps
         from each disc, as a fraction of its radius (None: 0.2); ``heading`` is the state

@@ -60,7 +60,7 @@ def _shield(barriers: dict | None, spec: tlshield.Spec, **kw) -> tlshield.Shield
 def test_with_nothing_in_the_way_the_target_is_the_goal_bit_for_bit() -> None:
     goal = tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])
     spec = tlshield.Spec("F goal", {"goal": goal})
-    far = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 3.0])}
+    far = {"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[0.0, 3.0]))}
     routed, straight = _shield(far, spec), _shield(far, spec, route=False)
     rng = np.random.default_rng(0)
     for _ in range(50):
@@ -98,7 +98,7 @@ def test_an_enclosed_goal_is_aimed_at_and_the_robot_stays_out() -> None:
     """What the router cannot do: a goal walled in by overlapping discs has no way round; the
     target is the goal, and the barriers hold the robot outside."""
     ring = {
-        f"!o{k}": tlshield.Ball([0, 1], 0.5, center=[np.cos(a), np.sin(a)])
+        f"!o{k}": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[np.cos(a), np.sin(a)]))
         for k, a in enumerate(np.linspace(0, 2 * np.pi, 10, endpoint=False))
     }
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[0.0, 0.0])})
@@ -123,7 +123,7 @@ def test_a_bad_clearance_is_refused_where_it_is_given(bad: float) -> None:
 
 def test_copies_keep_the_routing_settings() -> None:
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
-    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}
+    barriers = {"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0]))}
     shield = _shield(barriers, spec, route=False, route_clearance=0.5)
     for twin in (copy.deepcopy(shield), pickle.loads(pickle.dumps(shield))):
         q = spec.automaton().initial
@@ -168,7 +168,7 @@ def test_a_round_clf_bound_does_not_depend_on_the_worlds_orientation() -> None:
 
 def test_the_round_clf_bound_holds_on_random_steps() -> None:
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
-    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}
+    barriers = {"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0]))}
     shield = _shield(barriers, spec, clf_round=(0, 1, 0.7), k=1e4)
     rng = np.random.default_rng(4)
     q = spec.automaton().initial
@@ -194,7 +194,7 @@ def test_a_bad_round_bound_is_refused_where_it_is_given(bad: tuple, message: str
 def test_gradients_through_a_round_bound_match_finite_differences() -> None:
     """The 16 rows are constant in a_rl and the state: the adjoint of the QP carries them."""
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[4.0, 1.0])})
-    barriers = {"!o": tlshield.Ball([0, 1], 0.5, center=[1.0, 0.0])}
+    barriers = {"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[1.0, 0.0]))}
     shield = _shield(barriers, spec, clf_round=(0, 1, 0.6), k=1e4, route=False)
     rng = np.random.default_rng(7)
     states = rng.uniform([-2.0, -2.0], [0.3, 2.0], (200, 2))
@@ -251,7 +251,7 @@ def test_the_goal_term_reads_the_way_the_shield_drives(encoding: str) -> None:
         barriers = None
     else:
         spec = tlshield.Spec("F goal", {"goal": goal})
-        barriers = {"!o": disc}
+        barriers = {"!o": tlshield.Avoid(disc)}
     clearance = 0.5
     shield = _shield(barriers, spec, route_clearance=clearance)
     assert shield.routes
@@ -306,7 +306,7 @@ def test_a_routed_progress_reward_pays_by_the_way() -> None:
 
 def test_a_routed_monitor_is_copied_with_its_routing() -> None:
     spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])})
-    shield = _shield({"!o": tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0])}, spec)
+    shield = _shield({"!o": tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[0.0, 0.0]))}, spec)
     monitor = tlshield.Monitor(shield.automaton, routed_by=shield)
     monitor.reset(np.array([-2.0, 0.0]))
     for twin in (copy.deepcopy(monitor), pickle.loads(pickle.dumps(monitor))):
@@ -344,7 +344,7 @@ def test_a_routed_monitor_gives_the_shield_its_answer_bit_for_bit(
     if encoding == "formula":
         spec, barriers = tlshield.Spec("!o U goal", {"o": disc, "goal": goal}), None
     else:
-        spec, barriers = tlshield.Spec("F goal", {"goal": goal}), {"!o": disc}
+        spec, barriers = tlshield.Spec("F goal", {"goal": goal}), {"!o": tlshield.Avoid(disc)}
     shield = _shield(barriers, spec, use_cbf=use_cbf)
     other = _shield(barriers, spec, use_cbf=use_cbf, route_clearance=0.9)
     aut = shield.automaton

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from tlshield._core import Ball, Halfspace, Shield, Spec, Unicycle
+from tlshield._core import Avoid, Ball, Halfspace, Shield, Spec, Unicycle
 from tlshield.envs.layout import GOAL_DIMS, OBSTACLE_DIMS, STATE_DIM, THETA, X, Y
 from tlshield.envs.params import CONFIGS, FULL
 
@@ -393,12 +393,12 @@ PAPER_ENV = {
 OBSTACLE_SLACK_WEIGHT = 1e-3
 
 
-def obstacle_barriers(params: ChannelParams) -> dict[str, tuple[Ball, float]]:
+def obstacle_barriers(params: ChannelParams) -> dict[str, tuple[Avoid, float]]:
     """The moving-obstacle barriers: keep the reference point out of a disc of
     ``barrier_radius`` around each obstacle centre (read from the state)."""
     return {
         f"!o{k + 1}": (
-            Ball(pos=[X, Y], radius=params.shield.barrier_radius, center_dims=list(dims)),
+            Avoid(Ball(pos=[X, Y], radius=params.shield.barrier_radius, center_dims=list(dims))),
             OBSTACLE_SLACK_WEIGHT,
         )
         for k, dims in enumerate(OBSTACLE_DIMS)

@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Ball, Halfspace, Shield, SingleIntegrator, Spec
+from tlshield._core import Ball, Halfspace, Inside, Shield, SingleIntegrator, Spec
 from tlshield.copying import IndependentCopies
 from tlshield.envs.params import CONFIGS, FULL, build, check_config, shielded_config
 from tlshield.wrappers import FsaAugmented, Shielded
@@ -124,13 +124,13 @@ def flatworld_spec(formula: str) -> Spec:
     return Spec(formula, colour_predicates())
 
 
-def wall_barriers(size: float) -> dict[str, Halfspace]:
+def wall_barriers(size: float) -> dict[str, Inside]:
     """The square's four walls as barriers ``x < size`` etc. (the shield keeps the point in)."""
     return {
-        "x<size": Halfspace([-1.0, 0.0], size),
-        "x>-size": Halfspace([1.0, 0.0], size),
-        "y<size": Halfspace([0.0, -1.0], size),
-        "y>-size": Halfspace([0.0, 1.0], size),
+        "x<size": Inside(Halfspace([-1.0, 0.0], size)),
+        "x>-size": Inside(Halfspace([1.0, 0.0], size)),
+        "y<size": Inside(Halfspace([0.0, -1.0], size)),
+        "y>-size": Inside(Halfspace([0.0, 1.0], size)),
     }
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from tlshield import (
     AccelerationUnicycle,
+    Avoid,
     Ball,
     DoubleIntegrator,
     Monitor,
@@ -217,7 +218,7 @@ def shield_for(
         barriers = None
     elif encoding == "barriers":
         spec = Spec("F goal", {"goal": goal_ball})
-        barriers = {f"!{name}": ball for name, ball in balls.items()}
+        barriers = {f"!{name}": Avoid(ball) for name, ball in balls.items()}
     else:
         raise ValueError(f"encoding: expected one of {ENCODINGS}, got {encoding!r}")
     return Shield(spec, r.model, barriers=barriers, route=route, **r.shield_kwargs)

@@ -4,6 +4,7 @@
 //! Python exceptions; all logic lives in `tlshield-core`.
 
 mod automaton;
+mod barrier;
 mod channel;
 mod codes;
 mod convert;
@@ -70,6 +71,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predicate::PyBall>()?;
     m.add_class::<predicate::PyUnion>()?;
     m.add_class::<predicate::PyIntersection>()?;
+    m.add_class::<barrier::PyAvoid>()?;
+    m.add_class::<barrier::PyInside>()?;
     m.add_class::<spec::PySpec>()?;
     m.add_class::<automaton::PyAutomaton>()?;
     m.add_class::<progress::PyProgressReward>()?;

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
-use tlshield_core::{Automaton, Barrier, Bounds, Shield, ShieldParams, SolverChoice};
+use tlshield_core::{Automaton, Bounds, Shield, ShieldParams, SolverChoice};
 
 use crate::automaton::PyAutomaton;
 use crate::convert::{self};
@@ -15,7 +15,6 @@ use crate::custom::PyControlAffine;
 use crate::dynamics::model_of;
 use crate::errors::map;
 use crate::literals::LiteralNames;
-use crate::predicate::predicate_of;
 pub use crate::shield_results::{PyFilterBatch, PyFilterResult};
 use crate::spec::PySpec;
 
@@ -60,42 +59,6 @@ fn bounds(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Bounds> {
         (Ok(lo), Err(hi)) => Bounds::new(vec![lo; hi.len()], hi),
         (Err(lo), Ok(hi)) => Bounds::new(lo.clone(), vec![hi; lo.len()]),
     })
-}
-
-/// Barriers from a sequence of predicates (named `h0`, `h1`, ...) or a mapping name ->
-/// predicate or `(predicate, slack weight)`; a name starting with `!` keeps the state out of
-/// the predicate's region.
-fn barriers(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Barrier>> {
-    if let Ok(items) = obj.call_method0("items") {
-        let mut out = Vec::new();
-        for item in items.try_iter()? {
-            let (key, value): (Bound<'_, PyAny>, Bound<'_, PyAny>) = item?.extract()?;
-            let name: String = key
-                .extract()
-                .map_err(|_| PyTypeError::new_err("barriers: mapping keys must be names (str)"))?;
-            let (value, weight) = match value.extract::<(Bound<'_, PyAny>, f64)>() {
-                Ok((p, w)) => (p, w),
-                Err(_) => (value, 1.0),
-            };
-            let predicate = predicate_of(&format!("barriers[{name:?}]"), &value)?;
-            out.push(Barrier::named(name, predicate).with_slack_weight(weight));
-        }
-        return Ok(out);
-    }
-    let mut out = Vec::new();
-    let iter = obj.try_iter().map_err(|_| {
-        PyTypeError::new_err(
-            "barriers: expected a sequence of Halfspace/Ball or a mapping name -> predicate",
-        )
-    })?;
-    for (i, item) in iter.enumerate() {
-        let item = item?;
-        out.push(Barrier::inside(
-            Barrier::default_name(i),
-            predicate_of(&format!("barriers[{i}]"), &item)?,
-        ));
-    }
-    Ok(out)
 }
 
 /// The TL-CLF-CBF shield (paper Eq. 5D2): corrects an RL action so the FSA state's safe set
@@ -222,7 +185,7 @@ impl PyShield {
         .with_rl_bounds(rl_bounds.map(|b| bounds(b, "rl_bounds")).transpose()?)
         .with_barriers(
             barriers
-                .map(self::barriers)
+                .map(crate::barrier::barriers)
                 .transpose()?
                 .unwrap_or_default(),
         )

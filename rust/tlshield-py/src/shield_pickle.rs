@@ -1,6 +1,5 @@
 //! `Shield` pickled as its constructor's arguments.
 
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use tlshield_core::Bounds;
@@ -25,14 +24,8 @@ impl PyShield {
         let pair = |b: &Bounds| (b.lo.clone(), b.hi.clone());
         let barriers = PyDict::new(py);
         for b in &p.barriers {
-            if !b.named_for_its_side() {
-                return Err(PyValueError::new_err(format!(
-                    "barrier {:?}: a name starting with '!' must mean 'outside' to be pickled",
-                    b.name
-                )));
-            }
-            let predicate = crate::predicate::to_python(py, &b.predicate)?;
-            barriers.set_item(&b.name, (predicate, b.slack_weight))?;
+            let side = crate::barrier::to_side(py, b)?;
+            barriers.set_item(&b.name, (side, b.slack_weight))?;
         }
         let kwargs = PyDict::new(py);
         kwargs.set_item("alpha", p.alpha)?;

@@ -57,7 +57,7 @@ use inputs::{BatchRows, Call, Stage};
 use order::Orders;
 use outcome::OutRows;
 pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
-pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice, OUTSIDE_PREFIX};
+pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice};
 use program::Rules;
 use workspace::Workspace;
 

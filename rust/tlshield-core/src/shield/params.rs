@@ -6,9 +6,6 @@ use crate::spec::Spec;
 
 use super::ShieldError;
 
-/// The prefix of a barrier name that keeps the state outside the predicate's region.
-pub const OUTSIDE_PREFIX: char = '!';
-
 /// A user barrier: `h = rho(predicate)` (`positive`) or `h = -rho(predicate)` (keep out of
 /// the predicate's region, e.g. a moving obstacle's disc), kept above the margin.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,25 +43,9 @@ impl Barrier {
         }
     }
 
-    /// The barrier a name describes (the naming rule of `barriers={name: predicate}`): a name
-    /// starting with `!` keeps the state outside the predicate's region, any other inside.
-    pub fn named(name: impl Into<String>, predicate: Predicate) -> Self {
-        let name = name.into();
-        match name.starts_with(OUTSIDE_PREFIX) {
-            true => Barrier::outside(name, predicate),
-            false => Barrier::inside(name, predicate),
-        }
-    }
-
     /// The name of barrier `i` of a plain list of predicates: `h{i}`.
     pub fn default_name(i: usize) -> String {
         format!("h{i}")
-    }
-
-    /// Whether the name says the barrier's side (`!` exactly when outside), so that
-    /// [`Barrier::named`] rebuilds it from its name.
-    pub fn named_for_its_side(&self) -> bool {
-        self.positive != self.name.starts_with(OUTSIDE_PREFIX)
     }
 
     /// The barrier's value `h(s)` (the predicate's robustness, negated for an `outside`
@@ -707,14 +688,11 @@ mod tests {
     }
 
     #[test]
-    fn a_name_says_the_side() {
+    fn a_barrier_keeps_its_side_whatever_its_name() {
         let p = Predicate::halfspace(vec![1.0], 0.0).unwrap();
-        let out = Barrier::named("!wall", p.clone());
-        let inside = Barrier::named("wall", p.clone());
-        assert!(!out.positive && inside.positive);
-        assert!(out.named_for_its_side() && inside.named_for_its_side());
-        assert!(!Barrier::inside("!wall", p.clone()).named_for_its_side());
-        assert!(!Barrier::outside("wall", p).named_for_its_side());
+        let s = [2.0];
+        assert_eq!(Barrier::inside("!wall", p.clone()).value(&s), 2.0);
+        assert_eq!(Barrier::outside("wall", p).value(&s), -2.0);
         assert_eq!(Barrier::default_name(3), "h3");
     }
 
