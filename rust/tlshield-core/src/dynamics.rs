@@ -103,6 +103,15 @@ pub trait Structure: std::fmt::Display {
     /// Whether an input moves state dimension `d` through one integration (`f[d]` depends on
     /// an actuated dimension).
     fn actuates_twice_removed(&self, d: usize) -> bool;
+    /// The dimensions of the model's position (what a CLF drives to a goal), if it has one.
+    fn position(&self) -> Option<Vec<usize>> {
+        None
+    }
+    /// Whether an input moves state dimension `d` at all (directly or through one
+    /// integration).
+    fn moves(&self, d: usize) -> bool {
+        self.actuates(d) || self.actuates_twice_removed(d)
+    }
 }
 
 impl Structure for Dynamics {
@@ -112,6 +121,18 @@ impl Structure for Dynamics {
 
     fn actuates_twice_removed(&self, d: usize) -> bool {
         Dynamics::actuates_twice_removed(self, d)
+    }
+
+    fn position(&self) -> Option<Vec<usize>> {
+        Some(match self {
+            Dynamics::SingleIntegrator { pos } | Dynamics::DoubleIntegrator { pos, .. } => {
+                pos.clone()
+            }
+            Dynamics::Unicycle { x, y, .. }
+            | Dynamics::AccelerationUnicycle { x, y, .. }
+            | Dynamics::KinematicBicycle { x, y, .. }
+            | Dynamics::ThrustTurn { x, y, .. } => vec![*x, *y],
+        })
     }
 }
 

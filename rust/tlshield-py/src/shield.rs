@@ -168,7 +168,7 @@ impl PyShield {
         };
         let pos = match pos {
             Some(p) => crate::convert::indices(p, "pos")?,
-            None => ShieldParams::DEFAULT_POS.to_vec(),
+            None => Vec::new(),
         };
         let params = ShieldParams::new(
             alpha,

@@ -36,7 +36,8 @@ pub(super) fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), Shie
     Ok(())
 }
 
-/// Checks a drift of `rows` rows of length `n`.
+/// Checks a drift of `rows` rows of length `n` (its layout against the model's:
+/// [`Shield::check_drift_layout`]).
 pub(super) fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
     if d.len() != rows * n {
         return Err(InputError::Shape {
@@ -51,6 +52,13 @@ pub(super) fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), Shield
 }
 
 impl Shield {
+    /// Checks that a drift moves no dimension the model's inputs move (no model: nothing to
+    /// check against).
+    pub(super) fn check_drift_layout(&self, d: &[f64], n: usize) -> Result<(), ShieldError> {
+        self.structure()
+            .map_or(Ok(()), |model| super::layout::check_drift(d, n, model))
+    }
+
     /// Checks the state length, finiteness and the barrier dimensions.
     pub(super) fn check_state(&self, what: &str, s: &[f64]) -> Result<(), ShieldError> {
         self.check_state_len(what, s.len())
@@ -204,6 +212,7 @@ impl Shield {
         self.check_dynamics(s.len(), fg)?;
         if let Some(d) = drift {
             check_drift(d, s.len(), 1)?;
+            self.check_drift_layout(d, s.len())?;
         }
         Ok(())
     }
@@ -270,6 +279,7 @@ impl Shield {
         check_finite("states", states, n)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
+            self.check_drift_layout(d, n)?;
         }
         Ok(self.automaton.check_states("qs", qs)?)
     }
@@ -318,6 +328,7 @@ impl Shield {
         self.check_batch_dynamics(rows, n, dynamics)?;
         if let Some(d) = drift {
             check_drift(d, n, rows)?;
+            self.check_drift_layout(d, n)?;
         }
         Ok(Some(n))
     }

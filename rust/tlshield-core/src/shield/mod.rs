@@ -44,6 +44,7 @@ use crate::validate::check_finite;
 mod check;
 mod gradient;
 mod inputs;
+mod layout;
 mod order;
 mod outcome;
 mod params;
@@ -152,6 +153,12 @@ impl Shield {
             (None, Some(c)) => Some(c.inputs()),
             (None, None) => None,
         })?;
+        let structure: Option<&dyn Structure> = match (&dynamics, &custom) {
+            (Some(d), _) => Some(d),
+            (None, Some(c)) => Some(c),
+            (None, None) => None,
+        };
+        layout::resolve_pos(&mut params, structure);
         params.broadcast(m)?;
         params.validate(m, automaton.spec())?;
         let spec = automaton.spec();
@@ -205,12 +212,11 @@ impl Shield {
                 )));
             }
         }
-        let structure: Option<&dyn Structure> = match (&dynamics, &custom) {
-            (Some(d), _) => Some(d),
-            (None, Some(c)) => Some(c),
-            (None, None) => None,
-        };
+        // The relative degree first (its message names the order), then the layout.
         let orders = Orders::new(&automaton, &params, structure, min_dim)?;
+        if let Some(model) = structure {
+            layout::check(spec, &params, model)?;
+        }
         let routing = routing_of(&params);
         Ok(Shield {
             automaton,
@@ -265,6 +271,15 @@ impl Shield {
     /// The user's model, if the shield was built with one.
     pub fn custom_model(&self) -> Option<&CustomModel> {
         self.custom.as_ref()
+    }
+
+    /// The model's structure (built-in or the user's), if the shield has a model.
+    fn structure(&self) -> Option<&dyn Structure> {
+        match (&self.dynamics, &self.custom) {
+            (Some(d), _) => Some(d),
+            (None, Some(c)) => Some(c),
+            (None, None) => None,
+        }
     }
 
     fn with_workspace<R>(&self, n: usize, run: impl FnOnce(&mut Workspace) -> R) -> R {

@@ -248,7 +248,10 @@ pub struct ShieldParams {
     pub rl_bounds: Option<Bounds>,
     /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
     pub barriers: Vec<Barrier>,
-    /// State dimensions the CLF drives to the goal.
+    /// State dimensions the CLF drives to the goal. Empty (the default): the model's position
+    /// ([`Structure::position`](crate::dynamics::Structure::position)), or
+    /// [`ShieldParams::DEFAULT_POS`] for a model without one, filled in when the shield is
+    /// built.
     pub pos: Vec<usize>,
     /// Gain `k` of the second-order CLF `V = |dp/dt + k (p - goal)|^2`, used when no input
     /// moves `pos` directly (acceleration-level models) (> 0).
@@ -303,13 +306,13 @@ impl ShieldParams {
     pub const DEFAULT_SLACK_PENALTY: f64 = 1e6;
     /// Default barrier margin: `h` is kept above this, so atoms (`rho > 0`) stay true.
     pub const DEFAULT_MARGIN: f64 = 1e-6;
-    /// Default CLF dimensions: the position is `s[0], s[1]`.
+    /// CLF dimensions for a model that names no position: `s[0], s[1]`.
     pub const DEFAULT_POS: [usize; 2] = [0, 1];
     /// Default gain of the second-order CLF.
     pub const DEFAULT_CLF_GAIN: f64 = 1.0;
 
     /// The gains and boxes every shield needs; everything else at its default: no actuator
-    /// limits, no user barriers, the CLF on [`ShieldParams::DEFAULT_POS`], both CBF and CLF on,
+    /// limits, no user barriers, the CLF on the model's position, both CBF and CLF on,
     /// [`SolverChoice::Auto`], [`ShieldParams::DEFAULT_SLACK_PENALTY`] and
     /// [`ShieldParams::DEFAULT_MARGIN`]. Validated by [`Shield::new`](super::Shield::new).
     pub fn new(alpha: f64, c3: f64, k: f64, cbf_bounds: Bounds, clf_bounds: Bounds) -> Self {
@@ -323,7 +326,7 @@ impl ShieldParams {
             action_bounds: None,
             rl_bounds: None,
             barriers: Vec::new(),
-            pos: Self::DEFAULT_POS.to_vec(),
+            pos: Vec::new(),
             clf_gain: Self::DEFAULT_CLF_GAIN,
             use_cbf: true,
             use_clf: true,
@@ -479,7 +482,7 @@ impl ShieldParams {
 
 impl ShieldParams {
     /// Checks the parameters on their own and for a system of `m` inputs shielding the task of
-    /// `spec`: every gain and weight a finite number > 0, `margin` > 0, the routing clearance
+    /// `spec` (with `pos` set: [`Shield::new`](super::Shield::new) fills in an empty one first): every gain and weight a finite number > 0, `margin` > 0, the routing clearance
     /// and the disturbance bounds >= 0, every box of `m` values and the RL box inside what the
     /// corrections can cancel, `pos` distinct dimensions matching the goal balls, and a spec
     /// with predicates. Each failure names the parameter ([`ShieldError::Config`]).
@@ -649,7 +652,9 @@ mod tests {
     fn validate_names_the_bad_setting() {
         let spec = crate::fixtures::task_spec();
         let b = |lo: f64, hi: f64| Bounds::new(vec![lo; 2], vec![hi; 2]);
-        let good = ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5));
+        // validate reads a set pos (Shield::new fills in an empty one from the model).
+        let good =
+            ShieldParams::new(2.0, 1.0, 1e4, b(-6.0, 6.0), b(-0.5, 0.5)).with_pos(vec![0, 1]);
         good.validate(2, &spec).unwrap();
         let err = |p: ShieldParams, m: usize| p.validate(m, &spec).unwrap_err().to_string();
         let mut bad = good.clone();

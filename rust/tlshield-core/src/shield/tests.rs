@@ -203,7 +203,10 @@ fn drift_adds_to_the_model_and_batches_agree() {
     let s = state(2.0, 1.3, -0.4);
     let (mut f, mut g) = (vec![0.0; N], vec![0.0; N * 2]);
     sh.dynamics().unwrap().eval(&s, &mut f, &mut g);
-    let drift: Vec<f64> = (0..N).map(|k| 0.1 * k as f64 - 0.3).collect();
+    // The measured motion of what no input moves: the goals' and obstacles' centres (3..N).
+    let drift: Vec<f64> = (0..N)
+        .map(|k| if k < 3 { 0.0 } else { 0.1 * k as f64 - 0.3 })
+        .collect();
     let moved: Vec<f64> = f.iter().zip(&drift).map(|(a, b)| a + b).collect();
     let fg = ControlAffine::new(&moved, &g);
     let a = sh.filter(&s, 0, &[1.0, 1.0], None, Some(&drift)).unwrap();
@@ -216,7 +219,10 @@ fn drift_adds_to_the_model_and_batches_agree() {
         .flat_map(|i| state(0.1 * i as f64, 0.05 * i as f64, 0.3))
         .collect();
     let drifts: Vec<f64> = (0..rows * N)
-        .map(|k| ((k * 7919) % 13) as f64 * 0.05 - 0.3)
+        .map(|k| match k % N < 3 {
+            true => 0.0,
+            false => ((k * 7919) % 13) as f64 * 0.05 - 0.3,
+        })
         .collect();
     let qs = vec![0usize; rows];
     let a_rl: Vec<f64> = (0..rows)
@@ -962,4 +968,75 @@ fn a_disturbance_bound_tightens_each_row_by_its_gradient() {
             "disturbance",
         );
     }
+}
+
+/// The layout check (shield/layout.rs): each mismatch between the model's dimensions and the
+/// predicates' or the drift's is an error that names the dimensions; the CLF's position
+/// defaults to the model's.
+#[test]
+fn a_layout_the_model_contradicts_is_refused_by_name() {
+    let goal = |pos: Vec<usize>, centre: Center| {
+        let ball = Predicate::ball(pos, 0.3, centre).unwrap();
+        Arc::new(Automaton::build(&crate::spec::Spec::new("F g", [("g", ball)]).unwrap()).unwrap())
+    };
+    let fixed = || Center::Fixed(vec![3.0, 0.0]);
+    let robot_at_2_3 = || Some(Dynamics::unicycle(0.1, 2, 3, 4).unwrap());
+    // The robot at dims 2-3 without pos: the CLF drives the model's own position...
+    let sh = Shield::new(
+        goal(vec![2, 3], fixed()),
+        robot_at_2_3(),
+        params(SolverChoice::Auto),
+    );
+    assert_eq!(sh.unwrap().params().pos, vec![2, 3]);
+    // ...and a pos over dims the model does not move is refused, naming them.
+    let err = Shield::new(
+        goal(vec![2, 3], fixed()),
+        robot_at_2_3(),
+        params(SolverChoice::Auto).with_pos(vec![0, 1]),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("pos = [0, 1]") && err.contains("[0, 1]"),
+        "{err}"
+    );
+    // A goal ball over dims the model does not move.
+    let err = Shield::new(
+        goal(vec![0, 1], fixed()),
+        robot_at_2_3(),
+        params(SolverChoice::Auto),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("atom \"g\"") && err.contains("[0, 1]"),
+        "{err}"
+    );
+    // A centre read from dims an input moves (the model's heading is dim 2: the issue's
+    // (x, y, fx, fy, theta) layout under the default Unicycle dims).
+    let unicycle = || Some(Dynamics::unicycle(0.1, 0, 1, 2).unwrap());
+    let err = Shield::new(
+        goal(vec![0, 1], Center::Dims(vec![2, 3])),
+        unicycle(),
+        params(SolverChoice::Auto),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("centre") && err.contains("[2]"), "{err}");
+    // A drift on a dimension an input moves, at the call.
+    let sh = Shield::new(
+        goal(vec![0, 1], Center::Dims(vec![3, 4])),
+        unicycle(),
+        params(SolverChoice::Auto),
+    )
+    .unwrap();
+    let s = [0.0, 0.0, 0.0, 3.0, 0.0];
+    let mut drift = [0.0, 0.0, 0.0, 0.5, 0.0];
+    assert!(sh.filter(&s, 0, &[0.0, 0.0], None, Some(&drift)).is_ok());
+    drift[2] = 0.1;
+    let err = sh
+        .filter(&s, 0, &[0.0, 0.0], None, Some(&drift))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("drift[2]"), "{err}");
 }
