@@ -717,7 +717,12 @@ class Shield:
         and it is None); ``clf_gain`` is ``k`` of the second-order CLF ``|dp/dt + k (p -
         goal)|^2`` (None: 1); ``disturbance`` bounds the model's error per
         state dimension, ``{d: w_d}`` (the plant's ``ds_d/dt`` may differ from the model's by
-        up to ``w_d``): each barrier row then holds for every such error (a robust CBF)."""
+        up to ``w_d``): each barrier row then holds for every such error (a robust CBF).
+        ``pos`` is the state dimensions the CLF drives to the goal (None: the model's position,
+        ``[0, 1]`` for a ``ControlAffine``). ``barriers`` states each barrier's side by its type
+        (``Avoid(p)``, ``Inside(p)``). With a model, the layout is checked against it: a ``pos``
+        or a ball over dimensions the model does not move, a centre read from dimensions it
+        moves, and a ``drift`` on them are ``ShieldError``s that name the dimensions."""
     def filter(
         self,
         s: ArrayLike,

@@ -1,10 +1,12 @@
 //! Core errors -> Python exceptions. Every caller error is a `ValueError`: `SpecError`,
-//! `AutomatonError` and `ShieldError` for their concerns, plain `ValueError` for bad numeric
-//! input outside them; a size that cannot be allocated is a `MemoryError`.
+//! `AutomatonError` and `ShieldError` for their concerns (every input problem of a shield's
+//! call is a `ShieldError`), plain `ValueError` for bad numeric input outside them; a size
+//! that cannot be allocated is a `MemoryError`.
 
 use pyo3::create_exception;
 use pyo3::exceptions::{PyMemoryError, PyValueError};
-use pyo3::PyErr;
+use pyo3::types::PyAnyMethods;
+use pyo3::{PyErr, PyResult};
 use tlshield_core::{
     AutomatonError as CoreAutomatonError, InputError, ShieldError as CoreShieldError,
     SpecError as CoreSpecError,
@@ -63,9 +65,16 @@ impl From<CoreAutomatonError> for PyCoreError {
 
 impl From<CoreShieldError> for PyCoreError {
     fn from(err: CoreShieldError) -> Self {
+        // Every input problem of a shield call is a ShieldError (a ValueError), as its
+        // docstring promises, but for a size past memory (MemoryError).
+        let input = |i: InputError| match i {
+            InputError::TooLarge { .. } => i.into(),
+            other => PyCoreError(ShieldError::new_err(other.to_string())),
+        };
         match err {
-            CoreShieldError::Input(input) => input.into(),
-            CoreShieldError::Automaton(aut) => aut.into(),
+            CoreShieldError::Input(i)
+            | CoreShieldError::Automaton(CoreAutomatonError::Input(i)) => input(i),
+            // A q the automaton does not have, a monitor not reset: the call's input too.
             other => PyCoreError(ShieldError::new_err(other.to_string())),
         }
     }
@@ -81,6 +90,20 @@ impl From<PyCoreError> for PyErr {
     fn from(err: PyCoreError) -> Self {
         err.0
     }
+}
+
+/// Runs a shield call's body, raising every input problem it finds as a `ShieldError`: those
+/// the core reports already are; those found while converting the arguments (a plain
+/// `ValueError` of a shape, an `AutomatonError` of an FSA state the automaton does not have)
+/// are re-raised as one with the same message. `TypeError` and `MemoryError` stay as they are.
+pub fn shield_call<T>(py: pyo3::Python<'_>, body: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    body().map_err(|err| {
+        let plain = err.get_type(py).is(py.get_type::<PyValueError>());
+        match plain || err.is_instance_of::<AutomatonError>(py) {
+            true => ShieldError::new_err(err.value(py).to_string()),
+            false => err,
+        }
+    })
 }
 
 /// Converts a core result into a `PyResult`.

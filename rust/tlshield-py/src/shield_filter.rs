@@ -152,22 +152,24 @@ impl PyShield {
         g: Option<&Bound<'_, PyAny>>,
         drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
-        if s.cast::<PyMonitor>().is_ok() {
-            return Err(PyTypeError::new_err(
-                "filter(s, q, a_rl): s is a Monitor; use filter_monitor(monitor, a_rl)",
-            ));
-        }
-        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
-        let drift = drift.as_deref();
-        let s = vector(s, "s")?;
-        let q = state(q, "q", self.inner.automaton())?;
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
-            .values()
-            .to_vec();
-        let out = self.with_dynamics(py, &s, f, g, |fg| {
-            map(self.inner.filter(&s, q, &a_rl, fg, drift))
-        })?;
-        Ok(self.result(py, out))
+        crate::errors::shield_call(py, || {
+            if s.cast::<PyMonitor>().is_ok() {
+                return Err(PyTypeError::new_err(
+                    "filter(s, q, a_rl): s is a Monitor; use filter_monitor(monitor, a_rl)",
+                ));
+            }
+            let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+            let drift = drift.as_deref();
+            let s = vector(s, "s")?;
+            let q = state(q, "q", self.inner.automaton())?;
+            let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+                .values()
+                .to_vec();
+            let out = self.with_dynamics(py, &s, f, g, |fg| {
+                map(self.inner.filter(&s, q, &a_rl, fg, drift))
+            })?;
+            Ok(self.result(py, out))
+        })
     }
 
     /// One shield step at a ``Monitor``'s last state and FSA state, reusing its reading of the
@@ -184,17 +186,19 @@ impl PyShield {
         g: Option<&Bound<'_, PyAny>>,
         drift: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyFilterResult> {
-        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
-        let drift = drift.as_deref();
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
-            .values()
-            .to_vec();
-        let monitor = monitor.borrow();
-        let s = monitor.inner.state();
-        let out = self.with_dynamics(py, s, f, g, |fg| {
-            map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
-        })?;
-        Ok(self.result(py, out))
+        crate::errors::shield_call(py, || {
+            let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+            let drift = drift.as_deref();
+            let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+                .values()
+                .to_vec();
+            let monitor = monitor.borrow();
+            let s = monitor.inner.state();
+            let out = self.with_dynamics(py, s, f, g, |fg| {
+                map(self.inner.filter_monitor(&monitor.inner, &a_rl, fg, drift))
+            })?;
+            Ok(self.result(py, out))
+        })
     }
 
     /// Shields the rows of a ``MonitorBatch`` at their last states and FSA states, reusing each
@@ -208,42 +212,44 @@ impl PyShield {
         a_rl: &Bound<'py, PyAny>,
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<PyFilterBatch> {
-        let monitors = monitors.borrow();
-        let rows = monitors.inner.len();
-        let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
-        let drift = drift
-            .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
-            .transpose()?;
-        let m = self.inner.inputs();
-        if a_rl.shape() != [rows, m] {
-            return Err(PyValueError::new_err(format!(
-                "filter_monitors: expected a_rl ({rows}, {m}) for {rows} monitors, got {}",
-                crate::convert::shape_text(a_rl.shape())
-            )));
-        }
-        let (actions, drift_values) = (a_rl.values(), drift.as_ref().map(|d| d.values()));
-        let shield = &self.inner;
-        let mut out = BatchOutput::default();
-        let batch = &monitors.inner;
-        let states: Vec<f64> = match &self.custom {
-            Some(_) => batch
-                .monitors()
-                .iter()
-                .flat_map(|m| m.state())
-                .copied()
-                .collect(),
-            None => Vec::new(),
-        };
-        let evaluated = self.evaluate_rows(py, &states)?;
-        let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
-            f,
-            g,
-            jacobian: Some(j),
-        });
-        map(py.detach(|| {
-            shield.filter_monitors_with(batch, actions, dynamics, drift_values, &mut out)
-        }))?;
-        self.batch_result(py, out, rows)
+        crate::errors::shield_call(py, || {
+            let monitors = monitors.borrow();
+            let rows = monitors.inner.len();
+            let a_rl = FloatArray::extract(a_rl, "a_rl", 2, "(B, m)")?;
+            let drift = drift
+                .map(|d| FloatArray::extract(d, "drift", 2, "(B, n)"))
+                .transpose()?;
+            let m = self.inner.inputs();
+            if a_rl.shape() != [rows, m] {
+                return Err(PyValueError::new_err(format!(
+                    "filter_monitors: expected a_rl ({rows}, {m}) for {rows} monitors, got {}",
+                    crate::convert::shape_text(a_rl.shape())
+                )));
+            }
+            let (actions, drift_values) = (a_rl.values(), drift.as_ref().map(|d| d.values()));
+            let shield = &self.inner;
+            let mut out = BatchOutput::default();
+            let batch = &monitors.inner;
+            let states: Vec<f64> = match &self.custom {
+                Some(_) => batch
+                    .monitors()
+                    .iter()
+                    .flat_map(|m| m.state())
+                    .copied()
+                    .collect(),
+                None => Vec::new(),
+            };
+            let evaluated = self.evaluate_rows(py, &states)?;
+            let dynamics = evaluated.as_ref().map(|(f, g, j)| BatchDynamics {
+                f,
+                g,
+                jacobian: Some(j),
+            });
+            map(py.detach(|| {
+                shield.filter_monitors_with(batch, actions, dynamics, drift_values, &mut out)
+            }))?;
+            self.batch_result(py, out, rows)
+        })
     }
 
     /// Shields a batch: ``states`` (B, n), ``qs`` (B,), ``a_rl`` (B, m), using the dynamics
@@ -261,19 +267,21 @@ impl PyShield {
         a_rl: &Bound<'py, PyAny>,
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<PyFilterBatch> {
-        if states.cast::<PyMonitorBatch>().is_ok() {
-            return Err(PyTypeError::new_err(
-                "filter_batch(states, qs, a_rl): states is a MonitorBatch; use \
+        crate::errors::shield_call(py, || {
+            if states.cast::<PyMonitorBatch>().is_ok() {
+                return Err(PyTypeError::new_err(
+                    "filter_batch(states, qs, a_rl): states is a MonitorBatch; use \
                  filter_monitors(monitors, a_rl)",
-            ));
-        }
-        let input = BatchInput::extract(self, py, "filter_batch", [states, qs, a_rl], drift)?;
-        let rows = input.rows().len();
-        let shield = &self.inner;
-        let mut out = BatchOutput::default();
-        let (batch, a_rl, dynamics, drift) = input.parts();
-        map(py.detach(|| shield.filter_batch_with(batch, a_rl, dynamics, drift, &mut out)))?;
-        self.batch_result(py, out, rows)
+                ));
+            }
+            let input = BatchInput::extract(self, py, "filter_batch", [states, qs, a_rl], drift)?;
+            let rows = input.rows().len();
+            let shield = &self.inner;
+            let mut out = BatchOutput::default();
+            let (batch, a_rl, dynamics, drift) = input.parts();
+            map(py.detach(|| shield.filter_batch_with(batch, a_rl, dynamics, drift, &mut out)))?;
+            self.batch_result(py, out, rows)
+        })
     }
 
     /// Every user barrier's value ``h(s)`` by name (> 0 while it holds): how a step is
@@ -283,13 +291,15 @@ impl PyShield {
         py: Python<'py>,
         s: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let s = vector(s, "s")?;
-        let mut values = Vec::new();
-        map(self.inner.barrier_values(&s, &mut values))?;
-        let out = PyDict::new(py);
-        for (name, h) in self.barrier_names.iter().zip(values) {
-            out.set_item(name.bind(py), h)?;
-        }
-        Ok(out)
+        crate::errors::shield_call(py, || {
+            let s = vector(s, "s")?;
+            let mut values = Vec::new();
+            map(self.inner.barrier_values(&s, &mut values))?;
+            let out = PyDict::new(py);
+            for (name, h) in self.barrier_names.iter().zip(values) {
+                out.set_item(name.bind(py), h)?;
+            }
+            Ok(out)
+        })
     }
 }

@@ -35,24 +35,27 @@ impl PyShield {
         drift: Option<&Bound<'py, PyAny>>,
         state_grad: bool,
     ) -> PyResult<GradientTuple> {
-        let grad = FloatArray::extract(grad_action, "grad_action", 2, "(B, m)")?;
-        let input = BatchInput::extract(self, py, "vjp_batch", [states, qs, a_rl], drift)?;
-        let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
-        if grad.shape() != [rows, m] {
-            return Err(PyValueError::new_err(format!(
-                "vjp_batch: expected grad_action ({rows}, {m}) for {rows} states, got {}",
-                convert::shape_text(grad.shape())
-            )));
-        }
-        let mut out = BatchGradient::default();
-        let shield = &self.inner;
-        let (batch, a_rl, dynamics, drift) = input.parts();
-        let grads = grad.values();
-        map(py.detach(|| {
-            shield.vjp_batch(batch, a_rl, grads, dynamics, drift, state_grad, &mut out)
-        }))?;
-        let (a_rl, states, flags) = gradient_arrays(py, out, rows, &[m], state_grad.then_some(n))?;
-        Ok((a_rl, states, flags))
+        crate::errors::shield_call(py, || {
+            let grad = FloatArray::extract(grad_action, "grad_action", 2, "(B, m)")?;
+            let input = BatchInput::extract(self, py, "vjp_batch", [states, qs, a_rl], drift)?;
+            let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
+            if grad.shape() != [rows, m] {
+                return Err(PyValueError::new_err(format!(
+                    "vjp_batch: expected grad_action ({rows}, {m}) for {rows} states, got {}",
+                    convert::shape_text(grad.shape())
+                )));
+            }
+            let mut out = BatchGradient::default();
+            let shield = &self.inner;
+            let (batch, a_rl, dynamics, drift) = input.parts();
+            let grads = grad.values();
+            map(py.detach(|| {
+                shield.vjp_batch(batch, a_rl, grads, dynamics, drift, state_grad, &mut out)
+            }))?;
+            let (a_rl, states, flags) =
+                gradient_arrays(py, out, rows, &[m], state_grad.then_some(n))?;
+            Ok((a_rl, states, flags))
+        })
     }
 
     /// The shielded actions of ``filter_batch(states, qs, a_rl)`` and their Jacobians, in one
@@ -72,21 +75,23 @@ impl PyShield {
         drift: Option<&Bound<'py, PyAny>>,
         state_grad: bool,
     ) -> PyResult<JacobianTuple> {
-        let input = BatchInput::extract(self, py, "jacobian_batch", [states, qs, a_rl], drift)?;
-        let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
-        let mut out = BatchGradient::default();
-        let shield = &self.inner;
-        let (batch, a_rl, dynamics, drift) = input.parts();
-        map(
-            py.detach(|| shield.jacobian_batch(batch, a_rl, dynamics, drift, state_grad, &mut out))
-        )?;
-        let action =
-            numpy::ndarray::Array2::from_shape_vec((rows, m), std::mem::take(&mut out.action))
-                .map(|a| a.into_pyarray(py).unbind())
-                .map_err(|e| PyValueError::new_err(e.to_string()))?;
-        let (jac_a, jac_s, flags) =
-            gradient_arrays(py, out, rows, &[m, m], state_grad.then_some(n))?;
-        Ok((action, jac_a, jac_s, flags))
+        crate::errors::shield_call(py, || {
+            let input = BatchInput::extract(self, py, "jacobian_batch", [states, qs, a_rl], drift)?;
+            let (rows, n, m) = (input.rows().len(), input.rows().n, self.inner.inputs());
+            let mut out = BatchGradient::default();
+            let shield = &self.inner;
+            let (batch, a_rl, dynamics, drift) = input.parts();
+            map(py.detach(|| {
+                shield.jacobian_batch(batch, a_rl, dynamics, drift, state_grad, &mut out)
+            }))?;
+            let action =
+                numpy::ndarray::Array2::from_shape_vec((rows, m), std::mem::take(&mut out.action))
+                    .map(|a| a.into_pyarray(py).unbind())
+                    .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let (jac_a, jac_s, flags) =
+                gradient_arrays(py, out, rows, &[m, m], state_grad.then_some(n))?;
+            Ok((action, jac_a, jac_s, flags))
+        })
     }
 }
 
