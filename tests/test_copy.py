@@ -22,6 +22,7 @@ from tests.fixtures import task_shield
 from tlshield.envs.channel import ChannelEnv, channel_task_spec
 from tlshield.envs.flatworld import make_flatworld
 from tlshield.envs.point_mass import make_point_mass
+from tlshield.envs.safety_gym import SafetyGoalEnv, load_builder
 
 COPIES: dict[str, Callable[[Any], Any]] = {
     "copy": copy.copy,
@@ -215,11 +216,14 @@ MADE: dict[str, Callable[[], Any]] = {
     ),
     "PointMass-v0": lambda: gym.make("tlshield/PointMass-v0"),
     "FlatWorld-v0": lambda: gym.make("tlshield/FlatWorld-v0"),
+    "SafetyPointGoal1-v0": lambda: gym.make("tlshield/SafetyPointGoal1-v0"),
+    "SafetyCarGoal1-v0 native": lambda: gym.make("tlshield/SafetyCarGoal1-v0", actions="native"),
 }
 OWN: dict[str, Callable[[], Any]] = {
     "ChannelEnv": lambda: ChannelEnv(config="rl_cbf"),
     "make_point_mass": lambda: make_point_mass("rl_cbf_clf"),
     "make_flatworld": lambda: make_flatworld(config="rl_cbf"),
+    "SafetyGoalEnv Goal2": lambda: SafetyGoalEnv("SafetyPointGoal2-v0", "rl_cbf", alpha=3.0),
 }
 CASES = [(name, how) for name in MADE for how in ("deepcopy", "pickle")] + [
     (name, how) for name in OWN for how in COPIES
@@ -228,6 +232,8 @@ CASES = [(name, how) for name in MADE for how in ("deepcopy", "pickle")] + [
 
 @pytest.mark.parametrize(("name", "how"), CASES)
 def test_a_copied_env_continues_exactly_like_the_original(name: str, how: str) -> None:
+    if "Safety" in name:
+        load_builder()  # make test installs Safety-Gymnasium; without it, the error says so
     env = {**MADE, **OWN}[name]()
     env.reset(seed=11)
     rng = np.random.default_rng(5)

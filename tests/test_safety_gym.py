@@ -446,3 +446,16 @@ def test_td3_trains_through_the_shield_layer(tmp_path: Path) -> None:
     raw = policy.actor.mu(policy.actor.extract_features(batch, policy.actor.features_extractor))
     want = inner.shield.filter(s, q, raw[0].detach().double().numpy()).action
     np.testing.assert_allclose(out[0].detach().numpy(), want, atol=1e-6)
+
+
+@pytest.mark.parametrize("task", sorted(sg.TASKS))
+def test_making_a_shielded_env_warns_of_nothing(task: str) -> None:
+    # Safety-Gymnasium's action Box cast used to print "RuntimeWarning: overflow encountered in
+    # cast" at every make (issue 57); the adapter now silences that one harmless warning.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make(f"tlshield/{task}")
+        env.reset(seed=0)
+        env.step(env.action_space.sample())

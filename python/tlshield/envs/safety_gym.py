@@ -34,6 +34,7 @@ import math
 import os
 import sys
 import types
+import warnings
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
@@ -141,7 +142,13 @@ def make_builder(task: str) -> Any:
     if task not in BUILDER_TASKS:
         raise ValueError(f"task = {task!r}: the adapter supports {', '.join(BUILDER_TASKS)}")
     robot = task.removeprefix("Safety").split("Goal")[0]
-    return load_builder()(task, config={"agent_name": robot})
+    builder = load_builder()
+    with warnings.catch_warnings():
+        # Safety-Gymnasium builds its action Box from MuJoCo's float32 control range as
+        # float64, and Gymnasium's check casts float64's limits to float32 on the way: a
+        # harmless overflow warning at every make, about no value of the space.
+        warnings.filterwarnings("ignore", "overflow encountered in cast", RuntimeWarning)
+        return builder(task, config={"agent_name": robot})
 
 
 @dataclass(frozen=True)
@@ -494,6 +501,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             raise ValueError(f"actions = {actions!r}: expected one of {', '.join(ACTIONS)}")
         self.robot = robot_of(task)
         self.params = build(SafetyGoalParams, {**self.robot.defaults, **overrides}, task)
+        # What a copy is rebuilt from (see __getstate__).
+        self._args = (task, config, evaluation, actions, dict(overrides))
+        self._episode: tuple[int, list[NDArray[np.float64]]] | None = None
         self.config = config
         self.task = task
         self.actions = actions
@@ -581,12 +591,43 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         super().reset(seed=seed)
         if seed is None:  # Safety-Gymnasium draws its layout from its own seed
             seed = int(self.np_random.integers(2**31 - 1))
+        return self._start(seed)
+
+    def _start(self, seed: int) -> tuple[NDArray[np.float64], dict[str, Any]]:
+        # An episode of Safety-Gymnasium's from its seed: with the actions since, all a copy
+        # needs to continue it (MuJoCo and Safety-Gymnasium replay them exactly).
         obs, info = self._env.reset(seed=seed)
+        self._episode = (seed, [])
         self._find_agent()
         self._state = self.true_state()
         self.monitor.reset(self._state)
         self._detour = self.detour()
         return np.asarray(obs, dtype=np.float64), {**info, "state": self._state}
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Copied and pickled as data: the constructor's arguments, the env's random stream,
+        and the episode as its reset seed and the actions since (Safety-Gymnasium's MuJoCo
+        world holds no state a pickle could carry; replaying the episode rebuilds it exactly,
+        bit for bit, at a cost of one step per step taken)."""
+        rng = None if self._np_random is None else self._np_random.bit_generator.state
+        episode = None
+        if self._episode is not None:
+            seed, taken = self._episode
+            episode = (seed, [a.tolist() for a in taken])
+        return {"args": self._args, "rng": rng, "episode": episode}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        task, config, evaluation, actions, overrides = state["args"]
+        self.__init__(task, config, evaluation, actions, **overrides)  # type: ignore[misc]
+        if state["episode"] is not None:
+            seed, taken = state["episode"]
+            self._start(seed)
+            for a in taken:
+                self.step(np.asarray(a, dtype=np.float64))
+        if state["rng"] is not None:
+            bits = getattr(np.random, state["rng"]["bit_generator"])()
+            bits.state = state["rng"]
+            self._np_random = np.random.Generator(bits)
 
     def detour(self) -> float:
         """How much longer the way the shield's router drives to the goal is than the straight
@@ -664,6 +705,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             u = result.action
             applied = self.env_action(u)
             penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
+        assert self._episode is not None  # set with _state
+        self._episode[1].append(action.copy())
         obs, reward, cost, terminated, truncated, info = self._env.step(self.native_action(applied))
         goal_met = bool(info.get("goal_met", False))
         if goal_met:
