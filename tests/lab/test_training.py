@@ -220,3 +220,22 @@ def test_train_and_evaluate_point_mass_from_the_cli(tmp_path: Path) -> None:
     assert result["collisions"] == 0
     with pytest.raises(ValueError, match="only 'fixed'"):
         train("rl_clf", 0, 1, tmp_path / "x", env="tlshield/PointMass-v0", clf_schedule="linear")
+
+
+def test_the_progress_bar_shows_the_run_so_far() -> None:
+    """Issue 57: the bar showed ``ret=nan`` in every update where no episode ended, and its
+    ``viol=`` counted only the last update (101 violating steps in training showed as 0)."""
+    from tlshield.lab.callbacks import RunTotals
+
+    totals = RunTotals()
+    row = {"violations": 101.0, "relaxed": 3, "failed": 0}
+    assert totals.add(row) == {"ret": "-", "viol": "101", "relaxed": "3", "failed": "0"}
+    totals.returns.extend([10.0, 20.0])
+    assert totals.add({**row, "violations": 0.0})["ret"] == "15.0"
+    # An update where no episode ended keeps the last returns; counts add up.
+    shown = totals.add({"violations": 0.0, "relaxed": 1, "failed": 2})
+    assert shown == {"ret": "15.0", "viol": "101", "relaxed": "7", "failed": "2"}
+    # Not measured (an env that reports no violations): n/a, never 0.
+    assert RunTotals().add({"violations": float("nan"), "relaxed": 0, "failed": 0})["viol"] == "n/a"
+    totals.returns.extend(float(k) for k in range(100))  # the last RunTotals.RECENT only
+    assert totals.add(row)["ret"] == f"{sum(range(80, 100)) / 20:.1f}"

@@ -6,6 +6,7 @@ trains."""
 
 from __future__ import annotations
 
+import collections
 import csv
 import math
 import time
@@ -129,6 +130,39 @@ def _mean(values: list[float]) -> float:
 def metrics_text(count: float) -> str:
     """A count column as the progress bar shows it ("n/a": not measured)."""
     return "n/a" if math.isnan(count) else str(int(count))
+
+
+class RunTotals:
+    """What the progress bar shows of the run so far: the mean return of the last
+    :attr:`RECENT` episodes (whichever updates they ended in: an update where none ended shows
+    the last ones, not NaN) and the violating, relaxed and failed steps since the start (not
+    only the last update's)."""
+
+    #: Episodes the shown return averages.
+    RECENT = 20
+
+    def __init__(self) -> None:
+        self.returns: collections.deque[float] = collections.deque(maxlen=self.RECENT)
+        self.violations = math.nan  # NaN until an update measures them
+        self.relaxed = 0
+        self.failed = 0
+
+    def add(self, row: dict[str, Any]) -> dict[str, str]:
+        """Adds an update's row (``returns``: the episodes that ended in it); returns the
+        bar's postfix."""
+        if not math.isnan(row["violations"]):
+            self.violations = (0 if math.isnan(self.violations) else self.violations) + row[
+                "violations"
+            ]
+        self.relaxed += int(row["relaxed"])
+        self.failed += int(row["failed"])
+        ret = f"{np.mean(self.returns):.1f}" if self.returns else "-"
+        return {
+            "ret": ret,
+            "viol": metrics_text(self.violations),
+            "relaxed": str(self.relaxed),
+            "failed": str(self.failed),
+        }
 
 
 def diagnostics(model: Any, metrics: UpdateMetrics) -> dict[str, float]:
@@ -256,6 +290,7 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
         self.start = time.perf_counter()
         self.csv_file: Any = None
         self.bar: Any = None
+        self.totals = RunTotals()
 
     def _init_callback(self) -> None:
         from tqdm.auto import tqdm
@@ -335,10 +370,10 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
         for key, value in row.items():
             if key not in ("update", "timesteps"):
                 self.logger.record(f"tlshield/{key}", value)
+        self.totals.returns.extend(returns)
         metrics.reset_update()
         self.bar.update(1)
-        viol = metrics_text(row["violations"])
-        self.bar.set_postfix(ret=f"{row['return_mean']:.1f}", viol=viol)
+        self.bar.set_postfix(self.totals.add(row))
 
 
 class TrainingCallback(CallbackList):  # type: ignore[misc]
