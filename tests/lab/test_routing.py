@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import pickle
+from typing import Any
 
 import numpy as np
 import pytest
@@ -364,3 +365,21 @@ def test_a_routed_monitor_gives_the_shield_its_answer_bit_for_bit(
         for out in outs[1:]:
             assert np.array_equal(out.action, outs[0].action)
             assert np.array_equal(out.goal, outs[0].goal)
+
+
+def test_an_episode_that_entered_an_obstacle_is_never_a_success(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 57: with the obstacles as barriers (``F goal``), an episode that went through a
+    disc and reached the goal counted as a success. A seeker through a CLF without the CBF
+    crosses the disc on the line: it reaches the goal, enters, and is not a success."""
+
+    def no_cbf(robot_name: str, obstacles: Any, goal: Any, encoding: str, route: bool) -> Any:
+        spec = tlshield.Spec("F goal", {"goal": tlshield.Ball([0, 1], 0.05, center=list(goal))})
+        r = routing.robot(robot_name)
+        return tlshield.Shield(spec, r.model, use_cbf=False, route=False, **r.shield_kwargs)
+
+    monkeypatch.setattr(routing, "shield_for", no_cbf)
+    run = routing.episode("line", "single", "barriers", "seeker", 0)
+    assert run.entries > 0 and run.steps < routing.HORIZON  # it went through and arrived
+    assert not run.success

@@ -226,9 +226,10 @@ def shield_for(
 
 @dataclass(frozen=True)
 class Episode:
-    """What one episode gave."""
+    """What one episode gave: ``success`` is the goal reached without ever entering an
+    obstacle (an episode that touched one is never a success, in either encoding)."""
 
-    reached: bool
+    success: bool
     entries: int
     steps: int
     relaxed: int
@@ -258,7 +259,7 @@ def episode(
         entries += any(np.linalg.norm(p - c) < rad for c, rad in obstacles)
         monitor.advance(s)
         if np.linalg.norm(p - goal) < GOAL_RADIUS:
-            return Episode(True, entries, t + 1, relaxed)
+            return Episode(entries == 0, entries, t + 1, relaxed)
     return Episode(False, entries, HORIZON, relaxed)
 
 
@@ -270,7 +271,7 @@ def cell(
         episode(layout_name, robot_name, encoding, driver, seed, route) for seed in range(episodes)
     ]
     return {
-        "success": sum(e.reached for e in runs) / episodes,
+        "success": sum(e.success for e in runs) / episodes,
         "entries": sum(e.entries for e in runs),
         "relaxed": sum(e.relaxed for e in runs),
     }
