@@ -230,3 +230,33 @@ def test_the_exploration_script_counts_reaches_and_traps() -> None:
         if "cbf" in config:
             assert trapped == 0.0
     assert rows[("rl_cbf_clf", "uniform")][0] > rows[("rl_cbf", "uniform")][0]
+
+
+def test_the_entropy_schedule_decays_ent_coef_to_zero(tmp_path: Path) -> None:
+    seen: list[float] = []
+
+    class Watch(BaseCallback):  # type: ignore[misc]
+        def _on_rollout_end(self) -> None:
+            seen.append(float(self.model.ent_coef))
+
+        def _on_step(self) -> bool:
+            return True
+
+    from tlshield.lab.callbacks import EntropySchedule
+
+    venv = make_vec_env("tlshield/Channel-v0", 2, "rl_cbf")
+    model = PPO("MlpPolicy", venv, n_steps=8, batch_size=16, seed=0, device="cpu", ent_coef=0.5)
+    model.learn(total_timesteps=4 * 16, callback=[EntropySchedule(0.02, 4), Watch()])
+    assert seen == pytest.approx([0.02, 0.015, 0.01, 0.005])
+    run = train(
+        "rl_cbf",
+        0,
+        2,
+        tmp_path / "e",
+        progress=False,
+        ppo={"ent_coef": 0.01, "ent_schedule": "linear"},
+    )
+    assert json.loads((run / "run.json").read_text())["ppo"]["ent_schedule"] == "linear"
+    assert settings.split({"ent_schedule": "linear"})["ppo"] == {"ent_schedule": "linear"}
+    with pytest.raises(ValueError, match="ent_schedule = 'cosine': expected one of"):
+        train("rl_cbf", 0, 1, tmp_path / "x", ppo={"ent_schedule": "cosine"})

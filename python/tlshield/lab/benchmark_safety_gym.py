@@ -83,6 +83,10 @@ VARIANTS: dict[str, Variant] = {
     "rl_cbf_clf+executed": Variant("rl_cbf_clf", ppo={"learn_from": "executed_without_clf"}),
     # The learning rate decays linearly to 0 over the run (late updates cannot undo early ones).
     "rl_cbf_clf+lr_linear": Variant("rl_cbf_clf", ppo={"lr_schedule": "linear"}),
+    # An entropy bonus that decays linearly from 0.01 to 0 (explore early, settle late).
+    "rl_cbf_clf+ent_linear": Variant(
+        "rl_cbf_clf", ppo={"ent_coef": 0.01, "ent_schedule": "linear"}
+    ),
 }
 #: The columns of ``safety_gym.csv``: per policy (``kept``: the best on validation, ``last``)
 #: the evaluation return and cost per episode; then the update the kept policy comes from, the

@@ -226,6 +226,25 @@ class ClfSchedule(BaseCallback):  # type: ignore[misc]
         self.update += 1
 
 
+class EntropySchedule(BaseCallback):  # type: ignore[misc]
+    """PPO's entropy coefficient decayed linearly from ``start`` to 0 over ``updates``
+    updates (setting ``ent_schedule="linear"``): set before each rollout, which the update
+    that follows it reads."""
+
+    def __init__(self, start: float, updates: int) -> None:
+        super().__init__()
+        self.start, self.updates, self.update = start, updates, 0
+
+    def _on_rollout_start(self) -> None:
+        self.model.ent_coef = self.start * (1.0 - self.update / max(self.updates, 1))
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.update += 1
+
+
 class Validation(BaseCallback):  # type: ignore[misc]
     """Every ``validate_every`` updates, the validation episodes of the deterministic policy;
     the best so far (ties: the later) is saved as the run's kept model. Best means the highest

@@ -31,7 +31,9 @@ from tlshield.lab.runs import json_tuples
 #: initial log standard deviation of the policy, the policy's kind (:data:`tlshield.lab.policies.
 #: POLICIES`) and whether rewards are normalised). ``use_sde`` (generalized state-dependent
 #: exploration) needs ``policy: "gaussian"``, SB3's own policy; ``learn_from`` chooses the action
-#: PPO learns from (:data:`tlshield.lab.training.LEARN_FROM`).
+#: PPO learns from (:data:`tlshield.lab.training.LEARN_FROM`); ``lr_schedule`` and
+#: ``ent_schedule`` hold or decay the learning rate and ``ent_coef``
+#: (:data:`tlshield.lab.training.LR_SCHEDULES`).
 PPO_NAMES = (
     "learning_rate",
     "ent_coef",
@@ -50,6 +52,8 @@ PPO_NAMES = (
     "use_sde",
     "sde_sample_freq",
     "learn_from",
+    "lr_schedule",
+    "ent_schedule",
 )
 #: Keywords of a bundled environment's factory besides its parameters (the task).
 TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}

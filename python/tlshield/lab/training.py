@@ -222,8 +222,8 @@ def _clf_rescaler(
 #: (SB3's own), the executed one, or the executed one without the CLF's part
 #: (:class:`tlshield.lab.callbacks.ExecutedActions`).
 LEARN_FROM = ("sampled", "executed", "executed_without_clf")
-#: How PPO's learning rate moves over a run (setting ``lr_schedule``): held, or decayed
-#: linearly to 0.
+#: How PPO's learning rate moves over a run (setting ``lr_schedule``), and its entropy
+#: coefficient (``ent_schedule``, from ``ent_coef``): held, or decayed linearly to 0.
 LR_SCHEDULES = ("constant", "linear")
 
 
@@ -241,11 +241,13 @@ class PpoSettings:
     norm_reward: bool
     lr_schedule: str
     learn_from: str
+    ent_schedule: str = "constant"
 
 
 def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
     """The preset's PPO settings with ``ppo``'s on top; the tlshield-only keys (``n_envs``,
-    ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``, ``lr_schedule``) are taken
+    ``policy``, ``norm_reward``, ``log_std_init``, ``learn_from``, ``lr_schedule``,
+    ``ent_schedule``) are taken
     out of SB3's keywords."""
     from tlshield.lab.policies import policy_class
     from tlshield.lab.saved import activation_class
@@ -263,13 +265,15 @@ def _ppo_settings(preset: str, ppo: dict[str, Any] | None) -> PpoSettings:
         ppo=kwargs,
         net_arch=spec["net_arch"],
         lr_schedule=str(kwargs.pop("lr_schedule", spec.get("lr_schedule", "constant"))),
+        ent_schedule=str(kwargs.pop("ent_schedule", spec.get("ent_schedule", "constant"))),
     )
     policy_class(settings.policy)  # an unknown name fails here, before any environment is built
     activation_class(settings.activation)
     if settings.learn_from not in LEARN_FROM:
         raise ValueError(f"learn_from = {settings.learn_from!r}: expected one of {LEARN_FROM}")
-    if settings.lr_schedule not in LR_SCHEDULES:
-        raise ValueError(f"lr_schedule = {settings.lr_schedule!r}: expected one of {LR_SCHEDULES}")
+    for key in ("lr_schedule", "ent_schedule"):
+        if getattr(settings, key) not in LR_SCHEDULES:
+            raise ValueError(f"{key} = {getattr(settings, key)!r}: expected one of {LR_SCHEDULES}")
     if settings.ppo.get("use_sde") and settings.policy != "gaussian":
         # SB3's gSDE replaces the policy's Gaussian head: only its own policy has one.
         raise ValueError(f"use_sde needs policy 'gaussian', not {settings.policy!r}")
@@ -300,6 +304,7 @@ def _run_record(
         "ppo": {
             **settings.ppo,
             "lr_schedule": settings.lr_schedule,
+            "ent_schedule": settings.ent_schedule,
             "log_std_init": settings.log_std_init,
             "policy": settings.policy,
             "norm_reward": settings.norm_reward,
@@ -346,7 +351,7 @@ def learn(run: Any) -> Path:
     with its callbacks, then keeps the last policy (and the kept one when validation chose
     none) and the final ``run.json``, also when interrupted (Ctrl-C is raised again
     afterwards). Returns the run folder."""
-    from tlshield.lab.callbacks import ExecutedActions, TrainingCallback
+    from tlshield.lab.callbacks import EntropySchedule, ExecutedActions, TrainingCallback
     from tlshield.lab.saved import save_normalization
 
     model, venv, record, folder = run.model, run.venv, run.record, run.folder
@@ -355,6 +360,8 @@ def learn(run: Any) -> Path:
     if learn_from != "sampled":
         # First: the rollout holds the executed actions before anything else reads the step.
         before.append(ExecutedActions(run.inner, learn_from == "executed_without_clf"))
+    if record["ppo"].get("ent_schedule", "constant") == "linear":
+        before.append(EntropySchedule(float(record["ppo"]["ent_coef"]), run.updates))
     callback = TrainingCallback(run)
     timesteps = run.updates * run.inner.num_envs * model.n_steps
     try:
