@@ -1,6 +1,7 @@
 """One family of errors (issue 57, item 5): every input problem of a shield's call is a
 ``tlshield.ShieldError`` (a ValueError), as its docstring promises, whether the core finds it
-or the bindings find it while converting the arguments; a wrong type stays a TypeError."""
+or the bindings find it while converting the arguments; a wrong type stays a TypeError, and a
+monitor without an episode an AutomatonError wherever it is read."""
 
 from __future__ import annotations
 
@@ -40,10 +41,6 @@ CASES: list[tuple[str, Any]] = [
     ("filter: a_rl too long", lambda: SHIELD.filter(S, 0, np.zeros(3))),
     ("filter: drift of the wrong length", lambda: SHIELD.filter(S, 0, A, drift=np.zeros(5))),
     ("filter_monitor: a_rl of rank 2", lambda: SHIELD.filter_monitor(monitor(), AS)),
-    (
-        "filter_monitor: not reset",
-        lambda: SHIELD.filter_monitor(tlshield.Monitor(SPEC.automaton()), A),
-    ),
     ("filter_batch: qs out of range", lambda: SHIELD.filter_batch(ROWS, QS + 7, AS)),
     ("filter_batch: a_rl rows", lambda: SHIELD.filter_batch(ROWS, QS, np.zeros((2, 2)))),
     ("filter_batch: qs rows", lambda: SHIELD.filter_batch(ROWS, QS[:2], AS)),
@@ -62,6 +59,13 @@ def test_every_input_problem_of_a_call_is_a_shield_error(case: str, call: Any) -
     with pytest.raises(tlshield.ShieldError) as err:
         call()
     assert type(err.value) is tlshield.ShieldError and str(err.value), case
+
+
+def test_a_monitor_without_an_episode_is_one_error_wherever_it_is_read() -> None:
+    # The monitor's own problem, not the call's: AutomatonError from every call that reads it
+    # (tests/test_monitor.py has the batch's).
+    with pytest.raises(tlshield.AutomatonError, match=r"call reset\(s0\)"):
+        SHIELD.filter_monitor(tlshield.Monitor(SPEC.automaton()), A)
 
 
 def test_a_wrong_type_stays_a_type_error() -> None:

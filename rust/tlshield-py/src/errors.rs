@@ -74,7 +74,10 @@ impl From<CoreShieldError> for PyCoreError {
         match err {
             CoreShieldError::Input(i)
             | CoreShieldError::Automaton(CoreAutomatonError::Input(i)) => input(i),
-            // A q the automaton does not have, a monitor not reset: the call's input too.
+            // A monitor read before its episode starts is one error wherever it is read (the
+            // monitor's, a batch's or a shield's call): AutomatonError.
+            CoreShieldError::Automaton(aut @ CoreAutomatonError::NotReset { .. }) => aut.into(),
+            // A q the automaton does not have: the call's input too.
             other => PyCoreError(ShieldError::new_err(other.to_string())),
         }
     }
@@ -93,17 +96,25 @@ impl From<PyCoreError> for PyErr {
 }
 
 /// Runs a shield call's body, raising every input problem it finds as a `ShieldError`: those
-/// the core reports already are; those found while converting the arguments (a plain
-/// `ValueError` of a shape, an `AutomatonError` of an FSA state the automaton does not have)
-/// are re-raised as one with the same message. `TypeError` and `MemoryError` stay as they are.
+/// the core reports already are; a plain `ValueError` found while converting the arguments (a
+/// shape, a length) is re-raised as one with the same message. `TypeError`, `MemoryError` and
+/// `AutomatonError` (a monitor without an episode) stay as they are.
 pub fn shield_call<T>(py: pyo3::Python<'_>, body: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
-    body().map_err(|err| {
-        let plain = err.get_type(py).is(py.get_type::<PyValueError>());
-        match plain || err.is_instance_of::<AutomatonError>(py) {
+    body().map_err(
+        |err| match err.get_type(py).is(py.get_type::<PyValueError>()) {
             true => ShieldError::new_err(err.value(py).to_string()),
             false => err,
-        }
-    })
+        },
+    )
+}
+
+/// An FSA state the automaton does not have, found while converting a shield call's `q`: the
+/// call's input, so a `ShieldError` (the automaton's own calls raise `AutomatonError`).
+pub fn shield_state(py: pyo3::Python<'_>, err: PyErr) -> PyErr {
+    match err.is_instance_of::<AutomatonError>(py) {
+        true => ShieldError::new_err(err.value(py).to_string()),
+        false => err,
+    }
 }
 
 /// Converts a core result into a `PyResult`.

@@ -161,7 +161,8 @@ impl PyShield {
             let drift = drift.map(|d| vector(d, "drift")).transpose()?;
             let drift = drift.as_deref();
             let s = vector(s, "s")?;
-            let q = state(q, "q", self.inner.automaton())?;
+            let q = state(q, "q", self.inner.automaton())
+                .map_err(|e| crate::errors::shield_state(py, e))?;
             let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
                 .values()
                 .to_vec();
