@@ -635,6 +635,10 @@ class FilterResult:
     @property
     def slack(self) -> float: ...
     @property
+    def gave_way(self) -> tuple[str, float] | None:
+        """When the QP was relaxed: ``(name, slack)`` of the barrier whose row gave way the
+        most (named as in ``barriers``), else None."""
+    @property
     def goal(self) -> NDArray[np.float64] | None: ...
     @property
     def solver(self) -> Solver: ...

@@ -88,7 +88,8 @@ class FsaTracker:
 
 def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
     """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta``, the
-    :class:`tlshield.Status`, the largest barrier ``slack``, the :class:`tlshield.Solver`, the
+    :class:`tlshield.Status`, the largest barrier ``slack`` and the barrier that gave way
+    (``gave_way``: ``(name, slack)`` or None), the :class:`tlshield.Solver`, the
     CLF ``goal`` (or None) and the enforced ``barriers`` as ``{name: h(s)}`` (zeros, None and
     empty when no shield ran)."""
     if result is None:
@@ -100,6 +101,7 @@ def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[
             "delta": 0.0,
             "status": None,
             "slack": 0.0,
+            "gave_way": None,
             "solver": None,
             "goal": None,
             "barriers": {},
@@ -111,6 +113,7 @@ def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[
         "delta": result.delta,
         "status": result.status,
         "slack": result.slack,
+        "gave_way": result.gave_way,
         "solver": result.solver,
         "goal": result.goal,
         "barriers": dict(result.barriers),

@@ -108,17 +108,12 @@ impl PyShield {
     }
 
     pub(crate) fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
-        let barriers = out
-            .barriers
-            .iter()
-            .map(|(source, h)| {
-                let name = match source {
-                    BarrierSource::User(i) => self.barrier_names[*i].clone_ref(py),
-                    BarrierSource::SafeSet(literal) => self.literals.get(py, literal).unbind(),
-                };
-                (name, *h)
-            })
-            .collect();
+        let name = |source: &BarrierSource| match source {
+            BarrierSource::User(i) => self.barrier_names[*i].clone_ref(py),
+            BarrierSource::SafeSet(literal) => self.literals.get(py, literal).unbind(),
+        };
+        let barriers = out.barriers.iter().map(|(s, h)| (name(s), *h)).collect();
+        let gave_way = out.gave_way.as_ref().map(|(s, sigma)| (name(s), *sigma));
         PyFilterResult {
             action: out.action.into_pyarray(py).unbind(),
             a_cbf: out.a_cbf.into_pyarray(py).unbind(),
@@ -126,6 +121,7 @@ impl PyShield {
             delta: out.delta,
             status: out.status,
             slack: out.slack,
+            gave_way,
             goal: out.goal.map(|g| g.into_pyarray(py).unbind()),
             solver: out.solver,
             barriers,

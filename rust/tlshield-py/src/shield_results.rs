@@ -27,6 +27,10 @@ pub struct PyFilterResult {
     /// The largest barrier slack (0 unless relaxed).
     #[pyo3(get)]
     pub(crate) slack: f64,
+    /// When the QP was relaxed: ``(name, slack)`` of the barrier whose row gave way the most
+    /// (named as in ``barriers``), else None.
+    #[pyo3(get)]
+    pub(crate) gave_way: Option<(Py<PyString>, f64)>,
     /// The CLF goal point (len(pos),) or None.
     #[pyo3(get)]
     pub(crate) goal: Option<Py<PyArray1<f64>>>,

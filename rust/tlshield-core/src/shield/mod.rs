@@ -514,6 +514,7 @@ impl Shield {
         out.a_clf.fill(0.0);
         out.delta = 0.0;
         out.slack = 0.0;
+        out.gave_way = None;
         out.status = Status::Solved;
         out.solver = SolvedBy::Nothing;
         out.goal = (record && has_goal).then(|| program.goal.clone());
@@ -561,6 +562,12 @@ impl Shield {
         }
         if status != Status::Solved {
             out.slack = x[vars..].iter().fold(0.0, |a: f64, &b| a.max(b));
+            out.gave_way = x[vars..]
+                .iter()
+                .enumerate()
+                .filter(|&(_, &sigma)| sigma > 0.0)
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .map(|(row, &sigma)| (program.source(row), sigma));
         }
         for (j, action) in out.action.iter_mut().enumerate() {
             *action = a_rl[j] + out.a_cbf[j] + out.a_clf[j];

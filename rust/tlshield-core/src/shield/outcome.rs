@@ -79,6 +79,9 @@ pub struct Filtered {
     pub status: Status,
     /// The largest barrier slack (0 unless [`Status::Relaxed`]).
     pub slack: f64,
+    /// When the QP was relaxed and a row took slack: the barrier whose row took the most, and
+    /// that slack (the amount by which its condition was given up this step).
+    pub gave_way: Option<(BarrierSource, f64)>,
     /// Which solver answered.
     pub solver: SolvedBy,
     /// The CLF goal this step, if any.
@@ -96,6 +99,7 @@ impl Filtered {
             delta: 0.0,
             status: Status::Solved,
             slack: 0.0,
+            gave_way: None,
             solver: SolvedBy::Nothing,
             goal: None,
             barriers: Vec::new(),

@@ -53,6 +53,8 @@ pub(super) struct Program {
     pub(super) lg: Vec<f64>,
     rhs: Vec<f64>,
     weights: Vec<f64>,
+    /// Per row: the barrier it holds (what gave way, when its slack is the largest).
+    sources: Vec<BarrierSource>,
     /// Per barrier: whether the router goes around it (the outside of a disc over `pos`).
     routed: Vec<bool>,
     /// The CLF goal and `Lg V` (m values).
@@ -166,6 +168,11 @@ impl Program {
         self.rhs.len()
     }
 
+    /// The barrier that barrier row `row` holds.
+    pub(super) fn source(&self, row: usize) -> BarrierSource {
+        self.sources[row]
+    }
+
     /// Variables of the unrelaxed problem.
     pub(super) fn vars(&self) -> usize {
         self.cbf_vars + self.clf_vars + usize::from(self.has_goal)
@@ -232,6 +239,7 @@ impl Program {
         self.lg.clear();
         self.rhs.clear();
         self.weights.clear();
+        self.sources.clear();
         self.routed.clear();
         // The atoms' robustness at s, once for both the safe set and the goal: the task
         // monitor's reading of this state when there is one.
@@ -301,6 +309,7 @@ impl Program {
         });
         for (source, predicate, sign, h, weight, form) in user.chain(kept) {
             self.weights.push(weight);
+            self.sources.push(source);
             self.routed
                 .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos, s));
             predicate.gradient_into(s, &mut self.grad);
@@ -345,6 +354,7 @@ impl Program {
                 let lg_a = push_lg(&self.grad, &self.g, a_rl, &mut self.lg);
                 self.rhs.push(lg_a + psi - robust);
                 self.weights.push(weight);
+                self.sources.push(source);
                 self.routed.push(false);
             }
             if let Some(out) = barriers_out.as_deref_mut() {
