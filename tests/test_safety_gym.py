@@ -374,10 +374,9 @@ def test_the_correction_penalty_comes_off_the_reward_only() -> None:
         sg.SafetyGoalEnv("SafetyPointGoal1-v0", "rl_cbf", correction_penalty=-1.0)
 
 
-@pytest.mark.parametrize("algo", ["sac", "td3"])
-def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_path: Path) -> None:
-    """The off-policy levers: SAC and TD3 learn a residual on the routed CLF through the env's
-    shield (rl_cbf_clf), at cost 0 in training and in evaluation."""
+def _off_policy_script(out: Path, name: str, *args: str) -> dict[str, Any]:
+    """Runs scripts/safety_gym_td3_layer.py for 300 steps and 1 evaluation episode; returns
+    the row it wrote as ``out/SafetyPointGoal1-v0-<name>-s0.json``."""
     import subprocess
     import sys
 
@@ -386,7 +385,8 @@ def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_pat
         [
             sys.executable,
             str(root / "scripts" / "safety_gym_td3_layer.py"),
-            *("--algo", algo, "--steps", "300", "--episodes", "1", "--out", str(tmp_path)),
+            *args,
+            *("--steps", "300", "--episodes", "1", "--out", str(out)),
         ],
         capture_output=True,
         text=True,
@@ -394,7 +394,14 @@ def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_pat
         check=False,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    row = json.loads((tmp_path / f"SafetyPointGoal1-v0-rl_cbf_clf+{algo}-s0.json").read_text())
+    return dict(json.loads((out / f"SafetyPointGoal1-v0-{name}-s0.json").read_text()))
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_path: Path) -> None:
+    """The off-policy levers: SAC and TD3 learn a residual on the routed CLF through the env's
+    shield (rl_cbf_clf), at cost 0 in training and in evaluation."""
+    row = _off_policy_script(tmp_path, f"rl_cbf_clf+{algo}", "--algo", algo)
     assert row["method"] == f"rl_cbf_clf+{algo}" and row["steps"] == 300
     assert row["train_cost"] == 0.0 and row["last_cost"] == 0.0
     assert len(row["last_returns"]) == 1 and np.isfinite(row["last_return"])
@@ -403,25 +410,12 @@ def test_off_policy_learners_train_with_the_shield_in_the_env(algo: str, tmp_pat
 def test_td3_trains_through_the_shield_layer(tmp_path: Path) -> None:
     """The fourth lever's script: TD3 whose actor ends in the exact shield trains, costs 0 in
     training and evaluation, and its actor's gradient reaches the network through the layer."""
-    import subprocess
     import sys
 
     import torch
 
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run(
-        [
-            sys.executable,
-            str(root / "scripts" / "safety_gym_td3_layer.py"),
-            *("--steps", "300", "--episodes", "1", "--out", str(tmp_path)),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
-    )
-    assert done.returncode == 0, done.stdout + done.stderr
-    row = json.loads((tmp_path / "SafetyPointGoal1-v0-td3_layer-s0.json").read_text())
+    row = _off_policy_script(tmp_path, "td3_layer")
     assert row["steps"] == 300 and row["train_cost"] == 0.0 and row["last_cost"] == 0.0
     # The actor's output is the layer's: safe at the state, and differentiable to the weights.
     sys.path.insert(0, str(root / "scripts"))
