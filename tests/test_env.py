@@ -107,6 +107,7 @@ def test_observation_layout_and_info(observation: str) -> None:
         "delta",
         "status",
         "slack",
+        "gave_way",
         "solver",
         "goal",
         "barriers",
