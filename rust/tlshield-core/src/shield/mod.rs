@@ -153,11 +153,7 @@ impl Shield {
             (None, Some(c)) => Some(c.inputs()),
             (None, None) => None,
         })?;
-        let structure: Option<&dyn Structure> = match (&dynamics, &custom) {
-            (Some(d), _) => Some(d),
-            (None, Some(c)) => Some(c),
-            (None, None) => None,
-        };
+        let structure = structure_of(&dynamics, &custom);
         layout::resolve_pos(&mut params, structure);
         params.broadcast(m)?;
         params.validate(m, automaton.spec())?;
@@ -275,11 +271,7 @@ impl Shield {
 
     /// The model's structure (built-in or the user's), if the shield has a model.
     fn structure(&self) -> Option<&dyn Structure> {
-        match (&self.dynamics, &self.custom) {
-            (Some(d), _) => Some(d),
-            (None, Some(c)) => Some(c),
-            (None, None) => None,
-        }
+        structure_of(&self.dynamics, &self.custom)
     }
 
     fn with_workspace<R>(&self, n: usize, run: impl FnOnce(&mut Workspace) -> R) -> R {
@@ -561,19 +553,32 @@ impl Shield {
             out.delta = program.delta_0 + x[cbf_vars + clf_vars].max(0.0);
         }
         if status != Status::Solved {
-            out.slack = x[vars..].iter().fold(0.0, |a: f64, &b| a.max(b));
+            // The row that took the most slack gave way; the largest slack is its.
             out.gave_way = x[vars..]
                 .iter()
                 .enumerate()
                 .filter(|&(_, &sigma)| sigma > 0.0)
                 .max_by(|a, b| a.1.total_cmp(b.1))
                 .map(|(row, &sigma)| (program.source(row), sigma));
+            out.slack = out.gave_way.map_or(0.0, |(_, sigma)| sigma);
         }
         for (j, action) in out.action.iter_mut().enumerate() {
             *action = a_rl[j] + out.a_cbf[j] + out.a_clf[j];
         }
         out.status = status;
         out.solver = by;
+    }
+}
+
+/// The structure of a shield's model: the built-in one, else the user's, if any.
+fn structure_of<'a>(
+    dynamics: &'a Option<Dynamics>,
+    custom: &'a Option<CustomModel>,
+) -> Option<&'a dyn Structure> {
+    match (dynamics, custom) {
+        (Some(d), _) => Some(d),
+        (None, Some(c)) => Some(c),
+        (None, None) => None,
     }
 }
 
