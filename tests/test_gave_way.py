@@ -36,3 +36,66 @@ def test_nothing_gave_way_on_a_solved_step() -> None:
     out = sh.filter(np.array([0.5, 0.0]), 0, [0.3, 0.0])
     assert out.status == tlshield.Status.SOLVED and out.gave_way is None
     assert shield_info(None, np.zeros(2))["gave_way"] is None
+
+
+@pytest.mark.parametrize("first", ["wall", "floor"])
+def test_the_declared_order_decides_who_gives_way_over_the_slack_weights(first: str) -> None:
+    """``give_way=[...]``: the first-named barrier gives way and the other holds exactly, even
+    where the slack weights say the opposite (issue 57, item 4: a declared priority)."""
+    other = "floor" if first == "wall" else "wall"
+    # The weights favour `other` giving way (1e-3 against 1): the declared order overrides.
+    barriers = {"wall": WALL, "floor": FLOOR}
+    weighted = {first: (barriers[first], 1.0), other: (barriers[other], 1e-3)}
+    sh = tlshield.Shield(
+        SPEC,
+        tlshield.SingleIntegrator([0, 1]),
+        barriers=weighted,
+        give_way=[first],
+        **GAINS,
+    )
+    out = sh.filter(np.array([0.5, 0.0]), 0, [0.0, 0.0])
+    assert out.status == tlshield.Status.RELAXED and out.gave_way is not None
+    assert out.gave_way[0] == first
+    # The one that held keeps its row: the floor dx/dt >= 1.5, the wall dx/dt <= 0.5.
+    if other == "floor":
+        assert out.action[0] >= 1.5 - 1e-7
+    else:
+        assert out.action[0] <= 0.5 + 1e-7
+    # Without the declaration, the weights decide: `other` gives way.
+    plain = tlshield.Shield(SPEC, tlshield.SingleIntegrator([0, 1]), barriers=weighted, **GAINS)
+    assert plain.filter(np.array([0.5, 0.0]), 0, [0.0, 0.0]).gave_way[0] == other  # type: ignore[index]
+
+
+def test_a_barrier_gives_way_only_when_those_named_before_it_cannot_restore_feasibility() -> None:
+    """``give_way=["ceiling", "wall"]``: relaxing the ceiling (not in conflict) alone cannot
+    help, so the wall gives way next; the ceiling takes no slack, and the floor, unnamed, holds."""
+    ceiling = tlshield.Inside(tlshield.Halfspace([0.0, -1.0], 5.0))  # y < 5
+    sh = tlshield.Shield(
+        SPEC,
+        tlshield.SingleIntegrator([0, 1]),
+        barriers={"wall": WALL, "floor": FLOOR, "ceiling": ceiling},
+        give_way=["ceiling", "wall"],
+        **GAINS,
+    )
+    out = sh.filter(np.array([0.5, 0.0]), 0, [0.0, 0.0])
+    assert out.gave_way is not None and out.gave_way[0] == "wall"
+    assert out.action[0] >= 1.5 - 1e-7  # the floor held
+    # Batches follow the same order.
+    batch = sh.filter_batch(np.array([[0.5, 0.0]] * 3), np.zeros(3, int), np.zeros((3, 2)))
+    np.testing.assert_allclose(batch.action, np.repeat(out.action[None], 3, axis=0), atol=1e-9)
+
+
+def test_the_order_is_checked_where_it_is_given_and_names_atoms_too() -> None:
+    kw = {"barriers": {"wall": WALL}, **GAINS}
+    model = tlshield.SingleIntegrator([0, 1])
+    with pytest.raises(tlshield.ShieldError, match=r'give_way: "shelf" is neither.*\["wall", "g"\]'):
+        tlshield.Shield(SPEC, model, give_way=["shelf"], **kw)
+    with pytest.raises(tlshield.ShieldError, match='"wall" is named twice'):
+        tlshield.Shield(SPEC, model, give_way=["wall", "wall"], **kw)
+    with pytest.raises(TypeError, match="one string"):
+        tlshield.Shield(SPEC, model, give_way="wall", **kw)  # type: ignore[arg-type]
+    # An atom of the task (its safe-set literal) may be named, and the order survives a pickle.
+    import pickle
+
+    sh = tlshield.Shield(SPEC, model, give_way=["g", "wall"], **kw)
+    assert pickle.loads(pickle.dumps(sh)).__reduce__()[1][3]["give_way"] == ["g", "wall"]

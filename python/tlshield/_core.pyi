@@ -699,6 +699,8 @@ class Shield:
         route_clearance: float | None = None,
         heading: int | None = None,
         clf_round: tuple[int, int, float] | None = None,
+        dt: float | None = None,
+        give_way: Sequence[str] | None = None,
     ) -> Self:
         """``route`` aims the CLF at a target that leads around the discs the shield keeps
         the state out of (its avoid literals and ``Avoid`` barriers), re-planned every step, so
@@ -726,7 +728,16 @@ class Shield:
         ``[0, 1]`` for a ``ControlAffine``). ``barriers`` states each barrier's side by its type
         (``Avoid(p)``, ``Inside(p)``). With a model, the layout is checked against it: a ``pos``
         or a ball over dimensions the model does not move, a centre read from dimensions it
-        moves, and a ``drift`` on them are ``ShieldError``s that name the dimensions."""
+        moves, and a ``drift`` on them are ``ShieldError``s that name the dimensions. ``dt``
+        is the plant's time step when the action is held for ``dt`` and the state sampled
+        after an Euler step of the model: the barrier rows then hold the sampled states
+        (``h(s') >= (1 - alpha dt) h(s)``, docs/concepts/reliability.md), which needs
+        ``alpha * dt <= 1`` and ``alpha2 * dt <= 1``; None: the continuous-time rows, which
+        hold only as dt tends to 0. ``give_way`` is the order in which barriers give way
+        when the QP cannot hold them all: names of barriers and atoms of the task, first named
+        first; a barrier gives way only when relaxing every barrier named before it cannot
+        restore feasibility, and the unnamed give way last (None: all at once, shared by
+        the slack weights)."""
     def filter(
         self,
         s: ArrayLike,

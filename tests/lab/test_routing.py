@@ -31,6 +31,26 @@ def test_every_scenario_reaches_its_goal_and_never_enters(robot: str, driver: st
             assert cell["relaxed"] == 0, f"{where}: {cell['relaxed']} relaxed or failed QPs"
 
 
+@pytest.mark.parametrize("k", [None, 1e4])
+def test_no_scenario_enters_an_obstacle_by_any_amount(k: float | None) -> None:
+    """Issue 57's target: every robot, driver, layout and encoding, routing on and off, at the
+    rule's k and at k = 1e4: no sampled state inside a disc (the lab's shields know the plant's
+    dt, so their barrier rows hold the sampled states). Before, routing off at k = 1e4 put the
+    double integrator inside by about 1e-4 m on 1,415 steps of these 5 episodes per cell."""
+    routing.K_OVERRIDE = k
+    try:
+        for robot in routing.ROBOTS + routing.TURNING:
+            for driver in routing.DRIVERS:
+                for layout in routing.LAYOUTS:
+                    for encoding in routing.ENCODINGS:
+                        for route in (True, False):
+                            cell = routing.cell(layout, robot, encoding, driver, 5, route)
+                            where = f"{robot}/{driver}/{layout}/{encoding}/route={route}/k={k}"
+                            assert cell["entries"] == 0, where
+    finally:
+        routing.K_OVERRIDE = None
+
+
 @pytest.mark.parametrize("robot", routing.TURNING)
 def test_robots_that_must_turn_go_round_a_disc(robot: str) -> None:
     """The acceleration unicycle and ThrustTurn, the shield alone: the CLF turns the heading

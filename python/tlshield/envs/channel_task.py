@@ -428,6 +428,7 @@ def channel_shield(params: ChannelParams, config: str, spec: Spec | None = None)
         use_cbf=use_cbf,
         use_clf=use_clf,
         margin=params.shield.margin,
+        dt=params.agent.dt,
         barriers=obstacle_barriers(params) if params.shield.obstacle_barrier else None,
     )
 

@@ -152,6 +152,7 @@ def flatworld_shield(params: FlatWorldParams, config: str, spec: Spec) -> Shield
         rl_bounds=(-1.0, 1.0),
         barriers=wall_barriers(params.size),
         margin=params.margin,
+        dt=params.step_size,
         use_cbf=use_cbf,
         use_clf=use_clf,
         preserve_progress=bool(params.preserve_progress),

@@ -179,6 +179,7 @@ def point_mass_shield(
         rl_bounds=(-accel, accel),
         clf_gain=params.clf_gain,
         margin=params.margin,
+        dt=params.dt,
         use_cbf=use_cbf,
         use_clf=use_clf,
     )

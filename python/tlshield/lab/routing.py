@@ -221,7 +221,7 @@ def shield_for(
         barriers = {f"!{name}": Avoid(ball) for name, ball in balls.items()}
     else:
         raise ValueError(f"encoding: expected one of {ENCODINGS}, got {encoding!r}")
-    return Shield(spec, r.model, barriers=barriers, route=route, **r.shield_kwargs)
+    return Shield(spec, r.model, barriers=barriers, route=route, dt=DT, **r.shield_kwargs)
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,10 @@ fn bounds(v: f64, m: usize) -> Bounds {
 /// `s[2]` (`along > 0`), out of a ball of radius 1 at the origin, CLF off, HOCBF gains 2
 /// and 2. The obstacle is a user barrier, or (`in_formula`) an atom of the task `!o U g` whose
 /// safe-set literal `!o` the shield enforces.
-fn shield(model: Dynamics, accel: f64, in_formula: bool, along: f64) -> Shield {
+///
+/// `dt`: the shield holds the sampled states (`ShieldParams::dt`) with the default margin;
+/// `None`: the continuous-time rows, kept 1 cm clear.
+fn shield(model: Dynamics, accel: f64, in_formula: bool, along: f64, dt: Option<f64>) -> Shield {
     let origin = Center::Fixed(vec![0.0, 0.0]);
     let obstacle = match along {
         0.0 => Predicate::ball(vec![0, 1], 1.0, origin).unwrap(),
@@ -52,8 +55,9 @@ fn shield(model: Dynamics, accel: f64, in_formula: bool, along: f64) -> Shield {
     let params = ShieldParams::new(2.0, 1.0, 1e4, bounds(1e3, m), bounds(0.5, m))
         .with_alpha2(Some(2.0))
         // Kept 1 cm clear in continuous time, so the Euler plant's O(dt^2) error per step
-        // cannot carry the state inside.
-        .with_margin(1e-2)
+        // cannot carry the state inside; the sampled rows need no such margin.
+        .with_margin(dt.map_or(1e-2, |_| ShieldParams::DEFAULT_MARGIN))
+        .with_dt(dt)
         .with_parts(true, false)
         .with_action_bounds(Some(bounds(accel, m)));
     let (spec, params) = if in_formula {
@@ -91,11 +95,17 @@ fn attack(
     model: Dynamics,
     start: impl Fn(&mut Rng) -> Vec<f64>,
     (steps, dt): (usize, f64),
-    (shielded, in_formula): (bool, bool),
+    (shielded, in_formula, sampled): (bool, bool, bool),
     along: f64,
 ) -> (f64, usize, usize) {
     let accel = 2.0;
-    let sh = shield(model.clone(), accel, in_formula, along);
+    let sh = shield(
+        model.clone(),
+        accel,
+        in_formula,
+        along,
+        sampled.then_some(dt),
+    );
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let (mut min_h, mut relaxed, mut failed) = (f64::INFINITY, 0, 0);
     let mut s = start(&mut rng);
@@ -154,15 +164,27 @@ fn never_enters_at(
     start: impl Fn(&mut Rng) -> Vec<f64> + Copy,
     along: f64,
 ) {
-    assert!(attack(model.clone(), start, (4_000, 0.01), (false, false), along).0 < 0.0);
-    // At the 10 ms of the paper's plant and at 5 ms: exactly outside (min h >= 0), no margin.
-    for dt in [0.01, 0.005] {
-        for in_formula in [false, true] {
-            let (min_h, relaxed, failed) =
-                attack(model.clone(), start, (STEPS, dt), (true, in_formula), along);
+    let unshielded = (false, false, false);
+    assert!(attack(model.clone(), start, (4_000, 0.01), unshielded, along).0 < 0.0);
+    // At the 10 ms of the paper's plant and at 5 ms: exactly outside (min h >= 0), with the
+    // continuous-time rows kept 1 cm clear and with the sampled rows at the default margin.
+    for dt in [0.01, 0.005, 0.05] {
+        for (in_formula, sampled) in [(false, false), (true, false), (false, true), (true, true)] {
+            // 50 ms: beyond what 1 cm covers, so the sampled rows only, and not for a body
+            // point: its mixed-degree rows stay continuous-time (the bicycle's enters there).
+            if dt > 0.01 && (!sampled || along > 0.0) {
+                continue;
+            }
+            let (min_h, relaxed, failed) = attack(
+                model.clone(),
+                start,
+                (STEPS, dt),
+                (true, in_formula, sampled),
+                along,
+            );
             assert!(
                 min_h >= 0.0,
-                "{name} entered the obstacle at dt {dt}: min h = {min_h}"
+                "{name} entered the obstacle at dt {dt} (sampled rows: {sampled}): min h = {min_h}"
             );
             assert_eq!(failed, 0);
             let form = if in_formula {
@@ -171,8 +193,8 @@ fn never_enters_at(
                 "a user barrier"
             };
             println!(
-                "{name}, obstacle {form}, dt {dt}, {STEPS} steps: min h {min_h:.2e}, \
-                 relaxed {relaxed}, failed {failed}"
+                "{name}, obstacle {form}, dt {dt}, sampled rows {sampled}, {STEPS} steps: \
+                 min h {min_h:.2e}, relaxed {relaxed}, failed {failed}"
             );
         }
     }

@@ -118,6 +118,24 @@ fn disturbance_bounds(obj: &Bound<'_, PyAny>) -> PyResult<Vec<(usize, f64)>> {
     Ok(out)
 }
 
+/// `give_way`: a sequence of names (a lone string is refused: it would read as its letters).
+fn names(obj: &Bound<'_, PyAny>) -> PyResult<Vec<String>> {
+    if obj.is_instance_of::<PyString>() {
+        return Err(PyTypeError::new_err(
+            "give_way: expected a sequence of barrier or atom names, got one string; write \
+             [name]",
+        ));
+    }
+    obj.try_iter()
+        .map_err(|_| PyTypeError::new_err("give_way: expected a sequence of names (str)"))?
+        .map(|item| {
+            item?
+                .extract::<String>()
+                .map_err(|_| PyTypeError::new_err("give_way: expected a sequence of names (str)"))
+        })
+        .collect()
+}
+
 #[pymethods]
 impl PyShield {
     #[new]
@@ -126,7 +144,7 @@ impl PyShield {
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
         inputs=None, disturbance=None, route=true, route_clearance=None, heading=None,
-        clf_round=None,
+        clf_round=None, dt=None, give_way=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -156,6 +174,8 @@ impl PyShield {
         route_clearance: Option<f64>,
         heading: Option<usize>,
         clf_round: Option<(usize, usize, f64)>,
+        dt: Option<f64>,
+        give_way: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let automaton = automaton_of(spec)?;
         let custom = dynamics
@@ -196,6 +216,8 @@ impl PyShield {
         .with_slack_penalty(slack_penalty.unwrap_or(ShieldParams::DEFAULT_SLACK_PENALTY))
         .with_margin(margin.unwrap_or(ShieldParams::DEFAULT_MARGIN))
         .with_alpha2(alpha2)
+        .with_dt(dt)
+        .with_give_way(give_way.map(names).transpose()?.unwrap_or_default())
         .with_clf_gain(clf_gain.unwrap_or(ShieldParams::DEFAULT_CLF_GAIN))
         .with_preserve_progress(preserve_progress)
         .with_route(

@@ -43,6 +43,8 @@ impl PyShield {
         kwargs.set_item("slack_penalty", p.slack_penalty)?;
         kwargs.set_item("margin", p.margin)?;
         kwargs.set_item("alpha2", p.alpha2)?;
+        kwargs.set_item("dt", p.dt)?;
+        kwargs.set_item("give_way", p.give_way.clone())?;
         kwargs.set_item("clf_gain", p.clf_gain)?;
         kwargs.set_item("preserve_progress", p.preserve_progress)?;
         kwargs.set_item("inputs", shield.inputs())?;

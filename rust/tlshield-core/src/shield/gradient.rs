@@ -139,6 +139,56 @@ pub(super) struct Buffers {
     minus: Vec<f64>,
     /// Where an alternative passed over as empty is placed again (it must stay empty).
     spare: Vec<f64>,
+    /// A sampled row's predicted sample `y = s + dt f(s)` (`sampled.rs`).
+    ahead: Vec<f64>,
+}
+
+/// Adds to `gs` the state gradient of a sampled first-order row (`sampled.rs`) weighted by the
+/// adjoint of its right-hand side, `alpha`, and of its `L`, `b.beta`: the row reads
+/// `r = (~h(y) - (1 - alpha dt) ~h(s)) / dt` and `L_j = grad ~h(y) . g_j(s)` at
+/// `y = s + dt f(s)`, so `dy/ds = I + dt J_f(s)` (the drift is constant).
+#[allow(clippy::too_many_arguments)]
+fn sampled_row_state_gradient(
+    predicate: &Predicate,
+    sign: f64,
+    s: &[f64],
+    dt: f64,
+    alpha: f64,
+    params: &super::ShieldParams,
+    program: &super::program::Program,
+    model: &crate::dynamics::Dynamics,
+    b: &mut Buffers,
+    gs: &mut [f64],
+) {
+    let (n, m) = (s.len(), b.beta.len());
+    b.ahead.resize(n, 0.0);
+    for ((y, &si), &fi) in b.ahead.iter_mut().zip(s).zip(&program.f) {
+        *y = si + dt * fi;
+    }
+    predicate.gradient_into(&b.ahead, &mut b.grad);
+    b.grad.iter_mut().for_each(|g| *g *= sign);
+    // u = sum_j beta_j g_j(s) - alpha sum_d w_d sgn(c_d) e_d, c = grad ~h(y); then H(y) u.
+    for k in 0..n {
+        b.u[k] = dot(&program.g[k * m..(k + 1) * m], &b.beta);
+    }
+    for &(d, w) in &params.disturbance {
+        b.u[d] -= alpha * w * b.grad[d].signum() * f64::from(b.grad[d] != 0.0);
+    }
+    predicate.hessian_times(&b.ahead, &b.u, &mut b.hu);
+    // t = alpha grad ~h(y) / dt + H(y) u, carried back through dy/ds = I + dt J_f(s).
+    for ((t, &g), &hu) in b.u.iter_mut().zip(&b.grad).zip(&b.hu) {
+        *t = alpha * g / dt + sign * hu;
+    }
+    model.jacobian_f_transpose_times(s, &b.u, &mut b.tmp);
+    for ((g, &t), &jt) in gs.iter_mut().zip(&b.u).zip(&b.tmp) {
+        *g += t + dt * jt;
+    }
+    // - alpha (1 - alpha_cbf dt) grad ~h(s) / dt.
+    predicate.gradient_into(s, &mut b.tmp);
+    let w = alpha * (1.0 - params.alpha * dt) / dt * sign;
+    gs.iter_mut().zip(&b.tmp).for_each(|(g, &t)| *g -= w * t);
+    model.input_jacobian_contract(s, &b.grad, &b.beta, &mut b.tmp);
+    gs.iter_mut().zip(&b.tmp).for_each(|(g, t)| *g += t);
 }
 
 /// Appends the state dimensions any ball in `p` reads its centre from.
@@ -584,6 +634,12 @@ impl Shield {
                 .as_ref()
                 .expect("checked: state gradients need a model");
             let sign = if positive { 1.0 } else { -1.0 };
+            if let Some(dt) = params.dt {
+                sampled_row_state_gradient(
+                    predicate, sign, s, dt, alpha, params, program, model, b, gs,
+                );
+                continue;
+            }
             predicate.gradient_into(s, &mut b.grad);
             b.grad.iter_mut().for_each(|g| *g *= sign);
             // u = alpha f + sum_j beta_j g_j - alpha sum_d w_d sgn(grad_d) e_d; then H' u.

@@ -42,6 +42,7 @@ use crate::slots::Slots;
 use crate::validate::check_finite;
 
 mod check;
+mod give_way;
 mod gradient;
 mod inputs;
 mod layout;
@@ -49,7 +50,9 @@ mod order;
 mod outcome;
 mod params;
 mod program;
+mod sampled;
 mod workspace;
+use give_way::GiveWay;
 pub use gradient::{
     BatchGradient, GRAD_DEGENERATE, GRAD_FAILED, GRAD_RELAXED, GRAD_ROUTED, GRAD_SINGULAR,
 };
@@ -106,6 +109,8 @@ pub struct Shield {
     pool: Slots<Workspace>,
     /// What the CLF routes around ([`Shield::routing`]), made once.
     routing: Option<Routing>,
+    /// Each barrier's place in the declared give-way order.
+    give_way: GiveWay,
 }
 
 impl std::fmt::Debug for Shield {
@@ -214,6 +219,7 @@ impl Shield {
             layout::check(spec, &params, model)?;
         }
         let routing = routing_of(&params);
+        let give_way = GiveWay::new(&params, spec)?;
         Ok(Shield {
             automaton,
             dynamics,
@@ -224,6 +230,7 @@ impl Shield {
             min_dim,
             pool: Slots::default(),
             routing,
+            give_way,
         })
     }
 
@@ -520,7 +527,7 @@ impl Shield {
             return;
         }
 
-        program.assemble(params, a_rl, &mut ws.qp, false);
+        program.assemble(params, a_rl, &mut ws.qp, None);
         if stage == Stage::Problem {
             return;
         }
@@ -534,10 +541,19 @@ impl Shield {
             } else {
                 Status::Relaxed
             };
-            program.assemble(params, a_rl, &mut ws.qp, true);
-            by = ws.solvers.solve(params.solver, &ws.qp);
-            checked = ws.solvers.solution.status == QpStatus::Solved
-                && within_tolerance(&ws.qp, &ws.solvers.solution.x);
+            // The declared give-way order: slack on the first level's rows, then on those
+            // and the next level's, until the relaxed problem is solved (give_way.rs).
+            let mut level = self.give_way.next(program.sources(), None);
+            while let Some(l) = level {
+                program.assemble(params, a_rl, &mut ws.qp, Some((&self.give_way, l)));
+                by = ws.solvers.solve(params.solver, &ws.qp);
+                checked = ws.solvers.solution.status == QpStatus::Solved
+                    && within_tolerance(&ws.qp, &ws.solvers.solution.x);
+                level = match checked {
+                    true => None,
+                    false => self.give_way.next(program.sources(), Some(l)),
+                };
+            }
         }
         let out = &mut ws.out;
         let x = &ws.solvers.solution.x;

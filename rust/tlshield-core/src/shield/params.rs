@@ -230,6 +230,12 @@ pub struct ShieldParams {
     /// The HOCBF's second gain: `dpsi_1/dt + alpha2 psi_1 >= 0` (> 0), required when a barrier
     /// has relative degree 2 under the model (see `shield/order.rs`).
     pub alpha2: Option<f64>,
+    /// The plant's time step, when the shielded action is held for `dt` and the state is
+    /// sampled after it (an explicit Euler step of the model, [`crate::Dynamics::euler_step`]).
+    /// Set, the barrier rows hold the sampled states (`shield/sampled.rs`): `alpha dt` and
+    /// `alpha2 dt` must then be at most 1. `None` (the default): the continuous-time rows,
+    /// which hold only as `dt -> 0`.
+    pub dt: Option<f64>,
     /// CLF decay rate: `dV/dt + c3 V <= delta` (> 0).
     pub c3: f64,
     /// Linear cost on the CLF relaxation `delta` (> 0; an exact penalty once it exceeds the
@@ -264,6 +270,11 @@ pub struct ShieldParams {
     pub solver: SolverChoice,
     /// Cost per unit of barrier slack in the relaxed problem (> 0).
     pub slack_penalty: f64,
+    /// The order in which barriers give way when the QP cannot hold them all: user barrier
+    /// names and atoms of the task (a safe-set literal's atom), first named gives way first;
+    /// the barriers not named give way last (`shield/give_way.rs`). Empty (the default): all
+    /// at once, shared by the slack weights.
+    pub give_way: Vec<String>,
     /// Barrier rows enforce `h - margin` (>= 0): the CBF alone keeps `h >= 0`, but an atom
     /// holds only when `rho > 0`, so a state pressed against a barrier would otherwise decay
     /// to `h = 0` exactly and count as a violation. Small ([`ShieldParams::DEFAULT_MARGIN`]).
@@ -319,6 +330,7 @@ impl ShieldParams {
         ShieldParams {
             alpha,
             alpha2: None,
+            dt: None,
             c3,
             k,
             cbf_bounds,
@@ -332,6 +344,7 @@ impl ShieldParams {
             use_clf: true,
             solver: SolverChoice::Auto,
             slack_penalty: Self::DEFAULT_SLACK_PENALTY,
+            give_way: Vec::new(),
             margin: Self::DEFAULT_MARGIN,
             preserve_progress: true,
             disturbance: Vec::new(),
@@ -407,6 +420,18 @@ impl ShieldParams {
     /// The HOCBF's second gain (needed for barriers of relative degree 2).
     pub fn with_alpha2(mut self, alpha2: Option<f64>) -> Self {
         self.alpha2 = alpha2;
+        self
+    }
+
+    /// The order in which barriers give way (see [`ShieldParams::give_way`]).
+    pub fn with_give_way(mut self, names: Vec<String>) -> Self {
+        self.give_way = names;
+        self
+    }
+
+    /// The plant's time step (see [`ShieldParams::dt`]).
+    pub fn with_dt(mut self, dt: Option<f64>) -> Self {
+        self.dt = dt;
         self
     }
 
@@ -490,6 +515,9 @@ impl ShieldParams {
         positive("alpha", self.alpha)?;
         if let Some(a2) = self.alpha2 {
             positive("alpha2", a2)?;
+        }
+        if let Some(dt) = self.dt {
+            self.check_dt(dt)?;
         }
         positive("clf_gain", self.clf_gain)?;
         positive("c3", self.c3)?;
@@ -587,6 +615,26 @@ impl ShieldParams {
                         }
                     }
                 }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ShieldParams {
+    /// `dt` finite and > 0, and every class-K gain at most `1 / dt`: the sampled condition
+    /// `h(s') >= (1 - alpha dt) h(s)` keeps `h >= 0` only while its factor is >= 0.
+    fn check_dt(&self, dt: f64) -> Result<(), ShieldError> {
+        positive("dt", dt)?;
+        let gains = [("alpha", Some(self.alpha)), ("alpha2", self.alpha2)];
+        for (what, gain) in gains {
+            if let Some(gain) = gain.filter(|g| g * dt > 1.0) {
+                return Err(ShieldError::Config(format!(
+                    "{what} = {gain} with dt = {dt}: {what} * dt = {} > 1, so one step could \
+                     carry the sampled state across a barrier; choose {what} <= 1 / dt = {}",
+                    gain * dt,
+                    1.0 / dt
+                )));
             }
         }
         Ok(())

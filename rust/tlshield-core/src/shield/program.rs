@@ -16,7 +16,9 @@
 //! The buffers live in [`Program`] and are reused from step to step: nothing here allocates
 //! once they have grown to the problem's size.
 
+use super::give_way::GiveWay;
 use super::order::{Form, Orders};
+use super::sampled::{self, Sampled};
 use super::{BarrierSource, Call, ControlAffine, ShieldParams};
 use crate::automaton::{Automaton, Reading};
 use crate::cnf::Literal;
@@ -68,6 +70,8 @@ pub(super) struct Program {
     pub(super) delta_0: f64,
     /// Routes the CLF's target around the discs to avoid (`crate::route`).
     router: Router,
+    /// The sampled rows' buffers (`sampled.rs`), used when the shield knows `dt`.
+    sampled: Sampled,
     /// Whether routing changed this step's CLF row: a target other than the goal, or progress
     /// uncredited (`Program::uncredit_blocked_progress`).
     pub(super) rerouted: bool,
@@ -87,6 +91,8 @@ struct Site<'a> {
     s: &'a [f64],
     q: usize,
     a_rl: &'a [f64],
+    /// The drift of the dimensions no input moves (moving obstacles), constant over a step.
+    drift: Option<&'a [f64]>,
 }
 
 /// `out = J_f(s) u` (or `J_f(s)^T u` when `transpose`): from the Jacobian passed with this
@@ -173,6 +179,11 @@ impl Program {
         self.sources[row]
     }
 
+    /// The barrier each barrier row holds.
+    pub(super) fn sources(&self) -> &[BarrierSource] {
+        &self.sources
+    }
+
     /// Variables of the unrelaxed problem.
     pub(super) fn vars(&self) -> usize {
         self.cbf_vars + self.clf_vars + usize::from(self.has_goal)
@@ -255,6 +266,7 @@ impl Program {
             s,
             q,
             a_rl,
+            drift,
         };
         if params.use_cbf {
             self.barrier_rows(at, orders, automaton, &reading, barriers_out);
@@ -281,6 +293,7 @@ impl Program {
             s,
             q,
             a_rl,
+            drift,
         } = at;
         let spec = automaton.spec();
         if params.preserve_progress {
@@ -316,9 +329,23 @@ impl Program {
             self.grad.iter_mut().for_each(|v| *v *= sign);
             let lf = dot(&self.grad, &self.f);
             let psi = params.alpha * (h - params.margin);
+            let barrier = sampled::Barrier { predicate, sign, h };
             // The second-order row's r (None: first order, r = Lf h + alpha (h - margin)).
-            let (coefficients, second_r) = match form.second() {
-                true => {
+            let (coefficients, second_r) = match (form, params.dt) {
+                // Rows that hold the sampled states (sampled.rs); a mixed barrier keeps the
+                // continuous-time rows.
+                (Form::First, Some(dt)) => {
+                    let r = self.sampled.first(barrier, s, &self.f, params, dt);
+                    (&self.sampled.coefficients, Some(r))
+                }
+                (Form::Second, Some(dt)) => {
+                    let model = model.expect("second-order rows have a model");
+                    let r = self
+                        .sampled
+                        .second(barrier, s, &self.f, model, drift, params, dt);
+                    (&self.sampled.coefficients, Some(r))
+                }
+                _ if form.second() => {
                     predicate.hessian_times(s, &self.f, &mut self.hf);
                     self.hf.iter_mut().for_each(|v| *v *= sign);
                     jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
@@ -334,7 +361,7 @@ impl Program {
                     let alpha2 = params.alpha2.expect("Orders requires alpha2");
                     (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
                 }
-                false => (&self.grad, None),
+                _ => (&self.grad, None),
             };
             // The robust tightening: sum_d |dB/ds_d| w_d, with dB/ds = grad h (first
             // order) or grad psi_1 (second order), the row's coefficients either way.
@@ -379,6 +406,7 @@ impl Program {
             s,
             q,
             a_rl,
+            ..
         } = at;
         let m = a_rl.len();
         // CLF row (Eq. 5B1's goal): V = |e|^2 with e = s[pos] - goal, or, when no input moves
@@ -561,12 +589,12 @@ impl Program {
         params: &ShieldParams,
         a_rl: &[f64],
         qp: &mut DenseQp,
-        relaxed: bool,
+        relaxed: Option<(&GiveWay, usize)>,
     ) {
         let m = a_rl.len();
         let (barriers, vars, has_goal) = (self.barriers(), self.vars(), self.has_goal);
         let cbf_vars = self.cbf_vars;
-        let slacks = if relaxed { barriers } else { 0 };
+        let slacks = if relaxed.is_some() { barriers } else { 0 };
         let nv = vars + slacks;
         let delta = cbf_vars + self.clf_vars;
         qp.p_diag.clear();
@@ -593,8 +621,11 @@ impl Program {
                     r[cbf_vars + j] = -l;
                 }
             }
-            if relaxed {
-                r[vars + b] = -1.0;
+            // A row above the level holds: its slack stays out of it (and at 0).
+            if let Some((give_way, level)) = relaxed {
+                if give_way.level(self.sources[b]) <= level {
+                    r[vars + b] = -1.0;
+                }
             }
         }
         if has_goal {

@@ -1,0 +1,136 @@
+//! Barrier rows that hold the sampled states, when the plant holds the action for `dt` and
+//! is sampled after an explicit Euler step of the model, `s' = s + dt (f(s) + g(s) a)`
+//! ([`ShieldParams::dt`]). The continuous-time rows (`program.rs`) hold `dh/dt >= -alpha h`
+//! at the sample only; between samples the state moves on a straight line, and on a double
+//! integrator braking at a disc's rim it ends each step about 1e-4 m inside.
+//!
+//! Write `~h = h - margin`, `g1 = alpha dt` and `g2 = alpha2 dt` (both <= 1, checked at
+//! construction).
+//! - **First order** (discrete-time CBF, Agrawal & Sreenath): `~h(s') >= (1 - g1) ~h(s)`. With
+//!   `y = s + dt f(s)` the successor of `a = 0`, `s'(a) = y + dt g a`, and the row is that
+//!   condition linearised in `a` at 0, divided by `dt`:
+//!   `L = grad ~h(y) . g(s)`, `r = (~h(y) - (1 - g1) ~h(s)) / dt`.
+//! - **Second order** (discrete-time HOCBF, Xiong et al.): `psi(s) = (~h(y(s)) - (1 - g1)
+//!   ~h(s)) / dt >= 0` says the next sample keeps `~h >= (1 - g1) ~h`; the row keeps
+//!   `psi(s') >= (1 - g2) psi(s)`. No input moves what `h` reads, so `~h(s')` is `~h(y)` whatever
+//!   `a` is, and `psi(s')` reads the sample after next, `z(a) = s' + dt f(s')`, with
+//!   `dz/da = dt (I + dt J_f(y)) g(s)` at `a = 0`. Divided by `dt`:
+//!   `L = grad ~h(z0)^T (I + dt J_f(y)) g(s) / dt` and
+//!   `r = (~h(z0) - (1 - g1) ~h(y)) / dt^2 - (1 - g2) psi(s) / dt`, `z0 = y + dt f(y)`.
+//!
+//! Both tend to the continuous-time rows as `dt -> 0`. Exactness: where `~h` is convex along
+//! the step and the successor is affine in `a` (the outside of a disc or any half-space, under
+//! the single and double integrators, the unicycle's reference point and ThrustTurn), the
+//! linearisation is a lower bound, so a solved row keeps the sampled state out by any amount.
+//! Elsewhere (the inside of a disc; the acceleration unicycle and the bicycle, whose next
+//! heading bends the step) the error is second order in `dt a`.
+
+use super::ShieldParams;
+use crate::dynamics::Dynamics;
+use crate::predicate::Predicate;
+
+/// The predicted samples and gradients of one barrier's sampled row, reused from step to step.
+#[derive(Debug, Default)]
+pub(super) struct Sampled {
+    /// `y = s + dt f(s)` and, for second-order rows, `z0 = y + dt f(y)`.
+    y: Vec<f64>,
+    z: Vec<f64>,
+    /// `f(y)` and `g(y)` (the latter only because the model writes both).
+    fy: Vec<f64>,
+    gy: Vec<f64>,
+    /// `grad ~h` at the predicted sample, then `J_f(y)^T grad ~h(z0)`.
+    grad: Vec<f64>,
+    jt: Vec<f64>,
+    /// The row's state coefficients `c` (`L = c^T g(s)`), for the robust tightening too.
+    pub(super) coefficients: Vec<f64>,
+}
+
+/// One barrier as its sampled row reads it: `~h = sign * predicate - margin`, and its value at
+/// the state.
+#[derive(Clone, Copy)]
+pub(super) struct Barrier<'a> {
+    pub(super) predicate: &'a Predicate,
+    pub(super) sign: f64,
+    /// `h(s)` (the sign applied, the margin not).
+    pub(super) h: f64,
+}
+
+impl Barrier<'_> {
+    fn shifted(&self, s: &[f64], margin: f64) -> f64 {
+        self.sign * self.predicate.value(s) - margin
+    }
+}
+
+impl Sampled {
+    fn resize(&mut self, n: usize) {
+        for buf in [
+            &mut self.y,
+            &mut self.z,
+            &mut self.fy,
+            &mut self.grad,
+            &mut self.jt,
+            &mut self.coefficients,
+        ] {
+            buf.resize(n, 0.0);
+        }
+    }
+
+    /// The first-order row at `s` with drift-included `f`: fills
+    /// [`Sampled::coefficients`] and returns `r` (see the module docs).
+    pub(super) fn first(
+        &mut self,
+        b: Barrier<'_>,
+        s: &[f64],
+        f: &[f64],
+        params: &ShieldParams,
+        dt: f64,
+    ) -> f64 {
+        self.resize(s.len());
+        for ((y, &si), &fi) in self.y.iter_mut().zip(s).zip(f) {
+            *y = si + dt * fi;
+        }
+        b.predicate.gradient_into(&self.y, &mut self.coefficients);
+        self.coefficients.iter_mut().for_each(|c| *c *= b.sign);
+        let g1 = params.alpha * dt;
+        (b.shifted(&self.y, params.margin) - (1.0 - g1) * (b.h - params.margin)) / dt
+    }
+
+    /// The second-order row at `s` with drift-included `f` under `model`, whose drift
+    /// (`drift`, constant over the step) moves the dimensions no input does: fills
+    /// [`Sampled::coefficients`] and returns `r` (see the module docs).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn second(
+        &mut self,
+        b: Barrier<'_>,
+        s: &[f64],
+        f: &[f64],
+        model: &Dynamics,
+        drift: Option<&[f64]>,
+        params: &ShieldParams,
+        dt: f64,
+    ) -> f64 {
+        let n = s.len();
+        self.resize(n);
+        self.gy.resize(n * model.inputs(), 0.0);
+        for ((y, &si), &fi) in self.y.iter_mut().zip(s).zip(f) {
+            *y = si + dt * fi;
+        }
+        model.eval(&self.y, &mut self.fy, &mut self.gy);
+        if let Some(d) = drift {
+            self.fy.iter_mut().zip(d).for_each(|(f, d)| *f += d);
+        }
+        for ((z, &y), &fy) in self.z.iter_mut().zip(&self.y).zip(&self.fy) {
+            *z = y + dt * fy;
+        }
+        b.predicate.gradient_into(&self.z, &mut self.grad);
+        self.grad.iter_mut().for_each(|g| *g *= b.sign);
+        model.jacobian_f_transpose_times(&self.y, &self.grad, &mut self.jt);
+        for ((c, &g), &j) in self.coefficients.iter_mut().zip(&self.grad).zip(&self.jt) {
+            *c = (g + dt * j) / dt;
+        }
+        let (g1, g2) = (params.alpha * dt, params.alpha2.unwrap_or(0.0) * dt);
+        let h_y = b.shifted(&self.y, params.margin);
+        let psi = (h_y - (1.0 - g1) * (b.h - params.margin)) / dt;
+        (b.shifted(&self.z, params.margin) - (1.0 - g1) * h_y) / (dt * dt) - (1.0 - g2) * psi / dt
+    }
+}
