@@ -88,7 +88,9 @@ def test_a_barrier_gives_way_only_when_those_named_before_it_cannot_restore_feas
 def test_the_order_is_checked_where_it_is_given_and_names_atoms_too() -> None:
     kw = {"barriers": {"wall": WALL}, **GAINS}
     model = tlshield.SingleIntegrator([0, 1])
-    with pytest.raises(tlshield.ShieldError, match=r'give_way: "shelf" is neither.*\["wall", "g"\]'):
+    with pytest.raises(
+        tlshield.ShieldError, match=r'give_way: "shelf" is neither.*\["wall", "g"\]'
+    ):
         tlshield.Shield(SPEC, model, give_way=["shelf"], **kw)
     with pytest.raises(tlshield.ShieldError, match='"wall" is named twice'):
         tlshield.Shield(SPEC, model, give_way=["wall", "wall"], **kw)
@@ -99,3 +101,20 @@ def test_the_order_is_checked_where_it_is_given_and_names_atoms_too() -> None:
 
     sh = tlshield.Shield(SPEC, model, give_way=["g", "wall"], **kw)
     assert pickle.loads(pickle.dumps(sh)).__reduce__()[1][3]["give_way"] == ["g", "wall"]
+
+
+def test_a_batch_names_who_gave_way_row_by_row() -> None:
+    """``FilterBatch.gave_way`` (and the monitor batch's) is what ``filter`` says, per row."""
+    ceiling = tlshield.Inside(tlshield.Halfspace([0.0, -1.0], 5.0))  # y < 5
+    barriers = {"wall": (WALL, 1e-3), "floor": FLOOR, "ceiling": ceiling}
+    sh = tlshield.Shield(SPEC, tlshield.SingleIntegrator([0, 1]), barriers=barriers, **GAINS)
+    rng = np.random.default_rng(0)
+    states = rng.uniform([-1.0, -1.0], [3.0, 6.0], (64, 2))
+    a_rl = rng.uniform(-1.0, 1.0, (64, 2))
+    batch = sh.filter_batch(states, np.zeros(64, int), a_rl)
+    want = [sh.filter(s, 0, a).gave_way for s, a in zip(states, a_rl, strict=True)]
+    assert batch.gave_way == want
+    assert sum(g is not None for g in want) >= 10  # rows did give way
+    monitors = tlshield.MonitorBatch(sh.automaton, 64)
+    monitors.reset(states)
+    assert sh.filter_monitors(monitors, a_rl).gave_way == want

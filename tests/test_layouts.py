@@ -259,6 +259,11 @@ CASES: dict[str, Case] = {
         "filter",
         {"s": S, "q": Q, "a_rl": A_RL[5], "f": F, "g": G, "drift": DRIFT[5]},
     ),
+    "Shield.problem": Case(
+        _shield,
+        "problem",
+        {"s": S, "q": Q, "a_rl": A_RL[5], "f": F, "g": G, "drift": DRIFT[5]},
+    ),
     "Shield.barrier_values": Case(_shield, "barrier_values", {"s": S}),
     "Shield.filter_monitor": Case(
         _shield,

@@ -38,7 +38,7 @@ def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(env_id: str, config: s
     theirs.seed(7)
     np.testing.assert_array_equal(ours.reset(), theirs.reset())
     rng = np.random.default_rng(0)
-    dones_seen = 0
+    dones_seen = gave_way = 0
     for _ in range(320):  # past PointMass-v0's horizon (300): every env ends at least once
         a = _actions(rng, n)
         ours.step_async(a)
@@ -67,12 +67,18 @@ def test_the_sb3_vec_env_equals_dummy_vec_env_bit_for_bit(env_id: str, config: s
             for key in ("a_rl", "a_cbf", "a_clf", "delta", "status", "slack", "solver"):
                 if "shield" in want:
                     np.testing.assert_array_equal(mine["shield"][key], want["shield"][key])
+            if "shield" in want:
+                # Who gave way, named as the single env names it (issue 57, item 4).
+                assert mine["shield"]["gave_way"] == want["shield"]["gave_way"], i
+                gave_way += want["shield"]["gave_way"] is not None
             if done[i]:
                 np.testing.assert_array_equal(
                     mine["terminal_observation"], want["terminal_observation"]
                 )
         dones_seen += int(done.sum())
     assert dones_seen > 0  # episodes ended and were reset along the way
+    if env_id == "tlshield/Channel-v0" and n == 40:
+        assert gave_way > 0  # the comparison above saw give-ways (4 in one run)
 
 
 @pytest.mark.parametrize("env_id", sorted(WORLDS))

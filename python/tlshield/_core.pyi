@@ -450,6 +450,8 @@ class WorldsStep:
     @property
     def solver(self) -> NDArray[np.uint8]: ...
     @property
+    def gave_way(self) -> list[tuple[str, float] | None]: ...
+    @property
     def active(self) -> NDArray[np.bool_]: ...
     def infos(
         self,
@@ -665,6 +667,9 @@ class FilterBatch:
     @property
     def solver(self) -> NDArray[np.uint8]:
         """``Solver`` values."""
+    @property
+    def gave_way(self) -> list[tuple[str, float] | None]:
+        """Per row, ``(name, slack)`` of the barrier that gave way, or None."""
     def __len__(self) -> int: ...
 
 @final
@@ -749,6 +754,18 @@ class Shield:
     ) -> FilterResult:
         """One shield step at ``(s, q)`` for ``a_rl`` (at a ``Monitor``'s state:
         ``filter_monitor``)."""
+    def problem(
+        self,
+        s: ArrayLike,
+        q: int,
+        a_rl: ArrayLike,
+        f: ArrayLike | None = None,
+        g: ArrayLike | None = None,
+        drift: ArrayLike | None = None,
+    ) -> dict[str, NDArray[np.float64]]:
+        """The QP ``filter`` would solve at this step (before any relaxation): ``P_diag``,
+        ``c``, ``G`` and ``h`` of ``min x'Px/2 + c'x  s.t.  G x <= h`` over ``x = [a_cbf |
+        a_clf | d]``."""
     def filter_monitor(
         self,
         monitor: Monitor,

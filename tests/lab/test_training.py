@@ -64,6 +64,9 @@ def test_evaluation(run: Path) -> None:
     result = evaluate(run, trials=3)
     assert result["trials"] == 3 and 0.0 <= result["success_rate"] <= 1.0
     assert result["violation_steps"] == 0
+    # Give-ways by barrier and contacts the shield did not report are counted (issue 57).
+    assert isinstance(result["gave_way"], dict) and result["contacts_on_solved_steps"] == 0
+    assert all("gave_way" in o for o in result["outcomes"])
     saved = json.loads((run / "evaluation.json").read_text())
     assert saved == result
     data = np.load(run / "trajectories.npz")
@@ -229,13 +232,49 @@ def test_the_progress_bar_shows_the_run_so_far() -> None:
 
     totals = RunTotals()
     row = {"violations": 101.0, "relaxed": 3, "failed": 0}
-    assert totals.add(row) == {"ret": "-", "viol": "101", "relaxed": "3", "failed": "0"}
+    totals.gave_way.update({"!o1": 2})
+    shown = totals.add(row)
+    assert shown == {"ret": "-", "viol": "101", "relaxed": "3", "failed": "0", "gave_way": "2"}
     totals.returns.extend([10.0, 20.0])
     assert totals.add({**row, "violations": 0.0})["ret"] == "15.0"
     # An update where no episode ended keeps the last returns; counts add up.
     shown = totals.add({"violations": 0.0, "relaxed": 1, "failed": 2})
-    assert shown == {"ret": "15.0", "viol": "101", "relaxed": "7", "failed": "2"}
+    assert shown == {
+        "ret": "15.0",
+        "viol": "101",
+        "relaxed": "7",
+        "failed": "2",
+        "gave_way": "2",
+    }
     # Not measured (an env that reports no violations): n/a, never 0.
     assert RunTotals().add({"violations": float("nan"), "relaxed": 0, "failed": 0})["viol"] == "n/a"
     totals.returns.extend(float(k) for k in range(100))  # the last RunTotals.RECENT only
     assert totals.add(row)["ret"] == f"{sum(range(80, 100)) / 20:.1f}"
+
+
+def test_an_episode_that_touched_an_obstacle_is_never_counted_a_success() -> None:
+    """Issue 57, item 4: on Channel-v0 with the obstacles as the shield's barriers only (not in
+    the formula), the env accepts an episode that touched one on the way; training's success
+    count does not (evaluation ends a trial at its first contact, and a contact on the step of
+    acceptance is not a success either). The unshielded env, driven straight ahead."""
+    import gymnasium as gym
+
+    from tlshield.lab.callbacks import UpdateMetrics
+
+    env = gym.make("tlshield/Channel-v0", config="rl")
+    metrics = UpdateMetrics(1, 0.99)
+    accepted_after_contact = clean = 0
+    for seed in range(60):
+        env.reset(seed=seed)
+        touched = False
+        while True:
+            _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0]))
+            touched |= bool(info["collision"])
+            metrics.step(np.array([reward]), np.array([terminated or truncated]), [info])
+            if terminated or truncated:
+                accepted_after_contact += bool(info["success"]) and touched
+                clean += bool(info["success"]) and not touched
+                break
+    env.close()
+    assert accepted_after_contact > 0, "no episode touched and was accepted: cannot fail"
+    assert metrics.successes == clean

@@ -67,6 +67,8 @@ class UpdateMetrics:
         self.task_return = np.zeros(n_envs)
         self.episode_cost = np.zeros(n_envs)
         self.was_trapped = np.zeros(n_envs, dtype=bool)
+        #: Whether the episode so far touched an obstacle (``info["collision"]``).
+        self.touched = np.zeros(n_envs, dtype=bool)
         self.reset_update()
 
     def reset_update(self) -> None:
@@ -83,6 +85,8 @@ class UpdateMetrics:
         self.trap_entries = self.successes = 0
         self.relaxed = self.failed = self.steps = 0
         self.correction = 0.0
+        #: Per barrier, the steps of this update on which it gave way.
+        self.gave_way: collections.Counter[str] = collections.Counter()
 
     def step(self, rewards: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
         self.discounted += self.discount * rewards
@@ -100,11 +104,15 @@ class UpdateMetrics:
                 self.violations = (self.violations or 0) + int(violation)
             self.trap_entries += info["trap"] and not self.was_trapped[i]
             self.was_trapped[i] = info["trap"]
-            self.successes += info["success"]
+            self.touched[i] |= bool(info.get("collision", False))
+            # An episode that touched an obstacle is never a success.
+            self.successes += bool(info["success"]) and not self.touched[i]
             shield = info.get("shield", {})
             status = shield.get("status")
             self.relaxed += status in (Status.RELAXED, Status.INACCURATE)
             self.failed += status == Status.FAILED
+            if shield.get("gave_way") is not None:
+                self.gave_way[str(shield["gave_way"][0])] += 1
             self.steps += 1
             if "a_cbf" in shield:  # |a_applied - a_rl|: what the shield and the CLF overruled
                 self.correction += float(np.linalg.norm(shield["a_cbf"] + shield["a_clf"]))
@@ -114,7 +122,7 @@ class UpdateMetrics:
                 self.episode_costs.append(float(self.episode_cost[i]))
                 self.discounted[i], self.discount[i] = 0.0, 1.0
                 self.task_return[i] = self.episode_cost[i] = 0.0
-                self.was_trapped[i] = False
+                self.was_trapped[i] = self.touched[i] = False
 
 
 def _measured(value: float) -> float:
@@ -146,6 +154,8 @@ class RunTotals:
         self.violations = math.nan  # NaN until an update measures them
         self.relaxed = 0
         self.failed = 0
+        #: Per barrier, the steps on which it gave way since the start.
+        self.gave_way: collections.Counter[str] = collections.Counter()
 
     def add(self, row: dict[str, Any]) -> dict[str, str]:
         """Adds an update's row (``returns``: the episodes that ended in it); returns the
@@ -162,6 +172,7 @@ class RunTotals:
             "viol": metrics_text(self.violations),
             "relaxed": str(self.relaxed),
             "failed": str(self.failed),
+            "gave_way": str(sum(self.gave_way.values())),
         }
 
 
@@ -381,6 +392,7 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
             "cost": math.nan if metrics.cost is None else metrics.cost,
             "validation_return": self.validation.last_return,
             "validation_cost": self.validation.last_cost,
+            "gave_way": sum(metrics.gave_way.values()),
         }
         self.writer.writerow(row)
         self.csv_file.flush()
@@ -390,6 +402,7 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
             if key not in ("update", "timesteps"):
                 self.logger.record(f"tlshield/{key}", value)
         self.totals.returns.extend(returns)
+        self.totals.gave_way.update(metrics.gave_way)
         metrics.reset_update()
         self.bar.update(1)
         self.bar.set_postfix(self.totals.add(row))
@@ -408,6 +421,10 @@ class TrainingCallback(CallbackList):  # type: ignore[misc]
     def elapsed(self) -> float:
         """Seconds since the run started."""
         return self.log.elapsed()
+
+    def gave_way(self) -> dict[str, int]:
+        """Per barrier, the training steps (of finished updates) on which it gave way."""
+        return dict(self.log.totals.gave_way)
 
     def close(self) -> None:
         """Closes the metrics file and the progress bar (the run is over)."""

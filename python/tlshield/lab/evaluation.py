@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from tlshield import Status
 from tlshield.envs import ENV_ID
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
@@ -77,6 +78,8 @@ def rollouts(
             "violations": None,
             "return": 0.0,
             "cost": None,
+            "gave_way": {},
+            "contacts_on_solved_steps": 0,
         }
         for s in seeds
     ]
@@ -107,13 +110,24 @@ def rollouts(
                 out["cost"] = (out["cost"] or 0.0) + float(info["cost"])
             collision = measures.collision(info)
             if collision is not None:
-                out["collision"] = collision
+                # Sticky: a trial that touched an obstacle once collided.
+                out["collision"] = bool(out["collision"]) or collision
+            if collision and info.get("shield", {}).get("status") == Status.SOLVED:
+                # A contact the shield did not report: its QP held every row (issue 57).
+                out["contacts_on_solved_steps"] += 1
+            gave_way = info.get("shield", {}).get("gave_way")
+            if gave_way is not None:
+                name = str(gave_way[0])
+                out["gave_way"][name] = out["gave_way"].get(name, 0) + 1
+            # A trial that touched an obstacle is never a success, however the obstacles are
+            # encoded (in the formula, or as the shield's barriers only).
+            touched = bool(out["collision"])
             if by_return:
                 out["success"] = out["success"] or bool(info.get("success", False))
                 if not (terminated or truncated):
                     still.append(i)
             elif terminated or truncated or collision:
-                out["success"] = bool(info["success"])
+                out["success"] = bool(info["success"]) and not touched
             else:
                 still.append(i)
         active = still
@@ -127,6 +141,15 @@ def rollouts(
         [np.array(p) for p in paths],
         [np.array(p) for p in obstacle_paths],
     )
+
+
+def gave_way_totals(outcomes: list[dict[str, Any]]) -> dict[str, int]:
+    """Per barrier, the steps on which it gave way, summed over the trials."""
+    totals: dict[str, int] = {}
+    for o in outcomes:
+        for name, count in o.get("gave_way", {}).items():
+            totals[name] = totals.get(name, 0) + count
+    return dict(sorted(totals.items()))
 
 
 def _count(value: bool | int | None) -> int | None:
@@ -196,6 +219,9 @@ def evaluate(
         "mean_steps_to_success": float(np.mean(steps_to_success)) if steps_to_success else None,
         "return_mean": float(np.mean([o["return"] for o in outcomes])),
         "cost_mean": float(np.mean(costs)) if costs else None,
+        # Per barrier, the evaluation steps on which it gave way (every trial).
+        "gave_way": gave_way_totals(outcomes),
+        "contacts_on_solved_steps": sum(o["contacts_on_solved_steps"] for o in outcomes),
         "outcomes": outcomes,
     }
     Path(run, evaluation_file).write_text(json.dumps(result, indent=2))

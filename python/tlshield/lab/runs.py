@@ -40,6 +40,7 @@ from tlshield.envs.params import upgrade
 
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
+    "GIVE_WAY_COLUMNS",
     "METRIC_COLUMNS",
     "RETURN_COLUMNS",
     "RUN_FILE",
@@ -98,8 +99,12 @@ RETURN_COLUMNS = (
     "validation_return",
     "validation_cost",
 )
+#: Give-ways, per update: the steps whose QP was relaxed and named a barrier that gave way
+#: (``info["shield"]["gave_way"]``; by barrier over the whole run: ``run.json``'s
+#: ``gave_way``). NaN in older runs.
+GIVE_WAY_COLUMNS = ("gave_way",)
 #: Columns that came later: a run written before them reads them as NaN.
-_LATER_COLUMNS = (*DIAGNOSTIC_COLUMNS, *RETURN_COLUMNS)
+_LATER_COLUMNS = (*DIAGNOSTIC_COLUMNS, *RETURN_COLUMNS, *GIVE_WAY_COLUMNS)
 #: The columns of metrics.csv before the constraint columns.
 _HEAD_COLUMNS = ("update", "timesteps", "episodes", "return_mean", "return_std")
 #: The columns of metrics.csv after the constraint columns.
@@ -115,6 +120,7 @@ _TAIL_COLUMNS = (
     "wall_time",
     *DIAGNOSTIC_COLUMNS,
     *RETURN_COLUMNS,
+    *GIVE_WAY_COLUMNS,
 )
 
 

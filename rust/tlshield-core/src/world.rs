@@ -6,7 +6,7 @@ use smallvec::SmallVec;
 
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{Filtered, Shield, SolvedBy, Status, Want};
+use crate::shield::{BarrierSource, Filtered, Shield, SolvedBy, Status, Want};
 
 /// What a world measures at a state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -62,6 +62,8 @@ pub struct ShieldStep {
     pub status: Status,
     /// Which solver answered.
     pub solver: SolvedBy,
+    /// The barrier that gave way and its slack, when the QP was relaxed.
+    pub gave_way: Option<(BarrierSource, f64)>,
     /// The whole answer, when recorded.
     pub record: Option<Filtered>,
 }
@@ -86,6 +88,7 @@ impl ShieldStep {
                 slack: f.slack,
                 status: f.status,
                 solver: f.solver,
+                gave_way: f.gave_way,
                 record: (want == Want::Record).then(|| f.clone()),
             }
         })

@@ -4,7 +4,7 @@
 use numpy::IntoPyArray;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList, PyString};
 use tlshield_core::{BarrierSource, BatchDynamics, BatchOutput, ControlAffine, Filtered, Shield};
 
 use crate::convert::{state, vector, FloatArray};
@@ -103,15 +103,31 @@ impl PyShield {
             delta: out.delta.into_pyarray(py).unbind(),
             slack: out.slack.into_pyarray(py).unbind(),
             status: out.status.into_pyarray(py).unbind(),
+            gave_way: self.gave_way_list(py, out.gave_way.into_iter())?,
             solver: out.solver.into_pyarray(py).unbind(),
         })
     }
 
-    pub(crate) fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
-        let name = |source: &BarrierSource| match source {
+    /// The name of a barrier the shield enforced: the user's key, or the safe-set literal.
+    pub(crate) fn source_name(&self, py: Python<'_>, source: &BarrierSource) -> Py<PyString> {
+        match source {
             BarrierSource::User(i) => self.barrier_names[*i].clone_ref(py),
             BarrierSource::SafeSet(literal) => self.literals.get(py, literal).unbind(),
-        };
+        }
+    }
+
+    /// Per row, `(name, slack)` of the barrier that gave way, or None.
+    pub(crate) fn gave_way_list<'py>(
+        &self,
+        py: Python<'py>,
+        rows: impl Iterator<Item = Option<(BarrierSource, f64)>>,
+    ) -> PyResult<Py<PyList>> {
+        let items = rows.map(|g| g.map(|(s, sigma)| (self.source_name(py, &s), sigma)));
+        Ok(PyList::new(py, items)?.unbind())
+    }
+
+    pub(crate) fn result(&self, py: Python<'_>, out: Filtered) -> PyFilterResult {
+        let name = |source: &BarrierSource| self.source_name(py, source);
         let barriers = out.barriers.iter().map(|(s, h)| (name(s), *h)).collect();
         let gave_way = out.gave_way.as_ref().map(|(s, sigma)| (name(s), *sigma));
         PyFilterResult {
@@ -167,6 +183,47 @@ impl PyShield {
             })?;
             Ok(self.result(py, out))
         })
+    }
+
+    /// The QP ``filter`` would solve at this step, before any relaxation: a dict of numpy
+    /// arrays ``P_diag`` (the diagonal of P), ``c``, ``G`` (rows, vars) and ``h``, for
+    /// ``min x'Px/2 + c'x  s.t.  G x <= h`` over ``x = [a_cbf | a_clf | d]`` (parts that are
+    /// off are absent; ``d = delta - delta_0``); empty arrays when nothing is corrected. For
+    /// inspecting a step and solving it independently. Arguments as in ``filter``.
+    #[pyo3(signature = (s, q, a_rl, f=None, g=None, drift=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn problem<'py>(
+        &self,
+        py: Python<'py>,
+        s: &Bound<'py, PyAny>,
+        q: &Bound<'py, PyAny>,
+        a_rl: &Bound<'py, PyAny>,
+        f: Option<&Bound<'py, PyAny>>,
+        g: Option<&Bound<'py, PyAny>>,
+        drift: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let qp = crate::errors::shield_call(py, || {
+            let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+            let s = vector(s, "s")?;
+            let q = state(q, "q", self.inner.automaton())
+                .map_err(|e| crate::errors::shield_state(py, e))?;
+            let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+                .values()
+                .to_vec();
+            self.with_dynamics(py, &s, f, g, |fg| {
+                map(self.inner.problem(&s, q, &a_rl, fg, drift.as_deref()))
+            })
+        })?;
+        let vars = qp.p_diag.len();
+        let rows = qp.h.len();
+        let out = PyDict::new(py);
+        out.set_item("P_diag", qp.p_diag.into_pyarray(py))?;
+        out.set_item("c", qp.c.into_pyarray(py))?;
+        let g = numpy::ndarray::Array2::from_shape_vec((rows, vars), qp.g)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        out.set_item("G", g.into_pyarray(py))?;
+        out.set_item("h", qp.h.into_pyarray(py))?;
+        Ok(out)
     }
 
     /// One shield step at a ``Monitor``'s last state and FSA state, reusing its reading of the

@@ -3,7 +3,7 @@
 
 use numpy::{PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyList, PyString};
 use tlshield_core::{SolvedBy, Status};
 
 use crate::codes;
@@ -84,6 +84,9 @@ pub struct PyFilterBatch {
     pub(crate) status: Py<PyArray1<u8>>,
     /// ``tlshield.Solver`` values (B,) uint8.
     pub(crate) solver: Py<PyArray1<u8>>,
+    /// Per row, ``(name, slack)`` of the barrier that gave way (see
+    /// ``FilterResult.gave_way``), or None.
+    pub(crate) gave_way: Py<PyList>,
 }
 
 #[pymethods]

@@ -4,6 +4,7 @@
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyList;
 use tlshield_core::world::{step_many, ShieldStep, World, WorldStep};
 
 use crate::channel::PyChannelWorld;
@@ -112,6 +113,8 @@ pub struct PyWorldsStep {
     pub(crate) status: Py<PyArray1<u8>>,
     /// ``tlshield.Solver`` values (N,).
     pub(crate) solver: Py<PyArray1<u8>>,
+    /// Per row, ``(name, slack)`` of the barrier that gave way, or None.
+    pub(crate) gave_way: Py<PyList>,
     /// Whether the row was stepped (N,).
     pub(crate) active: Py<PyArray1<bool>>,
 }
@@ -227,6 +230,17 @@ pub fn step_worlds(
             .unbind(),
         status: shield_code(&|f| f.status as u8).into_pyarray(py).unbind(),
         solver: shield_code(&|f| f.solver as u8).into_pyarray(py).unbind(),
+        gave_way: match &shield {
+            Some(sh) => sh.gave_way_list(
+                py,
+                steps.iter().map(|s| {
+                    s.as_ref()
+                        .and_then(|s| s.shield.as_ref())
+                        .and_then(|f| f.gave_way)
+                }),
+            )?,
+            None => PyList::new(py, steps.iter().map(|_| py.None()))?.unbind(),
+        },
         active: active.into_pyarray(py).unbind(),
     })
 }

@@ -41,6 +41,7 @@ impl PyWorldsStep {
         let (collision, violation) = (collision.as_slice()?, violation.as_slice()?);
         let (delta, status, slack) = (delta.as_slice()?, status.as_slice()?, slack.as_slice()?);
         let solver = solver.as_slice()?;
+        let gave_way = self.gave_way.bind(py);
         let rows = q.len();
         // The action rows as numpy views, by iterating the (N, 2) arrays (numpy's own row
         // iteration: several times cheaper than indexing row by row).
@@ -83,6 +84,7 @@ impl PyWorldsStep {
                 s.set_item(intern!(py, "delta"), delta[i])?;
                 s.set_item(intern!(py, "status"), status_of.get_item(status[i])?)?;
                 s.set_item(intern!(py, "slack"), slack[i])?;
+                s.set_item(intern!(py, "gave_way"), gave_way.get_item(i)?)?;
                 s.set_item(intern!(py, "solver"), solver_of.get_item(solver[i])?)?;
                 s.set_item(intern!(py, "goal"), py.None())?;
                 s.set_item(intern!(py, "barriers"), PyDict::new(py))?;

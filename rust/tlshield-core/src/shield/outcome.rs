@@ -125,6 +125,8 @@ pub struct BatchOutput {
     pub slack: Vec<f64>,
     /// [`SolvedBy`] codes, `(B,)`.
     pub solver: Vec<u8>,
+    /// Per row, the barrier that gave way and its slack (see [`Filtered::gave_way`]).
+    pub gave_way: Vec<Option<(BarrierSource, f64)>>,
 }
 
 impl BatchOutput {
@@ -138,6 +140,7 @@ impl BatchOutput {
         crate::alloc::try_resize(&mut self.delta, "rows", rows, 0.0)?;
         crate::alloc::try_resize(&mut self.slack, "rows", rows, 0.0)?;
         crate::alloc::try_resize(&mut self.status, "rows", rows, 0)?;
+        crate::alloc::try_resize(&mut self.gave_way, "rows", rows, None)?;
         crate::alloc::try_resize(&mut self.solver, "rows", rows, 0)
     }
 
@@ -151,15 +154,19 @@ impl BatchOutput {
             .zip(self.status.chunks_mut(chunk))
             .zip(self.slack.chunks_mut(chunk))
             .zip(self.solver.chunks_mut(chunk))
+            .zip(self.gave_way.chunks_mut(chunk))
             .map(
-                |((((((action, a_cbf), a_clf), delta), status), slack), solver)| OutRows {
-                    action,
-                    a_cbf,
-                    a_clf,
-                    delta,
-                    status,
-                    slack,
-                    solver,
+                |(((((((action, a_cbf), a_clf), delta), status), slack), solver), gave_way)| {
+                    OutRows {
+                        action,
+                        a_cbf,
+                        a_clf,
+                        delta,
+                        status,
+                        slack,
+                        solver,
+                        gave_way,
+                    }
                 },
             )
     }
@@ -174,6 +181,7 @@ pub(super) struct OutRows<'a> {
     pub(super) status: &'a mut [u8],
     pub(super) slack: &'a mut [f64],
     pub(super) solver: &'a mut [u8],
+    pub(super) gave_way: &'a mut [Option<(BarrierSource, f64)>],
 }
 
 impl OutRows<'_> {
@@ -187,5 +195,6 @@ impl OutRows<'_> {
         self.status[i] = out.status as u8;
         self.slack[i] = out.slack;
         self.solver[i] = out.solver as u8;
+        self.gave_way[i] = out.gave_way;
     }
 }

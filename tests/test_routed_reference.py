@@ -1,0 +1,96 @@
+"""The routed shield (the default) against an independent solve and finite differences (issue
+57, item 6). Routing only changes the CLF row's target and credit; the QP the shield then
+solves (``Shield.problem``) is solved again by cvxpy with CLARABEL, and the action must agree.
+Its ``dL/da_rl`` on rows flagged ``GradFlag.ROUTED`` is exact (the route is fixed in ``a_rl``):
+it must equal central differences of the action."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tlshield
+from tlshield import GradFlag, Status
+from tlshield.lab import routing
+
+cp = pytest.importorskip("cvxpy")
+
+
+def scene(robot: str, seed: int) -> tuple[tlshield.Shield, np.ndarray, np.ndarray, np.ndarray]:
+    """The routing lab's shield for ``robot`` among eight random discs (obstacles as
+    barriers, routing on), and 200 states around them with random RL actions."""
+    rng = np.random.default_rng(seed)
+    goal = routing.GOAL
+    obstacles = routing.layout("random8", rng)
+    sh = routing.shield_for(robot, obstacles, goal, "barriers", route=True)
+    model = routing.robot(robot)
+    states, a_rl = [], []
+    while len(states) < 200:
+        p = rng.uniform([-2.2, -1.5], [1.8, 1.5])
+        if any(np.linalg.norm(p - c) < r + 0.02 for c, r in obstacles):
+            continue
+        s = model.start(p)
+        if robot == "unicycle":
+            s[2] = rng.uniform(-np.pi, np.pi)
+        if robot == "double":
+            s[2:] = rng.uniform(-0.5, 0.5, 2)
+        states.append(s)
+        a_rl.append(0.5 * rng.uniform(-1.0, 1.0, 2))
+    s_arr = np.array(states)
+    q = np.full(len(s_arr), sh.automaton.initial)
+    return sh, s_arr, q, np.array(a_rl)
+
+
+def independent(problem: dict) -> np.ndarray | None:
+    """cvxpy's solve of ``min x'Px/2 + c'x  s.t.  G x <= h`` (None when not optimal)."""
+    n = len(problem["c"])
+    x = cp.Variable(n)
+    objective = 0.5 * cp.sum(cp.multiply(problem["P_diag"], cp.square(x))) + problem["c"] @ x
+    prob = cp.Problem(cp.Minimize(objective), [problem["G"] @ x <= problem["h"]])
+    prob.solve(solver="CLARABEL", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)
+    return None if prob.status != "optimal" else np.asarray(x.value)
+
+
+@pytest.mark.parametrize("robot", ["single", "unicycle", "double"])
+def test_the_routed_shield_equals_an_independent_solve_and_its_gradient_is_exact(
+    robot: str,
+) -> None:
+    sh, states, q, a_rl = scene(robot, 3)
+    m = sh.num_inputs
+    batch = sh.filter_batch(states, q, a_rl)
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=a_rl.shape)
+    ga, _, flags = sh.vjp_batch(states, q, a_rl, v, state_grad=False)
+    compared = routed = 0
+    for i, (s, a) in enumerate(zip(states, a_rl, strict=True)):
+        if batch.status[i] != Status.SOLVED:
+            continue
+        problem = sh.problem(s, q[i], a)
+        if len(problem["c"]) != 2 * m + 1:  # no goal this step (it is reached)
+            continue
+        x = independent(problem)
+        assert x is not None, f"row {i}: cvxpy found no optimum of a QP the shield solved"
+        want = a + x[:m] + x[m : 2 * m]
+        np.testing.assert_allclose(batch.action[i], want, atol=1e-5, rtol=0, err_msg=f"row {i}")
+        compared += 1
+        routed += bool(flags[i] & GradFlag.ROUTED)
+    assert compared >= 100 and routed >= 20, (compared, routed)
+    # dL/da_rl on the routed rows (and on no other flag) against central differences.
+    only_routed = flags == GradFlag.ROUTED
+    assert only_routed.sum() >= 20, only_routed.sum()
+    eps = 1e-6
+    for j in range(m):
+        d = np.zeros_like(a_rl)
+        d[:, j] = eps
+        plus = (sh.filter_batch(states, q, a_rl + d).action * v).sum(axis=1)
+        minus = (sh.filter_batch(states, q, a_rl - d).action * v).sum(axis=1)
+        fd = (plus - minus) / (2 * eps)
+        np.testing.assert_allclose(ga[only_routed, j], fd[only_routed], atol=1e-5, rtol=1e-5)
+
+
+def test_the_problem_is_checked_like_a_filter_call() -> None:
+    sh, states, q, a_rl = scene("single", 1)
+    with pytest.raises(tlshield.ShieldError, match="a_rl"):
+        sh.problem(states[0], q[0], [np.nan, 0.0])
+    with pytest.raises(tlshield.ShieldError):
+        sh.problem(states[0][:1], q[0], a_rl[0])
