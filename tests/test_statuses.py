@@ -1,0 +1,79 @@
+"""The rarer outcomes are produced and checked (issue 57, item 6): ``Status.INACCURATE`` (the
+solver called a QP solved but its answer broke a row; the relaxed problem's checked answer is
+returned instead) and ``GradFlag.SINGULAR`` (the active rows' KKT system is singular at working
+precision; only the identity part of the gradient is returned). Both come from badly scaled
+barriers, a wall whose gradient is 1e13-1e15, where a well-scaled copy of the same wall gives
+SOLVED and an exact gradient."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tlshield
+from tlshield import GradFlag, Status
+
+SPEC = tlshield.Spec("F g", {"g": tlshield.Ball([0, 1], 0.3, center=[5.0, 3.0])})
+GAINS = {"alpha": 1.0, "c3": 1.0, "cbf_bounds": (-3.0, 3.0), "clf_bounds": (-1.0, 1.0)}
+
+
+def wall(scale: float) -> tlshield.Inside:
+    """x < 1, its robustness scaled by ``scale``."""
+    return tlshield.Inside(tlshield.Halfspace([-scale, 0.0], scale))
+
+
+def test_an_answer_outside_tolerance_is_inaccurate_and_the_returned_action_keeps_the_rows() -> (
+    None
+):
+    floor = tlshield.Inside(tlshield.Halfspace([0.0, 1.0], 2.0))
+    s = np.array([0.21819422112911013, 3.4817491719633615])
+    a_rl = np.array([-1.9917726277415206, -1.3508506623907204])
+    kw = {"k": 1e8, **GAINS}
+    model = tlshield.SingleIntegrator([0, 1])
+    steep = tlshield.Shield(
+        SPEC, model, barriers={"wall": wall(1e15), "floor": floor}, solver="clarabel", **kw
+    )
+    out = steep.filter(s, 0, a_rl)
+    assert out.status == Status.INACCURATE, out
+    assert np.all(np.isfinite(out.action))
+    # The action returned keeps every barrier row of the problem as posed, within the
+    # tolerance a solved answer must meet (RESIDUAL_TOL = 1e-7 of the row's scale).
+    qp = steep.problem(s, 0, a_rl)
+    rows, m = 2, 2
+    x = np.concatenate([out.a_cbf, out.a_clf])
+    g, h = qp["G"][:rows, : 2 * m], qp["h"][:rows]
+    scale = 1.0 + np.abs(h) + np.abs(g * x).sum(axis=1)
+    assert np.all(g @ x - h <= 1e-7 * scale), (g @ x - h, scale)
+    # The same wall, well scaled: solved as posed.
+    plain = tlshield.Shield(
+        SPEC, model, barriers={"wall": wall(1.0), "floor": floor}, solver="clarabel", **kw
+    )
+    assert plain.filter(s, 0, a_rl).status == Status.SOLVED
+
+
+def test_a_singular_kkt_system_is_flagged_and_gives_the_identity_part_only() -> None:
+    """At x = 0.999 pushed at the wall, the wall's row is active; scaled by 1e13 its KKT system
+    is singular at working precision (pivot below 1e-13 of its largest entry)."""
+    s, a_rl, v = np.array([[0.999, 0.0]]), np.array([[1.0, 0.0]]), np.array([[0.7, -0.4]])
+    q = np.zeros(1, int)
+    model = tlshield.SingleIntegrator([0, 1])
+    steep = tlshield.Shield(SPEC, model, barriers={"wall": wall(1e13)}, k=10.0, **GAINS)
+    ga, _, flags = steep.vjp_batch(s, q, a_rl, v, state_grad=False)
+    assert flags[0] & GradFlag.SINGULAR
+    assert steep.filter(s[0], 0, a_rl[0]).status == Status.SOLVED
+    np.testing.assert_array_equal(ga, v)  # the identity part: through a_rl itself
+    # Well scaled, the same step has an exact gradient: the wall stops a_rl's push in x.
+    plain = tlshield.Shield(SPEC, model, barriers={"wall": wall(1.0)}, k=10.0, **GAINS)
+    ga, _, flags = plain.vjp_batch(s, q, a_rl, v, state_grad=False)
+    assert not flags[0] & GradFlag.SINGULAR
+    eps = 1e-6
+    fd = [
+        (
+            (plain.filter_batch(s, q, a_rl + d).action - plain.filter_batch(s, q, a_rl - d).action)
+            @ v[0]
+        )[0]
+        / (2 * eps)
+        for d in (np.array([[eps, 0.0]]), np.array([[0.0, eps]]))
+    ]
+    np.testing.assert_allclose(ga[0], fd, atol=1e-6)
+    assert abs(ga[0, 0]) < 1e-6  # the push into the wall has no effect
