@@ -8,7 +8,6 @@ SOLVED and an exact gradient."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import tlshield
 from tlshield import GradFlag, Status
@@ -22,9 +21,7 @@ def wall(scale: float) -> tlshield.Inside:
     return tlshield.Inside(tlshield.Halfspace([-scale, 0.0], scale))
 
 
-def test_an_answer_outside_tolerance_is_inaccurate_and_the_returned_action_keeps_the_rows() -> (
-    None
-):
+def test_an_answer_outside_tolerance_is_inaccurate_and_the_returned_action_keeps_the_rows() -> None:
     floor = tlshield.Inside(tlshield.Halfspace([0.0, 1.0], 2.0))
     s = np.array([0.21819422112911013, 3.4817491719633615])
     a_rl = np.array([-1.9917726277415206, -1.3508506623907204])
