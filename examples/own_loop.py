@@ -15,7 +15,8 @@ spec = tlshield.Spec(
     exclusive=[["g1", "g2", "g3"]],  # the goal discs never overlap
 )  # fmt: skip
 shield = tlshield.Shield(spec, tlshield.Unicycle(eps=0.1), alpha=2.0, c3=1.0, k=1e4,
-                         cbf_bounds=(-6.0, 6.0), clf_bounds=(-0.5, 0.5))  # fmt: skip
+                         cbf_bounds=(-6.0, 6.0), clf_bounds=(-0.5, 0.5),
+                         dt=0.1)  # the plant's step below: rows hold its samples  # fmt: skip
 monitor = tlshield.Monitor(shield.automaton, c_r=1.0, trap_penalty=-30.0)
 s = np.zeros(13)  # the robot at the origin, heading 0; then the centres of g1, g2, g3
 s[3:9] = [2.0, 2.0, 4.0, 3.5, 8.0, 8.0]

@@ -80,6 +80,12 @@ pub enum SolverChoice {
 }
 
 impl SolverChoice {
+    /// The largest CLF cost `k` Clarabel alone is given: above it its interior point cannot
+    /// resolve `k delta` against `|a|^2` (on Channel-v0, 68 of 300 random steps FAILED at
+    /// k = 3e11, returning `a_rl` uncorrected; none up to 1e11). [`SolverChoice::Auto`]'s
+    /// active set is exact far beyond it.
+    pub const CLARABEL_MAX_K: f64 = 1e11;
+
     /// The name [`SolverChoice::parse`] reads.
     pub fn name(self) -> &'static str {
         match self {
@@ -522,6 +528,16 @@ impl ShieldParams {
         positive("clf_gain", self.clf_gain)?;
         positive("c3", self.c3)?;
         positive("k", self.k)?;
+        if self.solver == SolverChoice::Clarabel && self.k > SolverChoice::CLARABEL_MAX_K {
+            return Err(ShieldError::Config(format!(
+                "k = {:e} with solver = \"clarabel\": above {:e} Clarabel alone fails on \
+                 many steps (each then returns a_rl uncorrected); use solver = \"auto\" \
+                 (its exact active set is measured to 1e16) or k <= {:e}",
+                self.k,
+                SolverChoice::CLARABEL_MAX_K,
+                SolverChoice::CLARABEL_MAX_K
+            )));
+        }
         positive("slack_penalty", self.slack_penalty)?;
         if let Some(h) = self.heading.filter(|h| self.pos.contains(h)) {
             return Err(ShieldError::Config(format!(
@@ -716,6 +732,19 @@ mod tests {
         let unbound = Spec::from_formula("F a").unwrap();
         let alone = good.validate(2, &unbound).unwrap_err().to_string();
         assert!(alone.contains("formula alone"), "{alone}");
+        // A CLF cost Clarabel alone cannot resolve; the same k under Auto is accepted.
+        let mut bad = good.clone().with_solver(SolverChoice::Clarabel);
+        bad.k = 3e11;
+        let msg = err(bad.clone(), 2);
+        assert!(
+            msg.contains("k = 3e11") && msg.contains("\"auto\""),
+            "{msg}"
+        );
+        bad.k = SolverChoice::CLARABEL_MAX_K;
+        bad.validate(2, &spec).unwrap();
+        bad.solver = SolverChoice::Auto;
+        bad.k = 1e16;
+        bad.validate(2, &spec).unwrap();
     }
 
     #[test]
