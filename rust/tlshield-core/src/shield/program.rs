@@ -320,6 +320,11 @@ impl Program {
             let form = orders.atoms[lit.atom];
             (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, form)
         });
+        if let Some(dt) = params.dt {
+            // The sample after next only where a second-order row reads it.
+            let model = model.filter(|_| orders.second_order());
+            self.sampled.predict(s, &self.f, model, drift, dt);
+        }
         for (source, predicate, sign, h, weight, form) in user.chain(kept) {
             self.weights.push(weight);
             self.sources.push(source);
@@ -335,14 +340,12 @@ impl Program {
                 // Rows that hold the sampled states (sampled.rs); a mixed barrier keeps the
                 // continuous-time rows.
                 (Form::First, Some(dt)) => {
-                    let r = self.sampled.first(barrier, s, &self.f, params, dt);
+                    let r = self.sampled.first(barrier, params, dt);
                     (&self.sampled.coefficients, Some(r))
                 }
                 (Form::Second, Some(dt)) => {
                     let model = model.expect("second-order rows have a model");
-                    let r = self
-                        .sampled
-                        .second(barrier, s, &self.f, model, drift, params, dt);
+                    let r = self.sampled.second(barrier, model, params, dt);
                     (&self.sampled.coefficients, Some(r))
                 }
                 _ if form.second() => {

@@ -75,46 +75,26 @@ impl Sampled {
         }
     }
 
-    /// The first-order row at `s` with drift-included `f`: fills
-    /// [`Sampled::coefficients`] and returns `r` (see the module docs).
-    pub(super) fn first(
+    /// Predicts this step's samples, once for every barrier: `y = s + dt f(s)` from the
+    /// drift-included `f`, and, under a model (whose drift `drift`, constant over the step,
+    /// moves the dimensions no input does), `z0 = y + dt f(y)` for the second-order rows.
+    pub(super) fn predict(
         &mut self,
-        b: Barrier<'_>,
         s: &[f64],
         f: &[f64],
-        params: &ShieldParams,
-        dt: f64,
-    ) -> f64 {
-        self.resize(s.len());
-        for ((y, &si), &fi) in self.y.iter_mut().zip(s).zip(f) {
-            *y = si + dt * fi;
-        }
-        b.predicate.gradient_into(&self.y, &mut self.coefficients);
-        self.coefficients.iter_mut().for_each(|c| *c *= b.sign);
-        let g1 = params.alpha * dt;
-        (b.shifted(&self.y, params.margin) - (1.0 - g1) * (b.h - params.margin)) / dt
-    }
-
-    /// The second-order row at `s` with drift-included `f` under `model`, whose drift
-    /// (`drift`, constant over the step) moves the dimensions no input does: fills
-    /// [`Sampled::coefficients`] and returns `r` (see the module docs).
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn second(
-        &mut self,
-        b: Barrier<'_>,
-        s: &[f64],
-        f: &[f64],
-        model: &Dynamics,
+        model: Option<&Dynamics>,
         drift: Option<&[f64]>,
-        params: &ShieldParams,
         dt: f64,
-    ) -> f64 {
+    ) {
         let n = s.len();
         self.resize(n);
-        self.gy.resize(n * model.inputs(), 0.0);
         for ((y, &si), &fi) in self.y.iter_mut().zip(s).zip(f) {
             *y = si + dt * fi;
         }
+        let Some(model) = model else {
+            return;
+        };
+        self.gy.resize(n * model.inputs(), 0.0);
         model.eval(&self.y, &mut self.fy, &mut self.gy);
         if let Some(d) = drift {
             self.fy.iter_mut().zip(d).for_each(|(f, d)| *f += d);
@@ -122,6 +102,26 @@ impl Sampled {
         for ((z, &y), &fy) in self.z.iter_mut().zip(&self.y).zip(&self.fy) {
             *z = y + dt * fy;
         }
+    }
+
+    /// The first-order row of barrier `b` at this step's [`Sampled::predict`]: fills
+    /// [`Sampled::coefficients`] and returns `r` (see the module docs).
+    pub(super) fn first(&mut self, b: Barrier<'_>, params: &ShieldParams, dt: f64) -> f64 {
+        b.predicate.gradient_into(&self.y, &mut self.coefficients);
+        self.coefficients.iter_mut().for_each(|c| *c *= b.sign);
+        let g1 = params.alpha * dt;
+        (b.shifted(&self.y, params.margin) - (1.0 - g1) * (b.h - params.margin)) / dt
+    }
+
+    /// The second-order row of barrier `b` at this step's [`Sampled::predict`] (made with
+    /// `model`): fills [`Sampled::coefficients`] and returns `r` (see the module docs).
+    pub(super) fn second(
+        &mut self,
+        b: Barrier<'_>,
+        model: &Dynamics,
+        params: &ShieldParams,
+        dt: f64,
+    ) -> f64 {
         b.predicate.gradient_into(&self.z, &mut self.grad);
         self.grad.iter_mut().for_each(|g| *g *= b.sign);
         model.jacobian_f_transpose_times(&self.y, &self.grad, &mut self.jt);
