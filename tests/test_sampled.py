@@ -58,6 +58,12 @@ def settings(sh: tlshield.Shield) -> dict:
     return sh.__reduce__()[1][3]
 
 
+def rebuilt(sh: tlshield.Shield, **changes: object) -> tlshield.Shield:
+    """The same shield with some keywords changed."""
+    spec, model = sh.__reduce__()[1][2]
+    return tlshield.Shield(spec, model, **{**settings(sh), **changes})
+
+
 def min_h(sh: tlshield.Shield, dt: float) -> float:
     """The double integrator parked on the disc's rim by the CLF at k = 1e4, routing off."""
     model = tlshield.DoubleIntegrator([0, 1], [2, 3])
@@ -95,3 +101,37 @@ def test_the_envs_stepped_by_the_model_pass_their_step() -> None:
     for sh, dt in cases:
         assert sh is not None
         assert settings(sh)["dt"] == dt
+
+
+def test_where_the_step_moves_nothing_a_barrier_reads_the_rows_are_the_continuous_ones() -> None:
+    """A driftless model (the single integrator, the unicycle's reference point) and no moving
+    obstacle: the predicted sample of a = 0 is the state itself, so the sampled rows are the
+    continuous-time rows bit for bit (FlatWorld-v0's and Channel-v0's shields with static
+    obstacles act as before); with the obstacles' drift they differ."""
+    rng = np.random.default_rng(4)
+    goal = tlshield.Spec("F g", {"g": GOAL})
+    flat = FlatWorldParams()
+    with_dt = flatworld_shield(flat, "rl_cbf_clf", goal)
+    assert with_dt is not None
+    without = rebuilt(with_dt, dt=None)
+    states = rng.uniform(-flat.size, flat.size, (400, 2))
+    a = rng.uniform(-1.0, 1.0, (400, 2))
+    qs = np.zeros(400, int)
+    np.testing.assert_array_equal(
+        with_dt.filter_batch(states, qs, a).action, without.filter_batch(states, qs, a).action
+    )
+    channel = ChannelParams()
+    sh = channel_shield(channel, "rl_cbf_clf")
+    assert sh is not None
+    plain = rebuilt(sh, dt=None)
+    s = rng.uniform(-1.0, 1.0, (400, 13)) * [4, 1.4, 3.1, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4]
+    s[:, 9:] = s[:, :2].repeat(2, axis=0).reshape(400, 4) + rng.uniform(-0.8, 0.8, (400, 4))
+    q = sh.automaton.step_batch(s, np.full(400, sh.automaton.initial))
+    a = rng.uniform(*channel.agent.rl_bounds, (400, 2))
+    np.testing.assert_array_equal(
+        sh.filter_batch(s, q, a).action, plain.filter_batch(s, q, a).action
+    )
+    drift = np.zeros_like(s)
+    drift[:, 9:] = rng.normal(scale=0.5, size=(400, 4))
+    moved = sh.filter_batch(s, q, a, drift).action != plain.filter_batch(s, q, a, drift).action
+    assert moved.any()

@@ -340,12 +340,12 @@ impl Program {
                 // Rows that hold the sampled states (sampled.rs); a mixed barrier keeps the
                 // continuous-time rows.
                 (Form::First, Some(dt)) => {
-                    let r = self.sampled.first(barrier, params, dt);
+                    let r = self.sampled.first(barrier, s, params, dt);
                     (&self.sampled.coefficients, Some(r))
                 }
                 (Form::Second, Some(dt)) => {
                     let model = model.expect("second-order rows have a model");
-                    let r = self.sampled.second(barrier, model, params, dt);
+                    let r = self.sampled.second(barrier, s, model, params, dt);
                     (&self.sampled.coefficients, Some(r))
                 }
                 _ if form.second() => {

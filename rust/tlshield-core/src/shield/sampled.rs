@@ -9,14 +9,17 @@
 //! - **First order** (discrete-time CBF, Agrawal & Sreenath): `~h(s') >= (1 - g1) ~h(s)`. With
 //!   `y = s + dt f(s)` the successor of `a = 0`, `s'(a) = y + dt g a`, and the row is that
 //!   condition linearised in `a` at 0, divided by `dt`:
-//!   `L = grad ~h(y) . g(s)`, `r = (~h(y) - (1 - g1) ~h(s)) / dt`.
-//! - **Second order** (discrete-time HOCBF, Xiong et al.): `psi(s) = (~h(y(s)) - (1 - g1)
-//!   ~h(s)) / dt >= 0` says the next sample keeps `~h >= (1 - g1) ~h`; the row keeps
+//!   `L = grad ~h(y) . g(s)`, `r = (~h(y) - ~h(s)) / dt + alpha ~h(s)` (written so that where
+//!   the step moves nothing `h` reads, `y` reads as `s`, the row is the continuous-time one
+//!   bit for bit).
+//! - **Second order** (discrete-time HOCBF, Xiong et al.): `psi(s) = (~h(y(s)) - ~h(s)) / dt +
+//!   alpha ~h(s) >= 0` says the next sample keeps `~h >= (1 - g1) ~h`; the row keeps
 //!   `psi(s') >= (1 - g2) psi(s)`. No input moves what `h` reads, so `~h(s')` is `~h(y)` whatever
 //!   `a` is, and `psi(s')` reads the sample after next, `z(a) = s' + dt f(s')`, with
 //!   `dz/da = dt (I + dt J_f(y)) g(s)` at `a = 0`. Divided by `dt`:
 //!   `L = grad ~h(z0)^T (I + dt J_f(y)) g(s) / dt` and
-//!   `r = (~h(z0) - (1 - g1) ~h(y)) / dt^2 - (1 - g2) psi(s) / dt`, `z0 = y + dt f(y)`.
+//!   `r = (psi_next - psi(s)) / dt + alpha2 psi(s)` with `psi_next = (~h(z0) - ~h(y)) / dt +
+//!   alpha ~h(y)` (`psi(s')` at `a = 0`), `z0 = y + dt f(y)`.
 //!
 //! Both tend to the continuous-time rows as `dt -> 0`. Exactness: where `~h` is convex along
 //! the step and the successor is affine in `a` (the outside of a disc or any half-space, under
@@ -106,11 +109,18 @@ impl Sampled {
 
     /// The first-order row of barrier `b` at this step's [`Sampled::predict`]: fills
     /// [`Sampled::coefficients`] and returns `r` (see the module docs).
-    pub(super) fn first(&mut self, b: Barrier<'_>, params: &ShieldParams, dt: f64) -> f64 {
+    pub(super) fn first(
+        &mut self,
+        b: Barrier<'_>,
+        s: &[f64],
+        params: &ShieldParams,
+        dt: f64,
+    ) -> f64 {
         b.predicate.gradient_into(&self.y, &mut self.coefficients);
         self.coefficients.iter_mut().for_each(|c| *c *= b.sign);
-        let g1 = params.alpha * dt;
-        (b.shifted(&self.y, params.margin) - (1.0 - g1) * (b.h - params.margin)) / dt
+        // The change over the step read by one code path (0 exactly when y = s).
+        let change = b.shifted(&self.y, params.margin) - b.shifted(s, params.margin);
+        change / dt + params.alpha * (b.h - params.margin)
     }
 
     /// The second-order row of barrier `b` at this step's [`Sampled::predict`] (made with
@@ -118,6 +128,7 @@ impl Sampled {
     pub(super) fn second(
         &mut self,
         b: Barrier<'_>,
+        s: &[f64],
         model: &Dynamics,
         params: &ShieldParams,
         dt: f64,
@@ -128,9 +139,10 @@ impl Sampled {
         for ((c, &g), &j) in self.coefficients.iter_mut().zip(&self.grad).zip(&self.jt) {
             *c = (g + dt * j) / dt;
         }
-        let (g1, g2) = (params.alpha * dt, params.alpha2.unwrap_or(0.0) * dt);
+        let alpha2 = params.alpha2.expect("Orders requires alpha2");
         let h_y = b.shifted(&self.y, params.margin);
-        let psi = (h_y - (1.0 - g1) * (b.h - params.margin)) / dt;
-        (b.shifted(&self.z, params.margin) - (1.0 - g1) * h_y) / (dt * dt) - (1.0 - g2) * psi / dt
+        let psi = (h_y - b.shifted(s, params.margin)) / dt + params.alpha * (b.h - params.margin);
+        let psi_next = (b.shifted(&self.z, params.margin) - h_y) / dt + params.alpha * h_y;
+        (psi_next - psi) / dt + alpha2 * psi
     }
 }
