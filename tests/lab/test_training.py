@@ -65,7 +65,7 @@ def test_evaluation(run: Path) -> None:
     assert result["trials"] == 3 and 0.0 <= result["success_rate"] <= 1.0
     assert result["violation_steps"] == 0
     # Give-ways by barrier and contacts the shield did not report are counted (issue 57).
-    assert isinstance(result["gave_way"], dict) and result["contacts_on_solved_steps"] == 0
+    assert isinstance(result["gave_way"], dict) and result["unreported_contacts"] == 0
     assert all("gave_way" in o for o in result["outcomes"])
     saved = json.loads((run / "evaluation.json").read_text())
     assert saved == result

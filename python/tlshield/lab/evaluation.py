@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from tlshield import Status
 from tlshield.envs import ENV_ID
 from tlshield.envs.channel import ChannelEnv
 from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
@@ -79,7 +78,7 @@ def rollouts(
             "return": 0.0,
             "cost": None,
             "gave_way": {},
-            "contacts_on_solved_steps": 0,
+            "unreported_contacts": 0,
         }
         for s in seeds
     ]
@@ -112,10 +111,10 @@ def rollouts(
             if collision is not None:
                 # Sticky: a trial that touched an obstacle once collided.
                 out["collision"] = bool(out["collision"]) or collision
-            if collision and info.get("shield", {}).get("status") == Status.SOLVED:
-                # A contact the shield did not report: its QP held every row (issue 57).
-                out["contacts_on_solved_steps"] += 1
             gave_way = info.get("shield", {}).get("gave_way")
+            if collision and "shield" in info and gave_way is None:
+                # A contact on a step where no barrier gave way: the shield did not report it.
+                out["unreported_contacts"] += 1
             if gave_way is not None:
                 name = str(gave_way[0])
                 out["gave_way"][name] = out["gave_way"].get(name, 0) + 1
@@ -221,7 +220,7 @@ def evaluate(
         "cost_mean": float(np.mean(costs)) if costs else None,
         # Per barrier, the evaluation steps on which it gave way (every trial).
         "gave_way": gave_way_totals(outcomes),
-        "contacts_on_solved_steps": sum(o["contacts_on_solved_steps"] for o in outcomes),
+        "unreported_contacts": sum(o["unreported_contacts"] for o in outcomes),
         "outcomes": outcomes,
     }
     Path(run, evaluation_file).write_text(json.dumps(result, indent=2))
