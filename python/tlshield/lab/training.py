@@ -379,7 +379,7 @@ def learn(run: Any) -> Path:
             model.save(folder / "model.zip")
             save_normalization(venv, folder / "normalization.json")
         record["wall_time"] = callback.elapsed()
-        # Per barrier, the training steps on which it gave way (issue 57, item 4).
+        # Per barrier, the training steps on which it gave way.
         record["gave_way"] = dict(sorted(callback.gave_way().items()))
         (folder / RUN_FILE).write_text(json.dumps(record, indent=2))
         venv.close()
