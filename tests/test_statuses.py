@@ -74,3 +74,14 @@ def test_a_singular_kkt_system_is_flagged_and_gives_the_identity_part_only() -> 
     ]
     np.testing.assert_allclose(ga[0], fd, atol=1e-6)
     assert abs(ga[0, 0]) < 1e-6  # the push into the wall has no effect
+
+
+def test_the_python_codes_are_the_cores_every_one() -> None:
+    """``Status`` and ``Solver`` take their values from the core's tables, and every code the
+    core has is a member (a new core status cannot come back as an unknown integer)."""
+    from tlshield import Solver
+    from tlshield._core import SOLVER_CODES, STATUS_CODES
+
+    assert {s.name.lower(): int(s) for s in Status} == STATUS_CODES
+    assert {s.name.lower(): int(s) for s in Solver} == SOLVER_CODES
+    assert sorted(STATUS_CODES.values()) == list(range(len(STATUS_CODES)))

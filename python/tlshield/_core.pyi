@@ -33,6 +33,8 @@ GRAD_FAILED: int
 GRAD_DEGENERATE: int
 GRAD_SINGULAR: int
 GRAD_ROUTED: int
+STATUS_CODES: dict[str, int]
+SOLVER_CODES: dict[str, int]
 
 class SpecError(ValueError):
     """A formula that does not parse or is not scTLTL, or predicates that do not fit it."""

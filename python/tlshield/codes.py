@@ -1,7 +1,9 @@
 """The shield's outcome codes, one encoding for ``Shield.filter`` and ``Shield.filter_batch``:
 ``FilterResult.status`` is a :class:`Status`, ``FilterBatch.status`` an array of its values
 (compare with ``batch.status == Status.RELAXED``). Both are :class:`enum.IntEnum`, so they
-serialise as plain integers. ``Shield.vjp_batch``'s per-row flags are :class:`GradFlag` bits."""
+serialise as plain integers. ``Shield.vjp_batch``'s per-row flags are :class:`GradFlag` bits.
+Every value is the core's own (``STATUS_CODES``, ``SOLVER_CODES`` and the ``GRAD_*`` bits),
+so the two cannot drift apart."""
 
 from enum import IntEnum, IntFlag
 
@@ -11,6 +13,8 @@ from tlshield._core import (
     GRAD_RELAXED,
     GRAD_ROUTED,
     GRAD_SINGULAR,
+    SOLVER_CODES,
+    STATUS_CODES,
 )
 
 __all__ = ["GradFlag", "Solver", "Status"]
@@ -20,16 +24,16 @@ class Status(IntEnum):
     """How the QP of one shield step ended."""
 
     #: Solved as posed.
-    SOLVED = 0
+    SOLVED = STATUS_CODES["solved"]
     #: The barriers could not all hold: solved with slack on the barrier rows (the largest is
     #: ``FilterResult.slack``).
-    RELAXED = 1
+    RELAXED = STATUS_CODES["relaxed"]
     #: No solution: zero corrections, the RL action unchanged.
-    FAILED = 2
+    FAILED = STATUS_CODES["failed"]
     #: The solver called the problem solved, but its answer broke a constraint by more than
     #: the shield's residual tolerance (1e-7 of the row's scale); the action is the relaxed
     #: problem's answer, which passed the same check.
-    INACCURATE = 3
+    INACCURATE = STATUS_CODES["inaccurate"]
 
     def __str__(self) -> str:
         return self.name.lower()
@@ -39,11 +43,11 @@ class Solver(IntEnum):
     """Which solver answered one shield step."""
 
     #: No QP (nothing to correct, or failed).
-    NONE = 0
+    NONE = SOLVER_CODES["none"]
     #: The dense active-set solver.
-    ACTIVE_SET = 1
+    ACTIVE_SET = SOLVER_CODES["active_set"]
     #: Clarabel (interior point).
-    CLARABEL = 2
+    CLARABEL = SOLVER_CODES["clarabel"]
 
     def __str__(self) -> str:
         return self.name.lower()

@@ -54,6 +54,17 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GRAD_DEGENERATE", tlshield_core::shield::GRAD_DEGENERATE)?;
     m.add("GRAD_SINGULAR", tlshield_core::shield::GRAD_SINGULAR)?;
     m.add("GRAD_ROUTED", tlshield_core::shield::GRAD_ROUTED)?;
+    // The outcome codes, name -> code (`tlshield.codes.Status` and `Solver` read them).
+    let statuses = pyo3::types::PyDict::new(m.py());
+    for s in tlshield_core::shield::Status::ALL {
+        statuses.set_item(s.name(), s as u8)?;
+    }
+    m.add("STATUS_CODES", statuses)?;
+    let solvers = pyo3::types::PyDict::new(m.py());
+    for s in tlshield_core::shield::SolvedBy::ALL {
+        solvers.set_item(s.name(), s as u8)?;
+    }
+    m.add("SOLVER_CODES", solvers)?;
     // The paper's task-reward defaults (Monitor, and the Python trackers read them).
     m.add("DEFAULT_C_R", tlshield_core::monitor::DEFAULT_C_R)?;
     m.add(

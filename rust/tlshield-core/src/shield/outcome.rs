@@ -21,6 +21,14 @@ pub enum Status {
 }
 
 impl Status {
+    /// Every status, in code order (the bindings build Python's `Status` from it).
+    pub const ALL: [Status; 4] = [
+        Status::Solved,
+        Status::Relaxed,
+        Status::Failed,
+        Status::Inaccurate,
+    ];
+
     /// `"solved"`, `"relaxed"`, `"failed"` or `"inaccurate"`.
     pub fn name(self) -> &'static str {
         match self {
@@ -45,6 +53,9 @@ pub enum SolvedBy {
 }
 
 impl SolvedBy {
+    /// Every solver, in code order (the bindings build Python's `Solver` from it).
+    pub const ALL: [SolvedBy; 3] = [SolvedBy::Nothing, SolvedBy::ActiveSet, SolvedBy::Clarabel];
+
     /// `"none"`, `"active_set"` or `"clarabel"`.
     pub fn name(self) -> &'static str {
         match self {
