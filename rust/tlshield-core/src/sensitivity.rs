@@ -68,14 +68,10 @@ pub struct QpAdjointSolver {
 }
 
 impl QpAdjointSolver {
-    /// An empty workspace.
+    /// An empty workspace (the shield's gradient keeps one per workspace, by `Default`).
+    #[cfg(test)]
     pub fn new() -> Self {
         Self::default()
-    }
-
-    /// The active rows the last [`vjp`](Self::vjp) used.
-    pub fn active(&self) -> &[usize] {
-        &self.active
     }
 
     /// `dh = dL/dh` (length rows) and `dg = dL/dG` (rows x n, row-major) for `dx = dL/dx` at
@@ -83,6 +79,7 @@ impl QpAdjointSolver {
     /// them). `implied` names a row the others imply whenever it is tight (see the module
     /// docs). The slices must have the problem's sizes. [`factor`](Self::factor) then
     /// [`apply`](Self::apply), for one upstream gradient.
+    #[cfg(test)]
     #[allow(clippy::too_many_arguments)]
     pub fn vjp(
         &mut self,

@@ -10,7 +10,7 @@ use crate::robustness::{Program, Scratch, Trajectory, TrajectoryBatch};
 use crate::validate::check_finite;
 
 /// A formula bound to the predicates that give its atoms meaning; evaluates robustness and
-/// Boolean satisfaction of trajectories (see [`crate::robustness`]).
+/// Boolean satisfaction of trajectories (see [`Spec::robustness`]).
 #[derive(Debug, Clone)]
 pub struct Spec {
     formula: Formula,

@@ -112,7 +112,7 @@ pub trait World: Send {
     fn observe_row(&self, monitor: &Monitor, num_states: usize, out: &mut [f64]);
 }
 
-/// Steps many worlds in one call, in parallel past [`crate::parallel::MIN_ROWS`] rows: row `i`
+/// Steps many worlds in one call, in parallel past [`crate::shield::PARALLEL_MIN_ROWS`] rows: row `i`
 /// steps `worlds[i]` with `actions[2i..2i + 2]` and `monitors[i]`, shielded by `shield`, and
 /// writes its observation into row `i` of `obs` (`width` values: the observation, then the
 /// one-hot FSA state). Rows with `active[i]` false are left alone (`None`, observation row

@@ -261,7 +261,7 @@ pub struct ShieldParams {
     /// Extra user barriers (the paper's `h(s)`), kept positive, with their names.
     pub barriers: Vec<Barrier>,
     /// State dimensions the CLF drives to the goal. Empty (the default): the model's position
-    /// ([`Structure::position`](crate::dynamics::Structure::position)), or
+    /// ([`Structure::position`](crate::Structure::position)), or
     /// [`ShieldParams::DEFAULT_POS`] for a model without one, filled in when the shield is
     /// built.
     pub pos: Vec<usize>,
