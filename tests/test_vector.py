@@ -139,3 +139,44 @@ def test_step_worlds_takes_one_kind_of_world() -> None:
             np.zeros((2, 2)),
             np.zeros((2, 24)),
         )
+
+
+def test_every_bundled_env_has_a_vector_entry_point() -> None:
+    """``gymnasium.make_vec`` builds every bundled env's vector form from its registration:
+    the core-stepped envs' ``WorldVectorEnv`` (the same as ``tlshield.vector.make``, step for
+    step), a ``SyncVectorEnv`` for the envs written in Python (FlatWorld-v0, Safety-Gym's)."""
+    import gymnasium as gym
+
+    from tlshield.envs import FLATWORLD_ID, SAFETY_GYM_IDS
+
+    for env_id, kind in (
+        ("tlshield/Channel-v0", tlshield.vector.ChannelVectorEnv),
+        ("tlshield/PointMass-v0", tlshield.vector.PointMassVectorEnv),
+    ):
+        assert gym.spec(env_id).vector_entry_point is not None
+        ours, theirs = (
+            gym.make_vec(env_id, 3, config="rl_cbf_clf"),
+            tlshield.vector.make(env_id, 3, config="rl_cbf_clf"),
+        )
+        assert isinstance(ours, kind)
+        np.testing.assert_array_equal(ours.reset(seed=5)[0], theirs.reset(seed=5)[0])
+        a = np.tile([0.5, 0.1], (3, 1))
+        for _ in range(20):
+            np.testing.assert_array_equal(ours.step(a)[0], theirs.step(a)[0])
+    flat = gym.make_vec(FLATWORLD_ID, 2)
+    assert isinstance(flat, gym.vector.SyncVectorEnv) and flat.num_envs == 2
+    single = gym.make(FLATWORLD_ID)
+    np.testing.assert_array_equal(flat.reset(seed=1)[0][0], single.reset(seed=1)[0])
+    for env_id in SAFETY_GYM_IDS:
+        assert gym.spec(env_id).vector_entry_point == "tlshield.vector:safety_goal_vector_env"
+
+
+def test_a_safety_gym_env_vectorises_through_its_entry_point() -> None:
+    import gymnasium as gym
+
+    venv = gym.make_vec("tlshield/SafetyPointGoal1-v0", 2)
+    obs, _ = venv.reset(seed=0)
+    single = gym.make("tlshield/SafetyPointGoal1-v0")
+    np.testing.assert_array_equal(obs[1], single.reset(seed=1)[0])
+    venv.close()
+    single.close()

@@ -297,17 +297,42 @@ class PointMassVectorEnv(WorldVectorEnv):
         super().__init__(PointMassBatch(num_envs, config, **kwargs))
 
 
+def _sync(env_id: str, num_envs: int, **kwargs: Any) -> gym.vector.SyncVectorEnv:
+    """``num_envs`` copies of ``env_id`` side by side in Gymnasium's ``SyncVectorEnv``."""
+    _check_count(num_envs)
+    return gym.vector.SyncVectorEnv([lambda: gym.make(env_id, **kwargs)] * num_envs)
+
+
+def flatworld_vector_env(num_envs: int, **kwargs: Any) -> gym.vector.SyncVectorEnv:
+    """``tlshield/FlatWorld-v0``'s vector entry point (``gymnasium.make_vec``): its envs side
+    by side in a ``SyncVectorEnv`` (written in Python as a user's env would be, it has no core
+    world)."""
+    from tlshield.envs import FLATWORLD_ID
+
+    return _sync(FLATWORLD_ID, num_envs, **kwargs)
+
+
+def safety_goal_vector_env(num_envs: int, task: str, **kwargs: Any) -> gym.vector.SyncVectorEnv:
+    """The Safety-Gymnasium envs' vector entry point (``gymnasium.make_vec``): ``num_envs``
+    copies of ``tlshield/<task>`` side by side in a ``SyncVectorEnv``."""
+    return _sync(f"tlshield/{task}", num_envs, **kwargs)
+
+
 def make(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
     """A Gymnasium vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
-    ``tlshield/Channel-v0`` or ``tlshield/PointMass-v0`` (FlatWorld-v0, written in Python as a
-    user's env would be, has no core world: use Gymnasium's ``SyncVectorEnv``). For
-    Stable-Baselines3 use :func:`tlshield.sb3.make_vec_env`."""
-    from tlshield.envs import ENV_ID, POINT_MASS_ID
+    an env whose registered ``vector_entry_point`` is a core world (``tlshield/Channel-v0``,
+    ``tlshield/PointMass-v0``). Other envs, FlatWorld-v0 among them (written in Python as a
+    user's env would be), are refused: ``gymnasium.make_vec`` gives them a ``SyncVectorEnv``.
+    For Stable-Baselines3 use :func:`tlshield.sb3.make_vec_env`."""
+    import tlshield.envs  # noqa: F401  (registers the bundled envs)
 
-    kinds = {ENV_ID: ChannelVectorEnv, POINT_MASS_ID: PointMassVectorEnv}
-    if env_id not in kinds:
+    spec = gym.spec(env_id)
+    entry = spec.vector_entry_point
+    creator = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    if not (isinstance(creator, type) and issubclass(creator, WorldVectorEnv)):
         raise ValueError(
-            f"env {env_id!r}: tlshield.vector.make steps {ENV_ID} and {POINT_MASS_ID} in the "
-            "core; for other envs use gymnasium.vector.SyncVectorEnv"
+            f"env {env_id!r}: tlshield.vector.make steps the envs the core steps (registered "
+            "with a WorldVectorEnv as their vector_entry_point); for other envs use "
+            "gymnasium.make_vec (a SyncVectorEnv)"
         )
-    return kinds[env_id](num_envs, config, **kwargs)
+    return creator(num_envs, config, **kwargs)

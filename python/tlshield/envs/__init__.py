@@ -20,11 +20,23 @@ POINT_MASS_ID = "tlshield/PointMass-v0"
 FLATWORLD_ID = "tlshield/FlatWorld-v0"
 
 if ENV_ID not in gym.registry:
-    gym.register(id=ENV_ID, entry_point="tlshield.envs.channel:ChannelEnv")
+    gym.register(
+        id=ENV_ID,
+        entry_point="tlshield.envs.channel:ChannelEnv",
+        vector_entry_point="tlshield.vector:ChannelVectorEnv",
+    )
 if POINT_MASS_ID not in gym.registry:
-    gym.register(id=POINT_MASS_ID, entry_point="tlshield.envs.point_mass:make_point_mass")
+    gym.register(
+        id=POINT_MASS_ID,
+        entry_point="tlshield.envs.point_mass:make_point_mass",
+        vector_entry_point="tlshield.vector:PointMassVectorEnv",
+    )
 if FLATWORLD_ID not in gym.registry:
-    gym.register(id=FLATWORLD_ID, entry_point="tlshield.envs.flatworld:make_flatworld")
+    gym.register(
+        id=FLATWORLD_ID,
+        entry_point="tlshield.envs.flatworld:make_flatworld",
+        vector_entry_point="tlshield.vector:flatworld_vector_env",
+    )
 #: Safety-Gymnasium's tasks, shielded (``make safety-gym`` installs their stack; registering
 #: imports none of it).
 SAFETY_GYM_IDS = (
@@ -37,6 +49,7 @@ for _id in SAFETY_GYM_IDS:
         gym.register(
             id=_id,
             entry_point="tlshield.envs.safety_gym:make_safety_goal",
+            vector_entry_point="tlshield.vector:safety_goal_vector_env",
             kwargs={"task": _id.removeprefix("tlshield/")},
         )
 
