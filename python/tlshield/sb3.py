@@ -153,9 +153,10 @@ class PointMassVecEnv(WorldVecEnv):  # type: ignore[misc]
 
 
 def make_vec_env(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
-    """An SB3 ``VecEnv`` of ``num_envs`` copies of a bundled ``env_id`` stepped in one core
-    call (Channel-v0, PointMass-v0); None for any other env (use SB3's ``DummyVecEnv``)."""
-    from tlshield.envs import ENV_ID, POINT_MASS_ID
+    """An SB3 ``VecEnv`` of ``num_envs`` copies of an ``env_id`` the core steps (registered
+    with a core world as its ``vector_entry_point``: Channel-v0, PointMass-v0), stepped in one
+    core call; None for any other env (use SB3's ``DummyVecEnv``)."""
+    from tlshield.vector import world_vector_class
 
-    kinds = {ENV_ID: ChannelVecEnv, POINT_MASS_ID: PointMassVecEnv}
-    return kinds[env_id](num_envs, config, **kwargs) if env_id in kinds else None
+    kind = world_vector_class(env_id)
+    return None if kind is None else WorldVecEnv(kind.BATCH(num_envs, config, **kwargs))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numbers
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import gymnasium as gym
 import numpy as np
@@ -224,6 +224,10 @@ class WorldVectorEnv(IndependentCopies, gym.vector.VectorEnv):
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}
 
+    #: The core batch of a bundled env's vector class, built from ``(num_envs, config,
+    #: **kwargs)`` (set by each subclass; :func:`tlshield.sb3.make_vec_env` steps the same).
+    BATCH: ClassVar[Callable[..., WorldBatch]]
+
     def __init__(self, batch: WorldBatch) -> None:
         self.batch = batch
         num_envs = len(batch.envs)
@@ -285,16 +289,22 @@ class ChannelVectorEnv(WorldVectorEnv):
     """``tlshield/Channel-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
     :class:`WorldVectorEnv`)."""
 
+    #: The core batch it steps (:func:`tlshield.sb3.make_vec_env` steps the same).
+    BATCH = ChannelBatch
+
     def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
-        super().__init__(ChannelBatch(num_envs, config, **kwargs))
+        super().__init__(self.BATCH(num_envs, config, **kwargs))
 
 
 class PointMassVectorEnv(WorldVectorEnv):
     """``tlshield/PointMass-v0`` as a Gymnasium ``VectorEnv`` stepped in one core call (see
     :class:`WorldVectorEnv`)."""
 
+    #: The core batch it steps (:func:`tlshield.sb3.make_vec_env` steps the same).
+    BATCH = PointMassBatch
+
     def __init__(self, num_envs: int, config: str = FULL, **kwargs: Any) -> None:
-        super().__init__(PointMassBatch(num_envs, config, **kwargs))
+        super().__init__(self.BATCH(num_envs, config, **kwargs))
 
 
 def _sync(env_id: str, num_envs: int, **kwargs: Any) -> gym.vector.SyncVectorEnv:
@@ -318,21 +328,29 @@ def safety_goal_vector_env(num_envs: int, task: str, **kwargs: Any) -> gym.vecto
     return _sync(f"tlshield/{task}", num_envs, **kwargs)
 
 
+def world_vector_class(env_id: str) -> type[WorldVectorEnv] | None:
+    """The core-stepped vector env class ``env_id`` is registered with as its
+    ``vector_entry_point``, or None (an env written in Python, or none registered)."""
+    import tlshield.envs  # noqa: F401  (registers the bundled envs)
+
+    entry = gym.spec(env_id).vector_entry_point
+    creator = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    is_world = isinstance(creator, type) and issubclass(creator, WorldVectorEnv)
+    return cast(type[WorldVectorEnv], creator) if is_world else None
+
+
 def make(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
     """A Gymnasium vector env of ``num_envs`` copies of ``env_id`` stepped in one core call:
     an env whose registered ``vector_entry_point`` is a core world (``tlshield/Channel-v0``,
     ``tlshield/PointMass-v0``). Other envs, FlatWorld-v0 among them (written in Python as a
     user's env would be), are refused: ``gymnasium.make_vec`` gives them a ``SyncVectorEnv``.
     For Stable-Baselines3 use :func:`tlshield.sb3.make_vec_env`."""
-    import tlshield.envs  # noqa: F401  (registers the bundled envs)
-
-    spec = gym.spec(env_id)
-    entry = spec.vector_entry_point
-    creator = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
-    if not (isinstance(creator, type) and issubclass(creator, WorldVectorEnv)):
+    kind = world_vector_class(env_id)
+    if kind is None:
         raise ValueError(
             f"env {env_id!r}: tlshield.vector.make steps the envs the core steps (registered "
             "with a WorldVectorEnv as their vector_entry_point); for other envs use "
             "gymnasium.make_vec (a SyncVectorEnv)"
         )
-    return creator(num_envs, config, **kwargs)
+    # Each bundled class is built from (num_envs, config, **kwargs).
+    return cast(Callable[..., WorldVectorEnv], kind)(num_envs, config, **kwargs)

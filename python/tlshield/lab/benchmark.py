@@ -35,7 +35,7 @@ import numpy as np
 from tlshield.envs import FLATWORLD_ID
 from tlshield.envs.params import FULL, check_config
 from tlshield.lab.evaluation import rollouts
-from tlshield.lab.presets import PRESETS
+from tlshield.lab.presets import PRESETS, updates_for
 from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
 
 #: The columns of ``flatworld.csv``.
@@ -158,13 +158,6 @@ def random_policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return rng.uniform(-1.0, 1.0, size=(len(obs), 2))
 
 
-def updates_for(steps: int) -> int:
-    """PPO updates of the preset that cover ``steps`` environment steps (rounded up, as SB3's
-    ``learn(total_timesteps=steps)`` does)."""
-    spec = PRESETS[PRESET]
-    return math.ceil(steps / (spec["n_envs"] * spec["ppo"]["n_steps"]))
-
-
 def training_counts(folder: Path) -> dict[str, int]:
     """A finished training run's counts from its ``metrics.csv``: failures (trap entries plus
     box exits, FlatWorld's ``info["violation"]``) and environment steps."""
@@ -187,7 +180,7 @@ def job(
     run = prepare(
         config,
         seed,
-        updates_for(steps),
+        updates_for(steps, PRESET),
         folder,
         progress=False,
         preset=PRESET,

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from tlshield.lab.presets import updates_for
 from tlshield.lab.seeds import check_block, check_seeds
 
 #: The default budget per env (PPO steps per agent).
@@ -125,14 +125,6 @@ OMNISAFE = {
 }
 
 
-def updates_for(steps: int) -> int:
-    """The PPO updates that take at least ``steps`` environment steps under :data:`PRESET`."""
-    from tlshield.lab.presets import PRESETS
-
-    spec = PRESETS[PRESET]
-    return math.ceil(steps / (spec["n_envs"] * spec["ppo"]["n_steps"]))
-
-
 def train_and_evaluate(
     env: str, variant: str, seed: int, steps: int, episodes: int, folder: Path
 ) -> None:
@@ -153,7 +145,7 @@ def train_and_evaluate(
     run = prepare(
         v.config,
         seed,
-        updates_for(steps),
+        updates_for(steps, PRESET),
         folder,
         progress=False,
         preset=PRESET,

@@ -4,6 +4,7 @@ the measurements)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 #: PPO updates of a training run (``tlshield train`` and ``tlshield reproduce``; 1,024 steps
@@ -141,3 +142,10 @@ def clf_scale(schedule: str, progress: float, final: float) -> float:
     if schedule == "exponential":
         return float(final**progress)
     raise ValueError(f"clf schedule {schedule!r}: expected one of {SCHEDULES}")
+
+
+def updates_for(steps: int, preset: str) -> int:
+    """The PPO updates of ``preset`` that cover ``steps`` environment steps (rounded up, as
+    SB3's ``learn(total_timesteps=steps)`` does)."""
+    spec = PRESETS[preset]
+    return math.ceil(steps / (spec["n_envs"] * spec["ppo"]["n_steps"]))
