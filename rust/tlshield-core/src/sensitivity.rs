@@ -105,9 +105,53 @@ impl QpAdjointSolver {
         z: &[f64],
         implied: Option<usize>,
     ) -> Result<Adjoint, Singular> {
-        let (n, rows) = (qp.vars(), qp.rows());
-        debug_assert!(x.len() == n && z.len() == rows);
-        let mut adjoint = Adjoint::default();
+        let n = qp.vars();
+        debug_assert!(x.len() == n && z.len() == qp.rows());
+        let mut adjoint = Adjoint {
+            degenerate: self.choose_active(qp, x, z, implied),
+        };
+
+        // K = [P G_A'; G_A 0]; the multipliers from K [x; z_A] = [-c; h_A], then
+        // K [w; omega] = [dx; 0].
+        let na = self.active.len();
+        let d = n + na;
+        self.kkt.clear();
+        self.kkt.resize(d * d, 0.0);
+        for j in 0..n {
+            self.kkt[j * d + j] = qp.p_diag[j];
+        }
+        for (k, &i) in self.active.iter().enumerate() {
+            for j in 0..n {
+                let g = qp.g[i * n + j];
+                self.kkt[(n + k) * d + j] = g;
+                self.kkt[j * d + n + k] = g;
+            }
+        }
+        self.factor_kkt(d)?;
+        self.sol.clear();
+        self.sol.extend(qp.c.iter().map(|c| -c));
+        self.sol.extend(self.active.iter().map(|&i| qp.h[i]));
+        self.solve(d);
+        self.multipliers.clear();
+        self.multipliers.extend_from_slice(&self.sol[n..]);
+        let lmax = self.multipliers.iter().fold(1.0_f64, |a, &b| a.max(b));
+        adjoint.degenerate |= self.multipliers.iter().any(|&l| l <= MULTIPLIER_TOL * lmax);
+        Ok(adjoint)
+    }
+
+    /// Chooses the active rows at `x` (multipliers `z`): the tight rows, `implied` last, then
+    /// by decreasing multiplier, keeping those independent of the ones before
+    /// (Gram-Schmidt, twice for stability). Returns whether a tight row was dropped as
+    /// dependent (other than `implied`).
+    fn choose_active(
+        &mut self,
+        qp: &DenseQp,
+        x: &[f64],
+        z: &[f64],
+        implied: Option<usize>,
+    ) -> bool {
+        let n = qp.vars();
+        let mut degenerate = false;
         let zmax = z.iter().fold(1.0_f64, |a, &b| a.max(b));
         let ztol = MULTIPLIER_TOL * zmax;
 
@@ -149,39 +193,14 @@ impl QpAdjointSolver {
             let rest = dot(&self.basis[start..], &self.basis[start..]).sqrt();
             if rest < DEPENDENT {
                 self.basis.truncate(start);
-                adjoint.degenerate |= Some(i) != implied;
+                degenerate |= Some(i) != implied;
                 continue;
             }
             self.basis[start..].iter_mut().for_each(|v| *v /= rest);
             self.active.push(i);
         }
 
-        // K = [P G_A'; G_A 0]; the multipliers from K [x; z_A] = [-c; h_A], then
-        // K [w; omega] = [dx; 0].
-        let na = self.active.len();
-        let d = n + na;
-        self.kkt.clear();
-        self.kkt.resize(d * d, 0.0);
-        for j in 0..n {
-            self.kkt[j * d + j] = qp.p_diag[j];
-        }
-        for (k, &i) in self.active.iter().enumerate() {
-            for j in 0..n {
-                let g = qp.g[i * n + j];
-                self.kkt[(n + k) * d + j] = g;
-                self.kkt[j * d + n + k] = g;
-            }
-        }
-        self.factor_kkt(d)?;
-        self.sol.clear();
-        self.sol.extend(qp.c.iter().map(|c| -c));
-        self.sol.extend(self.active.iter().map(|&i| qp.h[i]));
-        self.solve(d);
-        self.multipliers.clear();
-        self.multipliers.extend_from_slice(&self.sol[n..]);
-        let lmax = self.multipliers.iter().fold(1.0_f64, |a, &b| a.max(b));
-        adjoint.degenerate |= self.multipliers.iter().any(|&l| l <= MULTIPLIER_TOL * lmax);
-        Ok(adjoint)
+        degenerate
     }
 
     /// `dh = dL/dh` and `dg = dL/dG` for `dx = dL/dx` with the factors of the last

@@ -163,36 +163,7 @@ impl Shield {
         params.broadcast(m)?;
         params.validate(m, automaton.spec())?;
         let spec = automaton.spec();
-        let mut min_dim = spec
-            .predicates()
-            .iter()
-            .chain(params.barriers.iter().map(|b| &b.predicate))
-            .map(Predicate::min_dim)
-            .max()
-            .unwrap_or(0)
-            .max(params.pos.iter().max().map_or(0, |p| p + 1))
-            .max(params.heading.map_or(0, |h| h + 1))
-            .max(
-                params
-                    .disturbance
-                    .iter()
-                    .map(|&(d, _)| d + 1)
-                    .max()
-                    .unwrap_or(0),
-            );
-        if let Some(d) = &dynamics {
-            min_dim = min_dim.max(d.min_dim());
-        }
-        if let Some(c) = &custom {
-            if min_dim > c.state_len() {
-                return Err(ShieldError::Config(format!(
-                    "the shield reads {min_dim} state values (barriers, predicates, pos) but \
-                     the model {c} has {}",
-                    c.state_len()
-                )));
-            }
-            min_dim = c.state_len();
-        }
+        let min_dim = min_dim(spec, &params, dynamics.as_ref(), custom.as_ref())?;
         // Where a predicate fixes the state length, an index past it can never be read: say so
         // here rather than at the first filter call.
         let fixed = spec
@@ -486,6 +457,38 @@ impl Shield {
         });
     }
 
+    /// Solves the assembled `ws.qp`; when its answer is not a checked solution and there are
+    /// barrier rows, the relaxed problem in the declared give-way order: slack on the first
+    /// level's rows, then on those and the next level's, until one is solved (`give_way.rs`).
+    /// Returns the status, the solver and whether `ws.solvers.solution` passed the check.
+    fn solve(&self, ws: &mut Workspace, a_rl: &[f64], relaxable: bool) -> (Status, SolvedBy, bool) {
+        let params = &self.params;
+        let mut by = ws.solvers.solve(params.solver, &ws.qp);
+        let mut checked = ws.solvers.solution.status == QpStatus::Solved
+            && within_tolerance(&ws.qp, &ws.solvers.solution.x);
+        if checked || !relaxable {
+            return (Status::Solved, by, checked);
+        }
+        let status = if ws.solvers.solution.status == QpStatus::Solved {
+            Status::Inaccurate
+        } else {
+            Status::Relaxed
+        };
+        let program = &ws.program;
+        let mut level = self.give_way.next(program.sources(), None);
+        while let Some(l) = level {
+            program.assemble(params, a_rl, &mut ws.qp, Some((&self.give_way, l)));
+            by = ws.solvers.solve(params.solver, &ws.qp);
+            checked = ws.solvers.solution.status == QpStatus::Solved
+                && within_tolerance(&ws.qp, &ws.solvers.solution.x);
+            level = match checked {
+                true => None,
+                false => self.give_way.next(program.sources(), Some(l)),
+            };
+        }
+        (status, by, checked)
+    }
+
     /// The shield step on validated input: `ws.qp` always, and the result in `ws.out` unless
     /// only the problem is wanted.
     fn step(&self, ws: &mut Workspace, call: Call<'_>, stage: Stage) {
@@ -531,30 +534,8 @@ impl Shield {
         if stage == Stage::Problem {
             return;
         }
-        let mut status = Status::Solved;
-        let mut by = ws.solvers.solve(params.solver, &ws.qp);
-        let mut checked = ws.solvers.solution.status == QpStatus::Solved
-            && within_tolerance(&ws.qp, &ws.solvers.solution.x);
-        if !checked && barriers > 0 {
-            status = if ws.solvers.solution.status == QpStatus::Solved {
-                Status::Inaccurate
-            } else {
-                Status::Relaxed
-            };
-            // The declared give-way order: slack on the first level's rows, then on those
-            // and the next level's, until the relaxed problem is solved (give_way.rs).
-            let mut level = self.give_way.next(program.sources(), None);
-            while let Some(l) = level {
-                program.assemble(params, a_rl, &mut ws.qp, Some((&self.give_way, l)));
-                by = ws.solvers.solve(params.solver, &ws.qp);
-                checked = ws.solvers.solution.status == QpStatus::Solved
-                    && within_tolerance(&ws.qp, &ws.solvers.solution.x);
-                level = match checked {
-                    true => None,
-                    false => self.give_way.next(program.sources(), Some(l)),
-                };
-            }
-        }
+        let (status, by, checked) = self.solve(ws, a_rl, barriers > 0);
+        let program = &ws.program;
         let out = &mut ws.out;
         let x = &ws.solvers.solution.x;
         if !checked {
@@ -583,6 +564,44 @@ impl Shield {
         }
         out.status = status;
         out.solver = by;
+    }
+}
+
+/// The smallest state length every part of a shield reads: the predicates, the barriers,
+/// `pos`, the heading, the disturbance bounds and the model (a user's model fixes it, and
+/// must cover what the rest reads).
+fn min_dim(
+    spec: &crate::spec::Spec,
+    params: &ShieldParams,
+    dynamics: Option<&Dynamics>,
+    custom: Option<&CustomModel>,
+) -> Result<usize, ShieldError> {
+    let read = spec
+        .predicates()
+        .iter()
+        .chain(params.barriers.iter().map(|b| &b.predicate))
+        .map(Predicate::min_dim)
+        .max()
+        .unwrap_or(0)
+        .max(params.pos.iter().max().map_or(0, |p| p + 1))
+        .max(params.heading.map_or(0, |h| h + 1))
+        .max(
+            params
+                .disturbance
+                .iter()
+                .map(|&(d, _)| d + 1)
+                .max()
+                .unwrap_or(0),
+        )
+        .max(dynamics.map_or(0, Dynamics::min_dim));
+    match custom {
+        Some(c) if read > c.state_len() => Err(ShieldError::Config(format!(
+            "the shield reads {read} state values (barriers, predicates, pos) but the model {c} \
+             has {}",
+            c.state_len()
+        ))),
+        Some(c) => Ok(c.state_len()),
+        None => Ok(read),
     }
 }
 

@@ -518,6 +518,14 @@ impl ShieldParams {
     /// corrections can cancel, `pos` distinct dimensions matching the goal balls, and a spec
     /// with predicates. Each failure names the parameter ([`ShieldError::Config`]).
     pub fn validate(&self, m: usize, spec: &Spec) -> Result<(), ShieldError> {
+        self.check_gains()?;
+        self.check_settings()?;
+        self.check_boxes(m)?;
+        self.check_layout(spec)
+    }
+
+    /// The gains: each finite and > 0, `dt` with them, `k` within what the solver resolves.
+    fn check_gains(&self) -> Result<(), ShieldError> {
         positive("alpha", self.alpha)?;
         if let Some(a2) = self.alpha2 {
             positive("alpha2", a2)?;
@@ -538,6 +546,11 @@ impl ShieldParams {
                 SolverChoice::CLARABEL_MAX_K
             )));
         }
+        Ok(())
+    }
+
+    /// The weights, the routing clearance, the margin and the disturbance bounds.
+    fn check_settings(&self) -> Result<(), ShieldError> {
         positive("slack_penalty", self.slack_penalty)?;
         if let Some(h) = self.heading.filter(|h| self.pos.contains(h)) {
             return Err(ShieldError::Config(format!(
@@ -574,6 +587,12 @@ impl ShieldParams {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The barriers' slack weights and every box of `m` values (the RL box inside what the
+    /// corrections can cancel).
+    fn check_boxes(&self, m: usize) -> Result<(), ShieldError> {
         for b in &self.barriers {
             positive(
                 &format!("slack weight of barrier {:?}", b.name),
@@ -599,6 +618,11 @@ impl ShieldParams {
                 check_cover(self, rl)?;
             }
         }
+        Ok(())
+    }
+
+    /// `pos` distinct dimensions matching the goal balls, and a spec with predicates.
+    fn check_layout(&self, spec: &Spec) -> Result<(), ShieldError> {
         if self.pos.is_empty() || (1..self.pos.len()).any(|i| self.pos[..i].contains(&self.pos[i]))
         {
             return Err(ShieldError::Config(format!(

@@ -25,6 +25,7 @@ use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
 use crate::linalg::dot;
 use crate::monitor::Monitor;
+use crate::predicate::Predicate;
 use crate::qp::DenseQp;
 use crate::route::{is_disc, Router, Routing};
 
@@ -148,6 +149,81 @@ fn tightening(coefficients: &[f64], disturbance: &[(usize, f64)]) -> f64 {
         .sum()
 }
 
+/// The continuous-time second-order (HOCBF) row of a barrier on `predicate` (signed by
+/// `sign`) with `grad h` and `f` given: leaves `grad psi_1 = H f + J_f^T grad h + alpha grad h`
+/// in `hf` (so `Lg psi_1 = hf^T g`; `alpha Lg h` is 0 at relative degree 2, not where it is
+/// mixed) and returns `r = Lf psi_1 + alpha2 psi_1` for `psi_1 = Lf h + psi`, `psi = alpha (h -
+/// margin)`, with `Lf psi_1 = f^T H f + grad h . J_f f + alpha Lf h`. `jf` and `jt` are
+/// scratch.
+fn second_order(
+    (hf, jf, jt): (&mut [f64], &mut [f64], &mut [f64]),
+    (grad, f): (&[f64], &[f64]),
+    predicate: &Predicate,
+    sign: f64,
+    at: Site<'_>,
+    psi: f64,
+) -> f64 {
+    let Site {
+        params,
+        model,
+        fg,
+        s,
+        ..
+    } = at;
+    let lf = dot(grad, f);
+    predicate.hessian_times(s, f, hf);
+    hf.iter_mut().for_each(|v| *v *= sign);
+    jacobian_times(model, fg, s, f, jf, false);
+    jacobian_times(model, fg, s, grad, jt, true);
+    let lf_psi = dot(f, hf) + dot(grad, jf) + params.alpha * lf;
+    for ((a, b), g) in hf.iter_mut().zip(jt.iter()).zip(grad) {
+        *a += b;
+        *a += params.alpha * g;
+    }
+    let alpha2 = params.alpha2.expect("Orders requires alpha2");
+    lf_psi + alpha2 * (lf + psi)
+}
+
+/// One enforced barrier: where it comes from, its predicate, sign (`h = sign rho`), value
+/// `h(s)`, slack weight and row form.
+type Enforced<'a> = (BarrierSource, &'a Predicate, f64, f64, f64, Form);
+
+/// The barriers a step enforces, in row order: the user's barriers, then the literals `safe`
+/// kept from the FSA state's safe set (Eq. 5C1, weight 1).
+fn enforced<'a>(
+    params: &'a ShieldParams,
+    safe: &'a [(Literal, f64)],
+    spec: &'a crate::spec::Spec,
+    orders: &'a Orders,
+    s: &'a [f64],
+) -> impl Iterator<Item = Enforced<'a>> + 'a {
+    let user = params.barriers.iter().enumerate().map(move |(i, b)| {
+        let sign = if b.positive { 1.0 } else { -1.0 };
+        let source = BarrierSource::User(i);
+        (
+            source,
+            &b.predicate,
+            sign,
+            b.value(s),
+            b.slack_weight,
+            orders.barriers[i],
+        )
+    });
+    let kept = safe.iter().map(move |&(lit, h)| {
+        let sign = if lit.positive { 1.0 } else { -1.0 };
+        let predicate = &spec.predicates()[lit.atom];
+        (
+            BarrierSource::SafeSet(lit),
+            predicate,
+            sign,
+            h,
+            1.0,
+            orders.atoms[lit.atom],
+        )
+    });
+    user.chain(kept)
+}
+
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
 fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
     let start = qp.g.len();
@@ -269,63 +345,43 @@ impl Program {
             drift,
         };
         if params.use_cbf {
-            self.barrier_rows(at, orders, automaton, &reading, barriers_out);
+            if params.preserve_progress {
+                reading.progress_safe_set(q, &mut self.safe);
+            } else {
+                reading.safe_set(q, &mut self.safe);
+            }
+            self.barrier_rows(at, orders, automaton, barriers_out);
         }
         self.clf_row(at, orders.clf, task, routing, &reading);
         self.cbf_vars = if params.use_cbf { m } else { 0 };
         self.clf_vars = if self.has_goal { m } else { 0 };
     }
 
-    /// The barrier rows (the user's barriers, then the safe set of Eq. 5C1): value h, the
-    /// row's L (m values) and right-hand side r + L . a_rl (see the module docs).
+    /// The barrier rows (the user's barriers, then the safe set of Eq. 5C1 already in
+    /// `self.safe`): value h, the row's L (m values) and right-hand side r + L . a_rl (see the
+    /// module docs).
     fn barrier_rows(
         &mut self,
         at: Site<'_>,
         orders: &Orders,
         automaton: &Automaton,
-        reading: &Reading<'_>,
         mut barriers_out: Option<&mut Vec<(BarrierSource, f64)>>,
     ) {
         let Site {
             params,
             model,
-            fg,
             s,
-            q,
             a_rl,
             drift,
+            ..
         } = at;
-        let spec = automaton.spec();
-        if params.preserve_progress {
-            reading.progress_safe_set(q, &mut self.safe);
-        } else {
-            reading.safe_set(q, &mut self.safe);
-        }
-        let user = params.barriers.iter().enumerate().map(|(i, b)| {
-            let sign = if b.positive { 1.0 } else { -1.0 };
-            let h = b.value(s);
-            let form = orders.barriers[i];
-            (
-                BarrierSource::User(i),
-                &b.predicate,
-                sign,
-                h,
-                b.slack_weight,
-                form,
-            )
-        });
-        let kept = self.safe.iter().map(|&(lit, h)| {
-            let sign = if lit.positive { 1.0 } else { -1.0 };
-            let predicate = &spec.predicates()[lit.atom];
-            let form = orders.atoms[lit.atom];
-            (BarrierSource::SafeSet(lit), predicate, sign, h, 1.0, form)
-        });
+        let enforced = enforced(params, &self.safe, automaton.spec(), orders, s);
         if let Some(dt) = params.dt {
             // The sample after next only where a second-order row reads it.
             let model = model.filter(|_| orders.second_order());
             self.sampled.predict(s, &self.f, model, drift, dt);
         }
-        for (source, predicate, sign, h, weight, form) in user.chain(kept) {
+        for (source, predicate, sign, h, weight, form) in enforced {
             self.weights.push(weight);
             self.sources.push(source);
             self.routed
@@ -349,20 +405,9 @@ impl Program {
                     (&self.sampled.coefficients, Some(r))
                 }
                 _ if form.second() => {
-                    predicate.hessian_times(s, &self.f, &mut self.hf);
-                    self.hf.iter_mut().for_each(|v| *v *= sign);
-                    jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
-                    jacobian_times(model, fg, s, &self.grad, &mut self.jt, true);
-                    let lf_psi =
-                        dot(&self.f, &self.hf) + dot(&self.grad, &self.jf) + params.alpha * lf;
-                    // grad psi_1 = H f + J_f^T grad h + alpha grad h into hf, so Lg psi_1 =
-                    // hf^T g (alpha Lg h is 0 at relative degree 2, not where it is mixed).
-                    for ((a, b), g) in self.hf.iter_mut().zip(&self.jt).zip(&self.grad) {
-                        *a += b;
-                        *a += params.alpha * g;
-                    }
-                    let alpha2 = params.alpha2.expect("Orders requires alpha2");
-                    (&self.hf, Some(lf_psi + alpha2 * (lf + psi)))
+                    let buffers = (&mut self.hf[..], &mut self.jf[..], &mut self.jt[..]);
+                    let r = second_order(buffers, (&self.grad, &self.f), predicate, sign, at, psi);
+                    (&self.hf, Some(r))
                 }
                 _ => (&self.grad, None),
             };
@@ -637,6 +682,17 @@ impl Program {
             r[delta] = -1.0;
             push_row(qp, nv, 0.0)[delta] = -1.0;
         }
+        self.push_bounds(params, a_rl, qp, nv);
+        for b in 0..slacks {
+            push_row(qp, nv, 0.0)[vars + b] = -1.0;
+        }
+    }
+
+    /// The box rows on `a_cbf` and `a_clf`, the actuator limits on the applied action, then
+    /// the round bound on `a_clf` (the gradient reads the limits' place), into `qp` of `nv`
+    /// variables.
+    fn push_bounds(&self, params: &ShieldParams, a_rl: &[f64], qp: &mut DenseQp, nv: usize) {
+        let (m, cbf_vars, has_goal) = (a_rl.len(), self.cbf_vars, self.has_goal);
         let groups = [
             (params.use_cbf, 0, &params.cbf_bounds),
             (has_goal, cbf_vars, &params.clf_bounds),
@@ -668,9 +724,6 @@ impl Program {
                 r[cbf_vars + i] = n[0];
                 r[cbf_vars + j] = n[1];
             }
-        }
-        for b in 0..slacks {
-            push_row(qp, nv, 0.0)[vars + b] = -1.0;
         }
     }
 }
