@@ -114,6 +114,13 @@ def test_the_gymnasium_vector_env_follows_the_single_envs(env_id: str) -> None:
 def test_bad_vector_input_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match="SyncVectorEnv"):
         tlshield.vector.make("tlshield/FlatWorld-v0", 2)
+    # An id gymnasium does not know by name (unregistered, or "module:Env-v0" before its
+    # import) is no core-stepped env: refused here, and SB3 training falls back to DummyVecEnv.
+    with pytest.raises(ValueError, match="SyncVectorEnv"):
+        tlshield.vector.make("tlshield/Nowhere-v0", 2)
+    from tlshield.sb3 import make_vec_env
+
+    assert make_vec_env("bicycle_room:BicycleRoom-v0", 2) is None
     with pytest.raises(ValueError, match="num_envs"):
         tlshield.vector.make("tlshield/Channel-v0", 0)
     venv = tlshield.vector.make("tlshield/Channel-v0", 2)

@@ -333,7 +333,10 @@ def world_vector_class(env_id: str) -> type[WorldVectorEnv] | None:
     ``vector_entry_point``, or None (an env written in Python, or none registered)."""
     import tlshield.envs  # noqa: F401  (registers the bundled envs)
 
-    entry = gym.spec(env_id).vector_entry_point
+    try:
+        entry = gym.spec(env_id).vector_entry_point
+    except gym.error.Error:  # not registered under this name (e.g. "module:Env-v0")
+        return None
     creator = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
     is_world = isinstance(creator, type) and issubclass(creator, WorldVectorEnv)
     return cast(type[WorldVectorEnv], creator) if is_world else None
