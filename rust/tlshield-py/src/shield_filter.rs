@@ -13,6 +13,9 @@ use crate::monitor::{PyMonitor, PyMonitorBatch};
 use crate::shield::{PyFilterBatch, PyFilterResult, PyShield};
 use crate::shield_batch::BatchInput;
 
+/// One step's converted `(s, q, a_rl, drift)`.
+type OneCall = (Vec<f64>, usize, Vec<f64>, Option<Vec<f64>>);
+
 impl PyShield {
     /// The core shield.
     pub(crate) fn core(&self) -> &Shield {
@@ -108,6 +111,26 @@ impl PyShield {
         })
     }
 
+    /// One step's `(s, q, a_rl, drift)`, converted and checked as `filter` and `problem` read
+    /// them (a `q` the automaton lacks is a `ShieldError`).
+    fn one_call(
+        &self,
+        py: Python<'_>,
+        s: &Bound<'_, PyAny>,
+        q: &Bound<'_, PyAny>,
+        a_rl: &Bound<'_, PyAny>,
+        drift: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<OneCall> {
+        let drift = drift.map(|d| vector(d, "drift")).transpose()?;
+        let s = vector(s, "s")?;
+        let q = state(q, "q", self.inner.automaton())
+            .map_err(|e| crate::errors::shield_state(py, e))?;
+        let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
+            .values()
+            .to_vec();
+        Ok((s, q, a_rl, drift))
+    }
+
     /// The name of a barrier the shield enforced: the user's key, or the safe-set literal.
     pub(crate) fn source_name(&self, py: Python<'_>, source: &BarrierSource) -> Py<PyString> {
         match source {
@@ -170,16 +193,9 @@ impl PyShield {
                     "filter(s, q, a_rl): s is a Monitor; use filter_monitor(monitor, a_rl)",
                 ));
             }
-            let drift = drift.map(|d| vector(d, "drift")).transpose()?;
-            let drift = drift.as_deref();
-            let s = vector(s, "s")?;
-            let q = state(q, "q", self.inner.automaton())
-                .map_err(|e| crate::errors::shield_state(py, e))?;
-            let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
-                .values()
-                .to_vec();
+            let (s, q, a_rl, drift) = self.one_call(py, s, q, a_rl, drift)?;
             let out = self.with_dynamics(py, &s, f, g, |fg| {
-                map(self.inner.filter(&s, q, &a_rl, fg, drift))
+                map(self.inner.filter(&s, q, &a_rl, fg, drift.as_deref()))
             })?;
             Ok(self.result(py, out))
         })
@@ -203,13 +219,7 @@ impl PyShield {
         drift: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let qp = crate::errors::shield_call(py, || {
-            let drift = drift.map(|d| vector(d, "drift")).transpose()?;
-            let s = vector(s, "s")?;
-            let q = state(q, "q", self.inner.automaton())
-                .map_err(|e| crate::errors::shield_state(py, e))?;
-            let a_rl = FloatArray::extract(a_rl, "a_rl", 1, "(m,)")?
-                .values()
-                .to_vec();
+            let (s, q, a_rl, drift) = self.one_call(py, s, q, a_rl, drift)?;
             self.with_dynamics(py, &s, f, g, |fg| {
                 map(self.inner.problem(&s, q, &a_rl, fg, drift.as_deref()))
             })
