@@ -34,16 +34,19 @@ def run(config: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from tlshield.envs import ENV_ID
     from tlshield.lab.callbacks import UpdateMetrics
     from tlshield.lab.evaluation import EVAL_SEED, rollouts
-    from tlshield.lab.seeds import validation_seed
-    from tlshield.lab.training import make_vec_env
+    from tlshield.lab.seeds import train_seed, validation_seed
+    from tlshield.sb3 import make_vec_env
 
     torch.set_num_threads(1)
     gamma = 0.999
     overrides = {"gamma": gamma}
     venv = VecNormalize(
-        make_vec_env(config, seed, overrides, args.n_envs), norm_reward=False, gamma=gamma
+        make_vec_env(ENV_ID, args.n_envs, config, seed=train_seed(seed), **overrides),
+        norm_reward=False,
+        gamma=gamma,
     )
     model = SAC(
         "MlpPolicy",
@@ -63,7 +66,7 @@ def run(config: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         def act(obs: np.ndarray) -> np.ndarray:
             return policy.predict(norm.normalize_obs(obs), deterministic=True)[0]
 
-        outcomes = rollouts(config, overrides, act, seeds)[0]
+        outcomes = rollouts(config, overrides, act, seeds)
         return sum(o["success"] for o in outcomes) / len(seeds)
 
     class Track(BaseCallback):  # type: ignore[misc]

@@ -151,7 +151,7 @@ def run(seed: int, method: str, args: argparse.Namespace) -> dict[str, Any]:
                 optim.zero_grad()
                 loss.backward()
                 optim.step()
-        val, _, _, _ = rollouts(
+        val = rollouts(
             "rl_cbf", {}, act, [validation_seed(seed, e) for e in range(args.validation)]
         )
         curve.append(
@@ -171,7 +171,7 @@ def run(seed: int, method: str, args: argparse.Namespace) -> dict[str, Any]:
         a_rl = centre + half * policy(x_all)
         executed = layer(torch.from_numpy(s_all), q_all, a_rl, d_all)
         executed_error = float(((executed - a_all) ** 2).sum(-1).mean())
-    outcomes, _, _, _ = rollouts("rl_cbf", {}, act, [EVAL_SEED + i for i in range(args.trials)])
+    outcomes = rollouts("rl_cbf", {}, act, [EVAL_SEED + i for i in range(args.trials)])
     return {
         "seed": seed,
         "method": method,

@@ -115,12 +115,9 @@ def test_bad_vector_input_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match="SyncVectorEnv"):
         tlshield.vector.make("tlshield/FlatWorld-v0", 2)
     # An id gymnasium does not know by name (unregistered, or "module:Env-v0" before its
-    # import) is no core-stepped env: refused here, and SB3 training falls back to DummyVecEnv.
+    # import) is no core-stepped env: refused here (SB3's make_vec_env gives a DummyVecEnv).
     with pytest.raises(ValueError, match="SyncVectorEnv"):
         tlshield.vector.make("tlshield/Nowhere-v0", 2)
-    from tlshield.sb3 import make_vec_env
-
-    assert make_vec_env("bicycle_room:BicycleRoom-v0", 2) is None
     with pytest.raises(ValueError, match="num_envs"):
         tlshield.vector.make("tlshield/Channel-v0", 0)
     venv = tlshield.vector.make("tlshield/Channel-v0", 2)
@@ -176,6 +173,27 @@ def test_every_bundled_env_has_a_vector_entry_point() -> None:
     np.testing.assert_array_equal(flat.reset(seed=1)[0][0], single.reset(seed=1)[0])
     for env_id in SAFETY_GYM_IDS:
         assert gym.spec(env_id).vector_entry_point == "tlshield.vector:safety_goal_vector_env"
+
+
+def test_one_sb3_make_vec_env_for_every_env() -> None:
+    """``tlshield.sb3.make_vec_env`` steps a core world where the registration names one and
+    runs any other env in SB3's ``DummyVecEnv``, seeded ``seed + i`` either way: the same
+    observations as the single envs reset with those seeds."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from tlshield.envs import FLATWORLD_ID
+    from tlshield.sb3 import WorldVecEnv, make_vec_env
+
+    for env_id, kind in (("tlshield/Channel-v0", WorldVecEnv), (FLATWORLD_ID, DummyVecEnv)):
+        venv = make_vec_env(env_id, 3, "rl_cbf_clf", seed=40)
+        assert isinstance(venv, kind) and venv.num_envs == 3
+        obs = venv.reset()
+        for i in range(3):
+            single = gym.make(env_id, config="rl_cbf_clf")
+            np.testing.assert_allclose(obs[i], single.reset(seed=40 + i)[0], rtol=0, atol=1e-6)
+    with pytest.raises(gym.error.Error):
+        make_vec_env("tlshield/Nowhere-v0", 2)
 
 
 def test_a_safety_gym_env_vectorises_through_its_entry_point() -> None:

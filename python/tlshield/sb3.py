@@ -3,9 +3,11 @@ this module loads SB3 (and torch): install the ``train`` extra."""
 
 from __future__ import annotations
 
+import functools
 import inspect
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
@@ -152,11 +154,26 @@ class PointMassVecEnv(WorldVecEnv):  # type: ignore[misc]
         super().__init__(PointMassBatch(num_envs, config, **kwargs))
 
 
-def make_vec_env(env_id: str, num_envs: int, config: str = FULL, **kwargs: Any) -> Any:
-    """An SB3 ``VecEnv`` of ``num_envs`` copies of an ``env_id`` the core steps (registered
-    with a core world as its ``vector_entry_point``: Channel-v0, PointMass-v0), stepped in one
-    core call; None for any other env (use SB3's ``DummyVecEnv``)."""
-    from tlshield.vector import world_vector_class
+def make_vec_env(
+    env_id: str, num_envs: int, config: str = FULL, *, seed: int | None = None, **kwargs: Any
+) -> VecEnv:
+    """An SB3 ``VecEnv`` of ``num_envs`` copies of ``env_id`` in shield configuration
+    ``config`` (``kwargs``: the env factory's keywords). An env registered with a core world
+    as its ``vector_entry_point`` (Channel-v0, PointMass-v0) steps all its copies in one core
+    call, the same numbers as SB3's ``DummyVecEnv`` over the single envs, bit for bit; any
+    other env runs in a ``DummyVecEnv`` of ``gymnasium.make`` copies. ``seed``: copy ``i`` is
+    seeded ``seed + i`` (SB3's ``VecEnv.seed``)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
+    from tlshield.vector import _check_count, world_vector_class
+
+    _check_count(num_envs)
     kind = world_vector_class(env_id)
-    return None if kind is None else WorldVecEnv(kind.BATCH(num_envs, config, **kwargs))
+    if kind is not None:
+        venv: VecEnv = WorldVecEnv(kind.BATCH(num_envs, config, **kwargs))
+    else:
+        one = functools.partial(gym.make, env_id, config=config, **kwargs)
+        venv = DummyVecEnv([one] * num_envs)
+    if seed is not None:
+        venv.seed(seed)
+    return venv

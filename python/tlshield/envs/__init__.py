@@ -3,10 +3,9 @@ imported: the paper's channel case study ``tlshield/Channel-v0``, a double-integ
 with a sequencing task, ``tlshield/PointMass-v0``, and DeepLTL's benchmark with any formula over
 its colours, ``tlshield/FlatWorld-v0``."""
 
-import gymnasium as gym
-
 from tlshield.envs.channel import (
     CONFIGS,
+    PAPER_ENV,
     STATE_DIM,
     TASK,
     ChannelEnv,
@@ -14,45 +13,52 @@ from tlshield.envs.channel import (
     channel_shield,
     channel_task_spec,
 )
+from tlshield.envs.profile import EnvProfile, profile_of, register
 
 ENV_ID = "tlshield/Channel-v0"
 POINT_MASS_ID = "tlshield/PointMass-v0"
 FLATWORLD_ID = "tlshield/FlatWorld-v0"
 
-if ENV_ID not in gym.registry:
-    gym.register(
-        id=ENV_ID,
-        entry_point="tlshield.envs.channel:ChannelEnv",
-        vector_entry_point="tlshield.vector:ChannelVectorEnv",
-    )
-if POINT_MASS_ID not in gym.registry:
-    gym.register(
-        id=POINT_MASS_ID,
-        entry_point="tlshield.envs.point_mass:make_point_mass",
-        vector_entry_point="tlshield.vector:PointMassVectorEnv",
-    )
-if FLATWORLD_ID not in gym.registry:
-    gym.register(
-        id=FLATWORLD_ID,
-        entry_point="tlshield.envs.flatworld:make_flatworld",
-        vector_entry_point="tlshield.vector:flatworld_vector_env",
-    )
+register(
+    ENV_ID,
+    "tlshield.envs.channel:ChannelEnv",
+    vector_entry_point="tlshield.vector:ChannelVectorEnv",
+    profile=EnvProfile(
+        params="tlshield.envs.channel:ChannelParams",
+        recorder="tlshield.envs.channel_paths:ChannelPaths",
+        clf_shield="tlshield.envs.channel:channel_shield",
+        preset_overrides={"paper": PAPER_ENV},
+    ),
+)
+register(
+    POINT_MASS_ID,
+    "tlshield.envs.point_mass:make_point_mass",
+    vector_entry_point="tlshield.vector:PointMassVectorEnv",
+    profile=EnvProfile(params="tlshield.envs.point_mass:PointMassParams"),
+)
+register(
+    FLATWORLD_ID,
+    "tlshield.envs.flatworld:make_flatworld",
+    vector_entry_point="tlshield.vector:flatworld_vector_env",
+    profile=EnvProfile(
+        params="tlshield.envs.flatworld:FlatWorldParams", task_keywords=("formula",)
+    ),
+)
 #: Safety-Gymnasium's tasks, shielded (``make safety-gym`` installs their stack; registering
-#: imports none of it).
+#: imports none of it). Scored by their return and cost.
 SAFETY_GYM_IDS = (
     "tlshield/SafetyPointGoal1-v0",
     "tlshield/SafetyPointGoal2-v0",
     "tlshield/SafetyCarGoal1-v0",
 )
 for _id in SAFETY_GYM_IDS:
-    if _id not in gym.registry:
-        gym.register(
-            id=_id,
-            entry_point="tlshield.envs.safety_gym:make_safety_goal",
-            vector_entry_point="tlshield.vector:safety_goal_vector_env",
-            kwargs={"task": _id.removeprefix("tlshield/")},
-        )
-
+    register(
+        _id,
+        "tlshield.envs.safety_gym:make_safety_goal",
+        vector_entry_point="tlshield.vector:safety_goal_vector_env",
+        kwargs={"task": _id.removeprefix("tlshield/")},
+        profile=EnvProfile(scored_by_return=True),
+    )
 
 __all__ = [
     "CONFIGS",
@@ -64,6 +70,9 @@ __all__ = [
     "TASK",
     "ChannelEnv",
     "ChannelParams",
+    "EnvProfile",
     "channel_shield",
     "channel_task_spec",
+    "profile_of",
+    "register",
 ]

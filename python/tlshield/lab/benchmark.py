@@ -34,7 +34,7 @@ import numpy as np
 
 from tlshield.envs import FLATWORLD_ID
 from tlshield.envs.params import FULL, check_config
-from tlshield.lab.evaluation import rollouts
+from tlshield.lab.evaluation import Recorder, rollouts
 from tlshield.lab.presets import PRESETS, updates_for
 from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
 
@@ -124,8 +124,8 @@ def run_episodes(
             seeds,
             FLATWORLD_ID,
             evaluation=config != "rl",
-            extra=_episode_end,
-        )[0]
+            recorders=[EpisodeEnd()],
+        )
         # A batch's episodes end by step, and by index within a step (a stable sort).
         ended += sorted(outcomes, key=lambda o: o["steps"])
     steps = [o["steps"] for o in ended if o["success"]]
@@ -138,14 +138,16 @@ def run_episodes(
     }
 
 
-def _episode_end(env: Any, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
+class EpisodeEnd(Recorder):
     """What the benchmark reads from a FlatWorld episode's last step: whether it entered the
     trap, whether it left the square, and its path."""
-    return {
-        "trap_entry": int(info["trap"] and terminated),
-        "box_exit": int(info["box_exit"]),
-        "path": np.asarray(env.unwrapped.path),
-    }
+
+    def end(self, trial: int, env: Any, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
+        return {
+            "trap_entry": int(info["trap"] and terminated),
+            "box_exit": int(info["box_exit"]),
+            "path": np.asarray(env.unwrapped.path),
+        }
 
 
 def zero_policy(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:

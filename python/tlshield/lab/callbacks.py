@@ -20,7 +20,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
-from tlshield.lab.envs import scored_by_return
+from tlshield.envs.profile import profile_of
 from tlshield.lab.evaluation import rollouts
 from tlshield.lab.measures import step_violation
 from tlshield.lab.presets import clf_scale
@@ -259,7 +259,7 @@ class EntropySchedule(BaseCallback):  # type: ignore[misc]
 class Validation(BaseCallback):  # type: ignore[misc]
     """Every ``validate_every`` updates, the validation episodes of the deterministic policy;
     the best so far (ties: the later) is saved as the run's kept model. Best means the highest
-    success rate, or, for an env :func:`tlshield.lab.envs.scored_by_return`, the highest mean
+    success rate, or, for an env whose profile is ``scored_by_return``, the highest mean
     return (its cost is recorded beside it)."""
 
     def __init__(self, run: TrainingRun) -> None:
@@ -289,18 +289,19 @@ class Validation(BaseCallback):  # type: ignore[misc]
         def policy(obs: np.ndarray) -> np.ndarray:
             return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
-        outcomes = rollouts(run.config, run.overrides, policy, seeds, run.env_id)[0]
+        outcomes = rollouts(run.config, run.overrides, policy, seeds, run.env_id)
         self.last = sum(o["success"] for o in outcomes) / trials
         self.last_return = float(np.mean([o["return"] for o in outcomes]))
         costs = [o["cost"] for o in outcomes if o["cost"] is not None]
         self.last_cost = float(np.mean(costs)) if costs else math.nan
-        score = self.last_return if scored_by_return(run.env_id) else self.last
+        by_return = profile_of(run.env_id).scored_by_return
+        score = self.last_return if by_return else self.last
         if score >= self.best:
             self.best = score
             model.save(run.folder / "model.zip")
             save_normalization(venv, run.folder / "normalization.json")
             kept = {"update": self.update, "validation_success": self.last}
-            if scored_by_return(run.env_id):
+            if by_return:
                 kept |= {"validation_return": self.last_return, "validation_cost": self.last_cost}
             run.record["kept"] = kept
 

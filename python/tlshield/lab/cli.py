@@ -20,6 +20,7 @@ from tlshield._core import Automaton, SpecError
 from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
 from tlshield.envs.channel import STATE_DIM, TASK, channel_task_spec
 from tlshield.envs.params import FULL
+from tlshield.envs.profile import profile_of
 from tlshield.envs.safety_gym import MissingStack
 from tlshield.lab.envs import import_modules
 from tlshield.lab.presets import DEFAULT_TRIALS, DEFAULT_UPDATES, STUDY_UPDATES
@@ -268,13 +269,11 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _preset_options(args: argparse.Namespace) -> dict[str, object]:
-    """``--preset paper`` trains with the paper's PPO settings and its environment (Eq. 5A1
+    """``--preset NAME`` trains with that preset's PPO settings and the env settings the env's
+    profile says it implies (``--preset paper`` on Channel-v0: the paper's environment, Eq. 5A1
     reward, 13-value observation, no moving-obstacle barrier)."""
-    from tlshield.envs.channel import PAPER_ENV
-
-    if args.preset == "paper" and getattr(args, "env", ENV_ID) == ENV_ID:
-        return {"preset": "paper", **PAPER_ENV}
-    return {"preset": args.preset}
+    implied = profile_of(getattr(args, "env", ENV_ID)).preset_overrides.get(args.preset, {})
+    return {"preset": args.preset, **implied}
 
 
 def _add_preset(parser: argparse.ArgumentParser) -> None:

@@ -1,7 +1,7 @@
 """How the lab makes and checks environments: the trainer's and the evaluation's ``make``, the
-checks run before training (a registered id, a task training can read) and what they read
-about an env (its horizon, whether it is scored by return). The library's own environments
-live in :mod:`tlshield.envs`."""
+checks run before training (a registered id, a task training can read) and an env's horizon.
+What kind of task an env is, the lab reads from its profile (:mod:`tlshield.envs.profile`).
+The library's own environments live in :mod:`tlshield.envs`."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from tlshield.envs import ENV_ID, SAFETY_GYM_IDS, ChannelEnv
+from tlshield._removed import refuse
+from tlshield.envs.profile import profile_of
 
 __all__ = [
     "check_env_id",
@@ -20,7 +21,6 @@ __all__ = [
     "factory_takes",
     "import_modules",
     "make",
-    "scored_by_return",
 ]
 
 
@@ -80,22 +80,14 @@ def env_horizon(env: Any) -> int | None:
         return getattr(spec, "max_episode_steps", None)
 
 
-def scored_by_return(env_id: str) -> bool:
-    """Whether ``env_id`` is scored by its reward and cost (Safety-Gymnasium's tasks: the goal
-    moves when met and an episode runs to its horizon), not by a temporal-logic task's success.
-    Training validates such an env on its return, and evaluation runs it as it trained (the
-    unshielded ``rl`` stays unshielded), to the horizon."""
-    return env_id in SAFETY_GYM_IDS
-
-
 def check_task_env(env: Any, gamma: float, env_id: str) -> None:
     """Checks that ``env`` exposes a task that training can read, and that its reward's
     guarantees hold for this training: an :class:`tlshield.wrappers.FsaAugmented` in the
     wrapper chain (``info["success"]`` and ``info["trap"]``), a progress reward sized for PPO's
     ``gamma``, and a reward horizon no shorter than the episodes (else finishing late may not
-    out-earn not finishing). Raises ValueError naming what is wrong. An env
-    :func:`scored_by_return` has its own reward, so only its ``info`` is read."""
-    if scored_by_return(env_id):
+    out-earn not finishing). Raises ValueError naming what is wrong. An env whose profile is
+    ``scored_by_return`` has its own reward, so only its ``info`` is read."""
+    if profile_of(env_id).scored_by_return:
         return
     try:
         tracker = env.get_wrapper_attr("tracker")
@@ -122,10 +114,8 @@ def check_task_env(env: Any, gamma: float, env_id: str) -> None:
 
 
 def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
-    """One environment of ``env_id`` in shield configuration ``config``: Channel-v0 unwrapped
-    (training and evaluation read its ``state`` directly), any other through ``gym.make``."""
-    if env_id == ENV_ID:
-        return ChannelEnv(config=config, **kwargs)
+    """One environment of ``env_id`` in shield configuration ``config``, through
+    ``gym.make``."""
     check_env_id(env_id)  # an unknown id or module is one clear ValueError
     try:
         return gym.make(env_id, config=config, **kwargs)
@@ -136,3 +126,14 @@ def make(env_id: str, config: str, **kwargs: Any) -> gym.Env:
             f"env {env_id!r}: gymnasium.make with {keywords} failed: {err} (the trainer's "
             "factory must accept config= and evaluation=)"
         ) from err
+
+
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(
+    __name__,
+    {
+        "scored_by_return": (
+            "tlshield.envs.profile_of(env_id).scored_by_return (the env's registered EnvProfile)"
+        )
+    },
+)

@@ -9,26 +9,46 @@ validation and evaluation live in :mod:`tlshield.lab.seeds`, so the three never 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tlshield.envs import ENV_ID
-from tlshield.envs.channel import ChannelEnv
-from tlshield.envs.layout import OBSTACLE_DIMS, X, Y
+from tlshield.envs.profile import load_attr, profile_of
 from tlshield.lab import measures
-from tlshield.lab.envs import env_horizon, import_modules, make, scored_by_return
+from tlshield.lab.envs import env_horizon, import_modules, make
 from tlshield.lab.presets import DEFAULT_TRIALS
 from tlshield.lab.runs import read_record
 from tlshield.lab.seeds import EVAL_SEED, MAX_TRIALS
 
-__all__ = ["EVAL_SEED", "evaluate", "rollouts", "saved_policy"]
+__all__ = ["EVAL_SEED", "Recorder", "evaluate", "rollouts", "saved_policy"]
 
-#: What :func:`rollouts` adds to a trial's outcome, read after its last step:
-#: ``extra(env, info, terminated) -> fields``.
-Extra = Callable[[Any, dict[str, Any], bool], dict[str, Any]]
+
+class Recorder:
+    """What :func:`rollouts` calls besides the policy, as SB3's ``evaluate_policy`` calls its
+    ``callback``: after each trial's reset (:meth:`start`), after each of its steps
+    (:meth:`step`) and once after its last step (:meth:`end`, whose fields are added to the
+    trial's outcome). :meth:`arrays` is what :func:`evaluate` saves as ``trajectories.npz``
+    (nothing by default). An env's profile may name one (``EnvProfile.recorder``:
+    Channel-v0's paths, :class:`tlshield.envs.channel_paths.ChannelPaths`); any object with
+    these four methods serves."""
+
+    def start(self, trial: int, env: Any) -> None:
+        """After trial ``trial``'s reset."""
+
+    def step(self, trial: int, env: Any) -> None:
+        """After each of trial ``trial``'s steps."""
+
+    def end(self, trial: int, env: Any, info: dict[str, Any], terminated: bool) -> dict[str, Any]:
+        """After the trial's last step (its ``info`` and ``terminated``): fields to add to its
+        outcome."""
+        return {}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Arrays to save (empty: nothing)."""
+        return {}
 
 
 def rollouts(
@@ -39,35 +59,41 @@ def rollouts(
     env_id: str = ENV_ID,
     *,
     evaluation: bool | None = None,
-    extra: Extra | None = None,
-) -> tuple[list[dict[str, Any]], np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    recorders: Sequence[Recorder] = (),
+    extra: None = None,
+) -> list[dict[str, Any]]:
     """Evaluation episodes (CBF on; end at the horizon, on success or on collision), all side
-    by side with one batched policy call per step: per-trial outcomes, start states, agent
-    paths and obstacle paths (the last three for Channel-v0 only; empty for other envs).
-    Violations and collisions are counted as :mod:`tlshield.lab.measures` says; ``None`` where the
+    by side with one batched policy call per step: one outcome per trial. Violations and
+    collisions are counted as :mod:`tlshield.lab.measures` says; ``None`` where the
     environment gives nothing to measure them by. Each outcome also has the trial's
     undiscounted ``return`` (the task's own reward, ``info["task_reward"]`` where the env
     shapes it) and ``cost`` (``info["cost"]`` summed; ``None`` where the env reports none).
 
-    An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) runs as it trained,
+    An env whose profile is ``scored_by_return`` (Safety-Gymnasium's) runs as it trained,
     the unshielded ``rl`` unshielded, and every episode runs to the horizon (a met goal moves,
     it does not end the task); its ``success`` says whether any goal was met.
 
     ``evaluation``: the env factory's ``evaluation=`` (default: the rules above, the CBF on
-    except for an env scored by return); ``overrides`` go to the factory as keywords. ``extra``,
-    if given, is called once per trial after the last step with the trial's env, that step's
-    ``info`` and its ``terminated``, and what it returns is added to the trial's outcome. The
-    envs are closed before this returns."""
-    by_return = scored_by_return(env_id)
+    except for an env scored by return); ``overrides`` go to the factory as keywords.
+    ``recorders`` (:class:`Recorder`) are called after each reset and step and once at each
+    trial's end; what their :meth:`Recorder.end` returns is added to the trial's outcome. The
+    envs are closed before this returns. (``extra=``, a per-trial function, was removed in
+    0.4: a :class:`Recorder`'s :meth:`Recorder.end` does its job.)"""
+    if extra is not None:
+        raise TypeError(
+            "rollouts(extra=...) was removed in tlshield 0.4: pass recorders=[a Recorder whose "
+            "end(trial, env, info, terminated) returns the fields]; rollouts returns the "
+            "outcomes alone (trajectories come from a recorder's arrays())"
+        )
+    by_return = profile_of(env_id).scored_by_return
     if evaluation is None:
         # The paper's evaluation rules: the CBF on in every configuration.
         evaluation = not by_return
     envs = [make(env_id, config, evaluation=evaluation, **overrides) for _ in seeds]
     obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds, strict=True)])
-    channel = env_id == ENV_ID
-    starts = np.stack([env.state.copy() for env in envs]) if channel else np.zeros((0, 0))
-    paths = [[env.state[[X, Y]]] for env in envs] if channel else []
-    obstacle_paths = [[_obstacles(env)] for env in envs] if channel else []
+    for i, env in enumerate(envs):
+        for recorder in recorders:
+            recorder.start(i, env)
     outcomes: list[dict[str, Any]] = [
         {
             "reset_seed": s,
@@ -95,29 +121,13 @@ def rollouts(
             o, reward, terminated, truncated, info = envs[i].step(action)
             obs[i] = o
             last[i] = info, bool(terminated)
-            if channel:
-                paths[i].append(envs[i].state[[X, Y]])
-                obstacle_paths[i].append(_obstacles(envs[i]))
+            for recorder in recorders:
+                recorder.step(i, envs[i])
             out = outcomes[i]
-            violation = measures.step_violation(info, trapped[i])
-            trapped[i] = bool(info.get("trap", False))
-            if violation is not None:
-                out["violations"] = (out["violations"] or 0) + int(violation)
+            _count_step(out, info, reward, trapped[i])
             out["steps"] = t + 1
-            out["return"] += float(info.get("task_reward", reward))
-            if "cost" in info:
-                out["cost"] = (out["cost"] or 0.0) + float(info["cost"])
+            trapped[i] = bool(info.get("trap", False))
             collision = measures.collision(info)
-            if collision is not None:
-                # Sticky: a trial that touched an obstacle once collided.
-                out["collision"] = bool(out["collision"]) or collision
-            gave_way = info.get("shield", {}).get("gave_way")
-            if collision and "shield" in info and gave_way is None:
-                # A contact on a step where no barrier gave way: the shield did not report it.
-                out["unreported_contacts"] += 1
-            if gave_way is not None:
-                name = str(gave_way[0])
-                out["gave_way"][name] = out["gave_way"].get(name, 0) + 1
             # A trial that touched an obstacle is never a success, however the obstacles are
             # encoded (in the formula, or as the shield's barriers only).
             touched = bool(out["collision"])
@@ -130,16 +140,32 @@ def rollouts(
             else:
                 still.append(i)
         active = still
-    for env, out, (info, terminated) in zip(envs, outcomes, last, strict=True):
-        if extra is not None:
-            out.update(extra(env, info, terminated))
+    for i, (env, out, (info, terminated)) in enumerate(zip(envs, outcomes, last, strict=True)):
+        for recorder in recorders:
+            out.update(recorder.end(i, env, info, terminated))
         env.close()
-    return (
-        outcomes,
-        starts,
-        [np.array(p) for p in paths],
-        [np.array(p) for p in obstacle_paths],
-    )
+    return outcomes
+
+
+def _count_step(out: dict[str, Any], info: dict[str, Any], reward: float, trapped: bool) -> None:
+    """Adds one step's violation, return, cost, collision and give-way to a trial's outcome."""
+    violation = measures.step_violation(info, trapped)
+    if violation is not None:
+        out["violations"] = (out["violations"] or 0) + int(violation)
+    out["return"] += float(info.get("task_reward", reward))
+    if "cost" in info:
+        out["cost"] = (out["cost"] or 0.0) + float(info["cost"])
+    collision = measures.collision(info)
+    if collision is not None:
+        # Sticky: a trial that touched an obstacle once collided.
+        out["collision"] = bool(out["collision"]) or collision
+    gave_way = info.get("shield", {}).get("gave_way")
+    if collision and "shield" in info and gave_way is None:
+        # A contact on a step where no barrier gave way: the shield did not report it.
+        out["unreported_contacts"] += 1
+    if gave_way is not None:
+        name = str(gave_way[0])
+        out["gave_way"][name] = out["gave_way"].get(name, 0) + 1
 
 
 def gave_way_totals(outcomes: list[dict[str, Any]]) -> dict[str, int]:
@@ -176,14 +202,15 @@ def evaluate(
     on success or on collision. All trials run side by side (one batched policy call per
     step); ``policy`` maps a batch of observations ``(N, d)`` to actions ``(N, 2)``. Trial
     ``i`` resets with seed ``seed + i``. Writes ``evaluation.json`` (totals and one record per
-    trial: reset seed, success, collision, steps, violating steps) and, for Channel-v0,
-    ``trajectories.npz`` (each trial's start state, agent path and obstacle paths). The run's
+    trial: reset seed, success, collision, steps, violating steps) and, where the env's profile
+    names a :class:`Recorder`, its arrays as ``trajectories.npz`` (Channel-v0: each trial's
+    start state, agent path and obstacle paths). The run's
     environment is the one its run.json names (``env_id``; Channel-v0 when absent).
     ``which="last"`` evaluates the last policy instead of the kept one and writes
     ``last_evaluation.json`` and ``last_trajectories.npz``; ``trust_pickles`` lets an older run
     folder's pickled statistics load (see :mod:`tlshield.lab.saved`). ``evaluation.json`` also
     has the trials' mean undiscounted ``return_mean`` and ``cost_mean`` (None where the env
-    reports no cost). An env :func:`tlshield.lab.envs.scored_by_return` (Safety-Gymnasium's) is
+    reports no cost). An env whose profile is ``scored_by_return`` (Safety-Gymnasium's) is
     evaluated as :func:`rollouts` says: as it trained, to the horizon."""
     if not (isinstance(trials, int) and 0 < trials <= MAX_TRIALS):
         raise ValueError(f"trials = {trials!r}: expected a positive integer <= {MAX_TRIALS}")
@@ -194,12 +221,16 @@ def evaluate(
     if policy is None:
         policy = saved_policy(Path(run), which, trust_pickles=trust_pickles)
     evaluation_file, trajectories_file = EVALUATION_FILES[which]
-    outcomes, starts, paths, obstacle_paths = rollouts(
+    env_id = record.get("env_id", ENV_ID)
+    profile = profile_of(env_id)
+    recorders = [load_attr(profile.recorder)()] if profile.recorder else []
+    outcomes = rollouts(
         record["config"],
         record.get("overrides", {}),
         policy,
         [seed + i for i in range(trials)],
-        record.get("env_id", ENV_ID),
+        env_id,
+        recorders=recorders,
     )
     successes = sum(o["success"] for o in outcomes)
     steps_to_success = [o["steps"] for o in outcomes if o["success"]]
@@ -224,15 +255,9 @@ def evaluate(
         "outcomes": outcomes,
     }
     Path(run, evaluation_file).write_text(json.dumps(result, indent=2))
-    if not paths:  # not Channel-v0: no trajectory figure to feed
-        return result
-    np.savez_compressed(
-        Path(run, trajectories_file),
-        starts=starts,
-        lengths=np.array([len(p) for p in paths]),
-        paths=np.concatenate(paths),
-        obstacle_paths=np.concatenate(obstacle_paths),
-    )
+    arrays = {k: v for r in recorders for k, v in r.arrays().items()}
+    if arrays:  # what the env's recorder kept (Channel-v0: the trajectory figure's paths)
+        np.savez_compressed(Path(run, trajectories_file), **arrays)
     return result
 
 
@@ -248,8 +273,3 @@ def saved_policy(
 
     torch.set_num_threads(1)
     return load_policy(run, which, trust_pickles=trust_pickles)
-
-
-def _obstacles(env: ChannelEnv) -> np.ndarray:
-    """The obstacles' centres ``[o1x, o1y, o2x, o2y]`` (a copy)."""
-    return env.state[[i for dims in OBSTACLE_DIMS for i in dims]]

@@ -102,7 +102,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # defaults (one environment of 2048 steps per update, minibatches of 64, Tanh 64-64 networks,
     # raw observations and rewards), the settings the unshielded row of docs/guides/safety-gym.md
     # was measured with, the same for every configuration. Validation is on the return
-    # (tlshield.lab.envs.scored_by_return): 5 episodes of 1,000 steps every 10 updates (about 25%
+    # (its profile is scored_by_return): 5 episodes of 1,000 steps every 10 updates (about 25%
     # more environment steps), the best checkpoint kept and the last one beside it.
     "safety-gym": {
         "n_envs": 1,

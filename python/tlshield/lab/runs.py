@@ -34,9 +34,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield.envs.channel import CONFIGS, ChannelParams
+from tlshield.envs import ENV_ID
+from tlshield.envs.channel import CONFIGS
 from tlshield.envs.layout import STATE_DIM
-from tlshield.envs.params import upgrade
+from tlshield.envs.params import flat_names, from_flat, upgrade
+from tlshield.envs.profile import profile_of
 
 __all__ = [
     "DIAGNOSTIC_COLUMNS",
@@ -166,8 +168,10 @@ class Run:
         return len(self.metrics["update"])
 
     @property
-    def env(self) -> ChannelParams:
-        """The environment constants the run trained with (defaults for missing fields)."""
+    def env(self) -> Any:
+        """The environment constants the run trained with, as its env's parameters class
+        (:mod:`tlshield.envs.profile`; defaults for missing fields); None for an env whose
+        profile names no parameters class."""
         return _env_params(self.record)
 
 
@@ -176,16 +180,19 @@ def json_tuples(value: Any) -> Any:
     return tuple(json_tuples(v) for v in value) if isinstance(value, list) else value
 
 
-def _env_params(record: dict[str, Any]) -> ChannelParams:
+def _env_params(record: dict[str, Any]) -> Any:
+    cls = profile_of(str(record.get("env_id", ENV_ID))).params_class()
+    if cls is None:
+        return None
     env = record.get("env")
     # A 0.1 record spells some parameters the old way: read them as data, without a warning.
     env = upgrade(env, "run record", from_file=True) if isinstance(env, dict) else {}
-    known = set(ChannelParams.flat_names())
+    known = set(flat_names(cls))
     values = {k: json_tuples(v) for k, v in env.items() if k in known}
     try:
-        return ChannelParams.from_flat(values)
+        return from_flat(cls, values)
     except TypeError:  # pragma: no cover - a record from an incompatible version
-        return ChannelParams()
+        return cls()
 
 
 def _read_metrics(path: Path) -> dict[str, NDArray[np.float64]]:

@@ -3,9 +3,10 @@
 
 A setting is one of
 
-* an environment constant (a field of :class:`tlshield.envs.ChannelParams`, of
-  ``PointMassParams`` for PointMass-v0 or ``FlatWorldParams`` for FlatWorld-v0, which also
-  takes ``formula``): ``c_r``, ``w``, ``alpha``, ``c3``, ``k``, ``clf_bounds``, ...; for a
+* an environment constant (a field of the parameters class the env's profile names:
+  :class:`tlshield.envs.ChannelParams`, ``PointMassParams`` for PointMass-v0 or
+  ``FlatWorldParams`` for FlatWorld-v0, which also takes its task keyword ``formula``):
+  ``c_r``, ``w``, ``alpha``, ``c3``, ``k``, ``clf_bounds``, ...; for a
   user's registered environment, any keyword of its factory (checked when it is built);
 * a PPO setting (:data:`PPO_NAMES`): ``learning_rate``, ``ent_coef``, ``n_epochs``,
   ``batch_size``, ...;
@@ -23,8 +24,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tlshield.envs import ENV_ID, FLATWORLD_ID, POINT_MASS_ID
+from tlshield._removed import refuse
+from tlshield.envs import ENV_ID
 from tlshield.envs.params import flat_names, from_flat, upgrade
+from tlshield.envs.profile import profile_of
 from tlshield.lab.runs import json_tuples
 
 #: PPO settings a run accepts (SB3 ``PPO`` keywords, plus the number of environments, the
@@ -55,8 +58,6 @@ PPO_NAMES = (
     "lr_schedule",
     "ent_schedule",
 )
-#: Keywords of a bundled environment's factory besides its parameters (the task).
-TASK_KEYWORDS = {FLATWORLD_ID: ("formula",)}
 #: Settings of :func:`tlshield.lab.training.train` itself.
 SCHEDULE_NAMES = ("clf_schedule", "clf_final_scale")
 
@@ -67,7 +68,7 @@ def env_names(env_id: str = ENV_ID) -> tuple[str, ...]:
     cls = _params_class(env_id)
     if cls is None:
         return ()
-    return (*flat_names(cls), *TASK_KEYWORDS.get(env_id, ()))
+    return (*flat_names(cls), *profile_of(env_id).task_keywords)
 
 
 def known_names(env_id: str = ENV_ID) -> tuple[str, ...]:
@@ -102,7 +103,7 @@ def split(settings: dict[str, Any], env_id: str = ENV_ID) -> dict[str, Any]:
     cls = _params_class(env_id)
     if cls is not None:
         # FlatWorld's task is a keyword of its factory, not a constant of its config.
-        task = TASK_KEYWORDS.get(env_id, ())
+        task = profile_of(env_id).task_keywords
         constants = {k: v for k, v in env.items() if k not in task}
         try:
             from_flat(cls, constants).check()
@@ -145,13 +146,13 @@ def parse_assignments(items: list[str], env_id: str = ENV_ID) -> dict[str, Any]:
 
 
 def _params_class(env_id: str) -> Any:
-    """The parameters class of a bundled environment; None for a user's registered one (an
-    unregistered id is an error)."""
-    from tlshield.envs import ChannelParams
-    from tlshield.envs.flatworld import FlatWorldParams
-    from tlshield.envs.point_mass import PointMassParams
+    """The parameters class its profile names (:mod:`tlshield.envs.profile`); None for an env
+    whose profile names none (an unregistered id is an error)."""
     from tlshield.lab.envs import check_env_id
 
-    classes = {ENV_ID: ChannelParams, POINT_MASS_ID: PointMassParams, FLATWORLD_ID: FlatWorldParams}
     check_env_id(env_id)
-    return classes.get(env_id)
+    return profile_of(env_id).params_class()
+
+
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(__name__, {"TASK_KEYWORDS": "tlshield.envs.profile_of(env_id).task_keywords"})

@@ -40,16 +40,16 @@ from typing import Any
 
 import numpy as np
 
+from tlshield._removed import refuse
 from tlshield.envs import ENV_ID
-from tlshield.envs.channel import CONFIGS, ChannelParams, channel_shield
-from tlshield.envs.params import FULL, as_flat, check_config
+from tlshield.envs.params import CONFIGS, FULL, as_flat, check_config, flat_names
+from tlshield.envs.profile import EnvProfile, load_attr, profile_of
 from tlshield.lab.envs import (
     check_env_id,
     check_task_env,
     factory_takes,
     import_modules,
     make,
-    scored_by_return,
 )
 from tlshield.lab.evaluation import evaluate
 from tlshield.lab.presets import (
@@ -85,24 +85,6 @@ def _env_params(venv: Any) -> Any:
         return venv.env_method("get_wrapper_attr", "params", indices=[0])[0]
     except AttributeError:
         return None
-
-
-def make_vec_env(
-    config: str, seed: int, overrides: dict[str, Any], n_envs: int, env_id: str = ENV_ID
-) -> Any:
-    """The training VecEnv: ``n_envs`` copies of ``env_id``, seeded ``train_seed(seed) + i``.
-    Channel-v0 and PointMass-v0 step all their envs in one core call
-    (:func:`tlshield.sb3.make_vec_env`, the same numbers as SB3's ``DummyVecEnv`` over the
-    single envs, bit for bit); other envs run in a ``DummyVecEnv``."""
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    from tlshield.sb3 import make_vec_env as core_vec_env
-
-    venv = core_vec_env(env_id, n_envs, config, **overrides)
-    if venv is None:
-        venv = DummyVecEnv([partial(make, env_id, config, **overrides)] * n_envs)
-    venv.seed(train_seed(seed))
-    return venv
 
 
 def train(config: str, seed: int, updates: int, out: str | Path, **options: Any) -> Path:
@@ -147,23 +129,28 @@ def prepare(
     imports = list(imports)
     import_modules(imports)
     check_env_id(env)
-    if env != ENV_ID and clf_schedule != DEFAULT_SCHEDULE:
-        raise ValueError(f"clf schedule {clf_schedule!r}: only 'fixed' outside {ENV_ID}")
+    profile = profile_of(env)
+    if profile.clf_shield is None and clf_schedule != DEFAULT_SCHEDULE:
+        raise ValueError(
+            f"clf schedule {clf_schedule!r}: env {env!r} has none (its profile names no "
+            "clf_shield to rebuild its shield with); use 'fixed'"
+        )
     settings = _ppo_settings(preset, ppo)
     # The progress reward is shaped for the discount PPO uses (the bundled environments take
     # it as a keyword; a user's environment is checked below).
-    if not scored_by_return(env) and (env.startswith("tlshield/") or factory_takes(env, "gamma")):
+    if _takes_gamma(env, profile):
         overrides = {"gamma": settings.ppo["gamma"], **overrides}
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
     from tlshield.lab.callbacks import TrainingRun
+    from tlshield.sb3 import make_vec_env
 
     torch.set_num_threads(1)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     check_task_env(make(env, config, **overrides), settings.ppo["gamma"], env)
-    inner = make_vec_env(config, seed, overrides, settings.n_envs, env)
+    inner = make_vec_env(env, settings.n_envs, config, seed=train_seed(seed), **overrides)
     venv = VecNormalize(
         inner,
         norm_obs=settings.norm_obs,
@@ -189,7 +176,7 @@ def prepare(
         overrides=overrides,
         clf_schedule=clf_schedule,
         clf_final_scale=clf_final_scale,
-        rescale_clf=_clf_rescaler(env, config, clf_schedule, inner, params),
+        rescale_clf=_clf_rescaler(profile, config, clf_schedule, inner, params),
         validate_every=PRESETS[preset].get("validate_every"),
         validation_trials=int(PRESETS[preset].get("validation_trials", 0)),
         on_update=on_update,
@@ -197,23 +184,34 @@ def prepare(
     )
 
 
-def scaled_clf(params: ChannelParams, scale: float) -> ChannelParams:
-    """``params`` with its CLF box scaled by ``scale``."""
-    (lo_v, lo_w), (hi_v, hi_w) = params.shield.clf_bounds
-    return params.replace(clf_bounds=((lo_v * scale, lo_w * scale), (hi_v * scale, hi_w * scale)))
+def _takes_gamma(env: str, profile: EnvProfile) -> bool:
+    """Whether the env's reward is sized by a discount it takes as ``gamma``: a parameter of
+    its profile's parameters class, or else a keyword its factory names (an env scored by
+    return has its own reward)."""
+    if profile.scored_by_return:
+        return False
+    cls = profile.params_class()
+    return "gamma" in flat_names(cls) if cls is not None else factory_takes(env, "gamma")
+
+
+def scaled_clf(params: Any, scale: float) -> Any:
+    """``params`` with its CLF box (``shield.clf_bounds``) scaled by ``scale``."""
+    lo, hi = params.shield.clf_bounds
+    return params.replace(clf_bounds=(tuple(x * scale for x in lo), tuple(x * scale for x in hi)))
 
 
 def _clf_rescaler(
-    env: str, config: str, clf_schedule: str, inner: Any, params: Any
+    profile: EnvProfile, config: str, clf_schedule: str, inner: Any, params: Any
 ) -> Callable[[float], None] | None:
-    """What :class:`tlshield.lab.callbacks.ClfSchedule` calls with each rollout's scale: for
-    Channel-v0 (the one env with a CLF schedule), its shield rebuilt with the CLF box scaled,
+    """What :class:`tlshield.lab.callbacks.ClfSchedule` calls with each rollout's scale: the
+    env's shield rebuilt with the CLF box scaled (by the ``clf_shield`` its profile names),
     set on every training environment; None when there is nothing to scale."""
-    if env != ENV_ID or clf_schedule == DEFAULT_SCHEDULE or not CONFIGS[config][1]:
+    if profile.clf_shield is None or clf_schedule == DEFAULT_SCHEDULE or not CONFIGS[config][1]:
         return None
+    shield_of = load_attr(profile.clf_shield)
 
     def rescale(scale: float) -> None:
-        inner.set_attr("shield", channel_shield(scaled_clf(params, scale), config))
+        inner.set_attr("shield", shield_of(scaled_clf(params, scale), config))
 
     return rescale
 
@@ -531,3 +529,14 @@ def ablation(
         )
     (root / "ablation.md").write_text("\n".join(lines) + "\n")
     return root
+
+
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(
+    __name__,
+    {
+        "make_vec_env": (
+            "tlshield.sb3.make_vec_env(env_id, n_envs, config, seed=train_seed(seed), **overrides)"
+        )
+    },
+)
