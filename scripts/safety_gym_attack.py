@@ -4,7 +4,7 @@ and ``tlshield/SafetyCarGoal1-v0`` in every configuration (docs/guides/safety-gy
     .venv/bin/python scripts/safety_gym_attack.py [--episodes 10]
 
 Policies: ``zero`` (no action: with ``rl_cbf_clf`` the shield alone drives, by its CLF), the
-lidar hazard attacker (:func:`tlshield.envs.safety_gym.hazard_attacker`: it sees
+lidar hazard attacker (:func:`hazard_attacker`, here: it sees
 what a policy sees, steers at the nearest hazard and brakes inside it), uniform random actions,
 and two goal-seekers that read the lidars as a policy does: ``seeker`` turns to the goal and
 thrusts, ``navigator`` also steers away from hazards and vases within 0.9 m (a potential field:
@@ -20,8 +20,28 @@ import math
 import warnings
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tlshield.envs.safety_gym import SafetyGoalEnv
+
+
+def hazard_attacker(env: SafetyGoalEnv, obs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """An attacker that sees what a policy sees: it steers at the nearest hazard on the hazard
+    lidar and, from the velocimeter, drives at a speed that falls with the distance to it, so
+    that it stops at the centre and stays there (full thrust ahead when no hazard is in
+    range)."""
+    robot = env.robot
+    bins = env.lidar(obs, "hazards")
+    if bins.max() <= 0.0:
+        return env.drive(1.0, 0.0)
+    i = int(np.argmax(bins))
+    angle = (i + 0.5) * 2.0 * np.pi / bins.size - robot.ahead  # from the heading
+    angle = (angle + np.pi) % (2.0 * np.pi) - np.pi  # (-pi, pi]: left is positive
+    distance = env.lidar_range * (1.0 - bins[i])
+    speed = min(1.0, 2.0 * distance)  # wanted, towards the hazard
+    forward = robot.forward_speed(env.sensor(obs, "velocimeter"))
+    thrust = float(np.clip(5.0 * (speed * math.cos(angle) - forward), -1.0, 1.0))
+    return env.drive(thrust, float(np.clip(3.0 * angle, -1.0, 1.0)))
 
 
 def goal_seeker(
@@ -81,7 +101,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     from tlshield import Status
-    from tlshield.envs.safety_gym import TASKS, hazard_attacker
+    from tlshield.envs.safety_gym import TASKS
 
     print(
         "| env | policy | config | episodes | cost | cost / episode | goals met | return / "

@@ -24,7 +24,9 @@ def rollouts(policy: str, episodes: int, steps: int) -> tuple[np.ndarray, ...]:
     """States before and after and the shield-unit inputs of ``episodes`` rollouts of the
     unshielded env under ``policy`` ("random": piecewise-constant uniform actions, half of
     them within the thrust's saturation; "attack": the lidar hazard attacker)."""
-    from tlshield.envs.safety_gym import SafetyGoalEnv, hazard_attacker
+    from safety_gym_attack import hazard_attacker
+
+    from tlshield.envs.safety_gym import SafetyGoalEnv
 
     env = SafetyGoalEnv("SafetyPointGoal1-v0", "rl", actions="native")
     rng = np.random.default_rng(0 if policy == "random" else 1)
@@ -107,8 +109,10 @@ def reference_point_model(d: float) -> object:
 def compare_models(episodes: int, d: float) -> None:
     """The lidar attacker against the shield (hazards in the formula, ``rl_cbf``) with each
     model: cost, and steps whose QP had to be relaxed."""
+    from safety_gym_attack import hazard_attacker
+
     from tlshield import Monitor, Shield, Status
-    from tlshield.envs.safety_gym import POINT, SafetyGoalEnv, hazard_attacker
+    from tlshield.envs.safety_gym import POINT, SafetyGoalEnv
 
     print("\n| shield model | attacker episodes | cost | relaxed steps |")
     print("|---|---:|---:|---:|")

@@ -10,9 +10,11 @@ validation and the command line: tests/lab/test_safety_gym_benchmark.py.
 
 from __future__ import annotations
 
+import importlib
 import importlib.metadata
 import json
 import pickle
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +28,20 @@ import tlshield
 from tlshield.envs import safety_gym as sg
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # gymnasium's Box casts
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _script(name: str) -> Any:
+    """``scripts/<name>.py`` as a module."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+
+
+#: The lidar hazard attacker of scripts/safety_gym_attack.py.
+hazard_attacker = _script("safety_gym_attack").hazard_attacker
 
 
 def attack(env: sg.SafetyGoalEnv, episodes: int, steps: int, seed: int) -> float:
@@ -33,7 +49,7 @@ def attack(env: sg.SafetyGoalEnv, episodes: int, steps: int, seed: int) -> float
     for ep in range(episodes):
         obs, _ = env.reset(seed=seed + ep)
         for _ in range(steps):
-            obs, _, terminated, truncated, info = env.step(sg.hazard_attacker(env, obs))
+            obs, _, terminated, truncated, info = env.step(hazard_attacker(env, obs))
             cost += info["cost"]
             if terminated or truncated:
                 break
@@ -63,6 +79,82 @@ def test_the_adapter_checks_versions_and_says_what_to_install(
         sg.make_builder("SafetyCarGoal3-v0")
     with pytest.raises(ValueError, match="the shielded envs are"):
         sg.SafetyGoalEnv("SafetyCarGoal3-v0")
+
+
+@pytest.mark.parametrize("halted", ["safety_gymnasium.assets.color", "safety_gymnasium.builder"])
+def test_a_failure_inside_the_adapter_takes_its_patches_back(
+    monkeypatch: pytest.MonkeyPatch, halted: str
+) -> None:
+    """load_builder patches the process (a module shell in sys.modules, hashable colours,
+    MjModel.jnt); when anything in it raises, sys.modules and MjModel.jnt are as they were on
+    entry and the error propagates. The import of ``halted`` fails: the colours' (the shell in
+    place, MjModel.jnt not patched yet) or the Builder's (every patch in place)."""
+    sg.load_builder()  # every third-party module the adapter imports is loaded once
+    for name in [n for n in sys.modules if n.split(".")[0] == "safety_gymnasium"]:
+        monkeypatch.delitem(sys.modules, name)
+
+    def unpatched(self: Any, *args: Any, **kwargs: Any) -> Any:  # stands in for MuJoCo's
+        raise AssertionError("not called")
+
+    monkeypatch.setattr(mujoco.MjModel, "jnt", unpatched)
+    seen: list[tuple[Any, Any, Any]] = []
+
+    class Halt:  # an import finder that fails the import of `halted`
+        def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
+            if name == halted:
+                color = sys.modules.get("safety_gymnasium.assets.color")
+                seen.append((sys.modules.get("safety_gymnasium"), mujoco.MjModel.jnt, color))
+                raise ImportError(f"halted at {name}")
+
+    monkeypatch.setattr(sys, "meta_path", [Halt(), *sys.meta_path])
+    before = dict(sys.modules)
+    with pytest.raises(ImportError, match=f"halted at {halted}"):
+        sg.load_builder.__wrapped__()  # uncached
+    shell, jnt, color = seen[0]  # the patches were in place when the import failed
+    assert shell is not None and shell.__path__
+    if halted == "safety_gymnasium.builder":
+        assert getattr(jnt, "_tlshield_patched", False)
+        assert all(type(c).__hash__ is object.__hash__ for c in color.COLOR.values())
+    else:
+        assert jnt is unpatched
+    assert sys.modules.keys() == before.keys()
+    assert all(sys.modules[name] is module for name, module in before.items())
+    assert mujoco.MjModel.jnt is unpatched
+
+
+def test_both_robots_are_what_the_env_reads_of_a_robot() -> None:
+    """PointModel and CarModel satisfy the Robot protocol, and the protocol declares exactly
+    what SafetyGoalEnv reads of ``self.robot``."""
+    import re
+
+    point: sg.Robot = sg.POINT  # a static check too: mypy holds both to the protocol
+    car: sg.Robot = sg.CAR
+    assert isinstance(point, sg.Robot) and isinstance(car, sg.Robot)
+    assert not isinstance(object(), sg.Robot)
+    declared = {name for name in vars(sg.Robot) if not name.startswith("_")}
+    source = (ROOT / "python" / "tlshield" / "envs" / "safety_gym" / "env.py").read_text()
+    assert declared == set(re.findall(r"\brobot\.(\w+)", source))
+
+
+def test_the_package_keeps_the_modules_names_and_names_where_the_attacker_went() -> None:
+    """tlshield.envs.safety_gym was one module: the package gives every name it had; the
+    attacker, a scripted policy of the scripts, is refused with its new place."""
+    for name in (
+        "VERSIONS INSTALL TASKS BUILDER_TASKS ACTIONS MissingStack installed load_builder "
+        "make_builder PointModel POINT CarModel CAR ROBOTS robot_of SafetyGoalParams goal_spec "
+        "SafetyGoalEnv make_safety_goal"
+    ).split():
+        assert getattr(sg, name) is not None, name
+    assert gym.spec("tlshield/SafetyPointGoal1-v0").entry_point == (
+        "tlshield.envs.safety_gym:make_safety_goal"
+    )
+    moved = r"hazard_attacker moved to scripts/safety_gym_attack\.py"
+    with pytest.raises(ImportError, match=moved):
+        from tlshield.envs.safety_gym import hazard_attacker  # noqa: F401
+    with pytest.raises(ImportError, match=moved):
+        sg.hazard_attacker  # noqa: B018
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        sg.nothing  # noqa: B018
 
 
 def test_the_car_robot_builds_and_steps_under_numpy_2() -> None:
@@ -148,8 +240,8 @@ def test_the_robots_units_drive_as_safety_gymnasiums_do(task: str) -> None:
     a, b = robot.reset(seed=21)[0], native.reset(seed=21)[0]
     scale = robot.robot.scale
     for _ in range(150):
-        a, _, _, _, info_a = robot.step(sg.hazard_attacker(robot, a))
-        b, _, _, _, info_b = native.step(sg.hazard_attacker(native, b))
+        a, _, _, _, info_a = robot.step(hazard_attacker(robot, a))
+        b, _, _, _, info_b = native.step(hazard_attacker(native, b))
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(info_a["state"], info_b["state"])
         np.testing.assert_array_equal(scale * info_a["action"], info_b["action"])
@@ -359,7 +451,7 @@ def test_the_correction_penalty_comes_off_the_reward_only() -> None:
     a, b = plain.reset(seed=4)[0], paid.reset(seed=4)[0]
     corrected = 0
     for _ in range(300):
-        action = sg.hazard_attacker(plain, a)
+        action = hazard_attacker(plain, a)
         a, r_plain, *_, info_plain = plain.step(action)
         b, r_paid, *_, info_paid = paid.step(action)
         np.testing.assert_array_equal(a, b)  # the same steps: only the reward differs
