@@ -148,7 +148,7 @@ def test_the_package_keeps_the_modules_names_and_names_where_the_attacker_went()
     assert gym.spec("tlshield/SafetyPointGoal1-v0").entry_point == (
         "tlshield.envs.safety_gym:make_safety_goal"
     )
-    moved = r"hazard_attacker moved to scripts/safety_gym_attack\.py"
+    moved = r"hazard_attacker was removed in tlshield 0\.4: use scripts/safety_gym_attack\.py"
     with pytest.raises(ImportError, match=moved):
         from tlshield.envs.safety_gym import hazard_attacker  # noqa: F401
     with pytest.raises(ImportError, match=moved):

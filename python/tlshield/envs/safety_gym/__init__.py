@@ -36,8 +36,7 @@ scripts use is ``hazard_attacker`` in ``scripts/safety_gym_attack.py``.
 
 from __future__ import annotations
 
-from typing import Any
-
+from tlshield._removed import refuse
 from tlshield.envs.safety_gym.adapter import (
     BUILDER_TASKS,
     INSTALL,
@@ -61,18 +60,14 @@ from tlshield.envs.safety_gym.robots import (
 from tlshield.envs.safety_gym.task import SafetyGoalParams, goal_spec
 
 #: Names that left this package, with where they went.
-_MOVED = {
-    "hazard_attacker": "scripts/safety_gym_attack.py (a scripted policy of the scripts, not "
-    "part of the library): import it from there",
-}
-
-
-def __getattr__(name: str) -> Any:
-    # A moved name is an ImportError naming its new place, for `from ... import` and for
-    # attribute access alike (an AttributeError's message is lost by `from ... import`).
-    if name in _MOVED:
-        raise ImportError(f"{__name__}.{name} moved to {_MOVED[name]}", name=__name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(
+    __name__,
+    {
+        "hazard_attacker": "scripts/safety_gym_attack.py's hazard_attacker (a scripted policy "
+        "of the scripts, not part of the library): import it from there"
+    },
+)
 
 
 __all__ = [
