@@ -27,6 +27,7 @@ pub(crate) mod error;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub(crate) mod formula;
+pub(crate) mod guidance;
 pub(crate) mod linalg;
 pub mod monitor;
 pub(crate) mod parallel;
@@ -36,7 +37,14 @@ pub mod progress;
 pub mod qp;
 pub(crate) mod region;
 pub(crate) mod robustness;
-pub mod route;
+/// The router's public names (the CLF's guidance around the discs the shield avoids), at the
+/// path they have had since 0.3; they live in the crate's guidance room with the rest of the
+/// CLF's guidance. See [`Router::target`](route::Router::target).
+pub mod route {
+    pub use crate::guidance::{
+        Disc, Router, Routing, DEFAULT_CLEARANCE, LOOKAHEAD, ROBOT_SLACK, SIDES,
+    };
+}
 pub(crate) mod sensitivity;
 pub mod shield;
 pub(crate) mod slots;

@@ -11,11 +11,11 @@ use rayon::prelude::*;
 use crate::automaton::{Automaton, Reading, MAX_ATOMS};
 use crate::cnf::Literal;
 use crate::error::{AutomatonError, InputError};
+use crate::guidance::{Router, Routing};
 use crate::progress::ProgressReward;
-use crate::route::{Router, Routing};
 use crate::validate::check_finite;
 
-/// The task reward's defaults, owned by Eq. 5A1 (`automaton::guidance`), here too because a
+/// The task reward's defaults, owned by Eq. 5A1 (`automaton::reward`), here too because a
 /// monitor is where most callers meet them.
 pub use crate::automaton::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 

@@ -20,7 +20,7 @@ use clarabel::solver::{
 
 use smallvec::SmallVec;
 
-use crate::predicate::{Center, Predicate};
+use crate::predicate::{Ball, Center, Predicate};
 
 /// Most alternatives one conjunction may expand into (the product of its unions' sizes).
 pub const MAX_ALTERNATIVES: usize = 256;
@@ -109,22 +109,76 @@ pub fn goal_dims<'a>(leaves: &[&'a Predicate]) -> Option<&'a [usize]> {
     })
 }
 
+/// A ball of a predicate read as geometry of the coordinate space `dims` (a plane for the
+/// router): the one reading of a ball as a shape, shared by the goal's pieces ([`piece`],
+/// [`centre_if_deepest`], [`separated`]) and the discs the router goes around
+/// (`guidance::plane`). It says where the centre is at a state and how far the point the ball
+/// holds sits from `s[dims]`: a body point is a region of the body, not of `dims`, so the
+/// goal's pieces leave it out, while the router grows its disc by that distance.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Round<'p> {
+    ball: &'p Ball,
+}
+
+impl<'p> Round<'p> {
+    /// `leaf` when it is a ball over exactly `dims` (the point it holds `s[dims]` or a body
+    /// point); `None` for anything else.
+    pub(crate) fn over(leaf: &'p Predicate, dims: &[usize]) -> Option<Self> {
+        match leaf {
+            Predicate::Ball(ball) if ball.pos() == dims => Some(Round { ball }),
+            _ => None,
+        }
+    }
+
+    /// Coordinate `k` of the centre at state `s` (read from `s` when the ball moves).
+    pub(crate) fn centre_at(self, k: usize, s: &[f64]) -> f64 {
+        match self.ball.center() {
+            Center::Fixed(c) => c[k],
+            Center::Dims(d) => s[d[k]],
+        }
+    }
+
+    /// Coordinate `k` of the centre, placed at `s` when there is one: `None` for a moving ball
+    /// without a state (it has no place of its own).
+    pub(crate) fn centre(self, k: usize, s: Option<&[f64]>) -> Option<f64> {
+        match (self.ball.center(), s) {
+            (Center::Fixed(c), _) => Some(c[k]),
+            (Center::Dims(_), Some(s)) => Some(self.centre_at(k, s)),
+            (Center::Dims(_), None) => None,
+        }
+    }
+
+    /// The radius.
+    pub(crate) fn radius(self) -> f64 {
+        self.ball.radius()
+    }
+
+    /// The distance from `s[dims]` to the body point the ball holds (the same at every
+    /// heading); `None` when it holds `s[dims]` itself.
+    pub(crate) fn body_reach(self) -> Option<f64> {
+        self.ball.offset().map(|o| o.length())
+    }
+
+    /// Whether the ball holds `s[dims]` itself: a region of the space `dims`.
+    fn of_the_point(self) -> bool {
+        self.ball.offset().is_none()
+    }
+}
+
 /// `leaf` as a piece over `dims`: a ball over exactly `dims` (its centre read from `s` when it
 /// moves; `None` for a moving ball without `s`), or a half-space reading only `dims`.
 /// `Some(None)`: the leaf does not live in this space (it takes no part).
 pub fn piece(leaf: &Predicate, dims: &[usize], s: Option<&[f64]>) -> Option<Option<Piece>> {
+    if let Some(round) = Round::over(leaf, dims).filter(|r| r.of_the_point()) {
+        let centre = (0..dims.len())
+            .map(|k| round.centre(k, s))
+            .collect::<Option<Vec<f64>>>()?;
+        return Some(Some(Piece::Ball {
+            centre,
+            radius: round.radius(),
+        }));
+    }
     match leaf {
-        Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => {
-            let centre = match (b.center(), s) {
-                (Center::Fixed(c), _) => c.clone(),
-                (Center::Dims(d), Some(s)) => d.iter().map(|&i| s[i]).collect(),
-                (Center::Dims(_), None) => return None,
-            };
-            Some(Some(Piece::Ball {
-                centre,
-                radius: b.radius(),
-            }))
-        }
         Predicate::Halfspace(h)
             if (0..h.w().len()).all(|d| h.w()[d] == 0.0 || dims.contains(&d)) =>
         {
@@ -151,26 +205,21 @@ pub fn centre_if_deepest(
     out: &mut Vec<f64>,
 ) -> bool {
     let mut ball = None;
-    for leaf in leaves {
-        match leaf {
-            Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => {
-                if ball.is_some() {
-                    return false;
-                }
-                ball = Some(b);
-            }
-            Predicate::Halfspace(_) => {}
-            _ => {}
+    for round in leaves
+        .iter()
+        .filter_map(|leaf| Round::over(leaf, dims))
+        .filter(|r| r.of_the_point())
+    {
+        if ball.is_some() {
+            return false;
         }
+        ball = Some(round);
     }
     let Some(b) = ball else {
         return false;
     };
     out.clear();
-    match b.center() {
-        Center::Fixed(c) => out.extend_from_slice(c),
-        Center::Dims(d) => out.extend(d.iter().map(|&i| s[i])),
-    }
+    out.extend((0..dims.len()).map(|k| b.centre_at(k, s)));
     leaves.iter().all(|leaf| match leaf {
         Predicate::Halfspace(h) => {
             let w = h.w();
@@ -196,15 +245,12 @@ pub fn centre_if_deepest(
 /// of their radii. A cheap exact test before the cone program (`false` says nothing). Only the
 /// pieces [`piece`] would keep take part.
 pub fn separated(leaves: &[Predicate], dims: &[usize], s: &[f64]) -> bool {
-    let centre = |b: &crate::predicate::Ball, k: usize| match b.center() {
-        Center::Fixed(c) => c[k],
-        Center::Dims(d) => s[d[k]],
-    };
+    let centre = |b: Round<'_>, k: usize| b.centre_at(k, s);
     let balls = || {
-        leaves.iter().filter_map(|leaf| match leaf {
-            Predicate::Ball(b) if b.pos() == dims && b.offset().is_none() => Some(b),
-            _ => None,
-        })
+        leaves
+            .iter()
+            .filter_map(|leaf| Round::over(leaf, dims))
+            .filter(|r| r.of_the_point())
     };
     for leaf in leaves {
         let Predicate::Halfspace(h) = leaf else {
@@ -230,11 +276,11 @@ pub fn separated(leaves: &[Predicate], dims: &[usize], s: &[f64]) -> bool {
             }
         }
     }
-    let all: SmallVec<[&crate::predicate::Ball; 4]> = balls().collect();
+    let all: SmallVec<[Round<'_>; 4]> = balls().collect();
     for (i, a) in all.iter().enumerate() {
         for b in &all[i + 1..] {
             let gap = (0..dims.len())
-                .map(|k| (centre(a, k) - centre(b, k)).powi(2))
+                .map(|k| (centre(*a, k) - centre(*b, k)).powi(2))
                 .sum::<f64>()
                 .sqrt();
             if gap >= a.radius() + b.radius() {

@@ -7,9 +7,10 @@
 //! The FSA reads every state of a trajectory: `q_0 = delta(initial, s_0)`,
 //! `q_{t+1} = delta(q_t, s_{t+1})`; an atom holds iff its robustness is > 0.
 //!
-//! Construction is in `build` (diagrams in `diagram`); the reward, goal and safe set that guide the learner and the
-//! shield (Eq. 5A1, 5B1, 5C1) are in `guidance`. Here: the automaton, its stepper and
-//! [`Reading`], the atoms of one validated state read once.
+//! Construction is in `build` (diagrams in `diagram`); the reward that guides the learner
+//! (Eq. 5A1) is in `reward`, the shield's safe set (Eq. 5C1) in `safe_set`, and the CLF goal
+//! (Eq. 5B1) with the rest of the shield's guidance in the crate's guidance room. Here: the
+//! automaton, its stepper and [`Reading`], the atoms of one validated state read once.
 
 use rayon::prelude::*;
 
@@ -21,14 +22,15 @@ use crate::validate::check_finite;
 
 mod build;
 mod diagram;
-mod guidance;
 mod regions;
+mod reward;
+mod safe_set;
 
 pub use build::{MAX_GUARD_CUBES, MAX_STATES};
 pub use diagram::MAX_NODES;
-pub(crate) use guidance::GoalChoice;
-pub use guidance::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 pub use regions::ranks;
+pub(crate) use regions::GoalAlternative;
+pub use reward::{DEFAULT_C_R, DEFAULT_TRAP_PENALTY};
 
 /// Most atoms an automaton supports. The construction never enumerates the `2^atoms` letters
 /// (transitions are decision diagrams over the atoms), so the bound is the letter's width.
@@ -102,12 +104,12 @@ impl<'a> Reading<'a> {
     }
 
     /// The automaton that read the state.
-    pub fn automaton(&self) -> &Automaton {
+    pub fn automaton(&self) -> &'a Automaton {
         self.aut
     }
 
     /// The state read.
-    pub fn state(&self) -> &[f64] {
+    pub fn state(&self) -> &'a [f64] {
         self.s
     }
 
@@ -188,6 +190,17 @@ impl Automaton {
     /// admits (`None`: unreachable, e.g. the trap).
     pub fn ranks(&self) -> &[Option<u32>] {
         &self.ranks
+    }
+
+    /// Per guard cube of edge `e`: the ways it can hold, each with its goal (Eq. 5B1's
+    /// candidates, read by `guidance::goal`).
+    pub(crate) fn goal_alternatives(&self, e: usize) -> &[Vec<GoalAlternative>] {
+        &self.goal_alternatives[e]
+    }
+
+    /// [`Automaton::goal_alternatives`] of every edge, in edge order.
+    pub(crate) fn all_goal_alternatives(&self) -> &[Vec<Vec<GoalAlternative>>] {
+        &self.goal_alternatives
     }
 
     /// Whether the geometry admits valuation `v` (no two disjoint regions, no empty

@@ -23,8 +23,8 @@
 use smallvec::SmallVec;
 
 use super::{BatchDynamics, BatchRows, Shield, Stage, StateBatch, Status, Want, Workspace};
-use crate::automaton::GoalChoice;
 use crate::error::{InputError, ShieldError};
+use crate::guidance::GoalChoice;
 use crate::linalg::dot;
 use crate::predicate::{Center, Predicate};
 use crate::sensitivity::{QpAdjointSolver, Singular};
@@ -37,7 +37,7 @@ pub const GRAD_FAILED: u8 = 2;
 /// Flag: the active set changes here; the gradient is one-sided (see the module docs).
 pub const GRAD_DEGENERATE: u8 = 4;
 /// Flag: routing changed the CLF row (a target around an obstacle, or progress into one
-/// uncredited; see [`crate::route`]). `dL/da_rl` is exact; `dL/ds` holds the target and the
+/// uncredited; see `crate::guidance`). `dL/da_rl` is exact; `dL/ds` holds the target and the
 /// uncredited direction fixed, leaving out how the route moves with the state.
 pub const GRAD_ROUTED: u8 = 16;
 /// Flag: the KKT system on the active rows was singular; only the identity part of the
@@ -416,7 +416,7 @@ impl Shield {
                     let (mut f, ready) = self.row_factor(ws);
                     if ready && sn > 0 && ws.program.has_goal {
                         let Workspace { program, grad, .. } = &mut *ws;
-                        if self.goal_jacobian(s, q, &program.goal, grad) {
+                        if self.goal_jacobian(s, q, &program.aim.target, grad) {
                             f |= GRAD_DEGENERATE;
                         }
                     }
@@ -578,7 +578,11 @@ impl Shield {
             grad: b,
             ..
         } = ws;
-        let mut flags = if program.rerouted { GRAD_ROUTED } else { 0 };
+        let mut flags = if program.aim.rerouted() {
+            GRAD_ROUTED
+        } else {
+            0
+        };
         let params = &self.params;
         let (m, n, nv, rows) = (self.m, s.len(), qp.vars(), qp.rows());
         let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
@@ -691,7 +695,7 @@ impl Shield {
                     .as_ref()
                     .expect("checked: state gradients need a model");
                 b.u.fill(0.0);
-                for (&p, &c) in params.pos.iter().zip(&program.goal) {
+                for (&p, &c) in params.pos.iter().zip(&program.aim.target) {
                     b.u[p] = s[p] - c;
                 }
                 model.jacobian_f_transpose_times(s, &b.u, &mut b.tmp);

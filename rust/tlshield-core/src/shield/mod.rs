@@ -34,10 +34,10 @@ use crate::automaton::Automaton;
 use crate::custom::CustomModel;
 use crate::dynamics::{Dynamics, Structure};
 use crate::error::{AutomatonError, ShieldError};
+use crate::guidance::Routing;
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{DenseQp, QpStatus};
-use crate::route::Routing;
 use crate::slots::Slots;
 use crate::validate::check_finite;
 
@@ -519,7 +519,7 @@ impl Shield {
         out.gave_way = None;
         out.status = Status::Solved;
         out.solver = SolvedBy::Nothing;
-        out.goal = (record && has_goal).then(|| program.goal.clone());
+        out.goal = (record && has_goal).then(|| program.aim.target.clone());
         if vars == 0 {
             ws.qp = DenseQp {
                 p_diag: Vec::new(),

@@ -306,7 +306,7 @@ pub struct ShieldParams {
     pub route_clearance: f64,
     /// The state dimension of the robot's heading, when a turn input reaches the position only
     /// through it: routing's CLF then turns the heading towards where it pushes
-    /// (`shield/program.rs`). `None` takes the built-in model's
+    /// (`guidance/aim.rs`). `None` takes the built-in model's
     /// ([`Dynamics::steered_heading`](crate::Dynamics::steered_heading)); a custom model
     /// declares its own here.
     pub heading: Option<usize>,
@@ -355,7 +355,7 @@ impl ShieldParams {
             preserve_progress: true,
             disturbance: Vec::new(),
             route: true,
-            route_clearance: crate::route::DEFAULT_CLEARANCE,
+            route_clearance: crate::guidance::DEFAULT_CLEARANCE,
             heading: None,
             clf_round: None,
             inputs: None,

@@ -23,11 +23,11 @@ use super::{BarrierSource, Call, ControlAffine, ShieldParams};
 use crate::automaton::{Automaton, Reading};
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
+use crate::guidance::{Aim, Routing, Turn};
 use crate::linalg::dot;
 use crate::monitor::Monitor;
 use crate::predicate::Predicate;
 use crate::qp::DenseQp;
-use crate::route::{is_disc, Router, Routing};
 
 /// What a shield fixed at construction, read by every step's rows.
 #[derive(Clone, Copy)]
@@ -47,10 +47,13 @@ pub(super) struct Program {
     pub(super) f: Vec<f64>,
     pub(super) g: Vec<f64>,
     grad: Vec<f64>,
-    /// Second-order terms: `H f`, `J_f f` and `J_f^T w` (n each).
+    /// Second-order terms: `H f` (a second-order barrier row's, then its `grad psi_1`),
+    /// `J_f f` and `J_f^T w` (n each).
     hf: Vec<f64>,
     jf: Vec<f64>,
     jt: Vec<f64>,
+    /// The second-order CLF's error `e` placed at the position dimensions (n values).
+    clf_error: Vec<f64>,
     pub(super) safe: Vec<(Literal, f64)>,
     /// Per barrier: `Lg h` (m values), the row's right-hand side and its slack weight.
     pub(super) lg: Vec<f64>,
@@ -58,10 +61,10 @@ pub(super) struct Program {
     weights: Vec<f64>,
     /// Per row: the barrier it holds (what gave way, when its slack is the largest).
     sources: Vec<BarrierSource>,
-    /// Per barrier: whether the router goes around it (the outside of a disc over `pos`).
-    routed: Vec<bool>,
-    /// The CLF goal and `Lg V` (m values).
-    pub(super) goal: Vec<f64>,
+    /// Where the CLF aims (the goal of Eq. 5B1 or the router's target in its place) and what
+    /// guidance changed in its row (`crate::guidance`).
+    pub(super) aim: Aim,
+    /// The CLF's `Lg V` (m values).
     pub(super) clf_lg: Vec<f64>,
     /// Whether this step has a CLF goal (CLF on and a goal in this FSA state).
     pub(super) has_goal: bool,
@@ -69,13 +72,8 @@ pub(super) struct Program {
     /// The closed-form lower bound of `delta` over the CLF box; the QP solves for
     /// `d = delta - delta_0 >= 0`.
     pub(super) delta_0: f64,
-    /// Routes the CLF's target around the discs to avoid (`crate::route`).
-    router: Router,
     /// The sampled rows' buffers (`sampled.rs`), used when the shield knows `dt`.
     sampled: Sampled,
-    /// Whether routing changed this step's CLF row: a target other than the goal, or progress
-    /// uncredited (`Program::uncredit_blocked_progress`).
-    pub(super) rerouted: bool,
     /// Variables of the unrelaxed problem: `a_cbf` (m if the CBF is on), `a_clf` and `d` (if
     /// there is a goal).
     pub(super) cbf_vars: usize,
@@ -241,6 +239,7 @@ impl Program {
             hf: vec![0.0; n],
             jf: vec![0.0; n],
             jt: vec![0.0; n],
+            clf_error: vec![0.0; n],
             ..Program::default()
         }
     }
@@ -282,6 +281,7 @@ impl Program {
         self.hf.resize(n, 0.0);
         self.jf.resize(n, 0.0);
         self.jt.resize(n, 0.0);
+        self.clf_error.resize(n, 0.0);
         match (fg, model) {
             (Some(ControlAffine { f, g, .. }), _) => {
                 self.f.copy_from_slice(f);
@@ -327,7 +327,7 @@ impl Program {
         self.rhs.clear();
         self.weights.clear();
         self.sources.clear();
-        self.routed.clear();
+        self.aim.start();
         // The atoms' robustness at s, once for both the safe set and the goal: the task
         // monitor's reading of this state when there is one.
         let reading = match task {
@@ -384,8 +384,7 @@ impl Program {
         for (source, predicate, sign, h, weight, form) in enforced {
             self.weights.push(weight);
             self.sources.push(source);
-            self.routed
-                .push(sign < 0.0 && params.pos.len() == 2 && is_disc(predicate, &params.pos, s));
+            self.aim.note_row(predicate, sign, &params.pos, s);
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
             let lf = dot(&self.grad, &self.f);
@@ -430,7 +429,7 @@ impl Program {
                 self.rhs.push(lg_a + psi - robust);
                 self.weights.push(weight);
                 self.sources.push(source);
-                self.routed.push(false);
+                self.aim.note_unrouted_row();
             }
             if let Some(out) = barriers_out.as_deref_mut() {
                 out.push((source, h));
@@ -438,7 +437,8 @@ impl Program {
         }
     }
 
-    /// The CLF row of Eq. 5B1 towards the goal, and `delta_0`.
+    /// The CLF row of Eq. 5B1 towards the goal (or the target guidance aims at in its place,
+    /// `crate::guidance`), and `delta_0`.
     fn clf_row(
         &mut self,
         at: Site<'_>,
@@ -448,13 +448,7 @@ impl Program {
         reading: &Reading<'_>,
     ) {
         let Site {
-            params,
-            model,
-            fg,
-            s,
-            q,
-            a_rl,
-            ..
+            params, q, a_rl, ..
         } = at;
         let m = a_rl.len();
         // CLF row (Eq. 5B1's goal): V = |e|^2 with e = s[pos] - goal, or, when no input moves
@@ -464,67 +458,31 @@ impl Program {
         self.has_goal = params.use_clf
             && match task {
                 Some(monitor) => monitor.goal().is_some_and(|g| {
-                    self.goal.clear();
-                    self.goal.extend_from_slice(g);
+                    self.aim.target.clear();
+                    self.aim.target.extend_from_slice(g);
                     true
                 }),
-                None => reading.goal(q, &mut self.goal),
+                None => reading.goal(q, &mut self.aim.target),
             };
-        self.rerouted = false;
         if let (true, Some(routing)) = (self.has_goal, routing) {
-            // A monitor routed the same way has planned this state's way already.
-            match task.and_then(|monitor| monitor.routed_target(routing)) {
-                Some(target) => self.aim_at(target),
-                None => self.route(params, s, q, reading),
-            }
+            // A monitor routed the same way has planned this state's way already; the safe
+            // set is the rows' when they read it.
+            let planned = task.and_then(|monitor| monitor.routed_target(routing));
+            let safe = params.use_cbf.then_some(&self.safe[..]);
+            self.aim.route(routing, planned, reading, q, safe);
         }
         self.clf_rhs = 0.0;
         self.delta_0 = 0.0;
         self.clf_lg.clear();
         self.clf_lg.resize(m, 0.0);
         if self.has_goal {
-            let (mut v, mut lf) = (0.0, 0.0);
-            match second_order {
-                true => {
-                    // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
-                    let k = params.clf_gain;
-                    jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
-                    self.hf.fill(0.0); // e placed at the pos dimensions
-                    for (&p, &c) in params.pos.iter().zip(&self.goal) {
-                        let e = self.f[p] + k * (s[p] - c);
-                        self.hf[p] = e;
-                        v += e * e;
-                        lf += 2.0 * e * (self.jf[p] + k * self.f[p]);
-                    }
-                    jacobian_times(model, fg, s, &self.hf, &mut self.jt, true);
-                    for (j, l) in self.clf_lg.iter_mut().enumerate() {
-                        *l = 2.0
-                            * (0..s.len())
-                                .map(|i| self.jt[i] * self.g[i * m + j])
-                                .sum::<f64>();
-                    }
-                    let steered = params
-                        .heading
-                        .or_else(|| model.and_then(Dynamics::steered_heading));
-                    if let (true, Some(theta)) = (params.route && params.pos.len() == 2, steered) {
-                        let (dv, dlf) = self.turn_towards_push(params, s, theta, v);
-                        v += dv;
-                        lf += dlf;
-                    }
-                }
-                false => {
-                    for (&k, &c) in params.pos.iter().zip(&self.goal) {
-                        let e = s[k] - c;
-                        v += e * e;
-                        lf += 2.0 * e * self.f[k];
-                        for (j, l) in self.clf_lg.iter_mut().enumerate() {
-                            *l += 2.0 * e * self.g[k * m + j];
-                        }
-                    }
-                }
-            }
+            let (v, lf) = match second_order {
+                true => self.second_order_clf(at),
+                false => self.first_order_clf(at),
+            };
             if params.route {
-                self.uncredit_blocked_progress(m);
+                self.aim
+                    .uncredit_blocked_progress(&mut self.clf_lg, &self.lg, &self.rhs);
             }
             self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + params.c3 * v);
             // The CLF bounds give delta a lower bound in closed form; solving for the excess
@@ -542,92 +500,70 @@ impl Program {
         }
     }
 
-    /// Progress the barriers will cancel is not progress: for every row of a barrier the router
-    /// goes around (the outside of a disc) that the RL action alone violates
-    /// (`r + L . a_rl < 0`, so the CBF will cut that action), the part of `Lg V` that credits
-    /// motion into the barrier (`Lg V . L > 0`) is projected out. Without
-    /// this, a push into an obstacle that also points towards the target satisfies the CLF row
-    /// while `a_cbf` cancels it: a parked equilibrium with `delta = 0` (measured with a greedy
-    /// seeker on the unicycle). With it, the CLF must find its decrease along the barrier.
-    fn uncredit_blocked_progress(&mut self, m: usize) {
-        let rows = self.lg.chunks_exact(m).zip(&self.rhs).zip(&self.routed);
-        for ((row, &rhs), &routed) in rows {
-            if rhs >= 0.0 || !routed {
-                continue;
-            }
-            let (along, norm2) = (dot(&self.clf_lg, row), dot(row, row));
-            if along > 0.0 && norm2 > 0.0 {
-                let t = along / norm2;
-                for (l, r) in self.clf_lg.iter_mut().zip(row) {
-                    *l -= t * r;
-                }
-                self.rerouted = true;
+    /// The first-order CLF towards the target: `V = |e|^2`, `e = s[pos] - target`; writes
+    /// `Lg V` into `clf_lg` (zeroed) and returns `(V, Lf V)`.
+    fn first_order_clf(&mut self, at: Site<'_>) -> (f64, f64) {
+        let Site {
+            params, s, a_rl, ..
+        } = at;
+        let m = a_rl.len();
+        let (mut v, mut lf) = (0.0, 0.0);
+        for (&k, &c) in params.pos.iter().zip(&self.aim.target) {
+            let e = s[k] - c;
+            v += e * e;
+            lf += 2.0 * e * self.f[k];
+            for (j, l) in self.clf_lg.iter_mut().enumerate() {
+                *l += 2.0 * e * self.g[k * m + j];
             }
         }
+        (v, lf)
     }
 
-    /// Robots that must turn (beyond the paper): under a model whose turn input reaches the
-    /// position only through the heading (`Dynamics::steered_heading`), the second-order CLF's
-    /// `Lg V` has no part on the turn, so the QP brakes where it should turn. The CLF gains
-    /// `lambda (1 - cos(theta - psi))`, with `psi` the direction the CLF pushes (`-e`) and
-    /// `lambda = |e|^2`, both held for the step: its decrease asks the heading to turn towards
-    /// the push. Returns what it adds to `V` and `Lf V` (`Lg V` is updated in place).
-    fn turn_towards_push(
-        &mut self,
-        params: &ShieldParams,
-        s: &[f64],
-        theta: usize,
-        v: f64,
-    ) -> (f64, f64) {
-        let (ex, ey) = (self.hf[params.pos[0]], self.hf[params.pos[1]]);
-        if v <= 1e-18 {
-            return (0.0, 0.0);
+    /// The second-order CLF towards the target: `V = |e|^2`, `e = f[pos] + k (s[pos] -
+    /// target)`, with the turn towards the push where the model steers (`crate::guidance`);
+    /// writes `Lg V` into `clf_lg` and returns `(V, Lf V)`.
+    fn second_order_clf(&mut self, at: Site<'_>) -> (f64, f64) {
+        let Site {
+            params,
+            model,
+            fg,
+            s,
+            a_rl,
+            ..
+        } = at;
+        let m = a_rl.len();
+        let (mut v, mut lf) = (0.0, 0.0);
+        // de_i/ds = J_f[pos_i, :] + k e_{pos_i}; g[pos, :] = 0 by construction.
+        let k = params.clf_gain;
+        jacobian_times(model, fg, s, &self.f, &mut self.jf, false);
+        self.clf_error.fill(0.0);
+        for (&p, &c) in params.pos.iter().zip(&self.aim.target) {
+            let e = self.f[p] + k * (s[p] - c);
+            self.clf_error[p] = e;
+            v += e * e;
+            lf += 2.0 * e * (self.jf[p] + k * self.f[p]);
         }
-        let off = s[theta] - (-ey).atan2(-ex);
-        let (sin, cos) = off.sin_cos();
-        let m = self.clf_lg.len();
+        jacobian_times(model, fg, s, &self.clf_error, &mut self.jt, true);
         for (j, l) in self.clf_lg.iter_mut().enumerate() {
-            *l += v * sin * self.g[theta * m + j];
+            *l = 2.0
+                * (0..s.len())
+                    .map(|i| self.jt[i] * self.g[i * m + j])
+                    .sum::<f64>();
         }
-        self.rerouted = true;
-        (v * (1.0 - cos), v * sin * self.f[theta])
-    }
-
-    /// Replaces the goal by the router's target around the discs this step keeps the state out
-    /// of: the user's barriers and the safe set's literals that are the outside of a ball (or
-    /// of a union of balls) over the CLF's position (`crate::route`).
-    fn route(&mut self, params: &ShieldParams, s: &[f64], q: usize, reading: &Reading<'_>) {
-        if !params.use_cbf {
-            // The safe set was not needed for rows; the router still avoids what it names.
-            if params.preserve_progress {
-                reading.progress_safe_set(q, &mut self.safe);
-            } else {
-                reading.safe_set(q, &mut self.safe);
-            }
+        let steered = params
+            .heading
+            .or_else(|| model.and_then(Dynamics::steered_heading));
+        if let (true, Some(theta)) = (params.route && params.pos.len() == 2, steered) {
+            let e = [self.clf_error[params.pos[0]], self.clf_error[params.pos[1]]];
+            let row = (&self.g[theta * m..(theta + 1) * m], self.f[theta]);
+            let turn = self
+                .aim
+                .turn_towards_push(e, s[theta], row, v, &mut self.clf_lg);
+            let Turn { v: dv, lf: dlf } = turn;
+            v += dv;
+            lf += dlf;
         }
-        let pos = [params.pos[0], params.pos[1]];
-        let user = params
-            .barriers
-            .iter()
-            .filter(|b| !b.positive)
-            .map(|b| &b.predicate);
-        let predicates = reading.automaton().spec().predicates();
-        let kept = self
-            .safe
-            .iter()
-            .filter(|(lit, _)| !lit.positive)
-            .map(|(lit, _)| &predicates[lit.atom]);
-        self.router.load(&pos, s, user.chain(kept));
-        let p = [s[pos[0]], s[pos[1]]];
-        let goal = [self.goal[0], self.goal[1]];
-        let target = self.router.target(p, goal, params.route_clearance);
-        self.aim_at(target);
-    }
-
-    /// Puts the router's `target` in place of the goal.
-    fn aim_at(&mut self, target: [f64; 2]) {
-        self.rerouted |= target != [self.goal[0], self.goal[1]];
-        self.goal.copy_from_slice(&target);
+        (v, lf)
     }
 
     /// Writes the QP of the last [`Program::rows`] into `qp`; `relaxed` adds a slack

@@ -1,0 +1,256 @@
+//! Where the CLF aims: the point of the router's path that the robot sees, the target placed
+//! the way left along it, and [`Aim`], the one value the CLF row of Eq. 5D2 reads (the target,
+//! whether guidance changed the row, the rows whose progress it uncredits, the turn term).
+//!
+//! The router's target replaces the goal of Eq. 5B1 when the straight line is blocked; the
+//! barrier rows the router goes around then must not credit progress into them, and a robot
+//! that must turn is asked to turn towards the push (both beyond the paper, see the methods).
+
+use super::graph::{norm, past_tangent, sub, Node};
+use super::plane::is_disc;
+use super::router::{Router, Routing};
+use crate::automaton::Reading;
+use crate::cnf::Literal;
+use crate::linalg::dot;
+use crate::predicate::Predicate;
+
+/// The aim's distance along the path, in inflated radii of the disc the path meets first.
+pub const LOOKAHEAD: f64 = 1.0;
+/// How much nearer each retry of the aim looks along the path when the point a lookahead along
+/// it is out of sight: a geometric back-off reaches the path's first node in a few tries.
+const BACK_OFF: f64 = 0.8;
+/// An aim this close to the robot has no direction to stretch the target along: the aim
+/// itself is the target.
+const AT_ROBOT: f64 = 1e-12;
+/// A CLF value at or below this: the robot is at its target and the push has no direction to
+/// turn towards (the angle of a zero error is meaningless).
+const NO_PUSH: f64 = 1e-18;
+
+/// The distance along the path at which the router aims past a disc of `radius`, grown by
+/// `clearance`: [`LOOKAHEAD`] inflated radii.
+pub(super) fn lookahead(radius: f64, clearance: f64) -> f64 {
+    LOOKAHEAD * radius * (1.0 + clearance)
+}
+
+impl Router {
+    /// The target after a search that reached the goal, for a robot at `p`: in the direction
+    /// of [`Router::aim`], as far away as the path is long, so that `V = |p - target|^2` is the
+    /// squared length of the way left (a CLF whose gradient points along the path, and which
+    /// asks the speed it would ask of a clear goal).
+    pub(super) fn place_target(&self, p: [f64; 2], clearance: f64) -> [f64; 2] {
+        let aim = self.aim(p, clearance);
+        let u = sub(aim, p);
+        let len = norm(u);
+        if len <= AT_ROBOT {
+            return aim;
+        }
+        let left = self.way_to(Node::Goal);
+        [p[0] + left * u[0] / len, p[1] + left * u[1] / len]
+    }
+
+    /// A point of the last path found that the robot at `p` sees (see the router's docs): the
+    /// point a lookahead along the path, or, hidden behind the disc the path wraps around, the
+    /// way along the tangent on its side; else the farthest point short of it in sight; the
+    /// first node at the least, which the robot sees by construction.
+    pub(super) fn aim(&self, p: [f64; 2], clearance: f64) -> [f64; 2] {
+        let mut first = Node::Goal;
+        while self.before(first) != Node::Robot {
+            first = self.before(first);
+        }
+        let corner_at = self.point(first);
+        let Node::Corner(k) = first else {
+            return corner_at;
+        };
+        let disc = self.corners[k].disc;
+        let lookahead = lookahead(self.discs[disc].radius, clearance);
+        let carrot = self.along_path(lookahead);
+        if self.visible_from_robot(p, carrot) {
+            return carrot;
+        }
+        // Hidden behind the disc the path wraps around (the robot on its rim): the way along
+        // the tangent from the robot on the carrot's side, which it sees.
+        let (c, r) = (self.discs[disc].center, self.inflated[disc]);
+        let [a, b] = [1.0, -1.0].map(|side| past_tangent(p, c, r, side, lookahead));
+        let toward = if norm(sub(a, carrot)) <= norm(sub(b, carrot)) {
+            a
+        } else {
+            b
+        };
+        if self.visible_from_robot(p, toward) {
+            return toward;
+        }
+        let mut along = BACK_OFF * lookahead;
+        while along > self.way_to(first) {
+            let carrot = self.along_path(along);
+            if self.visible_from_robot(p, carrot) {
+                return carrot;
+            }
+            along *= BACK_OFF;
+        }
+        corner_at
+    }
+
+    /// The point at length `along` on the last path found (robot to goal; the goal past its
+    /// end).
+    fn along_path(&self, along: f64) -> [f64; 2] {
+        let mut node = Node::Goal;
+        while self.before(node) != Node::Robot && self.way_to(self.before(node)) >= along {
+            node = self.before(node);
+        }
+        if self.way_to(node) <= along {
+            return self.point(node);
+        }
+        let before = self.before(node);
+        let (a, b) = (self.point(before), self.point(node));
+        let t = (along - self.way_to(before)) / (self.way_to(node) - self.way_to(before));
+        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+    }
+}
+
+/// What the turn towards the push adds to the CLF ([`Aim::turn_towards_push`]): to `V` and to
+/// `Lf V` (its `Lg V` part is added in place).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Turn {
+    /// Added to `V`.
+    pub(crate) v: f64,
+    /// Added to `Lf V`.
+    pub(crate) lf: f64,
+}
+
+/// Where the CLF of one step aims and what guidance changed in its row: the one value the CLF
+/// row of Eq. 5D2 reads from guidance. It owns its buffers (the target, the per-row flags, the
+/// planner's), reused from step to step: allocation-free once grown.
+#[derive(Debug, Default)]
+pub(crate) struct Aim {
+    /// The CLF's target: the goal of Eq. 5B1, or the router's target in its place (as far from
+    /// the robot as the way left is long).
+    pub(crate) target: Vec<f64>,
+    /// Whether guidance changed this step's CLF row: a target other than the goal, progress
+    /// uncredited ([`Aim::uncredit_blocked_progress`]) or a turn asked
+    /// ([`Aim::turn_towards_push`]).
+    rerouted: bool,
+    /// Per barrier row: whether the router goes around it (the outside of a disc over the
+    /// CLF's position), so that progress into it may be uncredited.
+    routed: Vec<bool>,
+    /// The planner's buffers.
+    router: Router,
+    /// The safe set routed around, when the barrier rows did not read it.
+    safe: Vec<(Literal, f64)>,
+}
+
+impl Aim {
+    /// Starts a step: no barrier row noted yet, nothing changed.
+    pub(crate) fn start(&mut self) {
+        self.routed.clear();
+        self.rerouted = false;
+    }
+
+    /// Whether guidance changed this step's CLF row.
+    pub(crate) fn rerouted(&self) -> bool {
+        self.rerouted
+    }
+
+    /// Notes the next barrier row, on `predicate` signed by `sign` (`h = sign rho`): the
+    /// router goes around it when it keeps the state outside a disc over the two dimensions
+    /// `pos` at `s`.
+    pub(crate) fn note_row(&mut self, predicate: &Predicate, sign: f64, pos: &[usize], s: &[f64]) {
+        self.routed
+            .push(sign < 0.0 && pos.len() == 2 && is_disc(predicate, pos, s));
+    }
+
+    /// Notes the next barrier row as one the router does not go around.
+    pub(crate) fn note_unrouted_row(&mut self) {
+        self.routed.push(false);
+    }
+
+    /// Replaces the goal by the router's target around the discs this step keeps the state out
+    /// of: `routing`'s user barriers and the avoided literals of its safe set at `(reading, q)`
+    /// that are the outside of a ball (or of a union of balls) over the CLF's position.
+    /// `planned`: the target a task monitor routed the same way has planned at this state
+    /// already; `safe`: the safe set when the barrier rows have read it (else it is read here).
+    pub(crate) fn route(
+        &mut self,
+        routing: &Routing,
+        planned: Option<[f64; 2]>,
+        reading: &Reading<'_>,
+        q: usize,
+        safe: Option<&[(Literal, f64)]>,
+    ) {
+        if let Some(target) = planned {
+            return self.aim_at(target);
+        }
+        let safe = match safe {
+            Some(safe) => safe,
+            None => {
+                routing.safe_set(reading, q, &mut self.safe);
+                &self.safe
+            }
+        };
+        let predicates = reading.automaton().spec().predicates();
+        let goal = [self.target[0], self.target[1]];
+        let target = routing.plan(predicates, safe, reading.state(), goal, &mut self.router);
+        self.aim_at(target);
+    }
+
+    /// Puts the router's `target` in place of the goal.
+    fn aim_at(&mut self, target: [f64; 2]) {
+        self.rerouted |= target != [self.target[0], self.target[1]];
+        self.target.copy_from_slice(&target);
+    }
+
+    /// Progress the barriers will cancel is not progress: for every row of a barrier the router
+    /// goes around (the outside of a disc) that the RL action alone violates
+    /// (`r + L . a_rl < 0`, so the CBF will cut that action), the part of `Lg V` (`lg_v`) that
+    /// credits motion into the barrier (`Lg V . L > 0`) is projected out. `lg` holds each
+    /// barrier row's `L` (as many values as `lg_v`) and `rhs` its `r + L . a_rl`. Without
+    /// this, a push into an obstacle that also points towards the target satisfies the CLF row
+    /// while `a_cbf` cancels it: a parked equilibrium with `delta = 0` (measured with a greedy
+    /// seeker on the unicycle). With it, the CLF must find its decrease along the barrier.
+    pub(crate) fn uncredit_blocked_progress(&mut self, lg_v: &mut [f64], lg: &[f64], rhs: &[f64]) {
+        let rows = lg.chunks_exact(lg_v.len()).zip(rhs).zip(&self.routed);
+        for ((row, &rhs), &routed) in rows {
+            if rhs >= 0.0 || !routed {
+                continue;
+            }
+            let (along, norm2) = (dot(lg_v, row), dot(row, row));
+            if along > 0.0 && norm2 > 0.0 {
+                let t = along / norm2;
+                for (l, r) in lg_v.iter_mut().zip(row) {
+                    *l -= t * r;
+                }
+                self.rerouted = true;
+            }
+        }
+    }
+
+    /// Robots that must turn (beyond the paper): under a model whose turn input reaches the
+    /// position only through the heading (`Dynamics::steered_heading`), the second-order CLF's
+    /// `Lg V` has no part on the turn, so the QP brakes where it should turn. The CLF gains
+    /// `lambda (1 - cos(theta - psi))`, with `psi` the direction the CLF pushes (`-e`, `e` the
+    /// CLF's error at the two position dimensions) and `lambda = |e|^2 = v`, both held for the
+    /// step: its decrease asks the heading `theta` to turn towards the push. `g_theta` and
+    /// `f_theta` are the heading's rows of `g` and `f`; `lg_v` is `Lg V`, updated in place.
+    pub(crate) fn turn_towards_push(
+        &mut self,
+        e: [f64; 2],
+        theta: f64,
+        (g_theta, f_theta): (&[f64], f64),
+        v: f64,
+        lg_v: &mut [f64],
+    ) -> Turn {
+        let [ex, ey] = e;
+        if v <= NO_PUSH {
+            return Turn { v: 0.0, lf: 0.0 };
+        }
+        let off = theta - (-ey).atan2(-ex);
+        let (sin, cos) = off.sin_cos();
+        for (l, g) in lg_v.iter_mut().zip(g_theta) {
+            *l += v * sin * g;
+        }
+        self.rerouted = true;
+        Turn {
+            v: v * (1.0 - cos),
+            lf: v * sin * f_theta,
+        }
+    }
+}

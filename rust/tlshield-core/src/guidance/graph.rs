@@ -1,0 +1,199 @@
+//! The planner's visibility graph: its nodes (the robot, the goal, and the corners past each
+//! inflated disc) and which segments between them keep out of the discs, with the plane
+//! geometry they are built from.
+
+use std::f64::consts::PI;
+
+use super::aim::lookahead;
+use super::router::Router;
+
+/// Sides of the polygon circumscribing each inflated disc.
+pub const SIDES: usize = 8;
+/// The unit vectors to the corners of the octagon, at multiples of 45 degrees.
+const OCTAGON: [[f64; 2]; SIDES] = {
+    const H: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    [
+        [1.0, 0.0],
+        [H, H],
+        [0.0, 1.0],
+        [-H, H],
+        [-1.0, 0.0],
+        [-H, -H],
+        [0.0, -1.0],
+        [H, -H],
+    ]
+};
+/// How far into the clearance (a fraction of the inflated radius) a segment from the robot may
+/// cut.
+pub const ROBOT_SLACK: f64 = 0.05;
+/// How close (a fraction of the radius) a segment may pass a disc's rim and still only touch
+/// it: a polygon's side touches its inflated circle in exact arithmetic, and rounding must not
+/// make it cross.
+const TOUCH: f64 = 1e-9;
+
+/// A node of the visibility graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Node {
+    /// The robot's position, where every path starts.
+    Robot,
+    /// The goal, where every path ends.
+    Goal,
+    /// A corner ([`Corner`]), by its place in the order the corners were found.
+    Corner(usize),
+}
+
+impl Node {
+    /// The node's slot in the search's per-node buffers: the robot, the goal, then the corners
+    /// in the order found (the order that breaks the search's ties).
+    pub(super) fn index(self) -> usize {
+        match self {
+            Node::Robot => 0,
+            Node::Goal => 1,
+            Node::Corner(k) => 2 + k,
+        }
+    }
+
+    /// The node in slot `i` (the inverse of [`Node::index`]).
+    pub(super) fn at(i: usize) -> Node {
+        match i {
+            0 => Node::Robot,
+            1 => Node::Goal,
+            i => Node::Corner(i - 2),
+        }
+    }
+}
+
+/// A way point past a disc: a vertex of its circumscribed polygon, or a point along a tangent
+/// from the robot.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Corner {
+    /// Where it is.
+    pub(super) at: [f64; 2],
+    /// The disc it leads past.
+    pub(super) disc: usize,
+}
+
+/// `a - b`.
+pub(super) fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// `|a|`.
+pub(super) fn norm(a: [f64; 2]) -> f64 {
+    a[0].hypot(a[1])
+}
+
+/// A point on the tangent from `p` to the circle at `c` of radius `r` on `side` (+1: passing the
+/// circle counter-clockwise about `c`): the tangent point, or, from on or inside the circle, a
+/// point a unit along the circle's tangent at `p`.
+fn tangent(p: [f64; 2], c: [f64; 2], r: f64, side: f64) -> [f64; 2] {
+    let rim = sub(p, c);
+    let d = norm(rim);
+    if d <= r || d == 0.0 {
+        let d = d.max(f64::MIN_POSITIVE);
+        return [p[0] - side * rim[1] / d, p[1] + side * rim[0] / d];
+    }
+    // The tangent point is at angle +-acos(r / d) from the direction c -> p.
+    let (sin, cos) = (side * (r / d).acos()).sin_cos();
+    let u = [rim[0] / d, rim[1] / d];
+    [
+        c[0] + r * (u[0] * cos - u[1] * sin),
+        c[1] + r * (u[0] * sin + u[1] * cos),
+    ]
+}
+
+/// The point on the tangent from `p` to the circle (`c`, `r`) on `side`, at least `lookahead`
+/// from `p` (past the tangent point when that is nearer).
+pub(super) fn past_tangent(
+    p: [f64; 2],
+    c: [f64; 2],
+    r: f64,
+    side: f64,
+    lookahead: f64,
+) -> [f64; 2] {
+    let u = sub(tangent(p, c, r, side), p);
+    let len = norm(u).max(f64::MIN_POSITIVE);
+    let to = len.max(lookahead);
+    [p[0] + to * u[0] / len, p[1] + to * u[1] / len]
+}
+
+/// Whether the segment `a`-`b` passes strictly inside the disc at `c` of radius `r` (touching
+/// it, as a polygon's side does, is allowed).
+pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
+    let d = sub(b, a);
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let ac = sub(c, a);
+    let t = if len2 > 0.0 {
+        ((ac[0] * d[0] + ac[1] * d[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let closest = [a[0] + t * d[0], a[1] + t * d[1]];
+    norm(sub(c, closest)) < r * (1.0 - TOUCH)
+}
+
+impl Router {
+    /// The graph from the robot at `p` to `goal` around this step's inflated discs: per disc,
+    /// the corners of its circumscribed polygon, then the two ways past it from the robot
+    /// (along each tangent from it to the inflated circle, at least a lookahead far:
+    /// continuous in the robot's position, so the shortest way does not jump as the robot
+    /// moves). A corner inside another inflated disc is dropped.
+    pub(super) fn build_graph(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) {
+        self.robot = p;
+        self.goal = goal;
+        self.corners.clear();
+        let corner = 1.0 / (PI / SIDES as f64).cos();
+        for (i, d) in self.discs.iter().enumerate() {
+            let r = self.inflated[i] * corner;
+            let lookahead = lookahead(d.radius, clearance);
+            let tangents = [1.0, -1.0]
+                .map(|side| past_tangent(p, d.center, self.inflated[i], side, lookahead));
+            let corners = OCTAGON.map(|[c, s]| [d.center[0] + r * c, d.center[1] + r * s]);
+            for v in corners.into_iter().chain(tangents) {
+                let covered = self
+                    .discs
+                    .iter()
+                    .zip(&self.inflated)
+                    .enumerate()
+                    .any(|(j, (o, &ro))| j != i && norm(sub(v, o.center)) < ro);
+                if !covered {
+                    self.corners.push(Corner { at: v, disc: i });
+                }
+            }
+        }
+    }
+
+    /// Nodes of the last graph built.
+    pub(super) fn nodes(&self) -> usize {
+        2 + self.corners.len()
+    }
+
+    /// Where `node` is.
+    pub(super) fn point(&self, node: Node) -> [f64; 2] {
+        match node {
+            Node::Robot => self.robot,
+            Node::Goal => self.goal,
+            Node::Corner(k) => self.corners[k].at,
+        }
+    }
+
+    /// Whether the segment `a`-`b` keeps out of every inflated disc (a polygon's own sides
+    /// touch its disc and are allowed).
+    pub(super) fn visible(&self, a: [f64; 2], b: [f64; 2]) -> bool {
+        !self
+            .discs
+            .iter()
+            .zip(&self.inflated)
+            .any(|(d, &r)| crosses(a, b, d.center, r))
+    }
+
+    /// [`Router::visible`] for a segment from the robot, which may cut [`ROBOT_SLACK`] into
+    /// the clearance (never into a disc): a robot that has reached a corner, or stands a hair
+    /// inside its polygon, still sees the next corner, instead of creeping onto the corner.
+    pub(super) fn visible_from_robot(&self, a: [f64; 2], b: [f64; 2]) -> bool {
+        !self.discs.iter().zip(&self.inflated).any(|(d, &r)| {
+            let cut = ((1.0 - ROBOT_SLACK) * r).max(d.radius).min(r);
+            crosses(a, b, d.center, cut)
+        })
+    }
+}

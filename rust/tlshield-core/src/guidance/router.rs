@@ -1,0 +1,323 @@
+//! The router (beyond the paper): the target the CLF aims at, leading around the discs
+//! the shield keeps the robot out of.
+//!
+//! A CLF aimed straight at a goal behind an obstacle makes the CLF-CBF QP park the robot in
+//! front of it: where the barrier's gradient is parallel to the CLF's, the QP cancels the push
+//! and the closed loop has an equilibrium on the barrier's rim (Reis, Aguiar and Silvestre 2021).
+//! The router removes that equilibrium by construction: the CLF's target lies in the direction
+//! of a point the robot can reach in a straight line without entering any known disc, on a
+//! shortest path around them. Where the robot stands on a disc's rim, that line is tangent to
+//! the disc (or points away from it), so the barrier never cancels it: the CLF's push always has
+//! a component the barrier leaves free, and the robot slides around instead of stopping.
+//!
+//! The planner is a visibility graph, re-built each step from the discs' current centres (so
+//! moving obstacles are re-read every step):
+//! - each disc of radius `r` is inflated to `R = r (1 + clearance)` and circumscribed by a
+//!   regular polygon of [`SIDES`](super::SIDES) sides, whose vertices are the graph's nodes, with the two
+//!   points along the tangents from the robot to the inflated circle, at least a lookahead
+//!   ([`LOOKAHEAD`](super::LOOKAHEAD) radii) away (a node inside another inflated disc is dropped): `inflate.rs`
+//!   and `graph.rs`;
+//! - two nodes are joined when the segment between them keeps out of every inflated disc (a
+//!   polygon's own sides touch its disc and are allowed; a segment from the robot may cut
+//!   [`ROBOT_SLACK`](super::ROBOT_SLACK) into the clearance, never into a disc);
+//! - the robot's position and the goal are nodes too, and A* (the straight distance to the goal
+//!   as its heuristic) gives the shortest path: `search.rs`;
+//! - the aim is the point a lookahead along that path if the robot sees it, else the point
+//!   along the tangent on the side the path wraps the disc it meets first, else the farthest
+//!   point short of the lookahead in sight (the path's first node at the least): `aim.rs`;
+//! - the target lies in the aim's direction, as far away as the path is long, so that
+//!   `V = |p - target|^2` is the squared length of the way left: it asks the speed it would ask
+//!   of a clear goal, and does not slow the robot at each corner.
+//!
+//! Moving along a shortest path shortens it by the distance moved and any other path by at
+//! most that, so the way chosen does not flip from step to step; ties are broken by the
+//! nodes' order, deterministically.
+//!
+//! With a clear straight line to the goal the target is the goal itself, bit for bit: routing
+//! changes nothing where nothing is in the way. A disc that holds the robot (a slip) or the goal
+//! is shrunk to just exclude it for that step.
+//!
+//! What it cannot do, and does instead:
+//! - a goal inside an obstacle, or enclosed by overlapping ones (no path): the target is the
+//!   goal, and the shield parks as before;
+//! - it routes around discs only (balls over the CLF's two position dimensions, and unions of
+//!   them); half-spaces, intersections and balls over other dimensions are not routed around
+//!   (the barriers still hold them);
+//! - it is a path of the robot's reference point, not of its body, and does not look at the
+//!   dynamics: a robot that cannot follow a corner is still kept safe by the barriers, and may
+//!   be slowed by them.
+//!
+//! Allocation-free per step once its buffers have grown to the problem's size.
+
+use super::graph::{Corner, Node};
+use super::plane::{each_disc, Disc};
+use crate::automaton::Reading;
+use crate::cnf::Literal;
+use crate::predicate::Predicate;
+
+/// What a shield routes around, and in which plane: enough to measure the way its CLF drives
+/// without the shield (the progress reward's goal term, `Monitor::route_with`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Routing {
+    /// The CLF's two position dimensions.
+    pub pos: [usize; 2],
+    /// The router's clearance (relative to each radius, >= 0).
+    pub clearance: f64,
+    /// The user's barriers that keep the state outside a predicate (routed when discs).
+    pub avoid: Vec<Predicate>,
+    /// Whether the safe set is the progress-preserving one (as the shield's).
+    pub preserve_progress: bool,
+}
+
+impl Routing {
+    /// The router's target ([`Router::target`]) from the state read by `reading` in FSA state
+    /// `q` towards `goal` (over [`Routing::pos`]), around the discs of the user's barriers and
+    /// of the safe set's avoided literals, as the shield plans it: `|p - target|` is the length
+    /// of the way left. `router` and `safe` are scratch.
+    pub fn target(
+        &self,
+        reading: &Reading<'_>,
+        q: usize,
+        goal: [f64; 2],
+        router: &mut Router,
+        safe: &mut Vec<(Literal, f64)>,
+    ) -> [f64; 2] {
+        self.safe_set(reading, q, safe);
+        let predicates = reading.automaton().spec().predicates();
+        self.plan(predicates, safe, reading.state(), goal, router)
+    }
+
+    /// The safe set this routing goes around at `(reading, q)` into `out`: the Eq. 5C1 one, or
+    /// the progress-preserving one (as the shield's).
+    pub(crate) fn safe_set(&self, reading: &Reading<'_>, q: usize, out: &mut Vec<(Literal, f64)>) {
+        if self.preserve_progress {
+            reading.progress_safe_set(q, out);
+        } else {
+            reading.safe_set(q, out);
+        }
+    }
+
+    /// The router's target from state `s` towards `goal`, around the discs of the user's
+    /// barriers and of the avoided literals of `safe` (atoms of `predicates`).
+    pub(crate) fn plan(
+        &self,
+        predicates: &[Predicate],
+        safe: &[(Literal, f64)],
+        s: &[f64],
+        goal: [f64; 2],
+        router: &mut Router,
+    ) -> [f64; 2] {
+        let kept = safe
+            .iter()
+            .filter(|(lit, _)| !lit.positive)
+            .map(|(lit, _)| &predicates[lit.atom]);
+        router.load(&self.pos, s, self.avoid.iter().chain(kept));
+        let p = [s[self.pos[0]], s[self.pos[1]]];
+        router.target(p, goal, self.clearance)
+    }
+}
+
+/// The planner's buffers (see the module docs). One per shield workspace.
+#[derive(Debug, Clone, Default)]
+pub struct Router {
+    pub(super) discs: Vec<Disc>,
+    /// Per disc, the inflated radius used this step (`inflate.rs`).
+    pub(super) inflated: Vec<f64>,
+    /// The graph's ends this step: the robot's position and the goal.
+    pub(super) robot: [f64; 2],
+    pub(super) goal: [f64; 2],
+    /// The graph's other nodes (`graph.rs`).
+    pub(super) corners: Vec<Corner>,
+    /// Per node ([`Node::index`]): the shortest way found from the robot, the straight
+    /// distance to the goal (A*'s heuristic), the node before it on that way, and whether it
+    /// is settled (`search.rs`).
+    pub(super) dist: Vec<f64>,
+    pub(super) rest: Vec<f64>,
+    pub(super) prev: Vec<Option<Node>>,
+    pub(super) done: Vec<bool>,
+}
+
+impl Router {
+    /// Forgets the discs of the last step.
+    pub fn clear(&mut self) {
+        self.discs.clear();
+    }
+
+    /// Adds a disc to route around this step (one with a radius that is not finite and > 0 is
+    /// ignored).
+    pub fn push(&mut self, disc: Disc) {
+        if disc.radius.is_finite() && disc.radius > 0.0 {
+            self.discs.push(disc);
+        }
+    }
+
+    /// The discs of this step.
+    pub fn discs(&self) -> &[Disc] {
+        &self.discs
+    }
+
+    /// Forgets the last step's discs and adds those of `avoided` (predicates whose outside the
+    /// state is kept in) over `pos` at `s` (`each_disc`).
+    pub(crate) fn load<'a>(
+        &mut self,
+        pos: &[usize],
+        s: &[f64],
+        avoided: impl Iterator<Item = &'a Predicate>,
+    ) {
+        self.clear();
+        for predicate in avoided {
+            each_disc(predicate, pos, s, &mut |disc| self.push(disc));
+        }
+    }
+
+    /// The target for a robot at `p` heading for `goal`, around this step's discs inflated by
+    /// `clearance` (relative to each radius, >= 0). See the module docs.
+    pub fn target(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> [f64; 2] {
+        // A goal inside an obstacle cannot be reached: aim at it, the barriers hold the robot.
+        if self.holds(goal) {
+            return goal;
+        }
+        self.inflate(p, goal, clearance);
+        if self.visible(p, goal) {
+            return goal;
+        }
+        self.build_graph(p, goal, clearance);
+        if !self.search() {
+            // Enclosed: no way around what is known. Aim at the goal (the shield parks).
+            return goal;
+        }
+        self.place_target(p, clearance)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::PI;
+
+    use super::super::graph::{crosses, norm, sub, ROBOT_SLACK, SIDES};
+    use super::*;
+    use proptest::prelude::*;
+
+    fn router(discs: &[([f64; 2], f64)]) -> Router {
+        let mut r = Router::default();
+        for &(center, radius) in discs {
+            r.push(Disc { center, radius });
+        }
+        r
+    }
+
+    #[test]
+    fn a_clear_line_aims_at_the_goal() {
+        let mut r = router(&[([0.0, 3.0], 1.0)]);
+        assert_eq!(r.target([-2.0, 0.0], [2.0, 0.0], 0.2), [2.0, 0.0]);
+    }
+
+    #[test]
+    fn the_way_left_is_the_straight_line_or_a_way_around() {
+        // The way left is |p - target| (the target lies as far as the path is long).
+        let way = |r: &mut Router| norm(sub(r.target([-3.0, 0.0], [3.0, 0.0], 0.2), [-3.0, 0.0]));
+        assert_eq!(way(&mut router(&[([0.0, 3.0], 1.0)])), 6.0);
+        // Around a unit disc grown to 1.2: at least the tangents and the arc around the
+        // circle (less the slack a segment from the robot may cut), at most around the
+        // circumscribed octagon's circle.
+        let mut r = router(&[([0.0, 0.0], 1.0)]);
+        let around = |radius: f64| {
+            let leg = (9.0 - radius * radius).sqrt();
+            2.0 * leg + radius * (PI - 2.0 * (radius / 3.0).acos())
+        };
+        let way = way(&mut r);
+        assert!(way > around((1.0 - ROBOT_SLACK) * 1.2) - 1e-9, "{way}");
+        assert!(
+            way < around(1.2 / (PI / SIDES as f64).cos()) + 1e-9,
+            "{way}"
+        );
+    }
+
+    #[test]
+    fn a_disc_on_the_line_is_passed_on_one_side() {
+        let mut r = router(&[([0.0, 0.0], 1.0)]);
+        let t = r.target([-3.0, 0.0], [3.0, 0.0], 0.2);
+        assert!(t[1].abs() > 0.1, "{t:?}");
+        assert!(!crosses([-3.0, 0.0], t, [0.0, 0.0], 1.0));
+    }
+
+    #[test]
+    fn an_enclosed_goal_is_aimed_at() {
+        let ring: Vec<_> = (0..12)
+            .map(|k| {
+                let a = 2.0 * PI * k as f64 / 12.0;
+                ([2.0 * a.cos(), 2.0 * a.sin()], 0.8)
+            })
+            .collect();
+        let mut r = router(&ring);
+        assert_eq!(r.target([5.0, 0.0], [0.0, 0.0], 0.2), [0.0, 0.0]);
+    }
+
+    proptest! {
+        /// The target is in sight of the robot past every disc, and with a clear line it is the
+        /// goal itself.
+        #[test]
+        fn the_target_is_in_sight(
+            discs in proptest::collection::vec(((-4.0..4.0f64, -4.0..4.0f64), 0.2..1.2f64), 0..8),
+            p in (-6.0..6.0f64, -6.0..6.0f64),
+            goal in (-6.0..6.0f64, -6.0..6.0f64),
+        ) {
+            let discs: Vec<_> = discs.into_iter().map(|((x, y), r)| ([x, y], r)).collect();
+            let (p, goal) = ([p.0, p.1], [goal.0, goal.1]);
+            prop_assume!(discs.iter().all(|&(c, r)| norm(sub(p, c)) > r && norm(sub(goal, c)) > r));
+            let mut r = router(&discs);
+            let t = r.target(p, goal, 0.2);
+            prop_assert!(t.iter().all(|v| v.is_finite()));
+            let clear = discs.iter().all(|&(c, rad)| !crosses(p, goal, c, rad));
+            if t != goal {
+                // The target lies along a point of the path that the robot sees.
+                let aim = r.aim(p, 0.2);
+                for &(c, rad) in &discs {
+                    prop_assert!(!crosses(p, aim, c, rad), "aim {:?} behind disc {:?}", aim, (c, rad));
+                }
+                let (u, v) = (sub(t, p), sub(aim, p));
+                prop_assert!((u[0] * v[1] - u[1] * v[0]).abs() <= 1e-9 * norm(u) * norm(v));
+                prop_assert!(u[0] * v[0] + u[1] * v[1] > 0.0);
+                prop_assert!(norm(u) >= norm(sub(goal, p)) * (1.0 - 1e-9));
+            } else if !clear {
+                // Aiming at a goal behind a disc only when no path exists: check that the
+                // inflated discs really close it off from the robot, by a grid flood fill.
+                prop_assert!(!reachable(&discs, p, goal, 1.2 / (PI / SIDES as f64).cos() * 1.02));
+            }
+        }
+    }
+
+    /// A brute-force reference: flood fill on a fine grid of the plane outside the discs
+    /// (inflated by `inflate`), from `p` to `goal`.
+    fn reachable(discs: &[([f64; 2], f64)], p: [f64; 2], goal: [f64; 2], inflate: f64) -> bool {
+        let (lo, step, cells) = (-8.0, 0.05, 320usize);
+        let free = |x: f64, y: f64| {
+            discs
+                .iter()
+                .all(|&(c, r)| norm(sub([x, y], c)) >= r * inflate * 0.98)
+        };
+        let index = |v: f64| (((v - lo) / step).round() as usize).min(cells - 1);
+        let mut seen = vec![false; cells * cells];
+        let mut stack = vec![(index(p[0]), index(p[1]))];
+        while let Some((i, j)) = stack.pop() {
+            if seen[i * cells + j] {
+                continue;
+            }
+            seen[i * cells + j] = true;
+            if (i, j) == (index(goal[0]), index(goal[1])) {
+                return true;
+            }
+            for (di, dj) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+                let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                if ni < 0 || nj < 0 || ni >= cells as i64 || nj >= cells as i64 {
+                    continue;
+                }
+                let (ni, nj) = (ni as usize, nj as usize);
+                if !seen[ni * cells + nj] && free(lo + ni as f64 * step, lo + nj as f64 * step) {
+                    stack.push((ni, nj));
+                }
+            }
+        }
+        false
+    }
+}
