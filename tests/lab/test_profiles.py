@@ -131,6 +131,10 @@ def test_the_0_4_removals_name_their_replacement() -> None:
         from tlshield.lab.training import make_vec_env  # noqa: F401
     with pytest.raises(ImportError, match=r"profile_of\(env_id\)\.task_keywords"):
         from tlshield.lab.settings import TASK_KEYWORDS  # noqa: F401
+    with pytest.raises(ImportError, match=r"tlshield\.lab\.bench\.write_report\(bench, out\)"):
+        from tlshield.lab.benchmark import write_report  # noqa: F401
+    with pytest.raises(ImportError, match=r"benchmark_safety_gym\.REPORT"):
+        from tlshield.lab.benchmark_safety_gym import read_rows  # noqa: F401
     with pytest.raises(TypeError, match="recorders="):
         rollouts("rl", {}, lambda o: o, [1], extra=lambda *a: {})  # type: ignore[arg-type]
     import tlshield.lab.envs

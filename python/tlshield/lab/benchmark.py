@@ -22,7 +22,6 @@ streams of ``SeedSequence(s)`` in disjoint ranges, the evaluation ones never use
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -32,8 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from tlshield._removed import refuse
 from tlshield.envs import FLATWORLD_ID
 from tlshield.envs.params import FULL, check_config
+from tlshield.lab import bench
 from tlshield.lab.evaluation import Recorder, rollouts
 from tlshield.lab.presets import PRESETS, updates_for
 from tlshield.lab.seeds import check_block, check_seeds, eval_block_seed
@@ -214,14 +215,14 @@ def _write(
 ) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     paths = result.pop("paths")
-    row = {"method": method, "task": formula, "formula": k, "seed": seed, **result, **counts}
-    row["wall_time"] = wall
-    (folder / "result.json").write_text(json.dumps(row, indent=2))
     np.savez(
         folder / "paths.npz",
         **{f"path{i}": p for i, (p, _) in enumerate(paths)},
         success=np.array([ok for _, ok in paths], dtype=bool),
     )
+    row = {"method": method, "task": formula, "formula": k, "seed": seed, **result, **counts}
+    row["wall_time"] = wall
+    bench.write_result(folder, row)  # last: the job is finished
 
 
 def flatworld(
@@ -257,7 +258,7 @@ def flatworld(
         for s in seeds:
             for name, policy in (("zero", zero_policy), ("random", random_policy)):
                 folder = runs / f"{name}-f{k}-s{s}"
-                if not (folder / "result.json").exists():
+                if not bench.is_finished(folder):
                     t0 = time.perf_counter()
                     result = run_episodes(f, FULL, policy, s, episodes)
                     counts = {"train_violations": 0, "train_steps": 0}
@@ -271,37 +272,26 @@ def flatworld(
                         counts,
                         time.perf_counter() - t0,
                     )
-    jobs = {}
-    for c in configs:
-        for k, f in enumerate(formulas, 1):
-            for s in seeds:
-                folder = runs / f"{c}-f{k}-s{s}"
-                if not (folder / "result.json").exists():
-                    jobs[folder] = partial(job, f, k, c, s, steps, episodes)
-    from tlshield.lab import cluster
-
-    cluster.run_counted(jobs, address, workers, progress)
-    return write_report(out, formulas)
+    jobs = {
+        runs / f"{c}-f{k}-s{s}": partial(job, f, k, c, s, steps, episodes)
+        for c in configs
+        for k, f in enumerate(formulas, 1)
+        for s in seeds
+    }
+    return bench.run(report(formulas), out, jobs, address, workers, progress)
 
 
-def read_rows(out: Path) -> list[dict[str, Any]]:
-    """Every finished job's row, in a stable order."""
-    rows = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*/result.json"))]
-    return sorted(rows, key=lambda r: (r["method"], r["formula"], r["seed"]))
-
-
-def write_report(out: Path, formulas: Sequence[str]) -> Path:
-    """``flatworld.csv``, ``flatworld.md`` and the paths figure from the finished jobs."""
-    out = Path(out)
-    rows = read_rows(out)
-    with (out / "flatworld.csv").open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({**r, "mean_steps": _num(r["mean_steps"])})
-    (out / "flatworld.md").write_text(markdown(rows, formulas))
-    _figure(out, rows, formulas)
-    return out
+def report(formulas: Sequence[str]) -> bench.Benchmark:
+    """The benchmark as data for :mod:`tlshield.lab.bench`: ``flatworld.csv`` (:data:`COLUMNS`),
+    ``flatworld.md`` (:func:`markdown`) and ``flatworld_paths.png``."""
+    return bench.Benchmark(
+        name="flatworld",
+        columns=COLUMNS,
+        order=lambda r: (r["method"], r["formula"], r["seed"]),
+        markdown=partial(markdown, formulas=formulas),
+        figure=partial(_figure, formulas=formulas),
+        csv_row=lambda r: {**r, "mean_steps": _num(r["mean_steps"])},
+    )
 
 
 def _num(x: float) -> str:
@@ -380,3 +370,15 @@ def _figure(out: Path, rows: list[dict[str, Any]], formulas: Sequence[str]) -> N
         panels.append((title, paths[:8], ok[:8]))
     if panels:
         plot_paths(panels, out / "flatworld_paths.png", CIRCLES)
+
+
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(
+    __name__,
+    {
+        "read_rows": "tlshield.lab.bench.read_rows(bench, out) with bench = "
+        "tlshield.lab.benchmark.report(formulas)",
+        "write_report": "tlshield.lab.bench.write_report(bench, out) with bench = "
+        "tlshield.lab.benchmark.report(formulas)",
+    },
+)

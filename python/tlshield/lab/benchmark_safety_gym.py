@@ -21,8 +21,6 @@ used for tuning), and PPO takes ``learner_seed(seed)``.
 
 from __future__ import annotations
 
-import csv
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -31,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from tlshield._removed import refuse
+from tlshield.lab import bench
 from tlshield.lab.presets import updates_for
 from tlshield.lab.seeds import check_block, check_seeds
 
@@ -180,7 +180,7 @@ def train_and_evaluate(
         "last_returns": [o["return"] for o in last["outcomes"]],
         "last_costs": [o["cost"] for o in last["outcomes"]],
     }
-    (folder / "result.json").write_text(json.dumps(row, indent=2))
+    bench.write_result(folder, row)  # last: the job is finished
 
 
 def safety_gym(
@@ -214,36 +214,14 @@ def safety_gym(
     out = Path(out)
     runs = out / "runs"
     runs.mkdir(parents=True, exist_ok=True)
-    jobs = {}
-    for e in envs:
-        budget = steps or DEFAULT_STEPS[e]
-        for c in configs:
-            for s in seeds:
-                folder = runs / f"{e}-{c}-s{s}-{budget}"
-                if not (folder / "result.json").exists():
-                    jobs[folder] = partial(train_and_evaluate, e, c, s, budget, episodes)
-    from tlshield.lab import cluster
-
-    cluster.run_counted(jobs, address, workers, progress)
-    return write_report(out)
-
-
-def read_rows(out: Path) -> list[dict[str, Any]]:
-    """Every finished job's row, in a stable order."""
-    rows = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*/result.json"))]
-    return sorted(rows, key=lambda r: (r["env"], r["budget"], r["method"], r["seed"]))
-
-
-def write_report(out: Path) -> Path:
-    """``safety_gym.csv``, ``safety_gym.md`` and ``safety_gym.png`` from the finished jobs."""
-    rows = read_rows(out)
-    with open(out / "safety_gym.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows(rows)
-    (out / "safety_gym.md").write_text(markdown(rows))
-    _figure(out, rows)
-    return out
+    jobs = {
+        runs / f"{e}-{c}-s{s}-{budget}": partial(train_and_evaluate, e, c, s, budget, episodes)
+        for e in envs
+        for budget in (steps or DEFAULT_STEPS[e],)
+        for c in configs
+        for s in seeds
+    }
+    return bench.run(REPORT, out, jobs, address, workers, progress)
 
 
 def _cost(value: float | None) -> str:
@@ -325,3 +303,26 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
     fig.tight_layout()
     fig.savefig(out / "safety_gym.png", dpi=110)
     plt.close(fig)
+
+
+#: The benchmark as data for :mod:`tlshield.lab.bench`: ``safety_gym.csv`` (:data:`COLUMNS`),
+#: ``safety_gym.md`` (:func:`markdown`) and ``safety_gym.png``.
+REPORT = bench.Benchmark(
+    name="safety_gym",
+    columns=COLUMNS,
+    order=lambda r: (r["env"], r["budget"], r["method"], r["seed"]),
+    markdown=markdown,
+    figure=_figure,
+)
+
+
+#: Names removed in 0.4, refused with a message naming what replaced them.
+__getattr__ = refuse(
+    __name__,
+    {
+        "read_rows": "tlshield.lab.bench.read_rows(bench, out) with bench = "
+        "tlshield.lab.benchmark_safety_gym.REPORT",
+        "write_report": "tlshield.lab.bench.write_report(bench, out) with bench = "
+        "tlshield.lab.benchmark_safety_gym.REPORT",
+    },
+)

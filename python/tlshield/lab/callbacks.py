@@ -7,7 +7,6 @@ trains."""
 from __future__ import annotations
 
 import collections
-import csv
 import math
 import time
 from collections.abc import Callable
@@ -17,12 +16,12 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-from stable_baselines3.common.logger import configure
 
 from tlshield.codes import Status
 from tlshield.envs.profile import profile_of
 from tlshield.lab.evaluation import rollouts
 from tlshield.lab.measures import step_violation
+from tlshield.lab.metrics_log import record_row, run_logger
 from tlshield.lab.presets import clf_scale
 from tlshield.lab.runs import metric_columns
 from tlshield.lab.saved import save_normalization
@@ -307,8 +306,9 @@ class Validation(BaseCallback):  # type: ignore[misc]
 
 
 class UpdateLog(BaseCallback):  # type: ignore[misc]
-    """Collects the metrics of every step; per update, writes a ``metrics.csv`` row (and
-    TensorBoard), calls ``run.on_update`` and moves the progress bar. It reads the update's CLF
+    """Collects the metrics of every step; per update, records a row in the model's SB3 logger
+    (:mod:`tlshield.lab.metrics_log`: ``metrics.csv`` and TensorBoard), calls
+    ``run.on_update`` and moves the progress bar. It reads the update's CLF
     scale and validation from the callbacks that own them. The constraint columns
     (``min_h_<name>``) are the constraints the environment reports at reset
     (``info["constraints"]``), in its order: names come from the env, none from here."""
@@ -319,7 +319,7 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
         self.schedule, self.validation = schedule, validation
         self.update = 0
         self.start = time.perf_counter()
-        self.csv_file: Any = None
+        self.logger_set = False
         self.bar: Any = None
         self.totals = RunTotals()
 
@@ -331,12 +331,10 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
         # SB3 resets the environments before it initialises the callbacks.
         reset_info = (getattr(run.inner, "reset_infos", None) or [{}])[0]
         self.constraints = [str(name) for name in reset_info.get("constraints", {})]
-        run.model.set_logger(configure(str(run.folder / "tb"), ["tensorboard"]))
-        self.csv_file = (run.folder / "metrics.csv").open("w", newline="")
-        columns = metric_columns(self.constraints)
-        self.writer = csv.DictWriter(self.csv_file, fieldnames=columns)
-        self.writer.writeheader()
-        self.csv_file.flush()
+        # metrics.csv and TensorBoard are the outputs of the model's SB3 logger: this callback
+        # records each update's row there, and SB3 writes it when it dumps its own values.
+        run.model.set_logger(run_logger(run.folder, metric_columns(self.constraints)))
+        self.logger_set = True
         self.bar = tqdm(
             total=run.updates,
             desc=f"{run.config} seed {run.seed}",
@@ -350,11 +348,12 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
         return time.perf_counter() - self.start
 
     def close(self) -> None:
-        """Closes the metrics file and the progress bar (the run is over)."""
+        """Closes the logger's outputs (metrics.csv, TensorBoard) and the progress bar (the run
+        is over)."""
         if self.bar is not None:
             self.bar.close()
-        if self.csv_file is not None:
-            self.csv_file.close()
+        if self.logger_set:
+            self.run.model.logger.close()
 
     def _on_step(self) -> bool:
         raw = self.run.venv.get_original_reward()  # metrics in raw units, not normalised
@@ -395,13 +394,9 @@ class UpdateLog(BaseCallback):  # type: ignore[misc]
             "validation_cost": self.validation.last_cost,
             "gave_way": sum(metrics.gave_way.values()),
         }
-        self.writer.writerow(row)
-        self.csv_file.flush()
+        record_row(self.logger, row)
         if self.run.on_update is not None:
             self.run.on_update(row)
-        for key, value in row.items():
-            if key not in ("update", "timesteps"):
-                self.logger.record(f"tlshield/{key}", value)
         self.totals.returns.extend(returns)
         self.totals.gave_way.update(metrics.gave_way)
         metrics.reset_update()
