@@ -35,7 +35,7 @@ def test_nothing_gave_way_on_a_solved_step() -> None:
     sh = tlshield.Shield(SPEC, tlshield.SingleIntegrator([0, 1]), barriers={"wall": WALL}, **GAINS)
     out = sh.filter(np.array([0.5, 0.0]), 0, [0.3, 0.0])
     assert out.status == tlshield.Status.SOLVED and out.gave_way is None
-    assert shield_info(None, np.zeros(2))["gave_way"] is None
+    assert shield_info(out, np.zeros(2))["gave_way"] is None
 
 
 @pytest.mark.parametrize("first", ["wall", "floor"])

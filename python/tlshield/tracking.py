@@ -1,16 +1,16 @@
 """The task along one episode for an environment written in Python: :class:`FsaTracker` (a shell
 over the core's :class:`tlshield.Monitor` that adds the one-hot FSA state) and
-:func:`shield_info` (the ``info["shield"]`` entry of a step). The Gymnasium wrappers
-(:mod:`tlshield.wrappers`) and the bundled environments build on these two."""
+the ``info["shield"]`` entry of a step, :func:`tlshield.step_info.shield_info` (also here). The
+Gymnasium wrappers (:mod:`tlshield.wrappers`) and the bundled environments build on these
+two."""
 
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tlshield._core import Automaton, FilterResult, Monitor, ProgressReward, Shield
+from tlshield._core import Automaton, Monitor, ProgressReward, Shield
+from tlshield.step_info import shield_info
 
 #: The task rewards a tracker can pay: the progress reward or the paper's Eq. 5A1.
 REWARDS = ("progress", "paper")
@@ -86,35 +86,4 @@ class FsaTracker:
         return self._eye[self.q if q is None else q]
 
 
-def shield_info(result: FilterResult | None, a_rl: NDArray[np.float64]) -> dict[str, Any]:
-    """The ``info["shield"]`` entry of a step: the RL action, the corrections, ``delta``, the
-    :class:`tlshield.Status`, the largest barrier ``slack`` and the barrier that gave way
-    (``gave_way``: ``(name, slack)`` or None), the :class:`tlshield.Solver`, the
-    CLF ``goal`` (or None) and the enforced ``barriers`` as ``{name: h(s)}`` (zeros, None and
-    empty when no shield ran)."""
-    if result is None:
-        zeros = np.zeros_like(a_rl)
-        return {
-            "a_rl": a_rl,
-            "a_cbf": zeros,
-            "a_clf": zeros,
-            "delta": 0.0,
-            "status": None,
-            "slack": 0.0,
-            "gave_way": None,
-            "solver": None,
-            "goal": None,
-            "barriers": {},
-        }
-    return {
-        "a_rl": a_rl,
-        "a_cbf": result.a_cbf,
-        "a_clf": result.a_clf,
-        "delta": result.delta,
-        "status": result.status,
-        "slack": result.slack,
-        "gave_way": result.gave_way,
-        "solver": result.solver,
-        "goal": result.goal,
-        "barriers": dict(result.barriers),
-    }
+__all__ = ["REWARDS", "FsaTracker", "shield_info"]

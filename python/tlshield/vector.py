@@ -169,10 +169,10 @@ class WorldBatch(IndependentCopies):
         goal and the barrier list: None and empty), built in the core call
         ``WorldsStep.infos``."""
         first = self.envs[0]
+        # info["shield"] is there when a shield filtered the step (tlshield.step_info).
         shielded = first.shield is not None and getattr(first, "shield_in_env", True)
-        with_shield = shielded or first.SHIELD_INFO_ALWAYS
         status_of, solver_of = (_MEMBERS[Status], _MEMBERS[Solver]) if shielded else ({}, {})
-        return out.infos(first.CONSTRAINTS, with_shield, status_of, solver_of)
+        return out.infos(first.CONSTRAINTS, shielded, status_of, solver_of)
 
 
 class ChannelBatch(WorldBatch):

@@ -33,7 +33,8 @@ from tlshield._core import (
     Spec,
 )
 from tlshield.copying import IndependentCopies
-from tlshield.tracking import REWARDS, FsaTracker, shield_info
+from tlshield.step_info import shield_info
+from tlshield.tracking import REWARDS, FsaTracker
 from tlshield.vector import ShieldedVectorEnv
 
 StateFn = Callable[[Any], NDArray[np.float64]]

@@ -43,7 +43,8 @@ from tlshield.envs.channel_task import (
 )
 from tlshield.envs.layout import GOAL_DIMS, RELATIVE_DIM, STATE_DIM, THETA, X, Y
 from tlshield.envs.params import FULL, build, check_config, shielded_config
-from tlshield.tracking import FsaTracker, shield_info
+from tlshield.step_info import StepInfo, shield_info
+from tlshield.tracking import FsaTracker
 
 #: Length of the relative observation before the one-hot FSA state.
 SQRT2 = math.sqrt(2.0)
@@ -117,8 +118,6 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
 
     #: The names of ``info["constraints"]`` (a batch builds ``info`` from these).
     CONSTRAINTS: ClassVar[tuple[str, str]] = ("c1", "c2")
-    #: ``info["shield"]`` is there in every configuration (zeros and None without a shield).
-    SHIELD_INFO_ALWAYS: ClassVar[bool] = True
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 
     def __init__(
@@ -326,7 +325,7 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
         if self.render_mode is not None:
             self._trajectory.append(self.state[X : Y + 1])
         h = out.constraints
-        info = {
+        info: StepInfo = {
             "fsa_state": out.q,
             "action": out.action,
             "success": out.accepted,
@@ -336,8 +335,9 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
             "violation": out.violation,
-            "shield": shield_info(out.shield, out.a_rl),
         }
+        if out.shield is not None:
+            info["shield"] = shield_info(out.shield, out.a_rl)
         if self.render_mode == "human":
             self.render()
         return out.observation, out.reward, out.terminated, out.truncated, info

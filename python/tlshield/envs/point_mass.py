@@ -33,7 +33,8 @@ from tlshield._core import (
 )
 from tlshield.copying import IndependentCopies
 from tlshield.envs.params import CONFIGS, FULL, build, check_config, shielded_config
-from tlshield.tracking import FsaTracker, shield_info
+from tlshield.step_info import StepInfo, shield_info
+from tlshield.tracking import FsaTracker
 
 #: Visit a, then b; stay out of both obstacles until b.
 TASK = "F a & F b & (!b U a) & ((!o1 & !o2) U b)"
@@ -199,8 +200,6 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
 
     #: The names of ``info["constraints"]`` (a batch builds ``info`` from these).
     CONSTRAINTS: ClassVar[tuple[str, str]] = ("o1", "o2")
-    #: ``info["shield"]`` is there only with a shield.
-    SHIELD_INFO_ALWAYS: ClassVar[bool] = False
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
 
     def __init__(self, config: str = FULL, evaluation: bool = False, **overrides: Any) -> None:
@@ -281,7 +280,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
         a_rl = np.asarray(action, dtype=np.float64)
         out = self._world.step(a_rl, self.tracker.monitor, self.shield)
         h = out.constraints
-        info: dict[str, Any] = {
+        info: StepInfo = {
             "constraints": {"o1": h[0], "o2": h[1]},
             "min_obstacle_distance": out.min_obstacle_distance,
             "collision": out.collision,
@@ -292,7 +291,7 @@ class PointMassEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.fl
             "trap": out.trapped,
             "tl_reward": out.tl_reward,
         }
-        if self.shield is not None:
+        if out.shield is not None:
             info["shield"] = shield_info(out.shield, a_rl)
         return out.observation, out.reward, out.terminated, out.truncated, info
 

@@ -62,7 +62,7 @@ class Variant:
 
 #: The rows the benchmark knows, by name (``--configs``): the four configurations at the env's
 #: defaults, the field's unshielded row in Safety-Gymnasium's own action space, and the levers
-#: of learning through the shield (366bc2d..4e1fc91), one change each.
+#: of learning through the shield, one change each (docs/guides/safety-gym.md measures them).
 VARIANTS: dict[str, Variant] = {
     **{c: Variant(c) for c in ("rl", "rl_cbf", "rl_clf", "rl_cbf_clf")},
     # PPO as the field runs it: Safety-Gymnasium's action box (docs/guides/safety-gym.md).

@@ -1,7 +1,8 @@
 """What training and evaluation count as a violation and a collision, read from the task
 itself so that a user's environment needs no extra ``info`` keys.
 
-A step's **violation** is the environment's own ``info["violation"]`` when it reports one (its
+The keys read here are declared in :class:`tlshield.step_info.StepInfo`. A step's
+**violation** is the environment's own ``info["violation"]`` when it reports one (its
 definition of unsafe); otherwise it is measured: a user barrier below zero at the new state
 (``info["barriers"]``, which :class:`tlshield.wrappers.Shielded` writes) or an entry into the
 automaton's trap (``info["trap"]``, the formula's safety broken). A **collision** is only ever
@@ -15,11 +16,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from tlshield.step_info import StepInfo
+
 #: How results print a count that could not be measured.
 NOT_MEASURED = "not measured"
 
 
-def step_violation(info: Mapping[str, Any], was_trapped: bool) -> bool | None:
+def step_violation(info: StepInfo | Mapping[str, Any], was_trapped: bool) -> bool | None:
     """Whether this step violated safety (see the module's docs); ``None`` when nothing in
     ``info`` tells. ``was_trapped``: the episode was in the trap before this step."""
     if "violation" in info:
@@ -33,7 +36,7 @@ def step_violation(info: Mapping[str, Any], was_trapped: bool) -> bool | None:
     return violated if known else None
 
 
-def collision(info: Mapping[str, Any]) -> bool | None:
+def collision(info: StepInfo | Mapping[str, Any]) -> bool | None:
     """The environment's own collision flag; ``None`` when it reports none."""
     return bool(info["collision"]) if "collision" in info else None
 

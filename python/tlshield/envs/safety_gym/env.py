@@ -19,7 +19,7 @@ from tlshield.envs.params import CONFIGS, FULL, build, check_config
 from tlshield.envs.safety_gym.adapter import TASKS, make_builder
 from tlshield.envs.safety_gym.robots import CarModel, robot_of
 from tlshield.envs.safety_gym.task import SafetyGoalParams, goal_spec
-from tlshield.tracking import shield_info
+from tlshield.step_info import ShieldedStep
 
 #: The policy's action spaces (``actions=``). ``"robot"`` (the default): each actuator's working
 #: range as ``[-1, 1]`` (the Point's motor saturates at 0.05 of Safety-Gymnasium's box, the
@@ -85,6 +85,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         # With a routing CLF the reward's goal term reads the way the shield drives (see
         # `detour`), so the reward and the guidance pull the same way around obstacles.
         self.monitor = Monitor(self.automaton, routed_by=self.shield)
+        #: Filter, advance the monitor, build ``info`` (:mod:`tlshield.step_info`).
+        self._step = ShieldedStep(self.monitor)
         self._routed = self.shield is not None and self.shield.routes
         self._reward_distance = float(self._env.task.goal.reward_distance)
         self._detour = 0.0
@@ -250,14 +252,12 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (2,) or not (math.isfinite(action[0]) and math.isfinite(action[1])):
             raise ValueError(f"action: expected 2 finite values, got {action!r}")
-        result = None
-        applied = action  # in this env's space
         u_rl = self.shield_input(action)
+        u, result = self._step.filter(self.shield, u_rl)
+        # In this env's space; the shield's correction is what the penalty prices.
+        applied = action if result is None else self.env_action(u)
         penalty = 0.0
-        if self.shield is not None:
-            result = self.shield.filter_monitor(self.monitor, u_rl)
-            u = result.action
-            applied = self.env_action(u)
+        if result is not None:
             penalty = self.params.correction_penalty * float(np.linalg.norm(u - u_rl))
         assert self._episode is not None  # set with _state
         self._episode[1].append(action.copy())
@@ -266,29 +266,25 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         if goal_met:
             self._find_agent()
         self._state = self.true_state()
-        if goal_met:  # a new goal was placed: the task starts again
-            step = self.monitor.reset(self._state)
-        else:
-            step = self.monitor.advance(self._state)
+        # A goal met: a new one was placed, and the task starts again.
+        step = self._step.advance(self._state, restart=goal_met)
         detour = self.detour()
         shaping = 0.0 if goal_met else self._reward_distance * (self._detour - detour)
         self._detour = detour
-        info = {
-            **info,
-            "cost": float(cost),
-            "violation": float(cost) > 0.0,
-            "goal_met": goal_met,
+        info = self._step.info(
+            info,
+            cost=float(cost),
+            violation=float(cost) > 0.0,
+            goal_met=goal_met,
             # What training's metrics count (as for every bundled env): a goal met is a
             # success, and the automaton's trap (inside a hazard's or a vase's disc) an entry.
-            "success": goal_met,
-            "trap": bool(step.trapped),
-            "task_reward": float(reward),
-            "detour": detour,
-            "action": applied,
-            "state": self._state,
-        }
-        if self.shield is not None:
-            info["shield"] = shield_info(result, u_rl)
+            success=goal_met,
+            trap=bool(step.trapped),
+            task_reward=float(reward),
+            detour=detour,
+            action=applied,
+            state=self._state,
+        )
         return (
             np.asarray(obs, dtype=np.float64),
             float(reward) + shaping - penalty,
