@@ -112,8 +112,9 @@ class ChannelEnv(IndependentCopies, gym.Env[NDArray[np.float64], NDArray[np.floa
 
     ``fsa_state``, ``success``, ``trap``, ``constraints`` (``c1``, ``c2``),
     ``min_obstacle_distance``, ``collision``, ``violation``; after a step also ``action`` (the
-    applied action), ``tl_reward`` and ``shield`` (``a_rl``, ``a_cbf``, ``a_clf``, ``delta``,
-    ``status``); after a reset ``goal_outside_channel`` and ``clf_goal_outside``.
+    applied action), ``tl_reward`` and, when a shield filtered the step, ``shield``
+    (:class:`tlshield.step_info.ShieldInfo`); after a reset ``goal_outside_channel`` and
+    ``clf_goal_outside``. Every key is declared in :class:`tlshield.step_info.StepInfo`.
     """
 
     #: The names of ``info["constraints"]`` (a batch builds ``info`` from these).
