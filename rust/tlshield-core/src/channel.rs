@@ -10,11 +10,12 @@
 
 use std::f64::consts::SQRT_2;
 
+use crate::check::check_finite;
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
 use crate::shield::{Shield, Want};
-use crate::world::{Measure, ShieldStep, World, WorldStep};
+use crate::world::{Measure, World, WorldStep};
 
 /// State length: x, y, theta, three goal centres, two obstacle centres.
 pub const STATE_DIM: usize = 13;
@@ -186,13 +187,13 @@ impl ChannelWorld {
     /// Puts the world where [`ChannelWorld::snapshot`] found it: the next step is the one the
     /// snapshotted world would have taken. Values must be finite and `t` within the horizon.
     pub fn restore(&mut self, state: &ChannelState) -> Result<(), InputError> {
-        crate::validate::check_finite("s", &state.s, STATE_DIM)?;
-        crate::validate::check_finite("drift", &state.drift, STATE_DIM)?;
+        check_finite("s", &state.s, STATE_DIM)?;
+        check_finite("drift", &state.drift, STATE_DIM)?;
         for (k, o) in state.obstacles.iter().enumerate() {
             let path = [o.u, o.amplitude, o.frequency, o.phase];
-            crate::validate::check_finite(&format!("obstacles[{k}]"), &path, 4)?;
+            check_finite(&format!("obstacles[{k}]"), &path, 4)?;
         }
-        crate::validate::check_steps(state.t, self.params.horizon)?;
+        crate::check::check_steps(state.t, self.params.horizon)?;
         self.s = state.s;
         self.drift = state.drift;
         self.obstacles = state.obstacles;
@@ -232,18 +233,12 @@ impl ChannelWorld {
         want: Want,
     ) -> Result<WorldStep, ShieldError> {
         let p = &self.params;
-        if let Some(i) = action.iter().position(|a| !a.is_finite()) {
-            return Err(InputError::NonFinite {
-                what: format!("action[{i}]"),
-                value: action[i],
-            }
-            .into());
-        }
+        check_finite("action", &action, 2)?;
         let a_rl = if scale { p.rl_action(action) } else { action };
         let filtered = match shield {
             Some(shield) => {
                 let drift = p.obstacle_drift.then_some(&self.drift[..]);
-                Some(ShieldStep::filter(shield, monitor, a_rl, drift, want)?)
+                Some(shield.filter_step(monitor, a_rl, drift, want)?)
             }
             None => None,
         };

@@ -11,8 +11,8 @@
 //! smooth models the shield supports.
 
 use crate::alloc::{checked_len, try_vec, try_with_capacity};
+use crate::check::check_finite;
 use crate::error::InputError;
-use crate::validate::check_finite;
 
 /// The structure of a user's control-affine model over `n` state values and `m` inputs.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,8 +5,8 @@
 //! come with every call (`custom.rs`). Each built-in model also gives exact products with the
 //! Jacobian of `f`, which the second-order (HOCBF) rows and the second-order CLF need.
 
+use crate::check::check_finite;
 use crate::error::InputError;
-use crate::validate::check_finite;
 
 /// A built-in control-affine model over a state of length `n` with `m` inputs.
 #[derive(Debug, Clone, PartialEq)]

@@ -20,6 +20,7 @@ pub mod active_set;
 pub mod alloc;
 pub(crate) mod automaton;
 pub mod channel;
+pub(crate) mod check;
 pub mod cnf;
 pub mod custom;
 pub(crate) mod dynamics;
@@ -49,7 +50,6 @@ pub(crate) mod sensitivity;
 pub mod shield;
 pub(crate) mod slots;
 pub(crate) mod spec;
-pub(crate) mod validate;
 pub mod world;
 
 pub use automaton::{Automaton, Edge, Reading, MAX_GUARD_CUBES, MAX_NODES, MAX_STATES};

@@ -9,11 +9,11 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::automaton::{Automaton, Reading, MAX_ATOMS};
+use crate::check::{check_finite, check_state, check_state_rows, SCALAR};
 use crate::cnf::Literal;
 use crate::error::{AutomatonError, InputError};
 use crate::guidance::{Router, Routing};
 use crate::progress::ProgressReward;
-use crate::validate::check_finite;
 
 /// The task reward's defaults, owned by Eq. 5A1 (`automaton::reward`), here too because a
 /// monitor is where most callers meet them.
@@ -111,13 +111,7 @@ impl Monitor {
                     }
                     .into());
                 }
-                if !trap_penalty.is_finite() {
-                    return Err(InputError::NonFinite {
-                        what: "trap_penalty".into(),
-                        value: *trap_penalty,
-                    }
-                    .into());
-                }
+                check_finite("trap_penalty", &[*trap_penalty], SCALAR)?;
             }
             TaskReward::Progress(..) => {}
         }
@@ -189,8 +183,7 @@ impl Monitor {
     /// Checks a state for this monitor's automaton: its length (the error names it `{what}
     /// length`) and finiteness.
     fn check(&self, what: &str, s: &[f64]) -> Result<(), AutomatonError> {
-        check_len(&self.automaton, what, s.len())?;
-        Ok(check_finite(what, s, s.len())?)
+        Ok(check_state(what, s, self.automaton.spec().state_len()?)?)
     }
 
     /// Reads the atoms of a checked state into the monitor (the state is copied into a buffer
@@ -294,13 +287,7 @@ impl Monitor {
 
     fn check_snapshot(&self, state: &MonitorState) -> Result<(), AutomatonError> {
         self.automaton.check_state("q", state.q)?;
-        if !state.phi.is_finite() {
-            return Err(InputError::NonFinite {
-                what: "phi".into(),
-                value: state.phi,
-            }
-            .into());
-        }
+        check_finite("phi", &[state.phi], SCALAR)?;
         if state.started {
             self.check("s", &state.s)?;
         } else if !state.s.is_empty() {
@@ -367,21 +354,6 @@ impl Monitor {
     pub fn goal(&self) -> Option<&[f64]> {
         self.has_goal.then_some(self.goal.as_slice())
     }
-}
-
-/// Checks a state length `n` for `automaton`'s spec; the error names it `{what} length`.
-fn check_len(automaton: &Automaton, what: &str, n: usize) -> Result<(), InputError> {
-    automaton
-        .spec()
-        .check_state_len(n)
-        .map_err(|err| match err {
-            InputError::Shape { expected, got, .. } => InputError::Shape {
-                what: format!("{what} length"),
-                expected,
-                got,
-            },
-            other => other,
-        })
 }
 
 /// N task monitors of one automaton, stepped together: the batch twin of [`Monitor`] for vector
@@ -525,16 +497,12 @@ impl MonitorBatch {
 
     /// Checks `(rows, dim)` states for the automaton: shape, length and finiteness.
     fn check_states(&self, states: &[f64], dim: usize, rows: usize) -> Result<(), AutomatonError> {
-        if dim == 0 || rows.checked_mul(dim) != Some(states.len()) {
-            return Err(InputError::Shape {
-                what: "states".into(),
-                expected: format!("({rows}, n): one row per monitor"),
-                got: format!("{} values in rows of {dim}", states.len()),
-            }
-            .into());
-        }
-        check_len(&self.automaton, "states row", dim)?;
-        Ok(check_finite("states", states, dim)?)
+        Ok(check_state_rows(
+            states,
+            dim,
+            rows,
+            self.automaton.spec().state_len()?,
+        )?)
     }
 }
 

@@ -6,11 +6,12 @@
 //!
 //! The start is drawn by the caller (the Gymnasium class, from its own generator).
 
+use crate::check::check_finite;
 use crate::dynamics::Dynamics;
 use crate::error::{InputError, ShieldError};
 use crate::monitor::Monitor;
 use crate::shield::{Shield, Want};
-use crate::world::{Measure, ShieldStep, World, WorldStep};
+use crate::world::{Measure, World, WorldStep};
 
 /// State length: position `x, y`, velocity `vx, vy`.
 pub const STATE_DIM: usize = 4;
@@ -80,8 +81,8 @@ impl PointMassWorld {
     /// Puts the world at state `s` after `t` steps of an episode (what [`PointMassWorld::state`]
     /// and [`PointMassWorld::steps`] read): values finite, `t` within the horizon.
     pub fn restore(&mut self, s: [f64; STATE_DIM], t: u32) -> Result<(), InputError> {
-        crate::validate::check_finite("s", &s, STATE_DIM)?;
-        crate::validate::check_steps(t, self.params.horizon)?;
+        check_finite("s", &s, STATE_DIM)?;
+        crate::check::check_steps(t, self.params.horizon)?;
         self.s = s;
         self.t = t;
         Ok(())
@@ -102,16 +103,10 @@ impl PointMassWorld {
         shield: Option<&Shield>,
         want: Want,
     ) -> Result<WorldStep, ShieldError> {
-        if let Some(i) = a_rl.iter().position(|a| !a.is_finite()) {
-            return Err(InputError::NonFinite {
-                what: format!("action[{i}]"),
-                value: a_rl[i],
-            }
-            .into());
-        }
+        check_finite("action", &a_rl, 2)?;
         let p = &self.params;
         let filtered = match shield {
-            Some(shield) => Some(ShieldStep::filter(shield, monitor, a_rl, None, want)?),
+            Some(shield) => Some(shield.filter_step(monitor, a_rl, None, want)?),
             None => None,
         };
         let wanted = filtered.as_ref().map_or(a_rl, |f| f.action);

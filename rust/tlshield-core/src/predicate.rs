@@ -6,6 +6,7 @@
 //! and Hessian are those of the part that attains the max (min), the first on ties: exact
 //! wherever that part is unique, and a valid one-sided choice on the seams.
 
+use crate::check::StateLen;
 use crate::error::{InputError, SpecError};
 
 /// `rho(s) = w . s + b`: a half-space of the state space (the paper's channel constraints).
@@ -79,14 +80,15 @@ pub enum Predicate {
     Intersection(Vec<Predicate>),
 }
 
-fn check_finite(what: &str, values: &[f64]) -> Result<(), SpecError> {
-    match crate::validate::first_non_finite(values) {
-        Some(i) => Err(SpecError::InvalidPredicate(format!(
-            "{what}[{i}] is {} (must be finite)",
-            values[i]
-        ))),
-        None => Ok(()),
-    }
+/// A predicate's parameters must be finite ([`crate::check::check_finite`], in the words of a
+/// predicate's error).
+fn finite(what: &str, values: &[f64]) -> Result<(), SpecError> {
+    crate::check::check_finite(what, values, values.len()).map_err(|err| match err {
+        InputError::NonFinite { what, value } => {
+            SpecError::InvalidPredicate(format!("{what} is {value} (must be finite)"))
+        }
+        other => SpecError::InvalidPredicate(other.to_string()),
+    })
 }
 
 fn check_distinct(what: &str, dims: &[usize]) -> Result<(), SpecError> {
@@ -108,8 +110,8 @@ impl Predicate {
                 "Halfspace w must have at least one entry".into(),
             ));
         }
-        check_finite("Halfspace w", &w)?;
-        check_finite("Halfspace b", &[b])?;
+        finite("Halfspace w", &w)?;
+        finite("Halfspace b", &[b])?;
         let terms = w
             .iter()
             .enumerate()
@@ -136,7 +138,7 @@ impl Predicate {
         }
         let center_len = match &center {
             Center::Fixed(c) => {
-                check_finite("Ball center", c)?;
+                finite("Ball center", c)?;
                 c.len()
             }
             Center::Dims(d) => {
@@ -181,7 +183,7 @@ impl Predicate {
                 ball.pos.len()
             )));
         }
-        check_finite("Ball offset", &[offset.along, offset.across])?;
+        finite("Ball offset", &[offset.along, offset.across])?;
         let centre_dims = match &ball.center {
             Center::Dims(d) => d.as_slice(),
             Center::Fixed(_) => &[],
@@ -276,34 +278,28 @@ impl Predicate {
 
     /// Checks that a state of length `n` can be read by this predicate.
     pub fn check_dim(&self, n: usize) -> Result<(), InputError> {
-        let ok = match self.exact_dim() {
-            Some(d) => n == d,
-            None => n >= self.min_dim(),
-        };
-        if ok {
-            return Ok(());
+        crate::check::check_state_len("state", n, &[self.state_len()])
+    }
+
+    /// What this predicate needs of a state's length (see [`crate::check::check_state_len`]).
+    pub(crate) fn state_len(&self) -> StateLen {
+        match self.exact_dim() {
+            Some(d) => StateLen::new(d, true),
+            None => StateLen::new(self.min_dim(), false),
         }
-        Err(InputError::Shape {
-            what: "state length".into(),
-            expected: match self.exact_dim() {
-                Some(d) => d.to_string(),
-                None => format!("at least {}", self.min_dim()),
-            },
-            got: n.to_string(),
-        })
     }
 
     /// Robustness at state `s` after checking its length and that it is finite.
     pub fn robustness(&self, s: &[f64]) -> Result<f64, InputError> {
         self.check_dim(s.len())?;
-        crate::validate::check_finite("s", s, s.len())?;
+        crate::check::check_finite("s", s, s.len())?;
         Ok(self.value(s))
     }
 
     /// Gradient at state `s` after checking its length and that it is finite.
     pub fn gradient(&self, s: &[f64]) -> Result<Vec<f64>, InputError> {
         self.check_dim(s.len())?;
-        crate::validate::check_finite("s", s, s.len())?;
+        crate::check::check_finite("s", s, s.len())?;
         let mut out = vec![0.0; s.len()];
         self.gradient_into(s, &mut out);
         Ok(out)

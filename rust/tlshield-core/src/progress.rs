@@ -411,13 +411,7 @@ impl ProgressReward {
             }
             .into());
         }
-        if !phi.is_finite() {
-            return Err(InputError::NonFinite {
-                what: "phi".into(),
-                value: phi,
-            }
-            .into());
-        }
+        crate::check::check_finite("phi", &[phi], crate::check::SCALAR)?;
         let reading = automaton.read(s_next)?;
         let q_next = reading.step(q);
         let phi_next = self.potential(&reading, q_next);

@@ -14,10 +14,10 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
+use crate::check::{check_finite, first_non_finite};
 use crate::error::InputError;
 use crate::formula::Formula;
 use crate::predicate::Predicate;
-use crate::validate::{check_finite, first_non_finite};
 
 /// One instruction of a compiled formula; operands are indices of earlier instructions.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -3,11 +3,11 @@
 
 use std::fmt;
 
+use crate::check::{check_finite, check_state_len, StateLen};
 use crate::error::{InputError, SpecError};
 use crate::formula::Formula;
 use crate::predicate::Predicate;
 use crate::robustness::{Program, Scratch, Trajectory, TrajectoryBatch};
-use crate::validate::check_finite;
 
 /// A formula bound to the predicates that give its atoms meaning; evaluates robustness and
 /// Boolean satisfaction of trajectories (see [`Spec::robustness`]).
@@ -189,8 +189,9 @@ impl Spec {
         &self.predicates
     }
 
-    /// Checks that states of length `n` can be evaluated.
-    pub fn check_state_len(&self, n: usize) -> Result<(), InputError> {
+    /// What the predicates need of a state's length (see [`check_state_len`]); an error for a
+    /// spec without predicates, which cannot evaluate states at all.
+    pub(crate) fn state_len(&self) -> Result<StateLen, InputError> {
         if !self.is_bound() {
             return Err(InputError::Value {
                 what: "spec".into(),
@@ -199,20 +200,9 @@ impl Spec {
                 got: "a formula alone (Spec::from_formula)".into(),
             });
         }
-        let ok = match self.exact_dim {
-            Some(d) => n == d,
-            None => n >= self.min_dim.max(1),
-        };
-        if ok {
-            return Ok(());
-        }
-        Err(InputError::Shape {
-            what: "state length".into(),
-            expected: match self.exact_dim {
-                Some(d) => d.to_string(),
-                None => format!("at least {}", self.min_dim.max(1)),
-            },
-            got: n.to_string(),
+        Ok(match self.exact_dim {
+            Some(d) => StateLen::new(d, true),
+            None => StateLen::new(self.min_dim.max(1), false),
         })
     }
 
@@ -233,7 +223,7 @@ impl Spec {
 
     /// Robustness of every atom at one state, after validating it.
     pub fn atom_robustness(&self, s: &[f64]) -> Result<Vec<f64>, InputError> {
-        self.check_state_len(s.len())?;
+        check_state_len("state", s.len(), &[self.state_len()?])?;
         check_finite("s", s, s.len())?;
         let mut out = vec![0.0; self.atoms.len()];
         self.atom_robustness_into(s, &mut out);
@@ -243,7 +233,7 @@ impl Spec {
 
 impl Spec {
     fn check_trajectory(&self, traj: &Trajectory<'_>) -> Result<(), InputError> {
-        self.check_state_len(traj.dim())
+        check_state_len("state", traj.dim(), &[self.state_len()?])
     }
 
     /// Robustness `rho(s_0..s_T, phi)` at `t = 0` (closed window).
@@ -279,7 +269,7 @@ impl Spec {
 
     /// Robustness of every trajectory of a batch, in parallel (rayon).
     pub fn robustness_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<f64>, InputError> {
-        self.check_state_len(batch.dim)?;
+        check_state_len("state", batch.dim, &[self.state_len()?])?;
         batch.map(0.0, |traj, scratch| {
             crate::robustness::robustness(&self.program, &self.predicates, traj, scratch)
         })
@@ -287,7 +277,7 @@ impl Spec {
 
     /// Boolean satisfaction of every trajectory of a batch, in parallel (rayon).
     pub fn satisfied_batch(&self, batch: TrajectoryBatch<'_>) -> Result<Vec<bool>, InputError> {
-        self.check_state_len(batch.dim)?;
+        check_state_len("state", batch.dim, &[self.state_len()?])?;
         batch.map(false, |traj, scratch| {
             crate::robustness::satisfied(&self.program, &self.predicates, traj, scratch)
         })
@@ -309,7 +299,7 @@ mod tests {
         let spec = Spec::from_formula("F a & X b").unwrap();
         assert_eq!(spec.atoms(), ["a", "b"]);
         assert!(!spec.is_bound());
-        let err = spec.check_state_len(2).unwrap_err().to_string();
+        let err = spec.state_len().unwrap_err().to_string();
         assert!(err.contains("a formula alone"), "{err}");
         let traj = Trajectory::new(&[0.0, 1.0], 1).unwrap();
         crate::tests_support::assert_error(spec.robustness(traj), "Value", "spec");
@@ -336,7 +326,12 @@ mod tests {
         ));
         let spec = Spec::new("F a", [("a", ball), ("unused", hs3)]).unwrap();
         assert_eq!(spec.atoms(), ["a"]);
-        crate::tests_support::assert_error(spec.check_state_len(1), "Shape", "state length");
-        assert!(spec.check_state_len(2).is_ok());
+        let rule = [spec.state_len().unwrap()];
+        crate::tests_support::assert_error(
+            check_state_len("state", 1, &rule),
+            "Shape",
+            "state length",
+        );
+        assert!(check_state_len("state", 2, &rule).is_ok());
     }
 }

@@ -6,7 +6,8 @@ use smallvec::SmallVec;
 
 use crate::error::{InputError, ShieldError};
 use crate::monitor::{Monitor, TaskStep};
-use crate::shield::{BarrierSource, Filtered, Shield, SolvedBy, Status, Want};
+use crate::shield::Shield;
+pub use crate::shield::ShieldStep;
 
 /// What a world measures at a state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,58 +42,6 @@ pub struct WorldStep {
     pub truncated: bool,
     /// Measurements at the new state.
     pub measure: Measure,
-}
-
-/// The shield's answer in a world's step: the corrections and the solve's outcome in fixed-size
-/// fields (a batch's rows allocate nothing), and the whole answer (goal, barriers) when the step
-/// was asked to keep it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ShieldStep {
-    /// The corrected action, `a_rl + a_cbf + a_clf`.
-    pub action: [f64; 2],
-    /// The safety correction.
-    pub a_cbf: [f64; 2],
-    /// The task correction.
-    pub a_clf: [f64; 2],
-    /// The CLF relaxation.
-    pub delta: f64,
-    /// The largest barrier slack.
-    pub slack: f64,
-    /// How the solve ended.
-    pub status: Status,
-    /// Which solver answered.
-    pub solver: SolvedBy,
-    /// The barrier that gave way and its slack, when the QP was relaxed.
-    pub gave_way: Option<(BarrierSource, f64)>,
-    /// The whole answer, when recorded.
-    pub record: Option<Filtered>,
-}
-
-impl ShieldStep {
-    /// The shield's answer for `a_rl` at `monitor`'s last state (`drift` as in
-    /// [`Shield::filter`]); [`Want::Record`] keeps the whole answer (one allocation per step).
-    pub fn filter(
-        shield: &Shield,
-        monitor: &Monitor,
-        a_rl: [f64; 2],
-        drift: Option<&[f64]>,
-        want: Want,
-    ) -> Result<ShieldStep, ShieldError> {
-        shield.filter_monitor_with(monitor, &a_rl, None, drift, want, |f| {
-            let pair = |v: &[f64]| [v[0], v[1]];
-            ShieldStep {
-                action: pair(&f.action),
-                a_cbf: pair(&f.a_cbf),
-                a_clf: pair(&f.a_clf),
-                delta: f.delta,
-                slack: f.slack,
-                status: f.status,
-                solver: f.solver,
-                gave_way: f.gave_way,
-                record: (want == Want::Record).then(|| f.clone()),
-            }
-        })
-    }
 }
 
 /// A world the core steps: one action (2 inputs) per step, shielded with its monitor's reading.
@@ -150,7 +99,7 @@ pub fn step_many<W: World>(
         }
         .into());
     }
-    crate::validate::check_finite("actions", actions, 2)?;
+    crate::check::check_finite("actions", actions, 2)?;
     let states = monitors.first().map_or(0, |m| m.automaton().num_states());
     let step = |world: &mut W, monitor: &mut Monitor, a: &[f64], row: &mut [f64]| {
         let out = world.step_row([a[0], a[1]], scale, monitor, shield)?;

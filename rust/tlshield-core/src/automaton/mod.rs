@@ -14,11 +14,11 @@
 
 use rayon::prelude::*;
 
+use crate::check::{check_finite, check_state_len};
 use crate::cnf::{dnf_text, Cube, Literal};
 use crate::error::{AutomatonError, InputError};
 use crate::robustness::Trajectory;
 use crate::spec::Spec;
-use crate::validate::check_finite;
 
 mod build;
 mod diagram;
@@ -259,7 +259,7 @@ impl Automaton {
     }
 
     fn check_vector(&self, s: &[f64]) -> Result<(), InputError> {
-        self.spec.check_state_len(s.len())?;
+        check_state_len("state", s.len(), &[self.spec.state_len()?])?;
         check_finite("s", s, s.len())
     }
 
@@ -320,7 +320,7 @@ impl Automaton {
             }
             .into());
         }
-        self.spec.check_state_len(dim)?;
+        check_state_len("state", dim, &[self.spec.state_len()?])?;
         check_finite("states", states, dim)?;
         self.check_states("qs", qs)?;
         let mut out = crate::alloc::try_vec("qs", qs.len(), 0)?;
@@ -334,7 +334,7 @@ impl Automaton {
 
     /// The state after reading every state of `traj`, starting from the initial state.
     pub fn run(&self, traj: Trajectory<'_>) -> Result<usize, AutomatonError> {
-        self.spec.check_state_len(traj.dim())?;
+        check_state_len("state", traj.dim(), &[self.spec.state_len()?])?;
         Ok((0..traj.len()).fold(self.initial, |q, t| {
             self.read_validated(traj.state(t)).step(q)
         }))

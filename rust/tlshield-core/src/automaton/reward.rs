@@ -119,12 +119,10 @@ fn check_weight(c_r: f64) -> Result<(), AutomatonError> {
 /// The reward of a step in the trap: `trap_penalty`, which must be given and finite.
 fn trap_reward(q: usize, trap_penalty: Option<f64>) -> Result<f64, AutomatonError> {
     match trap_penalty {
-        Some(p) if p.is_finite() => Ok(p),
-        Some(p) => Err(InputError::NonFinite {
-            what: "trap_penalty".into(),
-            value: p,
+        Some(p) => {
+            crate::check::check_finite("trap_penalty", &[p], crate::check::SCALAR)?;
+            Ok(p)
         }
-        .into()),
         None => Err(AutomatonError::TrapReward(q)),
     }
 }

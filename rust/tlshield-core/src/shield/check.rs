@@ -1,19 +1,23 @@
 //! The shield's input checks: every call's input (state lengths, finiteness, actions, the
-//! per-call dynamics, batches and monitors), each a `ShieldError` naming what was wrong.
+//! per-call dynamics, batches and monitors), each a `ShieldError` naming what was wrong. The
+//! checks every layer shares (a state's length, finiteness) are `crate::check`'s; what is
+//! the shield's own (its actions, its model, the drift's layout) is here, beside the entry
+//! points that run it.
 
 use std::sync::Arc;
 
+use crate::check::{check_finite, check_state_len, StateLen};
+use crate::custom::CustomModel;
 use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::monitor::MonitorBatch;
-use crate::validate::check_finite;
 
 use super::inputs::{BatchDynamics, Call, ControlAffine, StateBatch};
-use super::params::Bounds;
+use super::params::{Barrier, Bounds};
 use super::Shield;
 
 /// Checks that every row of `a` (rows of `lo.len()` values) lies in `b`, up to rounding
 /// (1e-9 of the bound's size, so a policy action scaled onto the box's edge passes).
-pub(super) fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), ShieldError> {
+fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), ShieldError> {
     let m = b.lo.len();
     for (k, &v) in a.iter().enumerate() {
         let j = k % m;
@@ -36,63 +40,97 @@ pub(super) fn check_within(what: &str, a: &[f64], b: &Bounds) -> Result<(), Shie
     Ok(())
 }
 
-/// Checks a drift of `rows` rows of length `n` (its layout against the model's:
-/// [`Shield::check_drift_layout`]).
-pub(super) fn check_drift(d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
-    if d.len() != rows * n {
-        return Err(InputError::Shape {
-            what: "drift".into(),
-            expected: format!("{rows} x {n} (one value per state dimension)"),
-            got: format!("{} values", d.len()),
-        }
-        .into());
+/// Every rule a state's length must meet in a shield, in the order they are checked: the
+/// spec's, the user's model's (exactly its own length), what the shield reads (the model,
+/// the barriers, `pos`) and each barrier's. An `Err` for a spec that cannot evaluate states.
+pub(super) fn state_rules(
+    spec: &crate::spec::Spec,
+    custom: Option<&CustomModel>,
+    min_dim: usize,
+    barriers: &[Barrier],
+) -> Result<Vec<StateLen>, InputError> {
+    let mut rules = vec![spec.state_len()?];
+    if let Some(c) = custom {
+        rules.push(StateLen {
+            note: " (the model's state_dim)",
+            ..StateLen::new(c.state_len(), true).named()
+        });
     }
-    check_finite("drift", d, n)?;
-    Ok(())
+    rules.push(StateLen {
+        note: " (dynamics, barriers and pos)",
+        ..StateLen::new(min_dim, false).named()
+    });
+    rules.extend(barriers.iter().map(|b| b.predicate.state_len()));
+    Ok(rules)
 }
 
 impl Shield {
-    /// Checks that a drift moves no dimension the model's inputs move (no model: nothing to
-    /// check against).
-    pub(super) fn check_drift_layout(&self, d: &[f64], n: usize) -> Result<(), ShieldError> {
+    /// The rules of [`state_rules`], made at construction.
+    pub(super) fn state_rules(&self) -> Result<&[StateLen], InputError> {
+        self.state_len.as_deref().map_err(Clone::clone)
+    }
+
+    /// Validates the arguments of one step. A task monitor's state was checked against the
+    /// same spec when the monitor read it (length and values) and its FSA state is one of the
+    /// automaton's: of the state, only the shield's own rules are new to it.
+    pub(super) fn check_call(&self, call: &Call<'_>) -> Result<(), ShieldError> {
+        let Call {
+            s,
+            q,
+            a_rl,
+            fg,
+            drift,
+            task,
+        } = *call;
+        let n = s.len();
+        check_state_len("s", n, self.state_rules()?)?;
+        if task.is_none() {
+            check_finite("s", s, n)?;
+            self.automaton.check_state("q", q)?;
+        }
+        self.check_action("a_rl", a_rl)?;
+        self.check_dynamics(n, fg)?;
+        if let Some(d) = drift {
+            self.check_drift(d, n, 1)?;
+        }
+        Ok(())
+    }
+
+    /// Checks a drift of `rows` rows of length `n`: its size, its values, and that it moves
+    /// no dimension the model's inputs move (no model: nothing to check that against).
+    fn check_drift(&self, d: &[f64], n: usize, rows: usize) -> Result<(), ShieldError> {
+        if d.len() != rows * n {
+            return Err(InputError::Shape {
+                what: "drift".into(),
+                expected: format!("{rows} x {n} (one value per state dimension)"),
+                got: format!("{} values", d.len()),
+            }
+            .into());
+        }
+        check_finite("drift", d, n)?;
         self.structure()
             .map_or(Ok(()), |model| super::layout::check_drift(d, n, model))
     }
 
-    /// Checks the state length, finiteness and the barrier dimensions.
-    pub(super) fn check_state(&self, what: &str, s: &[f64]) -> Result<(), ShieldError> {
-        self.check_state_len(what, s.len())
-    }
-
-    /// Checks a state length `n` against the spec, the dynamics and the barriers (an empty
-    /// batch still says how long its rows are).
-    pub(super) fn check_state_len(&self, what: &str, n: usize) -> Result<(), ShieldError> {
-        self.automaton.spec().check_state_len(n)?;
-        // A user's model is evaluated at exactly its own state length.
-        if let Some(c) = self.custom.as_ref().filter(|c| n != c.state_len()) {
+    /// Checks one call's RL action: length, finiteness and the RL box.
+    fn check_action(&self, what: &str, a: &[f64]) -> Result<(), ShieldError> {
+        if a.len() != self.m {
             return Err(InputError::Shape {
                 what: format!("{what} length"),
-                expected: format!("{} (the model's state_dim)", c.state_len()),
-                got: n.to_string(),
+                expected: format!("{} (one value per input)", self.m),
+                got: a.len().to_string(),
             }
             .into());
         }
-        if n < self.min_dim {
-            return Err(InputError::Shape {
-                what: format!("{what} length"),
-                expected: format!("at least {} (dynamics, barriers and pos)", self.min_dim),
-                got: n.to_string(),
-            }
-            .into());
-        }
-        for b in &self.params.barriers {
-            b.predicate.check_dim(n)?;
+        check_finite(what, a, a.len())?;
+        if let Some(rl) = &self.params.rl_bounds {
+            check_within(what, a, rl)?;
         }
         Ok(())
     }
 
     /// Checks a batch's `(rows, m)` RL actions: shape, finiteness and the RL box.
-    pub(super) fn check_batch_actions(&self, a_rl: &[f64], rows: usize) -> Result<(), ShieldError> {
+    fn check_batch_actions(&self, a_rl: &[f64], rows: usize) -> Result<(), ShieldError> {
         let m = self.m;
         if a_rl.len() != rows * m {
             return Err(InputError::Shape {
@@ -109,27 +147,10 @@ impl Shield {
         Ok(())
     }
 
-    pub(super) fn check_action(&self, what: &str, a: &[f64]) -> Result<(), ShieldError> {
-        if a.len() != self.m {
-            return Err(InputError::Shape {
-                what: format!("{what} length"),
-                expected: format!("{} (one value per input)", self.m),
-                got: a.len().to_string(),
-            }
-            .into());
-        }
-        check_finite(what, a, a.len())?;
-        if let Some(rl) = &self.params.rl_bounds {
-            check_within(what, a, rl)?;
-        }
-        Ok(())
-    }
-
-    pub(super) fn check_dynamics(
-        &self,
-        n: usize,
-        fg: Option<ControlAffine<'_>>,
-    ) -> Result<(), ShieldError> {
+    /// Checks one call's dynamics at a state of length `n` (already checked against the
+    /// shield's rules, a user's model's length among them), or, with none, that the shield
+    /// has a model.
+    fn check_dynamics(&self, n: usize, fg: Option<ControlAffine<'_>>) -> Result<(), ShieldError> {
         let Some(ControlAffine { f, g, jacobian }) = fg else {
             if self.dynamics.is_some() {
                 return Ok(());
@@ -139,16 +160,6 @@ impl Shield {
                 None => "this shield has no dynamics model: pass f and g with every call".into(),
             }));
         };
-        if let Some(c) = &self.custom {
-            if n != c.state_len() {
-                return Err(InputError::Shape {
-                    what: "s length".into(),
-                    expected: format!("{} (the model's state_dim)", c.state_len()),
-                    got: n.to_string(),
-                }
-                .into());
-            }
-        }
         if f.len() != n {
             return Err(InputError::Shape {
                 what: "f length".into(),
@@ -195,30 +206,8 @@ impl Shield {
         Ok(())
     }
 
-    /// Validates the arguments of one step.
-    pub(super) fn check_call(&self, call: &Call<'_>) -> Result<(), ShieldError> {
-        let Call {
-            s,
-            q,
-            a_rl,
-            fg,
-            drift,
-            ..
-        } = *call;
-        self.check_state("s", s)?;
-        check_finite("s", s, s.len())?;
-        self.automaton.check_state("q", q)?;
-        self.check_action("a_rl", a_rl)?;
-        self.check_dynamics(s.len(), fg)?;
-        if let Some(d) = drift {
-            check_drift(d, s.len(), 1)?;
-            self.check_drift_layout(d, s.len())?;
-        }
-        Ok(())
-    }
-
     /// Checks a batch's per-row dynamics (or, with none, that the shield has a model).
-    pub(super) fn check_batch_dynamics(
+    fn check_batch_dynamics(
         &self,
         rows: usize,
         n: usize,
@@ -275,11 +264,10 @@ impl Shield {
             .into());
         }
         self.check_batch_actions(a_rl, rows)?;
-        self.check_state_len("states row", n)?;
+        check_state_len("states row", n, self.state_rules()?)?;
         check_finite("states", states, n)?;
         if let Some(d) = drift {
-            check_drift(d, n, rows)?;
-            self.check_drift_layout(d, n)?;
+            self.check_drift(d, n, rows)?;
         }
         Ok(self.automaton.check_states("qs", qs)?)
     }
@@ -324,11 +312,10 @@ impl Shield {
         };
         // Every monitor of the batch read a state of its automaton: one length for all.
         let n = first.state().len();
-        self.check_state("monitor state", first.state())?;
+        check_state_len("monitor state", n, self.state_rules()?)?;
         self.check_batch_dynamics(rows, n, dynamics)?;
         if let Some(d) = drift {
-            check_drift(d, n, rows)?;
-            self.check_drift_layout(d, n)?;
+            self.check_drift(d, n, rows)?;
         }
         Ok(Some(n))
     }

@@ -23,12 +23,12 @@
 use smallvec::SmallVec;
 
 use super::{BatchDynamics, BatchRows, Shield, Stage, StateBatch, Status, Want, Workspace};
+use crate::check::check_finite;
 use crate::error::{InputError, ShieldError};
 use crate::guidance::GoalChoice;
 use crate::linalg::dot;
 use crate::predicate::{Center, Predicate};
 use crate::sensitivity::{QpAdjointSolver, Singular};
-use crate::validate::check_finite;
 
 /// Flag: the step was relaxed (slacks on the barrier rows); the gradient is the relaxed QP's.
 pub const GRAD_RELAXED: u8 = 1;

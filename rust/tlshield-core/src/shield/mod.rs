@@ -31,15 +31,15 @@ use std::sync::Arc;
 use smallvec::SmallVec;
 
 use crate::automaton::Automaton;
+use crate::check::{check_finite, check_state_len, StateLen};
 use crate::custom::CustomModel;
 use crate::dynamics::{Dynamics, Structure};
-use crate::error::{AutomatonError, ShieldError};
+use crate::error::{AutomatonError, InputError, ShieldError};
 use crate::guidance::Routing;
 use crate::monitor::{Monitor, MonitorBatch};
 use crate::predicate::Predicate;
 use crate::qp::{DenseQp, QpStatus};
 use crate::slots::Slots;
-use crate::validate::check_finite;
 
 mod check;
 mod give_way;
@@ -60,7 +60,7 @@ pub use inputs::{BatchDynamics, ControlAffine, StateBatch, Want};
 use inputs::{BatchRows, Call, Stage};
 use order::Orders;
 use outcome::OutRows;
-pub use outcome::{BarrierSource, BatchOutput, Filtered, SolvedBy, Status};
+pub use outcome::{BarrierSource, BatchOutput, Filtered, ShieldStep, SolvedBy, Status};
 pub use params::{Barrier, Bounds, RoundBound, ShieldParams, SolverChoice};
 use program::Rules;
 use workspace::Workspace;
@@ -103,8 +103,9 @@ pub struct Shield {
     /// Which rows are second order (HOCBF) under the model.
     orders: Orders,
     m: usize,
-    /// Smallest state length every part can read.
-    min_dim: usize,
+    /// Every rule a state's length must meet (`check.rs`'s `state_rules`); an error for a
+    /// spec that cannot evaluate states.
+    state_len: Result<Vec<StateLen>, InputError>,
     /// One workspace per concurrent caller, reused (no allocation in steady state).
     pool: Slots<Workspace>,
     /// What the CLF routes around ([`Shield::routing`]), made once.
@@ -191,6 +192,7 @@ impl Shield {
         }
         let routing = routing_of(&params);
         let give_way = GiveWay::new(&params, spec)?;
+        let state_len = check::state_rules(spec, custom.as_ref(), min_dim, &params.barriers);
         Ok(Shield {
             automaton,
             dynamics,
@@ -198,7 +200,7 @@ impl Shield {
             params,
             orders,
             m,
-            min_dim,
+            state_len,
             pool: Slots::default(),
             routing,
             give_way,
@@ -235,7 +237,7 @@ impl Shield {
     /// Every user barrier's value at `s` (in the order of [`ShieldParams::barriers`]), into
     /// `out`: what an environment's step can be measured by, with no key of its own.
     pub fn barrier_values(&self, s: &[f64], out: &mut Vec<f64>) -> Result<(), ShieldError> {
-        self.check_state("s", s)?;
+        check_state_len("s", s.len(), self.state_rules()?)?;
         check_finite("s", s, s.len())?;
         out.clear();
         out.extend(self.params.barriers.iter().map(|b| b.value(s)));
@@ -305,6 +307,47 @@ impl Shield {
         want: Want,
         take: impl FnOnce(&Filtered) -> R,
     ) -> Result<R, ShieldError> {
+        let call = self.monitor_call(monitor, a_rl, fg, drift)?;
+        self.checked_step(call, Stage::Filter(want), |ws| take(&ws.out))
+    }
+
+    /// [`Shield::filter_monitor`] for one step of a bundled world (two inputs, the model's
+    /// dynamics): the answer in fixed-size fields, and the whole of it with [`Want::Record`]
+    /// (one allocation per step).
+    pub fn filter_step(
+        &self,
+        monitor: &Monitor,
+        a_rl: [f64; 2],
+        drift: Option<&[f64]>,
+        want: Want,
+    ) -> Result<ShieldStep, ShieldError> {
+        let call = self.monitor_call(monitor, &a_rl, None, drift)?;
+        self.checked_step(call, Stage::Filter(want), |ws| {
+            let f = &ws.out;
+            let pair = |v: &[f64]| [v[0], v[1]];
+            ShieldStep {
+                action: pair(&f.action),
+                a_cbf: pair(&f.a_cbf),
+                a_clf: pair(&f.a_clf),
+                delta: f.delta,
+                slack: f.slack,
+                status: f.status,
+                solver: f.solver,
+                gave_way: f.gave_way,
+                record: (want == Want::Record).then(|| f.clone()),
+            }
+        })
+    }
+
+    /// The call at a task monitor's last state and FSA state; the monitor must watch this
+    /// shield's automaton and have started.
+    fn monitor_call<'a>(
+        &self,
+        monitor: &'a Monitor,
+        a_rl: &'a [f64],
+        fg: Option<ControlAffine<'a>>,
+        drift: Option<&'a [f64]>,
+    ) -> Result<Call<'a>, ShieldError> {
         if !Arc::ptr_eq(monitor.automaton(), &self.automaton) {
             return Err(ShieldError::Config(
                 "monitor: it watches another automaton; build it from this shield's automaton \
@@ -315,15 +358,14 @@ impl Shield {
         if !monitor.started() {
             return Err(AutomatonError::NotReset { row: None }.into());
         }
-        let call = Call {
+        Ok(Call {
             s: monitor.state(),
             q: monitor.q(),
             a_rl,
             fg,
             drift,
             task: Some(monitor),
-        };
-        self.checked_step(call, Stage::Filter(want), |ws| take(&ws.out))
+        })
     }
 
     /// The QP [`Shield::filter`] would solve at this step (before any relaxation), for

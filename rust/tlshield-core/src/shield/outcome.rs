@@ -209,3 +209,28 @@ impl OutRows<'_> {
         self.gave_way[i] = out.gave_way;
     }
 }
+
+/// The shield's answer in a world's step: the corrections and the solve's outcome in fixed-size
+/// fields (a batch's rows allocate nothing), and the whole answer (goal, barriers) when the step
+/// was asked to keep it ([`Shield::filter_step`](super::Shield::filter_step)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShieldStep {
+    /// The corrected action, `a_rl + a_cbf + a_clf`.
+    pub action: [f64; 2],
+    /// The safety correction.
+    pub a_cbf: [f64; 2],
+    /// The task correction.
+    pub a_clf: [f64; 2],
+    /// The CLF relaxation.
+    pub delta: f64,
+    /// The largest barrier slack.
+    pub slack: f64,
+    /// How the solve ended.
+    pub status: Status,
+    /// Which solver answered.
+    pub solver: SolvedBy,
+    /// The barrier that gave way and its slack, when the QP was relaxed.
+    pub gave_way: Option<(BarrierSource, f64)>,
+    /// The whole answer, when recorded.
+    pub record: Option<Filtered>,
+}
