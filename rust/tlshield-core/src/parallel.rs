@@ -82,8 +82,8 @@ pub fn part_len(rows: usize, serial_below: usize) -> usize {
 
 /// Runs `work` on every part, the calling thread and the pool's threads claiming one part at a
 /// time in order from a shared counter. The caller starts at once, and a pool thread that wakes
-/// late (about 50-150 us on a VM after the pool has slept between a Python loop's calls) finds
-/// fewer parts left, or none, instead of holding the batch up by a fixed share. Serial with
+/// late (its wake-up costs as much as many rows once the pool has slept between a Python loop's
+/// calls) finds fewer parts left, or none, instead of holding the batch up by a fixed share. Serial with
 /// one part or one thread. Which thread runs a part never changes its result.
 pub fn for_each_part<P: Send>(parts: &mut [P], work: impl Fn(&mut P) + Sync) {
     let helpers = threads().min(parts.len()).saturating_sub(1);

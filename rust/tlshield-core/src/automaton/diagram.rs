@@ -1,5 +1,5 @@
 //! Multi-terminal decision diagrams over the atoms: the symbolic form of a transition
-//! function (3d7a02f). Ordered (atom 0 at the top, then ascending), reduced (no node with
+//! function. Ordered (atom 0 at the top, then ascending), reduced (no node with
 //! equal children) and hash-consed (no two equal nodes), so one function has one node and two
 //! diagrams are equal iff their ids are. A leaf carries a `u32` value: a residual formula
 //! while building, a state id once built.

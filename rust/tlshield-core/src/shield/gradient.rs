@@ -220,9 +220,9 @@ type Part<'a> = (
 
 /// Gradient batches smaller than this run on the calling thread. Higher than
 /// [`super::PARALLEL_MIN_ROWS`]: a layer's caller does other work between calls, so the pool's
-/// threads are asleep and waking them costs about 150 us on a 2-core VM; measured through
-/// `ShieldLayer` (forward and backward): 64 rows 354 us in parallel, 243 us serial; 128 rows
-/// 402 / 394 us; 256 rows 521 / 705 us.
+/// threads are asleep when a batch arrives, and waking them costs more than a small batch's
+/// work; through `ShieldLayer` (forward and backward) the parallel pass stops losing to the
+/// serial one at about 128 rows (docs/benchmarks.md has the measurement).
 pub const GRADIENT_PARALLEL_MIN_ROWS: usize = 128;
 
 /// Relative step of the central differences of a moving goal.
