@@ -645,6 +645,12 @@ class FilterResult:
     @property
     def goal(self) -> NDArray[np.float64] | None: ...
     @property
+    def goal_unreachable(self) -> bool:
+        """Whether this step's goal cannot be reached from the state, as far as the routing
+        guidance can tell: it lies where the shield does not let the robot be (inside an
+        avoided disc, outside a region the robot is kept in), or no way around the avoided
+        discs leads to it. False without a routed goal."""
+    @property
     def solver(self) -> Solver: ...
     @property
     def barriers(self) -> list[tuple[str, float]]: ...

@@ -48,6 +48,9 @@ class ShieldInfo(TypedDict, total=False):
     gave_way: tuple[str, float] | None
     #: The CLF goal (or None without one).
     goal: NDArray[np.float64] | None
+    #: The goal cannot be reached from the state, as far as the routing guidance can tell
+    #: (``FilterResult.goal_unreachable``): the shield parks the robot safely short of it.
+    goal_unreachable: bool
     #: The enforced barriers, ``{name: h(s)}`` at the state the shield read.
     barriers: dict[str, float]
 
@@ -100,7 +103,7 @@ class StepInfo(TypedDict, total=False):
 def shield_info(result: FilterResult, a_rl: NDArray[np.float64]) -> ShieldInfo:
     """``info["shield"]`` of a step the shield filtered: the RL action, the corrections,
     ``delta``, the status, the largest barrier ``slack``, the barrier that gave way, the
-    solver, the CLF ``goal`` and the enforced ``barriers``."""
+    solver, the CLF ``goal``, whether it is unreachable and the enforced ``barriers``."""
     return {
         "a_rl": a_rl,
         "a_cbf": result.a_cbf,
@@ -111,6 +114,7 @@ def shield_info(result: FilterResult, a_rl: NDArray[np.float64]) -> ShieldInfo:
         "gave_way": result.gave_way,
         "solver": result.solver,
         "goal": result.goal,
+        "goal_unreachable": result.goal_unreachable,
         "barriers": dict(result.barriers),
     }
 

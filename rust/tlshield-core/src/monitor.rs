@@ -533,6 +533,7 @@ mod tests {
             pos: [0, 1],
             clearance: 0.2,
             avoid: Vec::new(),
+            inside: Vec::new(),
             preserve_progress: false,
         };
         let s = [

@@ -162,6 +162,7 @@ impl PyShield {
             slack: out.slack,
             gave_way,
             goal: out.goal.map(|g| g.into_pyarray(py).unbind()),
+            goal_unreachable: out.goal_unreachable,
             solver: out.solver,
             barriers,
         }

@@ -34,6 +34,13 @@ pub struct PyFilterResult {
     /// The CLF goal point (len(pos),) or None.
     #[pyo3(get)]
     pub(crate) goal: Option<Py<PyArray1<f64>>>,
+    /// Whether this step's goal cannot be reached from the state, as far as the routing
+    /// guidance can tell: it lies where the shield does not let the robot be (inside an
+    /// avoided disc, outside a region the robot is kept in), or no way around the avoided
+    /// discs leads to it. The shield then parks the robot safely short of it. False without a
+    /// routed goal.
+    #[pyo3(get)]
+    pub(crate) goal_unreachable: bool,
     pub(crate) solver: SolvedBy,
     /// The barriers enforced this step: ``(name, h(s))``; safe-set literals are named as in
     /// the formula (``"g3"``, ``"!g3"`` when negated), user barriers by their given name.

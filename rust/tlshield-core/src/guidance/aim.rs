@@ -136,6 +136,10 @@ pub(crate) struct Aim {
     router: Router,
     /// The safe set routed around, when the barrier rows did not read it.
     safe: Vec<(Literal, f64)>,
+    /// Whether this step's goal cannot be reached from the state ([`Aim::goal_unreachable`]).
+    unreachable: bool,
+    /// The state with the CLF's position moved to the goal (what a kept literal reads there).
+    probe: Vec<f64>,
 }
 
 impl Aim {
@@ -143,6 +147,17 @@ impl Aim {
     pub(crate) fn start(&mut self) {
         self.routed.clear();
         self.rerouted = false;
+        self.unreachable = false;
+    }
+
+    /// Whether this step's goal (Eq. 5B1's) cannot be reached from the state, as far as the
+    /// router can tell: the goal lies where the shield does not let the robot be (inside a disc
+    /// it avoids, or outside a region a kept literal or a user barrier holds it in, read with
+    /// the CLF's position at the goal and every other dimension as it is), or no way around
+    /// the discs leads to it. The CLF then aims at the goal anyway and the barriers hold the
+    /// robot short of it: a parked robot, which this names.
+    pub(crate) fn goal_unreachable(&self) -> bool {
+        self.unreachable
     }
 
     /// Whether guidance changed this step's CLF row.
@@ -188,7 +203,14 @@ impl Aim {
         };
         let predicates = reading.automaton().spec().predicates();
         let goal = [self.target[0], self.target[1]];
-        let target = routing.plan(predicates, safe, reading.state(), goal, &mut self.router);
+        let s = reading.state();
+        let target = routing.plan(predicates, safe, s, goal, &mut self.router);
+        self.unreachable = !self.router.reached() || {
+            let kept = safe.iter().map(|(lit, _)| (&predicates[lit.atom], lit.positive));
+            let user = routing.avoid.iter().map(|p| (p, false));
+            let held = routing.inside.iter().map(|p| (p, true));
+            excluded(&mut self.probe, &routing.pos, s, goal, kept.chain(user).chain(held))
+        };
         self.aim_at(target);
     }
 
@@ -253,4 +275,31 @@ impl Aim {
             lf: v * sin * f_theta,
         }
     }
+}
+
+/// Whether `goal` (over `pos`) lies where one of `constraints` does not let the state be: a
+/// predicate kept true (`true`) that is violated there, or kept false (`false`) that holds
+/// there, read at `s` with the position moved to the goal (into `probe`). Only predicates that
+/// read the position can tell.
+fn excluded<'p>(
+    probe: &mut Vec<f64>,
+    pos: &[usize; 2],
+    s: &[f64],
+    goal: [f64; 2],
+    constraints: impl Iterator<Item = (&'p Predicate, bool)>,
+) -> bool {
+    probe.clear();
+    probe.extend_from_slice(s);
+    probe[pos[0]] = goal[0];
+    probe[pos[1]] = goal[1];
+    constraints
+        .filter(|(p, _)| p.reads(pos[0]) || p.reads(pos[1]))
+        .any(|(p, kept_true)| {
+            let rho = p.value(probe);
+            if kept_true {
+                rho < 0.0
+            } else {
+                rho > 0.0
+            }
+        })
 }

@@ -65,6 +65,9 @@ pub struct Routing {
     pub clearance: f64,
     /// The user's barriers that keep the state outside a predicate (routed when discs).
     pub avoid: Vec<Predicate>,
+    /// The user's barriers that keep the state inside a predicate: not routed around, read
+    /// only to tell a goal the robot may not be at ([`Router::reached`]'s complement).
+    pub inside: Vec<Predicate>,
     /// Whether the safe set is the progress-preserving one (as the shield's).
     pub preserve_progress: bool,
 }
@@ -135,6 +138,9 @@ pub struct Router {
     pub(super) rest: Vec<f64>,
     pub(super) prev: Vec<Option<Node>>,
     pub(super) done: Vec<bool>,
+    /// Whether the last [`Router::target`] found the goal reachable: outside every disc, and
+    /// joined to the robot by a way around them.
+    reached: bool,
 }
 
 impl Router {
@@ -174,7 +180,8 @@ impl Router {
     /// `clearance` (relative to each radius, >= 0). See the module docs.
     pub fn target(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> [f64; 2] {
         // A goal inside an obstacle cannot be reached: aim at it, the barriers hold the robot.
-        if self.holds(goal) {
+        self.reached = !self.holds(goal);
+        if !self.reached {
             return goal;
         }
         self.inflate(p, goal, clearance);
@@ -184,9 +191,16 @@ impl Router {
         self.build_graph(p, goal, clearance);
         if !self.search() {
             // Enclosed: no way around what is known. Aim at the goal (the shield parks).
+            self.reached = false;
             return goal;
         }
         self.place_target(p, clearance)
+    }
+
+    /// Whether the last [`Router::target`] found its goal reachable: outside every disc, and
+    /// joined to the robot by a way around them (false before any target).
+    pub fn reached(&self) -> bool {
+        self.reached
     }
 }
 

@@ -562,6 +562,7 @@ impl Shield {
         out.status = Status::Solved;
         out.solver = SolvedBy::Nothing;
         out.goal = (record && has_goal).then(|| program.aim.target.clone());
+        out.goal_unreachable = has_goal && program.aim.goal_unreachable();
         if vars == 0 {
             ws.qp = DenseQp {
                 p_diag: Vec::new(),
@@ -668,6 +669,12 @@ fn routing_of(p: &ShieldParams) -> Option<Routing> {
             .barriers
             .iter()
             .filter(|b| !b.positive)
+            .map(|b| b.predicate.clone())
+            .collect(),
+        inside: p
+            .barriers
+            .iter()
+            .filter(|b| b.positive)
             .map(|b| b.predicate.clone())
             .collect(),
         preserve_progress: p.preserve_progress,

@@ -97,6 +97,10 @@ pub struct Filtered {
     pub solver: SolvedBy,
     /// The CLF goal this step, if any.
     pub goal: Option<Vec<f64>>,
+    /// Whether this step's goal cannot be reached from the state, as far as the routing
+    /// guidance can tell (it lies where the shield does not let the robot be, or no way
+    /// around the avoided discs leads to it); false without a routed goal.
+    pub goal_unreachable: bool,
     /// Every barrier enforced this step and its value `h(s)`.
     pub barriers: Vec<(BarrierSource, f64)>,
 }
@@ -113,6 +117,7 @@ impl Filtered {
             gave_way: None,
             solver: SolvedBy::Nothing,
             goal: None,
+            goal_unreachable: false,
             barriers: Vec::new(),
         }
     }
