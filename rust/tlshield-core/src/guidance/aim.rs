@@ -206,10 +206,18 @@ impl Aim {
         let s = reading.state();
         let target = routing.plan(predicates, safe, s, goal, &mut self.router);
         self.unreachable = !self.router.reached() || {
-            let kept = safe.iter().map(|(lit, _)| (&predicates[lit.atom], lit.positive));
+            let kept = safe
+                .iter()
+                .map(|(lit, _)| (&predicates[lit.atom], lit.positive));
             let user = routing.avoid.iter().map(|p| (p, false));
             let held = routing.inside.iter().map(|p| (p, true));
-            excluded(&mut self.probe, &routing.pos, s, goal, kept.chain(user).chain(held))
+            excluded(
+                &mut self.probe,
+                &routing.pos,
+                s,
+                goal,
+                kept.chain(user).chain(held),
+            )
         };
         self.aim_at(target);
     }
