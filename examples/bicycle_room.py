@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import tlshield
+from tlshield.envs import EnvProfile, register
 from tlshield.wrappers import FsaAugmented, Shielded
 
 #: The car: wheelbase (m), steering limit (rad), acceleration limit (m/s^2), top speed (m/s).
@@ -198,8 +199,8 @@ class _UnitActions(gym.ActionWrapper):
         return np.asarray(action, dtype=np.float64)
 
 
-if "BicycleRoom-v0" not in gym.registry:
-    gym.register(id="BicycleRoom-v0", entry_point=make_room)
+# The lab reads what kind of task this is from the registration: scored by its success.
+register("BicycleRoom-v0", make_room, profile=EnvProfile(scored_by_return=False))
 
 
 def attacker(state: np.ndarray) -> np.ndarray:
