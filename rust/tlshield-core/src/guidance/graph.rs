@@ -10,7 +10,7 @@ use super::router::Router;
 /// Sides of the polygon circumscribing each inflated disc.
 pub const SIDES: usize = 8;
 /// The unit vectors to the corners of the octagon, at multiples of 45 degrees.
-const OCTAGON: [[f64; 2]; SIDES] = {
+pub(super) const OCTAGON: [[f64; 2]; SIDES] = {
     const H: f64 = std::f64::consts::FRAC_1_SQRT_2;
     [
         [1.0, 0.0],
@@ -31,6 +31,20 @@ pub const ROBOT_SLACK: f64 = 0.05;
 /// make it cross.
 const TOUCH: f64 = 1e-9;
 
+/// Corners per disc: the polygon's, then the two ways past it from the robot.
+pub(super) const CORNERS: usize = SIDES + 2;
+
+/// Whether a corner lies inside another inflated disc (and so is no node), as far as known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Cover {
+    /// Not tested since the corner was placed.
+    Unknown,
+    /// Outside every other inflated disc: a node.
+    Free,
+    /// Inside another inflated disc: dropped.
+    Covered,
+}
+
 /// A node of the visibility graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Node {
@@ -38,13 +52,14 @@ pub(super) enum Node {
     Robot,
     /// The goal, where every path ends.
     Goal,
-    /// A corner ([`Corner`]), by its place in the order the corners were found.
+    /// A corner ([`Corner`]): the `k % CORNERS`-th of disc `k / CORNERS` (the order that breaks
+    /// the search's ties).
     Corner(usize),
 }
 
 impl Node {
     /// The node's slot in the search's per-node buffers: the robot, the goal, then the corners
-    /// in the order found (the order that breaks the search's ties).
+    /// in order (the order that breaks the search's ties).
     pub(super) fn index(self) -> usize {
         match self {
             Node::Robot => 0,
@@ -133,39 +148,66 @@ pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
 }
 
 impl Router {
-    /// The graph from the robot at `p` to `goal` around this step's inflated discs: per disc,
-    /// the corners of its circumscribed polygon, then the two ways past it from the robot
-    /// (along each tangent from it to the inflated circle, at least a lookahead far:
-    /// continuous in the robot's position, so the shortest way does not jump as the robot
-    /// moves). A corner inside another inflated disc is dropped.
-    pub(super) fn build_graph(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) {
-        self.robot = p;
-        self.goal = goal;
-        self.corners.clear();
+    /// Places the corners of every disc's circumscribed polygon (they do not depend on the
+    /// robot: kept while the discs stay put) and marks every corner's cover unknown.
+    pub(super) fn place_polygons(&mut self) {
         let corner = 1.0 / (PI / SIDES as f64).cos();
+        self.corners.clear();
         for (i, d) in self.discs.iter().enumerate() {
             let r = self.inflated[i] * corner;
-            let lookahead = lookahead(d.radius, clearance);
-            let tangents = [1.0, -1.0]
-                .map(|side| past_tangent(p, d.center, self.inflated[i], side, lookahead));
-            let corners = OCTAGON.map(|[c, s]| [d.center[0] + r * c, d.center[1] + r * s]);
-            for v in corners.into_iter().chain(tangents) {
-                let covered = self
-                    .discs
-                    .iter()
-                    .zip(&self.inflated)
-                    .enumerate()
-                    .any(|(j, (o, &ro))| j != i && norm(sub(v, o.center)) < ro);
-                if !covered {
-                    self.corners.push(Corner { at: v, disc: i });
-                }
+            let polygon = OCTAGON.map(|[c, s]| [d.center[0] + r * c, d.center[1] + r * s]);
+            // The two ways past the disc from the robot are placed when the disc is first
+            // needed in a step ([`Router::place_tangents`]).
+            let ways = [d.center; 2];
+            for at in polygon.into_iter().chain(ways) {
+                self.corners.push(Corner { at, disc: i });
             }
+        }
+        self.cover.clear();
+        self.cover.resize(self.corners.len(), Cover::Unknown);
+    }
+
+    /// Forgets the ways past each disc from the last step's robot position: they are placed
+    /// again when needed.
+    pub(super) fn forget_tangents(&mut self) {
+        self.tangents.clear();
+        self.tangents.resize(self.discs.len(), false);
+        for k in (SIDES..self.cover.len()).step_by(CORNERS) {
+            self.cover[k] = Cover::Unknown;
+            self.cover[k + 1] = Cover::Unknown;
         }
     }
 
-    /// Nodes of the last graph built.
-    pub(super) fn nodes(&self) -> usize {
-        2 + self.corners.len()
+    /// Places the two ways past disc `i` from the robot at `p` (along each tangent from it to
+    /// the inflated circle, at least a lookahead far: continuous in the robot's position, so
+    /// the shortest way does not jump as the robot moves), once per step.
+    pub(super) fn place_tangents(&mut self, i: usize, p: [f64; 2], clearance: f64) {
+        if self.tangents[i] {
+            return;
+        }
+        self.tangents[i] = true;
+        let d = self.discs[i];
+        let lookahead = lookahead(d.radius, clearance);
+        for (j, side) in [1.0, -1.0].into_iter().enumerate() {
+            let at = past_tangent(p, d.center, self.inflated[i], side, lookahead);
+            self.corners[CORNERS * i + SIDES + j].at = at;
+        }
+    }
+
+    /// Whether corner `k` is a node: not inside another inflated disc. Only the discs of
+    /// [`Router::near`] are tested, which is exact for a corner in the region they were chosen
+    /// for (a disc that holds the corner meets that region). Remembered until the corner moves.
+    pub(super) fn uncovered(&mut self, k: usize) -> bool {
+        if self.cover[k] == Cover::Unknown {
+            let (v, i) = (self.corners[k].at, self.corners[k].disc);
+            self.work += self.near.len();
+            let covered = self
+                .near
+                .iter()
+                .any(|&j| j != i && norm(sub(v, self.discs[j].center)) < self.inflated[j]);
+            self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
+        }
+        self.cover[k] == Cover::Free
     }
 
     /// Where `node` is.
@@ -185,6 +227,25 @@ impl Router {
             .iter()
             .zip(&self.inflated)
             .any(|(d, &r)| crosses(a, b, d.center, r))
+    }
+
+    /// [`Router::visible`] (or, `from_robot`, [`Router::visible_from_robot`]) tested against
+    /// the discs of [`Router::near`] only: exact for a segment inside the region they were
+    /// chosen for (a disc that crosses it meets that region).
+    pub(super) fn sees(&mut self, a: [f64; 2], b: [f64; 2], from_robot: bool) -> bool {
+        let mut tests = 0;
+        let blocked = self.near.iter().any(|&j| {
+            tests += 1;
+            let (d, r) = (&self.discs[j], self.inflated[j]);
+            let cut = if from_robot {
+                ((1.0 - ROBOT_SLACK) * r).max(d.radius).min(r)
+            } else {
+                r
+            };
+            crosses(a, b, d.center, cut)
+        });
+        self.work += tests;
+        !blocked
     }
 
     /// [`Router::visible`] for a segment from the robot, which may cut [`ROBOT_SLACK`] into

@@ -6,7 +6,8 @@
 //! - `plane.rs`: what the router sees of the predicates the shield avoids, discs in the plane
 //!   of the CLF's position (one reading of a ball as geometry, `crate::region`'s `Round`);
 //! - the router, a visibility-graph planner around those discs (`router.rs`, with its steps
-//!   `inflate.rs`, `graph.rs`, `search.rs`);
+//!   `inflate.rs`, `graph.rs`, `search.rs`; `reference.rs`, test only, the planner before its
+//!   work was bounded, which it must agree with);
 //! - `aim.rs`: the point of the path the robot sees, the target the way left along it, and
 //!   [`Aim`], what the CLF row reads (the target, the rows whose progress is uncredited, the
 //!   turn towards the push).
@@ -19,6 +20,8 @@ mod goal;
 mod graph;
 mod inflate;
 mod plane;
+#[cfg(test)]
+mod reference;
 mod router;
 mod search;
 
@@ -29,3 +32,4 @@ pub use graph::{ROBOT_SLACK, SIDES};
 pub use inflate::DEFAULT_CLEARANCE;
 pub use plane::Disc;
 pub use router::{Router, Routing};
+pub use search::WORK_BOUND;

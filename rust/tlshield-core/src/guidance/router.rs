@@ -10,8 +10,8 @@
 //! the disc (or points away from it), so the barrier never cancels it: the CLF's push always has
 //! a component the barrier leaves free, and the robot slides around instead of stopping.
 //!
-//! The planner is a visibility graph, re-built each step from the discs' current centres (so
-//! moving obstacles are re-read every step):
+//! The planner is a visibility graph over the discs' current centres (so moving obstacles are
+//! re-read every step):
 //! - each disc of radius `r` is inflated to `R = r (1 + clearance)` and circumscribed by a
 //!   regular polygon of [`SIDES`](super::SIDES) sides, whose vertices are the graph's nodes, with the two
 //!   points along the tangents from the robot to the inflated circle, at least a lookahead
@@ -28,6 +28,18 @@
 //! - the target lies in the aim's direction, as far away as the path is long, so that
 //!   `V = |p - target|^2` is the squared length of the way left: it asks the speed it would ask
 //!   of a clear goal, and does not slow the robot at each corner.
+//!
+//! The graph is never built whole. The search looks only at the discs that meet the ellipse a
+//! short enough path can use (foci the robot and the goal), tests an edge only when it would
+//! improve a node, and a corner's cover only when the corner is first needed (`search.rs`).
+//! The polygons' corners and what covers them do not depend on the robot: they are kept from
+//! step to step while the discs (and their inflated radii) stay the same, and placed again when
+//! any disc moves, appears or goes. The way is searched again every step, from the robot's new
+//! position (its tangent points move with it), so the target is the one a planner built from
+//! scratch would give. A step's work is bounded ([`WORK_BOUND`](super::WORK_BOUND)); where the
+//! bound is hit the step keeps the way to the goal found so far, or aims at the goal itself.
+//! Safety never depends on routing: the barriers are rows of the QP of their own, whatever the
+//! CLF aims at, and a step whose routing is cut short is as safe as one without routing.
 //!
 //! Moving along a shortest path shortens it by the distance moved and any other path by at
 //! most that, so the way chosen does not flip from step to step; ties are broken by the
@@ -49,8 +61,11 @@
 //!
 //! Allocation-free per step once its buffers have grown to the problem's size.
 
-use super::graph::{Corner, Node};
+use std::collections::BinaryHeap;
+
+use super::graph::{Corner, Cover, Node};
 use super::plane::{each_disc, Disc};
+use super::search::Open;
 use crate::automaton::Reading;
 use crate::cnf::Literal;
 use crate::predicate::Predicate;
@@ -129,8 +144,27 @@ pub struct Router {
     /// The graph's ends this step: the robot's position and the goal.
     pub(super) robot: [f64; 2],
     pub(super) goal: [f64; 2],
-    /// The graph's other nodes (`graph.rs`).
+    /// The graph's other nodes, [`CORNERS`](super::graph::CORNERS) per disc, each placed
+    /// whether or not it is a node (`graph.rs`).
     pub(super) corners: Vec<Corner>,
+    /// Per corner: whether it lies inside another inflated disc, as far as tested.
+    pub(super) cover: Vec<Cover>,
+    /// Per disc: whether the ways past it from the robot are placed this step.
+    pub(super) tangents: Vec<bool>,
+    /// The discs and inflated radii the corners were placed for: while this step's are the
+    /// same, the polygons' corners and their cover are kept.
+    pub(super) placed_discs: Vec<Disc>,
+    pub(super) placed_inflated: Vec<f64>,
+    /// The discs that meet the region searched (`search.rs`), in order.
+    pub(super) near: Vec<usize>,
+    /// The slots ([`Node::index`]) of the nodes in the region searched, in order.
+    pub(super) slots: Vec<usize>,
+    /// The search's open nodes.
+    pub(super) heap: BinaryHeap<Open>,
+    /// Tests of a point or a segment against a disc this step ([`WORK_BOUND`](super::WORK_BOUND)).
+    pub(super) work: usize,
+    /// Whether the last search was cut short by the work bound.
+    pub(super) truncated: bool,
     /// Per node ([`Node::index`]): the shortest way found from the robot, the straight
     /// distance to the goal (A*'s heuristic), the node before it on that way, and whether it
     /// is settled (`search.rs`).
@@ -162,6 +196,12 @@ impl Router {
         &self.discs
     }
 
+    /// Whether the last step's search hit [`WORK_BOUND`](super::WORK_BOUND) (its target is the
+    /// best found by then, or the goal).
+    pub fn truncated(&self) -> bool {
+        self.truncated
+    }
+
     /// Forgets the last step's discs and adds those of `avoided` (predicates whose outside the
     /// state is kept in) over `pos` at `s` (`each_disc`).
     pub(crate) fn load<'a>(
@@ -180,6 +220,7 @@ impl Router {
     /// `clearance` (relative to each radius, >= 0). See the module docs.
     pub fn target(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> [f64; 2] {
         // A goal inside an obstacle cannot be reached: aim at it, the barriers hold the robot.
+        self.truncated = false;
         self.reached = !self.holds(goal);
         if !self.reached {
             return goal;
@@ -188,17 +229,25 @@ impl Router {
         if self.visible(p, goal) {
             return goal;
         }
-        self.build_graph(p, goal, clearance);
-        if !self.search() {
-            // Enclosed: no way around what is known. Aim at the goal (the shield parks).
-            self.reached = false;
+        if self.discs != self.placed_discs || self.inflated != self.placed_inflated {
+            self.placed_discs.clone_from(&self.discs);
+            self.placed_inflated.clone_from(&self.inflated);
+            self.place_polygons();
+        }
+        if !self.search(p, goal, clearance) {
+            // Enclosed: no way around what is known, or none found within the work bound.
+            // Aim at the goal (the shield parks, safe). Only a complete search tells that the
+            // goal is unreachable.
+            self.reached = self.truncated;
             return goal;
         }
         self.place_target(p, clearance)
     }
 
-    /// Whether the last [`Router::target`] found its goal reachable: outside every disc, and
-    /// joined to the robot by a way around them (false before any target).
+    /// Whether the last [`Router::target`] left its goal reachable: false when the goal lies
+    /// inside a disc, or when a complete search found no way around the discs to it (a search
+    /// cut short by [`WORK_BOUND`](super::WORK_BOUND) tells nothing, and reports true); false
+    /// before any target.
     pub fn reached(&self) -> bool {
         self.reached
     }
@@ -211,6 +260,7 @@ mod tests {
     use super::super::graph::{crosses, norm, sub, ROBOT_SLACK, SIDES};
     use super::*;
     use proptest::prelude::*;
+    use proptest::strategy::ValueTree;
 
     fn router(discs: &[([f64; 2], f64)]) -> Router {
         let mut r = Router::default();
@@ -299,6 +349,183 @@ mod tests {
                 prop_assert!(!reachable(&discs, p, goal, 1.2 / (PI / SIDES as f64).cos() * 1.02));
             }
         }
+    }
+
+    /// Discs drawn from proptest's tuples.
+    fn discs_of(discs: Vec<((f64, f64), f64)>) -> Vec<([f64; 2], f64)> {
+        discs.into_iter().map(|((x, y), r)| ([x, y], r)).collect()
+    }
+
+    /// The target of the from-scratch planner (`reference.rs`), on a router of its own.
+    fn reference(
+        discs: &[([f64; 2], f64)],
+        p: [f64; 2],
+        goal: [f64; 2],
+    ) -> ([f64; 2], Option<f64>) {
+        router(discs).reference_target(p, goal, 0.2)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(512))]
+        /// Where the work bound is not hit, the bounded planner gives the from-scratch
+        /// planner's target, bit for bit (same shortest way, ties broken the same way), with a
+        /// router kept from step to step: its kept corners agree with freshly placed ones,
+        /// and it places them again when the discs move.
+        #[test]
+        fn the_bounded_planner_agrees_with_the_reference(
+            discs in proptest::collection::vec(((-4.0..4.0f64, -4.0..4.0f64), 0.2..1.2f64), 0..24),
+            steps in proptest::collection::vec(
+                ((-6.0..6.0f64, -6.0..6.0f64), (-6.0..6.0f64, -6.0..6.0f64)), 1..6),
+            shift in (-0.5..0.5f64, -0.5..0.5f64),
+        ) {
+            let mut discs = discs_of(discs);
+            let mut kept = router(&discs);
+            for (k, (p, goal)) in steps.into_iter().enumerate() {
+                if k == 3 {
+                    // The discs move: the kept corners must be placed again.
+                    for (c, _) in &mut discs {
+                        *c = [c[0] + shift.0, c[1] + shift.1];
+                    }
+                    kept.clear();
+                    for &(center, radius) in &discs {
+                        kept.push(Disc { center, radius });
+                    }
+                }
+                let (p, goal) = ([p.0, p.1], [goal.0, goal.1]);
+                let t = kept.target(p, goal, 0.2);
+                prop_assert!(!kept.truncated());
+                let (want, way) = reference(&discs, p, goal);
+                prop_assert_eq!(t, want, "step {} way {:?}", k, way);
+                if let Some(way) = way {
+                    prop_assert_eq!(kept.way_to(Node::Goal), way);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_same_discs_keep_their_corners_and_a_moved_one_is_placed_again() {
+        let mut r = router(&[([0.0, 0.0], 1.0), ([0.0, 2.5], 1.0)]);
+        r.target([-3.0, 0.0], [3.0, 0.0], 0.2);
+        let corners = r.corners.as_ptr();
+        let first = r.corners[0].at;
+        r.target([-2.9, 0.1], [3.0, 0.0], 0.2);
+        assert_eq!((r.corners.as_ptr(), r.corners[0].at), (corners, first));
+        r.clear();
+        r.push(Disc {
+            center: [0.5, 0.0],
+            radius: 1.0,
+        });
+        r.push(Disc {
+            center: [0.0, 2.5],
+            radius: 1.0,
+        });
+        let t = r.target([-2.9, 0.1], [3.0, 0.0], 0.2);
+        assert_eq!(r.corners[0].at[0], first[0] + 0.5);
+        assert_eq!(
+            t,
+            reference(
+                &[([0.5, 0.0], 1.0), ([0.0, 2.5], 1.0)],
+                [-2.9, 0.1],
+                [3.0, 0.0]
+            )
+            .0
+        );
+    }
+
+    /// `n` discs in the unit-spaced field the routing bench draws (centres in a box between
+    /// the robot and the goal, no two overlapping), from a fixed seed.
+    fn field(n: usize, seed: u64) -> Vec<([f64; 2], f64)> {
+        let mut runner = proptest::test_runner::TestRunner::new_with_rng(
+            ProptestConfig::default(),
+            proptest::test_runner::TestRng::from_seed(
+                proptest::test_runner::RngAlgorithm::ChaCha,
+                &[seed as u8; 32],
+            ),
+        );
+        let side = (n as f64).sqrt().max(1.0) * 1.2;
+        let draw = ((-side..side, -side..side), 0.2..0.5f64);
+        let mut discs = Vec::new();
+        while discs.len() < n {
+            let ((x, y), r) = draw.new_tree(&mut runner).unwrap().current();
+            let c = [x, y];
+            if discs
+                .iter()
+                .all(|&(o, ro): &([f64; 2], f64)| norm(sub(c, o)) > r + ro)
+            {
+                discs.push((c, r));
+            }
+        }
+        discs
+    }
+
+    #[test]
+    fn no_reallocation_after_warmup() {
+        // Buffers grow on the first pass over these states, and are reused on the second.
+        let discs = field(48, 7);
+        let mut r = router(&discs);
+        let side = 48f64.sqrt() * 1.2;
+        let states: Vec<_> = (0..200)
+            .map(|k| {
+                let y = (k as f64 * 0.618_034).fract() * 2.0 - 1.0;
+                ([-side - 1.0, y * side], [side + 1.0, -y * side])
+            })
+            .collect();
+        let pointers = |r: &Router| {
+            (
+                [r.discs.as_ptr() as usize, r.inflated.as_ptr() as usize],
+                [r.corners.as_ptr() as usize, r.cover.as_ptr() as usize],
+                [r.tangents.as_ptr() as usize, r.near.as_ptr() as usize],
+                [r.slots.as_ptr() as usize, r.heap.capacity()],
+                [r.dist.as_ptr() as usize, r.rest.as_ptr() as usize],
+                [r.prev.as_ptr() as usize, r.done.as_ptr() as usize],
+                [
+                    r.placed_discs.as_ptr() as usize,
+                    r.placed_inflated.as_ptr() as usize,
+                ],
+            )
+        };
+        let mut routed = 0;
+        for &(p, goal) in &states {
+            routed += usize::from(r.target(p, goal, 0.2) != goal);
+        }
+        assert!(routed > 100, "{routed}");
+        let before = pointers(&r);
+        for &(p, goal) in &states {
+            r.target(p, goal, 0.2);
+            assert_eq!(pointers(&r), before);
+        }
+    }
+
+    #[test]
+    fn a_search_past_the_work_bound_keeps_what_it_found_or_aims_at_the_goal() {
+        // A dense field of many discs between the robot and a goal far behind them.
+        let discs = field(1500, 3);
+        let mut r = router(&discs);
+        let (p, goal) = ([-60.0, 0.3], [60.0, -0.2]);
+        let t = r.target(p, goal, 0.2);
+        assert!(r.truncated());
+        assert!(t.iter().all(|v| v.is_finite()));
+        if t != goal {
+            assert!(r.visible_from_robot(p, r.aim(p, 0.2)));
+        }
+    }
+
+    #[test]
+    fn the_work_bound_is_not_hit_among_128_discs() {
+        // The routing bench's largest field: every step searches to the end.
+        let discs = field(128, 11);
+        let mut r = router(&discs);
+        let side = 128f64.sqrt() * 1.2;
+        let (mut routed, mut cut) = (0, 0);
+        for k in 0..100 {
+            let y = (k as f64 * 0.618_034).fract() * 2.0 - 1.0;
+            let (p, goal) = ([-side - 1.0, y * side], [side + 1.0, -y * side * 0.5]);
+            routed += usize::from(r.target(p, goal, 0.2) != goal);
+            cut += usize::from(r.truncated());
+        }
+        assert!(routed > 50, "{routed}");
+        assert_eq!(cut, 0);
     }
 
     /// A brute-force reference: flood fill on a fine grid of the plane outside the discs
