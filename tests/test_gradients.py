@@ -121,7 +121,11 @@ def test_vjp_matches_finite_differences_on_channel_v0() -> None:
 
     ok = flags == 0
     corrected = (np.abs(ga - v).max(axis=1) > 1e-3) | (np.abs(gs).max(axis=1) > 1e-3)
-    assert ok.sum() >= 120 and (ok & corrected).sum() >= 30, (ok.sum(), (ok & corrected).sum())
+    # Obstacles next to the agent: many random turns steer into one and are released to the
+    # CLF's box (issue 59), flagged ROUTED, whose dL/da_rl is exact (checked below).
+    routed = flags == tlshield.GradFlag.ROUTED
+    assert ok.sum() >= 60 and (ok & corrected).sum() >= 20, (ok.sum(), (ok & corrected).sum())
+    assert (ok | routed).sum() >= 120, (ok | routed).sum()
     for i in range(13):
         d = np.zeros_like(s)
         d[:, i] = eps
@@ -131,7 +135,10 @@ def test_vjp_matches_finite_differences_on_channel_v0() -> None:
         d = np.zeros_like(a)
         d[:, j] = eps
         fd = (value(s, a + d) - value(s, a - d)) / (2 * eps)
-        np.testing.assert_allclose(ga[ok, j], fd[ok], atol=1e-5, rtol=1e-5, err_msg=f"a[{j}]")
+        exact = ok | routed
+        np.testing.assert_allclose(
+            ga[exact, j], fd[exact], atol=1e-5, rtol=1e-5, err_msg=f"a[{j}]"
+        )
 
 
 # cvxpylayers 1.0.4 warns about its own numpy 2 arrays on every solve.

@@ -18,17 +18,22 @@ from tlshield.lab import routing
 EPISODES = 50
 
 
-@pytest.mark.parametrize("robot", routing.ROBOTS)
+@pytest.mark.parametrize("robot", routing.ROBOTS + routing.TURNING)
 @pytest.mark.parametrize("driver", routing.DRIVERS)
 def test_every_scenario_reaches_its_goal_and_never_enters(robot: str, driver: str) -> None:
-    floor = 0.95 if driver == "shield" else 0.80
+    """Issue 59's targets at the recommended CLF box (half the limits): the shield alone
+    reaches the goal in >= 0.95 of every cell, and a greedy seeker that turns at the full rate
+    in >= 0.98 (its turn into a blocked disc no longer holds the CLF's turn), every robot."""
+    assert routing.CLF_SHARE == 0.5
+    floor = 0.95 if driver == "shield" else 0.98
     for layout in routing.LAYOUTS:
         for encoding in routing.ENCODINGS:
             cell = routing.cell(layout, robot, encoding, driver, EPISODES)
             where = f"{robot}/{driver}/{layout}/{encoding}"
             assert cell["success"] >= floor, f"{where}: success {cell['success']}"
             assert cell["entries"] == 0, f"{where}: {cell['entries']} steps inside an obstacle"
-            assert cell["relaxed"] == 0, f"{where}: {cell['relaxed']} relaxed or failed QPs"
+            if robot in routing.ROBOTS:
+                assert cell["relaxed"] == 0, f"{where}: {cell['relaxed']} relaxed or failed QPs"
 
 
 @pytest.mark.parametrize("k", [None, 1e4])

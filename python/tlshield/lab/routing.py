@@ -9,6 +9,15 @@ shield's barriers with ``F goal``) and two drivers (the shield alone, a zero RL 
 seeker pushing straight at the goal through CBF+CLF). Every episode is seeded: the start and the
 goal are jittered, and the random layout is drawn, from ``numpy.random.default_rng(seed)``.
 
+How the drivers and boxes are set: every robot's inputs are bounded by its limits (``SPEED`` for
+a velocity or an acceleration, ``TURN`` for the unicycle's turn rate, ``SPEED`` for the turn of
+the robots that turn at acceleration level). The CLF's box is ``CLF_SHARE`` of the limits (half,
+the guides' recommendation), the CBF's three times the limits, and k is the rule's,
+``clf_bound / (d gain)`` (``TURN_GAIN`` for the turn of the robots that turn at acceleration
+level). The seeker pushes at half the speed limit (times the cosine of its
+heading error, for the robots that turn) and turns at the full rate: twice its heading error,
+clipped to the turn limit.
+
 ``python -m tlshield.lab.routing --episodes 50`` prints the tables, with routing on and off.
 """
 
@@ -54,6 +63,9 @@ SPEED = 1.0
 TURN = 3.0
 #: The CLF gain by the rule k = clf_bound / d with d = 0.5 m (docs/concepts/shield.md).
 CLF_DISTANCE = 0.5
+#: The CLF's box as a share of the limits: half, as docs/guides/own-robot.md recommends
+#: (``--clf-share`` measures others).
+CLF_SHARE = 0.5
 
 
 def layout(name: str, rng: np.random.Generator) -> list[tuple[np.ndarray, float]]:
@@ -117,31 +129,41 @@ def _heading_error(s: np.ndarray, g: np.ndarray) -> float:
     return _wrap(float(np.arctan2(g[1] - s[1], g[0] - s[0]) - s[2]))
 
 
-def _second_order(b: float) -> dict:
-    """The gains of an acceleration-level robot with inputs bounded by ``b``."""
+#: The gain the rule reads for the turn of a robot that turns at acceleration level, whose turn
+#: reaches the position only through the heading (no gain of its own): the unicycle's eps. At
+#: the recommended box, the rule's k without it (``clf_bound / d`` = 1) leaves the acceleration
+#: unicycle's shield alone parked in front of a single disc.
+TURN_GAIN = 0.1
+
+
+def _second_order(b: float, turn_gain: float = 1.0) -> dict:
+    """The gains of an acceleration-level robot with inputs bounded by ``b`` (``turn_gain``:
+    the gain the rule reads for its turn)."""
+    c = CLF_SHARE * b
     return dict(
         alpha=2.0,
         alpha2=2.0,
         c3=1.0,
-        k=b / CLF_DISTANCE,
+        k=c / (CLF_DISTANCE * turn_gain),
         clf_gain=1.0,
         cbf_bounds=(-3 * b, 3 * b),
-        clf_bounds=(-b, b),
+        clf_bounds=(-c, c),
     )
 
 
 def _robot(name: str) -> Robot:
     if name == "single":
         b = SPEED
+        c = CLF_SHARE * b
         return Robot(
             SingleIntegrator([0, 1]),
             lambda p: p.copy(),
             dict(
                 alpha=2.0,
                 c3=1.0,
-                k=b / CLF_DISTANCE,
+                k=c / CLF_DISTANCE,
                 cbf_bounds=(-3 * b, 3 * b),
-                clf_bounds=(-b, b),
+                clf_bounds=(-c, c),
             ),
             lambda s, g: 0.5 * SPEED * _unit(g - s[:2]),
         )
@@ -150,9 +172,7 @@ def _robot(name: str) -> Robot:
 
         def seek(s: np.ndarray, g: np.ndarray) -> np.ndarray:
             err = _heading_error(s, g)
-            return np.array(
-                [0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN) * 0.5]
-            )
+            return np.array([0.5 * SPEED * max(np.cos(err), 0.0), np.clip(2.0 * err, -TURN, TURN)])
 
         return Robot(
             Unicycle(eps=0.1),
@@ -161,10 +181,13 @@ def _robot(name: str) -> Robot:
                 alpha=2.0,
                 c3=1.0,
                 # The rule per input, k = bound / (d * gain): the turn rate moves the point
-                # eps = 0.1 ahead at eps * omega, so k = TURN / (CLF_DISTANCE * 0.1).
-                k=TURN / (CLF_DISTANCE * 0.1),
+                # eps = 0.1 ahead at eps * omega, so k = CLF_SHARE * TURN / (CLF_DISTANCE * 0.1).
+                k=CLF_SHARE * TURN / (CLF_DISTANCE * 0.1),
                 cbf_bounds=(tuple(3 * x for x in lo), tuple(3 * x for x in hi)),
-                clf_bounds=(lo, hi),
+                clf_bounds=(
+                    tuple(CLF_SHARE * x for x in lo),
+                    tuple(CLF_SHARE * x for x in hi),
+                ),
             ),
             seek,
         )
@@ -187,12 +210,14 @@ def _robot(name: str) -> Robot:
 
         def seek_turning(s: np.ndarray, g: np.ndarray) -> np.ndarray:
             err = _heading_error(s, g)
-            return np.array([0.5 * max(np.cos(err), 0.0), float(np.clip(2.0 * err, -1.0, 1.0))])
+            return np.array(
+                [0.5 * SPEED * max(np.cos(err), 0.0), float(np.clip(2.0 * err, -SPEED, SPEED))]
+            )
 
         return Robot(
             model,
             lambda p: np.concatenate([p, np.zeros(2 if name == "accel_unicycle" else 3)]),
-            _second_order(SPEED),
+            _second_order(SPEED, TURN_GAIN),
             seek_turning,
         )
     raise ValueError(f"robot: expected one of {ROBOTS + TURNING}, got {name!r}")
@@ -303,17 +328,26 @@ def table(episodes: int, route: bool) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Prints the tables (``--help``)."""
+    global K_OVERRIDE, CLF_SHARE
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--route", choices=("on", "off", "both"), default="both")
     parser.add_argument("--k", type=float, default=None, help="every robot's k (default: the rule)")
+    parser.add_argument(
+        "--clf-share",
+        type=float,
+        default=CLF_SHARE,
+        help="the CLF's box as a share of the limits (default: half, the recommended box)",
+    )
     args = parser.parse_args(argv)
-    global K_OVERRIDE
     K_OVERRIDE = args.k
+    CLF_SHARE = args.clf_share
     for route in {"on": [True], "off": [False], "both": [False, True]}[args.route]:
         k = "the rule" if args.k is None else f"{args.k:g}"
         where = "on" if route else "off"
-        print(f"routing {where}, k = {k} ({args.episodes} episodes per cell)")
+        box = f"CLF box {CLF_SHARE:g} x the limits"
+        print(f"routing {where}, k = {k}, {box} ({args.episodes} episodes per cell)")
         print("each cell: success with the obstacles in the formula / as barriers")
         print(table(args.episodes, route))
         print()

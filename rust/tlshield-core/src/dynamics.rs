@@ -299,6 +299,16 @@ impl Dynamics {
         }
     }
 
+    /// The heading of a model that turns: the unicycle's (whose turn rate moves its reference
+    /// point directly) and every [`Dynamics::steered_heading`]. Routing reads it to tell a turn
+    /// into an obstacle the CBF blocks (`crate::guidance`), which it lets the CLF cancel.
+    pub fn heading(&self) -> Option<usize> {
+        match *self {
+            Dynamics::Unicycle { theta, .. } => Some(theta),
+            _ => self.steered_heading(),
+        }
+    }
+
     /// The number of inputs m.
     pub fn inputs(&self) -> usize {
         match self {

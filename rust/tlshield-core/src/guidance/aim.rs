@@ -1,10 +1,12 @@
 //! Where the CLF aims: the point of the router's path that the robot sees, the target placed
 //! the way left along it, and [`Aim`], the one value the CLF row of Eq. 5D2 reads (the target,
-//! whether guidance changed the row, the rows whose progress it uncredits, the turn term).
+//! whether guidance changed the row, the rows whose progress it uncredits, the turn term, the
+//! RL action's turn the CLF may cancel).
 //!
 //! The router's target replaces the goal of Eq. 5B1 when the straight line is blocked; the
-//! barrier rows the router goes around then must not credit progress into them, and a robot
-//! that must turn is asked to turn towards the push (both beyond the paper, see the methods).
+//! barrier rows the router goes around then must not credit progress into them, a robot that
+//! must turn is asked to turn towards the push, and an RL action's turn into a disc the CBF
+//! blocks does not hold the CLF's turn (all beyond the paper, see the methods).
 
 use super::graph::{norm, past_tangent, sub, Node};
 use super::plane::is_disc;
@@ -107,6 +109,13 @@ impl Router {
     }
 }
 
+/// The RL action's turn the CLF may cancel on one input, `released` ([`Aim::release_blocked_turn`]),
+/// widens that input's CLF box `(lo, hi)` on the side that cancels it: the CLF keeps its own box
+/// beyond the RL action's turn.
+fn widened(lo: f64, hi: f64, released: f64) -> (f64, f64) {
+    (lo - released.max(0.0), hi - released.min(0.0))
+}
+
 /// What the turn towards the push adds to the CLF ([`Aim::turn_towards_push`]): to `V` and to
 /// `Lf V` (its `Lg V` part is added in place).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -126,12 +135,19 @@ pub(crate) struct Aim {
     /// the robot as the way left is long).
     pub(crate) target: Vec<f64>,
     /// Whether guidance changed this step's CLF row: a target other than the goal, progress
-    /// uncredited ([`Aim::uncredit_blocked_progress`]) or a turn asked
-    /// ([`Aim::turn_towards_push`]).
+    /// uncredited ([`Aim::uncredit_blocked_progress`]), a turn asked
+    /// ([`Aim::turn_towards_push`]) or the RL action's turn released
+    /// ([`Aim::release_blocked_turn`]).
     rerouted: bool,
     /// Per barrier row: whether the router goes around it (the outside of a disc over the
     /// CLF's position), so that progress into it may be uncredited.
     routed: Vec<bool>,
+    /// Per barrier row: `-dh/dp` over the CLF's two position dimensions (the direction into
+    /// the disc, for a routed row; zero for the others).
+    inward: Vec<[f64; 2]>,
+    /// Per input: the part of the RL action the CLF's box is widened to cancel this step (the
+    /// RL action's turn into a blocked disc, [`Aim::release_blocked_turn`]); zero elsewhere.
+    released: Vec<f64>,
     /// The planner's buffers.
     router: Router,
     /// The safe set routed around, when the barrier rows did not read it.
@@ -146,6 +162,8 @@ impl Aim {
     /// Starts a step: no barrier row noted yet, nothing changed.
     pub(crate) fn start(&mut self) {
         self.routed.clear();
+        self.inward.clear();
+        self.released.clear();
         self.rerouted = false;
         self.unreachable = false;
     }
@@ -167,15 +185,27 @@ impl Aim {
 
     /// Notes the next barrier row, on `predicate` signed by `sign` (`h = sign rho`): the
     /// router goes around it when it keeps the state outside a disc over the two dimensions
-    /// `pos` at `s`.
-    pub(crate) fn note_row(&mut self, predicate: &Predicate, sign: f64, pos: &[usize], s: &[f64]) {
-        self.routed
-            .push(sign < 0.0 && pos.len() == 2 && is_disc(predicate, pos, s));
+    /// `pos` at `s`. `grad` is the row's `dh/ds` at `s` (`sign` applied), whose position part
+    /// points out of the disc.
+    pub(crate) fn note_row(
+        &mut self,
+        (predicate, sign): (&Predicate, f64),
+        pos: &[usize],
+        s: &[f64],
+        grad: &[f64],
+    ) {
+        let routed = sign < 0.0 && pos.len() == 2 && is_disc(predicate, pos, s);
+        self.routed.push(routed);
+        self.inward.push(match routed {
+            true => [-grad[pos[0]], -grad[pos[1]]],
+            false => [0.0, 0.0],
+        });
     }
 
     /// Notes the next barrier row as one the router does not go around.
     pub(crate) fn note_unrouted_row(&mut self) {
         self.routed.push(false);
+        self.inward.push([0.0, 0.0]);
     }
 
     /// Replaces the goal by the router's target around the discs this step keeps the state out
@@ -251,6 +281,62 @@ impl Aim {
                 self.rerouted = true;
             }
         }
+    }
+
+    /// The RL action's turn into a blocked disc does not hold the CLF's turn. For a robot that
+    /// turns (its heading `theta`, with `g_theta` the heading's row of `g`): for every disc the
+    /// router goes around that blocks the RL action (the RL action alone violates its row, `rhs`
+    /// holding each barrier row's `r + L . a_rl`, so the CBF will cut that action; or the
+    /// heading points into the disc), every input of `a_rl` that turns the heading towards that
+    /// disc (it grows the heading's component into the disc) is released: the CLF's box on that input is widened so that `a_clf` can cancel it
+    /// ([`widened`], read by [`Aim::clf_box`]), beside its own box. Without this, a policy
+    /// that steers at its goal behind a disc holds the heading into the disc as hard as the
+    /// CLF's box turns it away, and `a_cbf` cancels the forward push: a parked equilibrium
+    /// (measured with greedy seekers at a CLF box of half the limits). The barrier rows are
+    /// untouched, and the CLF's cost `|a_clf|^2` still prices the cancelled turn, so a turn the
+    /// CLF's decrease does not need is kept.
+    pub(crate) fn release_blocked_turn(
+        &mut self,
+        theta: f64,
+        g_theta: &[f64],
+        a_rl: &[f64],
+        rhs: &[f64],
+    ) {
+        self.released.clear();
+        self.released.resize(a_rl.len(), 0.0);
+        // d(heading . inward)/d(theta): positive when turning up the angle points the
+        // heading further into the disc.
+        let (sin, cos) = theta.sin_cos();
+        let blocked = rhs.iter().zip(&self.routed).zip(&self.inward);
+        for ((&rhs, &routed), inward) in blocked {
+            // Blocked: the CBF will cut the RL action (its row is violated), or the heading
+            // points into the disc (a policy that turned past it pushes no more, but its turn
+            // still holds the heading there).
+            let ahead = cos * inward[0] + sin * inward[1];
+            if !routed || (rhs >= 0.0 && ahead <= 0.0) {
+                continue;
+            }
+            let into = -sin * inward[0] + cos * inward[1];
+            let parts = self.released.iter_mut().zip(g_theta).zip(a_rl);
+            for ((released, &g), &a) in parts {
+                if g * a * into > 0.0 {
+                    *released = a;
+                    self.rerouted = true;
+                }
+            }
+        }
+    }
+
+    /// The CLF's box this step on input `j`: `bounds` (its `(lo, hi)`) widened by the RL
+    /// action's turn released on `j` ([`Aim::release_blocked_turn`]).
+    pub(crate) fn clf_box(&self, (lo, hi): (f64, f64), j: usize) -> (f64, f64) {
+        widened(lo, hi, self.released.get(j).copied().unwrap_or(0.0))
+    }
+
+    /// The RL action's part released on input `j` (zero when none): the CLF box's widened side
+    /// moves with `a_rl_j` by `-1` (the gradient reads it).
+    pub(crate) fn released(&self, j: usize) -> f64 {
+        self.released.get(j).copied().unwrap_or(0.0)
     }
 
     /// Robots that must turn (beyond the paper): under a model whose turn input reaches the

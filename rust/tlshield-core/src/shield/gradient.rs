@@ -36,9 +36,10 @@ pub const GRAD_RELAXED: u8 = 1;
 pub const GRAD_FAILED: u8 = 2;
 /// Flag: the active set changes here; the gradient is one-sided (see the module docs).
 pub const GRAD_DEGENERATE: u8 = 4;
-/// Flag: routing changed the CLF row (a target around an obstacle, or progress into one
-/// uncredited; see `crate::guidance`). `dL/da_rl` is exact; `dL/ds` holds the target and the
-/// uncredited direction fixed, leaving out how the route moves with the state.
+/// Flag: routing changed the CLF row (a target around an obstacle, progress into one
+/// uncredited, or the RL action's turn into one released to the CLF's box; see
+/// `crate::guidance`). `dL/da_rl` is exact; `dL/ds` holds the target, the uncredited direction
+/// and the released inputs fixed, leaving out how the route moves with the state.
 pub const GRAD_ROUTED: u8 = 16;
 /// Flag: the KKT system on the active rows was singular; only the identity part of the
 /// gradient (`da/da_rl` through `a_rl` itself) is returned.
@@ -673,12 +674,17 @@ impl Shield {
             let start = barriers * nv + cbf_vars;
             b.beta.copy_from_slice(&b.dg[start..start + m]);
             if program.delta_0 > 0.0 {
-                let box_ = params.clf_bounds.lo.iter().zip(&params.clf_bounds.hi);
-                for ((beta, &l), (&lo, &hi)) in b.beta.iter_mut().zip(l).zip(box_) {
+                for (j, (beta, &l)) in b.beta.iter_mut().zip(l).enumerate() {
+                    let (lo, hi) = program.clf_box(params, j);
                     if l == 0.0 && lo != hi {
                         flags |= GRAD_DEGENERATE;
                     }
                     *beta += alpha * if l > 0.0 { lo } else { hi };
+                    // The box side that is widened by a released turn moves with a_rl_j by -1.
+                    let released = program.aim.released(j);
+                    if (l > 0.0 && released > 0.0) || (l <= 0.0 && released < 0.0) {
+                        ga[j] -= alpha * l;
+                    }
                 }
             } else {
                 for j in 0..m {
@@ -729,9 +735,23 @@ impl Shield {
             next += 2;
         }
 
+        // The box rows on a_cbf (constant), then on a_clf: h = hi_j, -lo_j, where the side
+        // widened by a released turn reads a_rl_j (hi_j - a_rl_j, or -lo_j + a_rl_j).
+        next += 2 * m * usize::from(params.use_cbf);
+        if has_goal {
+            for (j, (g, rows)) in ga.iter_mut().zip(b.dh[next..].chunks_exact(2)).enumerate() {
+                let released = program.aim.released(j);
+                if released < 0.0 {
+                    *g -= rows[0];
+                } else if released > 0.0 {
+                    *g += rows[1];
+                }
+            }
+            next += 2 * m;
+        }
+
         // Actuator limits: h = hi - a_rl (upper rows), then a_rl - lo (lower rows).
         if params.action_bounds.is_some() {
-            next += 2 * m * (usize::from(params.use_cbf) + usize::from(has_goal));
             for (k, sign) in [1.0, -1.0].into_iter().enumerate() {
                 let rows = &b.dh[next + k * m..next + (k + 1) * m];
                 ga.iter_mut().zip(rows).for_each(|(g, d)| *g -= sign * d);

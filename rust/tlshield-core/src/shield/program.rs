@@ -384,9 +384,10 @@ impl Program {
         for (source, predicate, sign, h, weight, form) in enforced {
             self.weights.push(weight);
             self.sources.push(source);
-            self.aim.note_row(predicate, sign, &params.pos, s);
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
+            self.aim
+                .note_row((predicate, sign), &params.pos, s, &self.grad);
             let lf = dot(&self.grad, &self.f);
             let psi = params.alpha * (h - params.margin);
             let barrier = sampled::Barrier { predicate, sign, h };
@@ -483,21 +484,34 @@ impl Program {
             if params.route {
                 self.aim
                     .uncredit_blocked_progress(&mut self.clf_lg, &self.lg, &self.rhs);
+                let heading = params
+                    .heading
+                    .or_else(|| at.model.and_then(Dynamics::heading));
+                if let (2, Some(theta)) = (params.pos.len(), heading) {
+                    let g_theta = &self.g[theta * m..(theta + 1) * m];
+                    self.aim
+                        .release_blocked_turn(at.s[theta], g_theta, a_rl, &self.rhs);
+                }
             }
             self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + params.c3 * v);
             // The CLF bounds give delta a lower bound in closed form; solving for the excess
             // d = delta - delta_0 >= 0 keeps the objective (and so the solver's relative gap)
             // of the order of |a|^2 instead of K * delta. The solution is the same.
-            let best = params
-                .clf_bounds
-                .lo
-                .iter()
-                .zip(&params.clf_bounds.hi)
-                .zip(&self.clf_lg)
-                .map(|((lo, hi), l)| (l * lo).min(l * hi))
+            let best = (0..m)
+                .map(|j| {
+                    let (lo, hi) = self.clf_box(params, j);
+                    (self.clf_lg[j] * lo).min(self.clf_lg[j] * hi)
+                })
                 .sum::<f64>();
             self.delta_0 = (best - self.clf_rhs).max(0.0);
         }
+    }
+
+    /// The CLF's box on input `j` this step: `clf_bounds`, widened by the RL action's turn
+    /// routing released (`crate::guidance`).
+    pub(super) fn clf_box(&self, params: &ShieldParams, j: usize) -> (f64, f64) {
+        let bounds = &params.clf_bounds;
+        self.aim.clf_box((bounds.lo[j], bounds.hi[j]), j)
     }
 
     /// The first-order CLF towards the target: `V = |e|^2`, `e = s[pos] - target`; writes
@@ -624,20 +638,21 @@ impl Program {
         }
     }
 
-    /// The box rows on `a_cbf` and `a_clf`, the actuator limits on the applied action, then
+    /// The box rows on `a_cbf` and `a_clf` (the CLF's widened by a released turn,
+    /// [`Program::clf_box`]), the actuator limits on the applied action, then
     /// the round bound on `a_clf` (the gradient reads the limits' place), into `qp` of `nv`
     /// variables.
     fn push_bounds(&self, params: &ShieldParams, a_rl: &[f64], qp: &mut DenseQp, nv: usize) {
         let (m, cbf_vars, has_goal) = (a_rl.len(), self.cbf_vars, self.has_goal);
-        let groups = [
-            (params.use_cbf, 0, &params.cbf_bounds),
-            (has_goal, cbf_vars, &params.clf_bounds),
-        ];
-        for (on, offset, bounds) in groups {
-            for j in (0..m).filter(|_| on) {
-                push_row(qp, nv, bounds.hi[j])[offset + j] = 1.0;
-                push_row(qp, nv, -bounds.lo[j])[offset + j] = -1.0;
-            }
+        for j in (0..m).filter(|_| params.use_cbf) {
+            let bounds = &params.cbf_bounds;
+            push_row(qp, nv, bounds.hi[j])[j] = 1.0;
+            push_row(qp, nv, -bounds.lo[j])[j] = -1.0;
+        }
+        for j in (0..m).filter(|_| has_goal) {
+            let (lo, hi) = self.clf_box(params, j);
+            push_row(qp, nv, hi)[cbf_vars + j] = 1.0;
+            push_row(qp, nv, -lo)[cbf_vars + j] = -1.0;
         }
         if let Some(bounds) = &params.action_bounds {
             for (sign, limit) in [(1.0, &bounds.hi), (-1.0, &bounds.lo)] {
