@@ -80,7 +80,9 @@ def channel_case(rng: np.random.Generator, passes: int) -> dict:
     for on in (False, True):
         shield = make_shield(route=on)
         q = shield.automaton.initial
-        t = step_percentiles(lambda item, sh=shield, q=q: sh.filter(item[0], q, item[1]), steps, passes)
+        t = step_percentiles(
+            lambda item, sh=shield, q=q: sh.filter(item[0], q, item[1]), steps, passes
+        )
         out["routed" if on else "unrouted"] = {"p50": t["p50"], "p99": t["p99"]}
     return out
 
