@@ -136,9 +136,7 @@ def test_vjp_matches_finite_differences_on_channel_v0() -> None:
         d[:, j] = eps
         fd = (value(s, a + d) - value(s, a - d)) / (2 * eps)
         exact = ok | routed
-        np.testing.assert_allclose(
-            ga[exact, j], fd[exact], atol=1e-5, rtol=1e-5, err_msg=f"a[{j}]"
-        )
+        np.testing.assert_allclose(ga[exact, j], fd[exact], atol=1e-5, rtol=1e-5, err_msg=f"a[{j}]")
 
 
 # cvxpylayers 1.0.4 warns about its own numpy 2 arrays on every solve.
