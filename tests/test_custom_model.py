@@ -96,9 +96,11 @@ def test_a_custom_model_gives_the_built_in_models_actions(
     given = jacobian if exact_jacobian else None
     custom = tlshield.ControlAffine(f, g, state_dim=n, inputs=2, jacobian=given)  # type: ignore[arg-type]
     extra = {} if n == 4 else {"alpha2": None}
-    # A custom model declares the heading its turn input steers (the built-in acceleration
-    # unicycle knows its own), so that routing's CLF turns it alike.
-    declared = {"heading": 2} if isinstance(built_in, tlshield.AccelerationUnicycle) else {}
+    # A custom model declares the heading its turn input steers (the built-in unicycles know
+    # their own), so that routing's CLF turns it alike and releases a turn into an obstacle
+    # alike.
+    turns = (tlshield.AccelerationUnicycle, tlshield.Unicycle)
+    declared = {"heading": 2} if isinstance(built_in, turns) else {}
     a, b = shield(built_in, **extra), shield(custom, **extra, **declared)
     rng = np.random.default_rng(0)
     xs = states(rng, 300, n)

@@ -110,6 +110,7 @@ def test_observation_layout_and_info(observation: str) -> None:
         "gave_way",
         "solver",
         "goal",
+        "goal_unreachable",
         "barriers",
     }
     assert isinstance(reward, float) and math.isfinite(reward)
