@@ -145,6 +145,9 @@ pub(crate) struct Aim {
     /// Per barrier row: `-dh/dp` over the CLF's two position dimensions (the direction into
     /// the disc, for a routed row; zero for the others).
     inward: Vec<[f64; 2]>,
+    /// Per barrier row: whether it is a routed disc that stays put (its predicate reads only
+    /// the position), the only kind whose blocking turn is released to the CLF.
+    still: Vec<bool>,
     /// Per input: the part of the RL action the CLF's box is widened to cancel this step (the
     /// RL action's turn into a blocked disc, [`Aim::release_blocked_turn`]); zero elsewhere.
     released: Vec<f64>,
@@ -163,6 +166,7 @@ impl Aim {
     pub(crate) fn start(&mut self) {
         self.routed.clear();
         self.inward.clear();
+        self.still.clear();
         self.released.clear();
         self.rerouted = false;
         self.unreachable = false;
@@ -196,6 +200,10 @@ impl Aim {
     ) {
         let routed = sign < 0.0 && pos.len() == 2 && is_disc(predicate, pos, s);
         self.routed.push(routed);
+        // A disc read from other dimensions than the position moves (or turns with the body):
+        // its barrier, not the CLF, answers a turn towards it.
+        let moves = (0..s.len()).any(|d| !pos.contains(&d) && predicate.reads(d));
+        self.still.push(routed && !moves);
         self.inward.push(match routed {
             true => [-grad[pos[0]], -grad[pos[1]]],
             false => [0.0, 0.0],
@@ -205,6 +213,7 @@ impl Aim {
     /// Notes the next barrier row as one the router does not go around.
     pub(crate) fn note_unrouted_row(&mut self) {
         self.routed.push(false);
+        self.still.push(false);
         self.inward.push([0.0, 0.0]);
     }
 
@@ -307,7 +316,7 @@ impl Aim {
         // d(heading . inward)/d(theta): positive when turning up the angle points the
         // heading further into the disc.
         let (sin, cos) = theta.sin_cos();
-        let blocked = rhs.iter().zip(&self.routed).zip(&self.inward);
+        let blocked = rhs.iter().zip(&self.still).zip(&self.inward);
         for ((&rhs, &routed), inward) in blocked {
             // Blocked: the CBF will cut the RL action (its row is violated), or the heading
             // points into the disc (a policy that turned past it pushes no more, but its turn
