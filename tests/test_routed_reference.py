@@ -81,14 +81,7 @@ def test_the_routed_shield_equals_an_independent_solve_and_its_gradient_is_exact
     # dL/da_rl on the routed rows (and on no other flag) against central differences.
     only_routed = flags == GradFlag.ROUTED
     assert only_routed.sum() >= 20, only_routed.sum()
-    eps = 1e-6
-    for j in range(m):
-        d = np.zeros_like(a_rl)
-        d[:, j] = eps
-        plus = (sh.filter_batch(states, q, a_rl + d).action * v).sum(axis=1)
-        minus = (sh.filter_batch(states, q, a_rl - d).action * v).sum(axis=1)
-        fd = (plus - minus) / (2 * eps)
-        np.testing.assert_allclose(ga[only_routed, j], fd[only_routed], atol=1e-5, rtol=1e-5)
+    assert_vjp_matches_differences(sh, states, q, a_rl, v, ga, only_routed)
 
 
 def test_the_problem_is_checked_like_a_filter_call() -> None:
@@ -164,11 +157,24 @@ def test_a_released_turn_widens_only_the_clf_box_and_its_gradient_is_exact(robot
             np.testing.assert_allclose(batch.action[i], want, atol=1e-5, rtol=0)
     check = released & (flags == GradFlag.ROUTED)
     assert check.sum() >= 20, check.sum()
+    assert_vjp_matches_differences(sh, s_arr, q, a_arr, v, ga, check)
+
+
+def assert_vjp_matches_differences(
+    sh: tlshield.Shield,
+    states: np.ndarray,
+    q: np.ndarray,
+    a_rl: np.ndarray,
+    v: np.ndarray,
+    ga: np.ndarray,
+    rows: np.ndarray,
+) -> None:
+    """``v . dL/da_rl`` (``ga``) on ``rows`` against central differences of the batch action."""
     eps = 1e-6
-    for j in range(m):
-        d = np.zeros_like(a_arr)
+    for j in range(a_rl.shape[1]):
+        d = np.zeros_like(a_rl)
         d[:, j] = eps
-        plus = (sh.filter_batch(s_arr, q, a_arr + d).action * v).sum(axis=1)
-        minus = (sh.filter_batch(s_arr, q, a_arr - d).action * v).sum(axis=1)
+        plus = (sh.filter_batch(states, q, a_rl + d).action * v).sum(axis=1)
+        minus = (sh.filter_batch(states, q, a_rl - d).action * v).sum(axis=1)
         fd = (plus - minus) / (2 * eps)
-        np.testing.assert_allclose(ga[check, j], fd[check], atol=1e-5, rtol=1e-5)
+        np.testing.assert_allclose(ga[rows, j], fd[rows], atol=1e-5, rtol=1e-5)
