@@ -202,8 +202,8 @@ impl Aim {
         self.routed.push(routed);
         // A disc read from other dimensions than the position moves (or turns with the body):
         // its barrier, not the CLF, answers a turn towards it.
-        let moves = (0..s.len()).any(|d| !pos.contains(&d) && predicate.reads(d));
-        self.still.push(routed && !moves);
+        let moves = || (0..s.len()).any(|d| !pos.contains(&d) && predicate.reads(d));
+        self.still.push(routed && !moves());
         self.inward.push(match routed {
             true => [-grad[pos[0]], -grad[pos[1]]],
             false => [0.0, 0.0],
