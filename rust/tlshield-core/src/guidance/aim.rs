@@ -243,7 +243,11 @@ impl Aim {
         let predicates = reading.automaton().spec().predicates();
         let goal = [self.target[0], self.target[1]];
         let s = reading.state();
-        let target = routing.plan(predicates, safe, s, goal, &mut self.router);
+        let mut probe = std::mem::take(&mut self.probe);
+        let mut in_goal = |point| reading.goal_region_holds(q, &routing.pos, point, &mut probe);
+        let (target, goal) =
+            routing.plan(predicates, safe, s, (goal, &mut in_goal), &mut self.router);
+        self.probe = probe;
         self.unreachable = !self.router.reached() || {
             let kept = safe
                 .iter()

@@ -56,6 +56,27 @@ impl<'a> Reading<'a> {
         self.goal_choice(q, goal).map(|c| c.alt.dims.as_slice())
     }
 
+    /// Whether `point` (over `pos`) lies in the region of the CLF goal of `q`, the alternative
+    /// Eq. 5B1 chooses at this state: every region of it holds at this state with the position
+    /// moved to `point` (into `probe`). False where `q` has no goal. Read only where a disc
+    /// covers the goal, to aim at its free part (`super::free`).
+    pub(crate) fn goal_region_holds(
+        &self,
+        q: usize,
+        pos: &[usize; 2],
+        point: [f64; 2],
+        probe: &mut Vec<f64>,
+    ) -> bool {
+        let Some(choice) = self.goal_choice(q, probe) else {
+            return false;
+        };
+        probe.clear();
+        probe.extend_from_slice(self.state());
+        probe[pos[0]] = point[0];
+        probe[pos[1]] = point[1];
+        choice.alt.leaves.iter().all(|p| p.value(probe) > 0.0)
+    }
+
     /// [`Reading::goal`], returning how the goal was chosen: the alternative, its lead over the
     /// others, and the better-scored ones passed over as empty here.
     pub(crate) fn goal_choice(&self, q: usize, goal: &mut Vec<f64>) -> Option<GoalChoice<'a>> {

@@ -8,6 +8,7 @@
 //! - the router, a visibility-graph planner around those discs (`router.rs`, with its steps
 //!   `inflate.rs`, `graph.rs`, `search.rs`; `reference.rs`, test only, the planner before its
 //!   work was bounded, which it must agree with);
+//! - `free.rs`: a goal partly covered by an avoided disc, aimed at at its free part;
 //! - `aim.rs`: the point of the path the robot sees, the target the way left along it, and
 //!   [`Aim`], what the CLF row reads (the target, the rows whose progress is uncredited, the
 //!   turn towards the push).
@@ -16,6 +17,7 @@
 //! regions; nothing below it depends on guidance.
 
 mod aim;
+mod free;
 mod goal;
 mod graph;
 mod inflate;

@@ -50,8 +50,9 @@
 //! is shrunk to just exclude it for that step.
 //!
 //! What it cannot do, and does instead:
-//! - a goal inside an obstacle, or enclosed by overlapping ones (no path): the target is the
-//!   goal, and the shield parks as before;
+//! - a goal an obstacle covers whole, or enclosed by overlapping ones (no path): the target is
+//!   the goal, and the shield parks as before (one an obstacle covers in part is aimed at at
+//!   its free part, `free.rs`);
 //! - it routes around discs only (balls over the CLF's two position dimensions, and unions of
 //!   them); half-spaces, intersections and balls over other dimensions are not routed around
 //!   (the barriers still hold them);
@@ -102,7 +103,11 @@ impl Routing {
     ) -> [f64; 2] {
         self.safe_set(reading, q, safe);
         let predicates = reading.automaton().spec().predicates();
-        self.plan(predicates, safe, reading.state(), goal, router)
+        let mut probe = Vec::new();
+        let mut in_goal = |point| reading.goal_region_holds(q, &self.pos, point, &mut probe);
+        let s = reading.state();
+        self.plan(predicates, safe, s, (goal, &mut in_goal), router)
+            .0
     }
 
     /// The safe set this routing goes around at `(reading, q)` into `out`: the Eq. 5C1 one, or
@@ -116,22 +121,28 @@ impl Routing {
     }
 
     /// The router's target from state `s` towards `goal`, around the discs of the user's
-    /// barriers and of the avoided literals of `safe` (atoms of `predicates`).
+    /// barriers and of the avoided literals of `safe` (atoms of `predicates`), and the goal it
+    /// leads to: `goal`, or, when a disc covers it, the nearest point of its free part that
+    /// `in_goal` (whether a point over [`Routing::pos`] lies in the goal's region) accepts.
     pub(crate) fn plan(
         &self,
         predicates: &[Predicate],
         safe: &[(Literal, f64)],
         s: &[f64],
-        goal: [f64; 2],
+        (goal, in_goal): ([f64; 2], &mut dyn FnMut([f64; 2]) -> bool),
         router: &mut Router,
-    ) -> [f64; 2] {
+    ) -> ([f64; 2], [f64; 2]) {
         let kept = safe
             .iter()
             .filter(|(lit, _)| !lit.positive)
             .map(|(lit, _)| &predicates[lit.atom]);
         router.load(&self.pos, s, self.avoid.iter().chain(kept));
         let p = [s[self.pos[0]], s[self.pos[1]]];
-        router.target(p, goal, self.clearance)
+        let goal = match router.holds(goal) {
+            true => router.free_part(p, goal, in_goal).unwrap_or(goal),
+            false => goal,
+        };
+        (router.target(p, goal, self.clearance), goal)
     }
 }
 
