@@ -185,6 +185,28 @@ def test_goal_draws() -> None:
     assert clf_outside == 0
 
 
+def test_no_step_aims_at_a_goal_outside_the_channel() -> None:
+    """With a goal drawn outside the channel in every episode, no shielded step's CLF goal
+    (the task monitor's, which the shield reads) lies outside it: that goal cannot be reached
+    while another can, and the rank-aware choice, restricted to goals that can be reached,
+    passes it over. (``info["shield"]["goal"]`` is the routed target, which may lie anywhere
+    along the way's direction.)"""
+    env = gym.make(ENV_ID, config="rl_cbf_clf", outside_goal_probability=1.0).unwrapped
+    w = env.params.task.half_width
+    rng = np.random.default_rng(0)
+    steps = 0
+    for seed in range(20):
+        env.reset(seed=seed)
+        for _ in range(100):
+            _, _, term, trunc, _ = env.step(rng.uniform(-1.0, 1.0, 2))
+            goal = env.tracker.goal
+            assert goal is not None and abs(goal[1] - goal[0]) <= w, (seed, goal)
+            steps += 1
+            if term or trunc:
+                break
+    assert steps > 1000
+
+
 def test_overrides_and_bad_input() -> None:
     env = gym.make(ENV_ID, config="rl_clf", k=1e3, dt=0.05, horizon=10, c_r=2.0)
     assert env.unwrapped.params.task.horizon == 10 and env.unwrapped.params.shield.k == 1e3

@@ -110,3 +110,37 @@ def test_the_flag_reaches_info_and_names_the_parked_robot() -> None:
                 break
         assert inside == 0
         assert all(flags) if covered else (info["success"] and not any(flags))
+
+
+def test_the_guidance_takes_another_goal_that_can_be_reached() -> None:
+    """Eq. 5B1's choice restricted to goals that can be reached: of ``F a | F b``, the more
+    robust ``a`` lies under a shelf, so the CLF leads to ``b`` and nothing is reported; with
+    both covered, it leads to ``a`` (Eq. 5B1's) and says so; without routing, to ``a``."""
+    a = tlshield.Ball([0, 1], 0.2, center=[2.0, 0.0])
+    b = tlshield.Ball([0, 1], 0.2, center=[-1.0, 3.0])
+    over_a = tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[2.0, 0.0]))
+    over_b = tlshield.Avoid(tlshield.Ball([0, 1], 0.5, center=[-1.0, 3.0]))
+    model = tlshield.SingleIntegrator([0, 1])
+    spec = tlshield.Spec("F a | F b", {"a": a, "b": b})
+    s = np.zeros(2)
+
+    def lead(barriers: dict, route: bool = True) -> tuple[np.ndarray, bool, list[float]]:
+        shield = tlshield.Shield(spec, model, barriers=barriers, route=route, **GAINS)
+        out = shield.filter(s, shield.automaton.initial, [0.0, 0.0])
+        monitor = tlshield.Monitor(shield.automaton, routed_by=shield)
+        monitor.reset(s)
+        via_monitor = shield.filter_monitor(monitor, [0.0, 0.0])
+        np.testing.assert_array_equal(via_monitor.action, out.action)
+        assert via_monitor.goal_unreachable == out.goal_unreachable
+        return np.asarray(out.action), bool(out.goal_unreachable), list(monitor.goal)
+
+    def towards(action: np.ndarray, goal: list[float]) -> bool:
+        # The action is clipped to the CLF's box: it heads into the goal's quadrant.
+        return bool(np.all(np.sign(action) == np.sign(np.round(goal))))
+
+    action, unreachable, goal = lead({"!shelf": over_a})
+    assert towards(action, [-1.0, 3.0]) and not unreachable and goal == [-1.0, 3.0]
+    action, unreachable, goal = lead({"!shelf": over_a, "!other": over_b})
+    assert towards(action, [2.0, 0.0]) and unreachable and goal == [2.0, 0.0]
+    action, unreachable, _ = lead({"!shelf": over_a}, route=False)
+    assert towards(action, [2.0, 0.0]) and not unreachable

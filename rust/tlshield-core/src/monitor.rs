@@ -12,7 +12,7 @@ use crate::automaton::{Automaton, Reading, MAX_ATOMS};
 use crate::check::{check_finite, check_state, check_state_rows, SCALAR};
 use crate::cnf::Literal;
 use crate::error::{AutomatonError, InputError};
-use crate::guidance::{Router, Routing};
+use crate::guidance::{Routed, Router, Routing, Scratch};
 use crate::progress::ProgressReward;
 
 /// The task reward's defaults, owned by Eq. 5A1 (`automaton::reward`), here too because a
@@ -85,8 +85,9 @@ struct Route {
     routing: Routing,
     router: Router,
     safe: Vec<(Literal, f64)>,
-    /// The router's target at the last state (when the goal is a point of its plane).
-    target: Option<[f64; 2]>,
+    scratch: Scratch,
+    /// The routed decision at the last state (when the goal is a point of its plane).
+    target: Option<Routed>,
 }
 
 impl Monitor {
@@ -212,11 +213,18 @@ impl Monitor {
                     routing,
                     router,
                     safe,
+                    scratch,
                     target,
                 } = route;
-                let aim = routing.target(&reading, self.q, goal, router, safe);
-                *target = Some(aim);
-                let p = [self.s[routing.pos[0]], self.s[routing.pos[1]]];
+                let routed = routing.target(&reading, self.q, goal, router, (safe, scratch));
+                *target = Some(routed);
+                // The goal the way leads to: Eq. 5B1's, its free part, or another that can be
+                // reached (`crate::guidance`).
+                self.goal.copy_from_slice(&routed.goal);
+                let (p, aim) = (
+                    [self.s[routing.pos[0]], self.s[routing.pos[1]]],
+                    routed.target,
+                );
                 Some((p[0] - aim[0]).hypot(p[1] - aim[1]))
             }
             (found, _) => found.map(|(d, _)| d),
@@ -236,6 +244,7 @@ impl Monitor {
                 routing,
                 router: Router::default(),
                 safe: Vec::new(),
+                scratch: Scratch::default(),
                 target: None,
             })
         });
@@ -243,7 +252,7 @@ impl Monitor {
 
     /// The target `routing` aims the CLF at from the last state, when this monitor routes
     /// exactly so (then a shield need not plan the same way again).
-    pub(crate) fn routed_target(&self, routing: &Routing) -> Option<[f64; 2]> {
+    pub(crate) fn routed_target(&self, routing: &Routing) -> Option<Routed> {
         let route = self.route.as_deref()?;
         (route.routing == *routing)
             .then_some(route.target)
@@ -545,7 +554,8 @@ mod tests {
         monitor.reset(&s).unwrap();
         let target = monitor
             .routed_target(&routing)
-            .expect("a goal in the plane");
+            .expect("a goal in the plane")
+            .target;
         let way = (s[0] - target[0]).hypot(s[1] - target[1]);
         assert_eq!(monitor.goal_distance(), Some(way));
         let other = Routing {

@@ -10,6 +10,7 @@
 
 use super::graph::{norm, past_tangent, sub, Node};
 use super::plane::is_disc;
+use super::reach::{Routed, Scratch};
 use super::router::{Router, Routing};
 use crate::automaton::Reading;
 use crate::cnf::Literal;
@@ -157,8 +158,8 @@ pub(crate) struct Aim {
     safe: Vec<(Literal, f64)>,
     /// Whether this step's goal cannot be reached from the state ([`Aim::goal_unreachable`]).
     unreachable: bool,
-    /// The state with the CLF's position moved to the goal (what a kept literal reads there).
-    probe: Vec<f64>,
+    /// The routed choice's scratch.
+    scratch: Scratch,
 }
 
 impl Aim {
@@ -225,44 +226,28 @@ impl Aim {
     pub(crate) fn route(
         &mut self,
         routing: &Routing,
-        planned: Option<[f64; 2]>,
+        planned: Option<Routed>,
         reading: &Reading<'_>,
         q: usize,
         safe: Option<&[(Literal, f64)]>,
     ) {
-        if let Some(target) = planned {
-            return self.aim_at(target);
-        }
-        let safe = match safe {
-            Some(safe) => safe,
+        let routed = match planned {
+            Some(routed) => routed,
             None => {
-                routing.safe_set(reading, q, &mut self.safe);
-                &self.safe
+                let safe = match safe {
+                    Some(safe) => safe,
+                    None => {
+                        routing.safe_set(reading, q, &mut self.safe);
+                        &self.safe
+                    }
+                };
+                let goal = [self.target[0], self.target[1]];
+                let buffers = (&mut self.router, &mut self.scratch);
+                routing.route(reading, q, goal, safe, buffers)
             }
         };
-        let predicates = reading.automaton().spec().predicates();
-        let goal = [self.target[0], self.target[1]];
-        let s = reading.state();
-        let mut probe = std::mem::take(&mut self.probe);
-        let mut in_goal = |point| reading.goal_region_holds(q, &routing.pos, point, &mut probe);
-        let (target, goal) =
-            routing.plan(predicates, safe, s, (goal, &mut in_goal), &mut self.router);
-        self.probe = probe;
-        self.unreachable = !self.router.reached() || {
-            let kept = safe
-                .iter()
-                .map(|(lit, _)| (&predicates[lit.atom], lit.positive));
-            let user = routing.avoid.iter().map(|p| (p, false));
-            let held = routing.inside.iter().map(|p| (p, true));
-            excluded(
-                &mut self.probe,
-                &routing.pos,
-                s,
-                goal,
-                kept.chain(user).chain(held),
-            )
-        };
-        self.aim_at(target);
+        self.unreachable = routed.unreachable;
+        self.aim_at(routed.target);
     }
 
     /// Puts the router's `target` in place of the goal.
@@ -382,31 +367,4 @@ impl Aim {
             lf: v * sin * f_theta,
         }
     }
-}
-
-/// Whether `goal` (over `pos`) lies where one of `constraints` does not let the state be: a
-/// predicate kept true (`true`) that is violated there, or kept false (`false`) that holds
-/// there, read at `s` with the position moved to the goal (into `probe`). Only predicates that
-/// read the position can tell.
-fn excluded<'p>(
-    probe: &mut Vec<f64>,
-    pos: &[usize; 2],
-    s: &[f64],
-    goal: [f64; 2],
-    constraints: impl Iterator<Item = (&'p Predicate, bool)>,
-) -> bool {
-    probe.clear();
-    probe.extend_from_slice(s);
-    probe[pos[0]] = goal[0];
-    probe[pos[1]] = goal[1];
-    constraints
-        .filter(|(p, _)| p.reads(pos[0]) || p.reads(pos[1]))
-        .any(|(p, kept_true)| {
-            let rho = p.value(probe);
-            if kept_true {
-                rho < 0.0
-            } else {
-                rho > 0.0
-            }
-        })
 }

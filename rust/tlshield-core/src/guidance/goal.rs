@@ -57,9 +57,8 @@ impl<'a> Reading<'a> {
     }
 
     /// Whether `point` (over `pos`) lies in the region of the CLF goal of `q`, the alternative
-    /// Eq. 5B1 chooses at this state: every region of it holds at this state with the position
-    /// moved to `point` (into `probe`). False where `q` has no goal. Read only where a disc
-    /// covers the goal, to aim at its free part (`super::free`).
+    /// Eq. 5B1 chooses at this state ([`GoalAlternative::holds_at`]). False where `q` has no
+    /// goal. Read only where a disc covers the goal, to aim at its free part (`super::free`).
     pub(crate) fn goal_region_holds(
         &self,
         q: usize,
@@ -67,19 +66,25 @@ impl<'a> Reading<'a> {
         point: [f64; 2],
         probe: &mut Vec<f64>,
     ) -> bool {
-        let Some(choice) = self.goal_choice(q, probe) else {
-            return false;
-        };
-        probe.clear();
-        probe.extend_from_slice(self.state());
-        probe[pos[0]] = point[0];
-        probe[pos[1]] = point[1];
-        choice.alt.leaves.iter().all(|p| p.value(probe) > 0.0)
+        self.goal_choice(q, probe)
+            .is_some_and(|choice| choice.alt.holds_at(self.state(), pos, point, probe))
     }
 
     /// [`Reading::goal`], returning how the goal was chosen: the alternative, its lead over the
     /// others, and the better-scored ones passed over as empty here.
     pub(crate) fn goal_choice(&self, q: usize, goal: &mut Vec<f64>) -> Option<GoalChoice<'a>> {
+        self.goal_choice_where(q, goal, &mut |_, _| true)
+    }
+
+    /// [`Reading::goal_choice`] among the alternatives whose goal `accept` takes (read with the
+    /// alternative and its point at this state): the others are passed over as the
+    /// empty ones are. `None` (and `goal` empty) where it takes none.
+    pub(crate) fn goal_choice_where(
+        &self,
+        q: usize,
+        goal: &mut Vec<f64>,
+        accept: &mut dyn FnMut(&'a GoalAlternative, &[f64]) -> bool,
+    ) -> Option<GoalChoice<'a>> {
         let (aut, s, rho) = (self.automaton(), self.state(), self.rho());
         goal.clear();
         let ranks = aut.ranks();
@@ -119,15 +124,19 @@ impl<'a> Reading<'a> {
                     }
                 }
             }
-            let (alt, score) = best?;
-            if alt.place(s, goal) {
+            let Some((alt, score)) = best else {
+                goal.clear();
+                return None;
+            };
+            if alt.place(s, goal) && accept(alt, goal) {
                 return Some(GoalChoice {
                     alt,
                     lead: score - runner_up,
                     passed: empty_here,
                 });
             }
-            empty_here.push(alt); // empty at this state: the next best
+            goal.clear();
+            empty_here.push(alt); // empty at this state, or not taken: the next best
         }
     }
 }
@@ -169,6 +178,22 @@ impl GoalChoice<'_> {
 }
 
 impl GoalAlternative {
+    /// Whether `point` (over `pos`) lies in this alternative's region: every region of it holds
+    /// at `s` with the position moved to `point` (into `probe`).
+    pub(crate) fn holds_at(
+        &self,
+        s: &[f64],
+        pos: &[usize; 2],
+        point: [f64; 2],
+        probe: &mut Vec<f64>,
+    ) -> bool {
+        probe.clear();
+        probe.extend_from_slice(s);
+        probe[pos[0]] = point[0];
+        probe[pos[1]] = point[1];
+        self.leaves.iter().all(|p| p.value(probe) > 0.0)
+    }
+
     /// This alternative's deepest point at state `s`, appended to the empty `goal`: its fixed
     /// point, the centre of its ball when that is deepest, or the closed form or cone program
     /// of [`region`]; false (and `goal` empty) when its regions do not meet at `s`.

@@ -9,6 +9,8 @@
 //!   `inflate.rs`, `graph.rs`, `search.rs`; `reference.rs`, test only, the planner before its
 //!   work was bounded, which it must agree with);
 //! - `free.rs`: a goal partly covered by an avoided disc, aimed at at its free part;
+//! - `reach.rs`: one routed step's decision (the target, whether its goal can be reached),
+//!   and Eq. 5B1's choice restricted to goals that can;
 //! - `aim.rs`: the point of the path the robot sees, the target the way left along it, and
 //!   [`Aim`], what the CLF row reads (the target, the rows whose progress is uncredited, the
 //!   turn towards the push).
@@ -22,6 +24,7 @@ mod goal;
 mod graph;
 mod inflate;
 mod plane;
+mod reach;
 #[cfg(test)]
 mod reference;
 mod router;
@@ -33,5 +36,6 @@ pub(crate) use goal::GoalChoice;
 pub use graph::{ROBOT_SLACK, SIDES};
 pub use inflate::DEFAULT_CLEARANCE;
 pub use plane::Disc;
+pub use reach::{Routed, Scratch};
 pub use router::{Router, Routing};
 pub use search::WORK_BOUND;

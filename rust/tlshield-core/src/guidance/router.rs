@@ -66,6 +66,7 @@ use std::collections::BinaryHeap;
 
 use super::graph::{Corner, Cover, Node};
 use super::plane::{each_disc, Disc};
+use super::reach::{Routed, Scratch};
 use super::search::Open;
 use crate::automaton::Reading;
 use crate::cnf::Literal;
@@ -89,25 +90,21 @@ pub struct Routing {
 }
 
 impl Routing {
-    /// The router's target ([`Router::target`]) from the state read by `reading` in FSA state
-    /// `q` towards `goal` (over [`Routing::pos`]), around the discs of the user's barriers and
+    /// The routed decision ([`Routed`]) at the state read by `reading` in FSA state `q` towards
+    /// Eq. 5B1's `goal` (over [`Routing::pos`]), around the discs of the user's barriers and
     /// of the safe set's avoided literals, as the shield plans it: `|p - target|` is the length
-    /// of the way left. `router` and `safe` are scratch.
+    /// of the way left, towards a goal that can be reached where one can (`reach.rs`).
+    /// `router` and the rest are scratch.
     pub fn target(
         &self,
         reading: &Reading<'_>,
         q: usize,
         goal: [f64; 2],
         router: &mut Router,
-        safe: &mut Vec<(Literal, f64)>,
-    ) -> [f64; 2] {
+        (safe, scratch): (&mut Vec<(Literal, f64)>, &mut Scratch),
+    ) -> Routed {
         self.safe_set(reading, q, safe);
-        let predicates = reading.automaton().spec().predicates();
-        let mut probe = Vec::new();
-        let mut in_goal = |point| reading.goal_region_holds(q, &self.pos, point, &mut probe);
-        let s = reading.state();
-        self.plan(predicates, safe, s, (goal, &mut in_goal), router)
-            .0
+        self.route(reading, q, goal, safe, (router, scratch))
     }
 
     /// The safe set this routing goes around at `(reading, q)` into `out`: the Eq. 5C1 one, or
