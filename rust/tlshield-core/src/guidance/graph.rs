@@ -93,9 +93,16 @@ pub(super) fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-/// `|a|`.
+/// `|a|`: the plain formula (the planner's hot loop measures many distances; libm's `hypot`
+/// cost more than the rest of the search), or `hypot` where the squares overflow.
+#[inline]
 pub(super) fn norm(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
+    let sq = a[0] * a[0] + a[1] * a[1];
+    if sq.is_finite() {
+        sq.sqrt()
+    } else {
+        a[0].hypot(a[1])
+    }
 }
 
 /// A point on the tangent from `p` to the circle at `c` of radius `r` on `side` (+1: passing the
@@ -134,7 +141,18 @@ pub(super) fn past_tangent(
 
 /// Whether the segment `a`-`b` passes strictly inside the disc at `c` of radius `r` (touching
 /// it, as a polygon's side does, is allowed).
+#[inline]
 pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
+    // Most discs a segment is tested against lie far from it: a centre more than `r` outside
+    // the segment's bounding box on either axis is more than `r` from every point of it,
+    // which four comparisons tell (exactly) before the projection's division.
+    if c[0] + r < a[0].min(b[0])
+        || c[0] - r > a[0].max(b[0])
+        || c[1] + r < a[1].min(b[1])
+        || c[1] - r > a[1].max(b[1])
+    {
+        return false;
+    }
     let d = sub(b, a);
     let len2 = d[0] * d[0] + d[1] * d[1];
     let ac = sub(c, a);
@@ -144,7 +162,8 @@ pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
         0.0
     };
     let closest = [a[0] + t * d[0], a[1] + t * d[1]];
-    norm(sub(c, closest)) < r * (1.0 - TOUCH)
+    let (e, cut) = (sub(c, closest), r * (1.0 - TOUCH));
+    e[0] * e[0] + e[1] * e[1] < cut * cut
 }
 
 impl Router {
