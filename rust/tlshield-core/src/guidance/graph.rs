@@ -45,6 +45,60 @@ pub(super) enum Cover {
     Covered,
 }
 
+/// Polygon corners up to which [`Edges`] remembers every segment between two of them (the
+/// memory is two bits per ordered pair: under 3 MiB here); past it, every segment is tested.
+const REMEMBERED_CORNERS: usize = 4096;
+
+/// What is known of the segments between polygon corners (the graph's edges that do not
+/// depend on the robot or the goal): whether each was tested, and whether it was clear. A
+/// segment's visibility is the same from step to step while the discs stay put, and a search
+/// along a trajectory tests mostly the same ones. Two bits per ordered pair `(from, to)` (the
+/// test is not symmetric in rounding: the pair is tested as the search first met it).
+#[derive(Debug, Clone, Default)]
+pub(super) struct Edges {
+    /// Per ordered pair of polygon corners: tested, and clear (bits of `2 * pair` and
+    /// `2 * pair + 1`).
+    pub(super) known: Vec<u64>,
+    /// The words of `known` written since the corners were placed (cleared word by word when
+    /// few, so that moving discs do not clear the whole table each step).
+    pub(super) set: Vec<usize>,
+    /// Polygon corners remembered (0: none, past [`REMEMBERED_CORNERS`]).
+    corners: usize,
+}
+
+impl Edges {
+    /// Forgets every segment, for `corners` polygon corners.
+    fn reset(&mut self, corners: usize) {
+        let corners = if corners <= REMEMBERED_CORNERS {
+            corners
+        } else {
+            0
+        };
+        let words = (2 * corners * corners).div_ceil(64);
+        if self.set.len() * 4 < self.known.len() && words == self.known.len() {
+            for &w in &self.set {
+                self.known[w] = 0;
+            }
+        } else {
+            self.known.clear();
+            self.known.resize(words, 0);
+        }
+        self.set.clear();
+        self.corners = corners;
+    }
+
+    /// The bit pair of the segment from corner `k` to corner `l` (both [`Node::Corner`]
+    /// indices), if both are polygon corners and remembered.
+    fn pair(&self, k: usize, l: usize) -> Option<usize> {
+        let (pk, pl) = (k % CORNERS, l % CORNERS);
+        if pk >= SIDES || pl >= SIDES || self.corners == 0 {
+            return None;
+        }
+        let (pk, pl) = (k / CORNERS * SIDES + pk, l / CORNERS * SIDES + pl);
+        Some(2 * (pk * self.corners + pl))
+    }
+}
+
 /// A node of the visibility graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Node {
@@ -184,6 +238,7 @@ impl Router {
         }
         self.cover.clear();
         self.cover.resize(self.corners.len(), Cover::Unknown);
+        self.edges.reset(SIDES * self.discs.len());
     }
 
     /// Forgets the ways past each disc from the last step's robot position: they are placed
@@ -265,6 +320,31 @@ impl Router {
         });
         self.work += tests;
         !blocked
+    }
+
+    /// [`Router::sees`] from node `u` to node `v` (at `a` and `b`), remembered between two
+    /// polygon corners (exact: a segment the search tests lies inside the region searched, so
+    /// the discs of [`Router::near`] are every disc that could cross it, and its answer holds
+    /// for the whole graph while the discs stay put).
+    pub(super) fn sees_between(&mut self, u: Node, v: Node, a: [f64; 2], b: [f64; 2]) -> bool {
+        let pair = match (u, v) {
+            (Node::Corner(k), Node::Corner(l)) => self.edges.pair(k, l),
+            _ => None,
+        };
+        let Some(bit) = pair else {
+            return self.sees(a, b, u == Node::Robot);
+        };
+        let (word, shift) = (bit / 64, bit % 64);
+        let known = self.edges.known[word] >> shift;
+        if known & 1 == 1 {
+            return known & 2 == 2;
+        }
+        let clear = self.sees(a, b, false);
+        if self.edges.known[word] == 0 {
+            self.edges.set.push(word);
+        }
+        self.edges.known[word] |= (1 | u64::from(clear) << 1) << shift;
+        clear
     }
 
     /// [`Router::visible`] for a segment from the robot, which may cut [`ROBOT_SLACK`] into

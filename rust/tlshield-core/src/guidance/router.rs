@@ -63,7 +63,7 @@
 
 use std::collections::BinaryHeap;
 
-use super::graph::{Corner, Cover, Node};
+use super::graph::{Corner, Cover, Edges, Node};
 use super::plane::{each_disc, Disc};
 use super::search::Open;
 use crate::automaton::Reading;
@@ -172,6 +172,10 @@ pub struct Router {
     pub(super) rest: Vec<f64>,
     pub(super) prev: Vec<Option<Node>>,
     pub(super) done: Vec<bool>,
+    /// Which segments between two polygon corners are known to be clear of every inflated
+    /// disc (`graph.rs`, [`Router::sees_between`]): kept, like the corners, while the discs
+    /// stay put.
+    pub(super) edges: Edges,
     /// Whether the last [`Router::target`] found the goal reachable: outside every disc, and
     /// joined to the robot by a way around them.
     reached: bool,
@@ -482,6 +486,10 @@ mod tests {
                 [
                     r.placed_discs.as_ptr() as usize,
                     r.placed_inflated.as_ptr() as usize,
+                ],
+                [
+                    r.edges.known.as_ptr() as usize,
+                    r.edges.set.as_ptr() as usize,
                 ],
             )
         };

@@ -244,7 +244,7 @@ impl Router {
             if self.work >= WORK_BOUND {
                 return false;
             }
-            if self.sees(a, b, u == Node::Robot) {
+            if self.sees_between(u, Node::at(i), a, b) {
                 self.dist[i] = through;
                 self.prev[i] = Some(u);
                 self.heap.push(Open { f, slot: i });
