@@ -147,10 +147,17 @@ pub(super) fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-/// `|a|`: the plain formula (the planner's hot loop measures many distances; libm's `hypot`
-/// cost more than the rest of the search), or `hypot` where the squares overflow.
-#[inline]
+/// `|a|` (libm's `hypot`): the lengths the target is placed with.
 pub(super) fn norm(a: [f64; 2]) -> f64 {
+    a[0].hypot(a[1])
+}
+
+/// `|a|` by the plain formula (`hypot` where the squares overflow): the search's many
+/// distances, which only order and prune (`hypot` cost more than the rest of the search).
+/// The way found is measured again with [`norm`] (`Router::measure_way`), so the target is
+/// the one a search on [`norm`] gives.
+#[inline]
+pub(super) fn length(a: [f64; 2]) -> f64 {
     let sq = a[0] * a[0] + a[1] * a[1];
     if sq.is_finite() {
         sq.sqrt()
@@ -278,7 +285,7 @@ impl Router {
             let covered = self
                 .near
                 .iter()
-                .any(|&j| j != i && norm(sub(v, self.discs[j].center)) < self.inflated[j]);
+                .any(|&j| j != i && length(sub(v, self.discs[j].center)) < self.inflated[j]);
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free

@@ -176,6 +176,8 @@ pub struct Router {
     /// disc (`graph.rs`, [`Router::sees_between`]): kept, like the corners, while the discs
     /// stay put.
     pub(super) edges: Edges,
+    /// The way found, goal first (`Router::measure_way`).
+    pub(super) path: Vec<Node>,
     /// Whether the last [`Router::target`] found the goal reachable: outside every disc, and
     /// joined to the robot by a way around them.
     reached: bool,
@@ -245,6 +247,7 @@ impl Router {
             self.reached = self.truncated;
             return goal;
         }
+        self.measure_way();
         self.place_target(p, clearance)
     }
 
@@ -481,6 +484,7 @@ mod tests {
                 [r.corners.as_ptr() as usize, r.cover.as_ptr() as usize],
                 [r.tangents.as_ptr() as usize, r.near.as_ptr() as usize],
                 [r.slots.as_ptr() as usize, r.heap.capacity()],
+                [r.path.as_ptr() as usize, r.path.capacity()],
                 [r.dist.as_ptr() as usize, r.rest.as_ptr() as usize],
                 [r.prev.as_ptr() as usize, r.done.as_ptr() as usize],
                 [
