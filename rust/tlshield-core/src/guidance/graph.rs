@@ -45,6 +45,60 @@ pub(super) enum Cover {
     Covered,
 }
 
+/// Polygon corners up to which [`Edges`] remembers every segment between two of them (the
+/// memory is two bits per ordered pair: under 3 MiB here); past it, every segment is tested.
+const REMEMBERED_CORNERS: usize = 4096;
+
+/// What is known of the segments between polygon corners (the graph's edges that do not
+/// depend on the robot or the goal): whether each was tested, and whether it was clear. A
+/// segment's visibility is the same from step to step while the discs stay put, and a search
+/// along a trajectory tests mostly the same ones. Two bits per ordered pair `(from, to)` (the
+/// test is not symmetric in rounding: the pair is tested as the search first met it).
+#[derive(Debug, Clone, Default)]
+pub(super) struct Edges {
+    /// Per ordered pair of polygon corners: tested, and clear (bits of `2 * pair` and
+    /// `2 * pair + 1`).
+    pub(super) known: Vec<u64>,
+    /// The words of `known` written since the corners were placed (cleared word by word when
+    /// few, so that moving discs do not clear the whole table each step).
+    pub(super) set: Vec<usize>,
+    /// Polygon corners remembered (0: none, past [`REMEMBERED_CORNERS`]).
+    corners: usize,
+}
+
+impl Edges {
+    /// Forgets every segment, for `corners` polygon corners.
+    fn reset(&mut self, corners: usize) {
+        let corners = if corners <= REMEMBERED_CORNERS {
+            corners
+        } else {
+            0
+        };
+        let words = (2 * corners * corners).div_ceil(64);
+        if self.set.len() * 4 < self.known.len() && words == self.known.len() {
+            for &w in &self.set {
+                self.known[w] = 0;
+            }
+        } else {
+            self.known.clear();
+            self.known.resize(words, 0);
+        }
+        self.set.clear();
+        self.corners = corners;
+    }
+
+    /// The bit pair of the segment from corner `k` to corner `l` (both [`Node::Corner`]
+    /// indices), if both are polygon corners and remembered.
+    fn pair(&self, k: usize, l: usize) -> Option<usize> {
+        let (pk, pl) = (k % CORNERS, l % CORNERS);
+        if pk >= SIDES || pl >= SIDES || self.corners == 0 {
+            return None;
+        }
+        let (pk, pl) = (k / CORNERS * SIDES + pk, l / CORNERS * SIDES + pl);
+        Some(2 * (pk * self.corners + pl))
+    }
+}
+
 /// A node of the visibility graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Node {
@@ -93,9 +147,23 @@ pub(super) fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-/// `|a|`.
+/// `|a|` (libm's `hypot`): the lengths the target is placed with.
 pub(super) fn norm(a: [f64; 2]) -> f64 {
     a[0].hypot(a[1])
+}
+
+/// `|a|` by the plain formula (`hypot` where the squares overflow): the search's many
+/// distances, which only order and prune (`hypot` cost more than the rest of the search).
+/// The way found is measured again with [`norm`] (`Router::measure_way`), so the target is
+/// the one a search on [`norm`] gives.
+#[inline]
+pub(super) fn length(a: [f64; 2]) -> f64 {
+    let sq = a[0] * a[0] + a[1] * a[1];
+    if sq.is_finite() {
+        sq.sqrt()
+    } else {
+        a[0].hypot(a[1])
+    }
 }
 
 /// A point on the tangent from `p` to the circle at `c` of radius `r` on `side` (+1: passing the
@@ -134,7 +202,18 @@ pub(super) fn past_tangent(
 
 /// Whether the segment `a`-`b` passes strictly inside the disc at `c` of radius `r` (touching
 /// it, as a polygon's side does, is allowed).
+#[inline]
 pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
+    // Most discs a segment is tested against lie far from it: a centre more than `r` outside
+    // the segment's bounding box on either axis is more than `r` from every point of it,
+    // which four comparisons tell (exactly) before the projection's division.
+    if c[0] + r < a[0].min(b[0])
+        || c[0] - r > a[0].max(b[0])
+        || c[1] + r < a[1].min(b[1])
+        || c[1] - r > a[1].max(b[1])
+    {
+        return false;
+    }
     let d = sub(b, a);
     let len2 = d[0] * d[0] + d[1] * d[1];
     let ac = sub(c, a);
@@ -144,7 +223,8 @@ pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
         0.0
     };
     let closest = [a[0] + t * d[0], a[1] + t * d[1]];
-    norm(sub(c, closest)) < r * (1.0 - TOUCH)
+    let (e, cut) = (sub(c, closest), r * (1.0 - TOUCH));
+    e[0] * e[0] + e[1] * e[1] < cut * cut
 }
 
 impl Router {
@@ -165,6 +245,7 @@ impl Router {
         }
         self.cover.clear();
         self.cover.resize(self.corners.len(), Cover::Unknown);
+        self.edges.reset(SIDES * self.discs.len());
     }
 
     /// Forgets the ways past each disc from the last step's robot position: they are placed
@@ -204,7 +285,7 @@ impl Router {
             let covered = self
                 .near
                 .iter()
-                .any(|&j| j != i && norm(sub(v, self.discs[j].center)) < self.inflated[j]);
+                .any(|&j| j != i && length(sub(v, self.discs[j].center)) < self.inflated[j]);
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free
@@ -246,6 +327,31 @@ impl Router {
         });
         self.work += tests;
         !blocked
+    }
+
+    /// [`Router::sees`] from node `u` to node `v` (at `a` and `b`), remembered between two
+    /// polygon corners (exact: a segment the search tests lies inside the region searched, so
+    /// the discs of [`Router::near`] are every disc that could cross it, and its answer holds
+    /// for the whole graph while the discs stay put).
+    pub(super) fn sees_between(&mut self, u: Node, v: Node, a: [f64; 2], b: [f64; 2]) -> bool {
+        let pair = match (u, v) {
+            (Node::Corner(k), Node::Corner(l)) => self.edges.pair(k, l),
+            _ => None,
+        };
+        let Some(bit) = pair else {
+            return self.sees(a, b, u == Node::Robot);
+        };
+        let (word, shift) = (bit / 64, bit % 64);
+        let known = self.edges.known[word] >> shift;
+        if known & 1 == 1 {
+            return known & 2 == 2;
+        }
+        let clear = self.sees(a, b, false);
+        if self.edges.known[word] == 0 {
+            self.edges.set.push(word);
+        }
+        self.edges.known[word] |= (1 | u64::from(clear) << 1) << shift;
+        clear
     }
 
     /// [`Router::visible`] for a segment from the robot, which may cut [`ROBOT_SLACK`] into

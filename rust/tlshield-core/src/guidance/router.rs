@@ -32,9 +32,9 @@
 //! The graph is never built whole. The search looks only at the discs that meet the ellipse a
 //! short enough path can use (foci the robot and the goal), tests an edge only when it would
 //! improve a node, and a corner's cover only when the corner is first needed (`search.rs`).
-//! The polygons' corners and what covers them do not depend on the robot: they are kept from
-//! step to step while the discs (and their inflated radii) stay the same, and placed again when
-//! any disc moves, appears or goes. The way is searched again every step, from the robot's new
+//! The polygons' corners, what covers them and which segments between them are clear do not
+//! depend on the robot: they are kept from step to step while the discs (and their inflated
+//! radii) stay the same, and placed again when any disc moves, appears or goes. The way is searched again every step, from the robot's new
 //! position (its tangent points move with it), so the target is the one a planner built from
 //! scratch would give. A step's work is bounded ([`WORK_BOUND`](super::WORK_BOUND)); where the
 //! bound is hit the step keeps the way to the goal found so far, or aims at the goal itself.
@@ -64,7 +64,7 @@
 
 use std::collections::BinaryHeap;
 
-use super::graph::{Corner, Cover, Node};
+use super::graph::{Corner, Cover, Edges, Node};
 use super::plane::{each_disc, Disc};
 use super::reach::{Routed, Scratch};
 use super::search::Open;
@@ -180,6 +180,12 @@ pub struct Router {
     pub(super) rest: Vec<f64>,
     pub(super) prev: Vec<Option<Node>>,
     pub(super) done: Vec<bool>,
+    /// Which segments between two polygon corners are known to be clear of every inflated
+    /// disc (`graph.rs`, [`Router::sees_between`]): kept, like the corners, while the discs
+    /// stay put.
+    pub(super) edges: Edges,
+    /// The way found, goal first (`Router::measure_way`).
+    pub(super) path: Vec<Node>,
     /// Whether the last [`Router::target`] found the goal reachable: outside every disc, and
     /// joined to the robot by a way around them.
     reached: bool,
@@ -249,6 +255,7 @@ impl Router {
             self.reached = self.truncated;
             return goal;
         }
+        self.measure_way();
         self.place_target(p, clearance)
     }
 
@@ -485,11 +492,16 @@ mod tests {
                 [r.corners.as_ptr() as usize, r.cover.as_ptr() as usize],
                 [r.tangents.as_ptr() as usize, r.near.as_ptr() as usize],
                 [r.slots.as_ptr() as usize, r.heap.capacity()],
+                [r.path.as_ptr() as usize, r.path.capacity()],
                 [r.dist.as_ptr() as usize, r.rest.as_ptr() as usize],
                 [r.prev.as_ptr() as usize, r.done.as_ptr() as usize],
                 [
                     r.placed_discs.as_ptr() as usize,
                     r.placed_inflated.as_ptr() as usize,
+                ],
+                [
+                    r.edges.known.as_ptr() as usize,
+                    r.edges.set.as_ptr() as usize,
                 ],
             )
         };

@@ -22,7 +22,7 @@
 use std::cmp::Ordering;
 
 use super::aim::lookahead;
-use super::graph::{crosses, norm, sub, Node, CORNERS};
+use super::graph::{crosses, length, norm, sub, Node, CORNERS};
 use super::router::Router;
 
 /// The most tests of a point or a segment against a disc the planner makes in one step (the
@@ -114,10 +114,10 @@ impl Router {
             .zip(&self.inflated)
             .map(|(d, &r)| {
                 let around = r + lookahead(d.radius, clearance);
-                norm(sub(d.center, p)) + norm(sub(d.center, goal)) + 2.0 * around
+                length(sub(d.center, p)) + length(sub(d.center, goal)) + 2.0 * around
             })
             .fold(0.0, f64::max);
-        let straight = norm(sub(goal, p));
+        let straight = length(sub(goal, p));
         let mut excess = FIRST_EXCESS
             * self
                 .discs
@@ -159,7 +159,7 @@ impl Router {
         let mut whole = true;
         self.near.clear();
         for (i, (d, &r)) in self.discs.iter().zip(&self.inflated).enumerate() {
-            let span = norm(sub(d.center, p)) + norm(sub(d.center, goal)) - 2.0 * r;
+            let span = length(sub(d.center, p)) + length(sub(d.center, goal)) - 2.0 * r;
             if everything || span <= reach * (1.0 + DISC_SLACK) {
                 self.near.push(i);
             } else {
@@ -174,7 +174,7 @@ impl Router {
             self.place_tangents(i, p, clearance);
             for k in CORNERS * i..CORNERS * (i + 1) {
                 let v = self.corners[k].at;
-                let span = norm(sub(v, p)) + norm(sub(v, goal));
+                let span = length(sub(v, p)) + length(sub(v, goal));
                 let inside = span <= reach * (1.0 + NODE_SLACK);
                 if !everything && !inside {
                     whole = false;
@@ -194,7 +194,7 @@ impl Router {
             self.dist[i] = f64::INFINITY;
             self.prev[i] = None;
             self.done[i] = false;
-            self.rest[i] = norm(sub(goal, self.point(Node::at(i))));
+            self.rest[i] = length(sub(goal, self.point(Node::at(i))));
         }
         let robot = Node::Robot.index();
         self.dist[robot] = 0.0;
@@ -233,7 +233,7 @@ impl Router {
                 continue;
             }
             let b = self.point(Node::at(i));
-            let through = best + norm(sub(b, a));
+            let through = best + length(sub(b, a));
             if through >= self.dist[i] {
                 continue;
             }
@@ -244,13 +244,31 @@ impl Router {
             if self.work >= WORK_BOUND {
                 return false;
             }
-            if self.sees(a, b, u == Node::Robot) {
+            if self.sees_between(u, Node::at(i), a, b) {
                 self.dist[i] = through;
                 self.prev[i] = Some(u);
                 self.heap.push(Open { f, slot: i });
             }
         }
         true
+    }
+
+    /// Measures the way found again with [`norm`], node by node from the robot, as a search
+    /// on [`norm`] sums it: the search's own sums ([`length`]) may differ in the last bits.
+    pub(super) fn measure_way(&mut self) {
+        self.path.clear();
+        let mut node = Node::Goal;
+        while node != Node::Robot {
+            self.path.push(node);
+            node = self.before(node);
+        }
+        let (mut at, mut way) = (self.robot, 0.0);
+        for k in (0..self.path.len()).rev() {
+            let next = self.point(self.path[k]);
+            way += norm(sub(next, at));
+            self.dist[self.path[k].index()] = way;
+            at = next;
+        }
     }
 
     /// The length of the shortest way found from the robot to `node`.
