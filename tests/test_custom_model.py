@@ -274,7 +274,8 @@ def test_the_kinematic_bicycle_steps_as_its_equations() -> None:
         state_dim=4,
         inputs=2,
     )
-    a_sh, b_sh = shield(bike), shield(custom, heading=2)
+    # A custom car declares its heading and its speed, as the built-in model knows its own.
+    a_sh, b_sh = shield(bike), shield(custom, heading=2, speed=3)
     rng = np.random.default_rng(3)
     for s in states(rng, 200, 4):
         u = rng.uniform(-4.0, 4.0, 2)

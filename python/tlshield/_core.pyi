@@ -711,6 +711,7 @@ class Shield:
         route: bool = True,
         route_clearance: float | None = None,
         heading: int | None = None,
+        speed: int | None = None,
         clf_round: tuple[int, int, float] | None = None,
         dt: float | None = None,
         give_way: Sequence[str] | None = None,
@@ -722,7 +723,11 @@ class Shield:
         from each disc, as a fraction of its radius (None: 0.2); ``heading`` is the state
         dimension of the heading that a turn input steers, for a custom model whose turn
         reaches the position only through it (None: the built-in model's), so that routing
-        turns it towards the CLF's push; ``clf_round=(i, j, radius)`` bounds the CLF's
+        turns it towards the CLF's push; ``speed`` is the state dimension of the speed along
+        that heading, for a custom model that turns only while moving, a car (None: the
+        built-in model's, the ``KinematicBicycle``'s), so that routing asks for the speed a
+        turn needs and backs up where driving on would only circle the target;
+        ``clf_round=(i, j, radius)`` bounds the CLF's
         correction on inputs i, j by a circle, beside ``clf_bounds`` (held as the inscribed
         16-gon: up to 1.9% short of the radius), so that a bound meaning a speed does not
         depend on which way the world faces. ``inputs`` is the number of

@@ -299,6 +299,16 @@ impl Dynamics {
         }
     }
 
+    /// The speed's state index of a model that turns only while moving, the bicycle (its turn
+    /// rate is `v tan delta / l`, nothing at rest). Guidance reads it to ask for the speed a
+    /// turn needs where only a turn would bring the robot nearer (`crate::guidance`).
+    pub fn turns_only_moving(&self) -> Option<usize> {
+        match *self {
+            Dynamics::KinematicBicycle { v, .. } => Some(v),
+            _ => None,
+        }
+    }
+
     /// The heading of a model that turns: the unicycle's (whose turn rate moves its reference
     /// point directly) and every [`Dynamics::steered_heading`]. Routing reads it to tell a turn
     /// into an obstacle the CBF blocks (`crate::guidance`), which it lets the CLF cancel.

@@ -144,7 +144,7 @@ impl PyShield {
         rl_bounds=None, barriers=None, pos=None, use_cbf=true, use_clf=true, solver="auto",
         slack_penalty=None, margin=None, alpha2=None, clf_gain=None, preserve_progress=true,
         inputs=None, disturbance=None, route=true, route_clearance=None, heading=None,
-        clf_round=None, dt=None, give_way=None,
+        speed=None, clf_round=None, dt=None, give_way=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -173,6 +173,7 @@ impl PyShield {
         route: bool,
         route_clearance: Option<f64>,
         heading: Option<usize>,
+        speed: Option<usize>,
         clf_round: Option<(usize, usize, f64)>,
         dt: Option<f64>,
         give_way: Option<&Bound<'_, PyAny>>,
@@ -225,6 +226,7 @@ impl PyShield {
             route_clearance.unwrap_or(tlshield_core::route::DEFAULT_CLEARANCE),
         )
         .with_heading(heading)
+        .with_speed(speed)
         .with_inputs(inputs)
         .with_clf_round(
             clf_round.map(|(i, j, radius)| tlshield_core::shield::RoundBound {

@@ -51,6 +51,7 @@ impl PyShield {
         kwargs.set_item("route", p.route)?;
         kwargs.set_item("route_clearance", p.route_clearance)?;
         kwargs.set_item("heading", p.heading)?;
+        kwargs.set_item("speed", p.speed)?;
         kwargs.set_item(
             "clf_round",
             p.clf_round.map(|r| (r.inputs[0], r.inputs[1], r.radius)),

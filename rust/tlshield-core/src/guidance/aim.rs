@@ -29,6 +29,60 @@ const AT_ROBOT: f64 = 1e-12;
 /// turn towards (the angle of a zero error is meaningless).
 const NO_PUSH: f64 = 1e-18;
 
+/// Backing out of its turning circle, a car asks at least this share of the position's error
+/// as speed ([`Aim::move_to_turn`]): the target may lie nearly ahead, where the angle alone
+/// would ask almost none.
+const BACK_OUT: f64 = 0.25;
+/// A car whose target has left its turning circle drives forwards again only once the
+/// target is this many radii from the circle's centre; in between it keeps the way it moves
+/// ([`Manoeuvre::way`]), so that it does not rock on the circle's rim.
+const CLEAR_OF_CIRCLE: f64 = 1.5;
+
+/// What [`Aim::move_to_turn`] reads of a car at one step: its heading, its speed, and the
+/// radius of the tightest circle the CLF's own steering drives at that speed (`None` at rest,
+/// where no turn can be made).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Manoeuvre {
+    /// The heading.
+    pub(crate) theta: f64,
+    /// The signed speed along the heading.
+    pub(crate) speed: f64,
+    /// The tightest turning circle's radius at this speed.
+    pub(crate) radius: Option<f64>,
+}
+
+impl Manoeuvre {
+    /// The way to drive (`+1` forwards, `-1` backwards) towards `target` from `p`, and whether
+    /// the car is backing out of its turning circle: backwards while the target is behind the
+    /// axle line (`cos off < 0`; backing up turns the car towards it) or inside the turning
+    /// circle on its side (driving forwards would only circle it); forwards once it is
+    /// [`CLEAR_OF_CIRCLE`] radii from that circle's centre; in between, the way it moves.
+    fn way(&self, off: f64, p: [f64; 2], target: [f64; 2]) -> (f64, bool) {
+        if off.cos() < 0.0 {
+            return (-1.0, false);
+        }
+        let Some(radius) = self.radius else {
+            return (1.0, false);
+        };
+        let (sin, cos) = self.theta.sin_cos();
+        let to = sub(target, p);
+        let side = if cos * to[1] - sin * to[0] >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        let centre = [p[0] - side * radius * sin, p[1] + side * radius * cos];
+        let from_centre = norm(sub(target, centre));
+        if from_centre < radius {
+            (-1.0, true)
+        } else if from_centre > CLEAR_OF_CIRCLE * radius || self.speed >= 0.0 {
+            (1.0, false)
+        } else {
+            (-1.0, true)
+        }
+    }
+}
+
 /// The distance along the path at which the router aims past a disc of `radius`, grown by
 /// `clearance`: [`LOOKAHEAD`] inflated radii.
 pub(super) fn lookahead(radius: f64, clearance: f64) -> f64 {
@@ -365,6 +419,51 @@ impl Aim {
         Turn {
             v: v * (1.0 - cos),
             lf: v * sin * f_theta,
+        }
+    }
+
+    /// Robots that turn only while moving (beyond the paper), a car: its turn rate is `v tan
+    /// delta / l`, so at rest the turn term's `Lg V` on the steering is zero
+    /// ([`Aim::turn_towards_push`]), and with its target abeam the push along the heading is
+    /// zero too: the car parks. The CLF gains `(v* - sigma v)_+^2`, the speed the manoeuvre
+    /// needs not yet reached, never a brake: `v* = |d| sin^2(off / 2)`, with `d = k (p -
+    /// target)` (the position's part of the CLF's error, a speed; `p` the CLF's position) and
+    /// `off` the heading's angle from the target's bearing, both read at the position only
+    /// and held for the step. `sigma` is the way to drive ([`Manoeuvre::way`]); backing up,
+    /// the manoeuvre owns the speed: the position's push along the heading would drive the
+    /// car on, into the circle it cannot leave forwards, so its part on the speed's inputs
+    /// gives way, and `v*` is at least [`BACK_OUT`] of `|d|`. `speed` is the speed's state
+    /// value and `(g_v, f_v)` its rows of `g` and `f`; `lg_v` is `Lg V`, updated in place.
+    pub(crate) fn move_to_turn(
+        &mut self,
+        (d, p): ([f64; 2], [f64; 2]),
+        car: Manoeuvre,
+        (g_v, f_v): (&[f64], f64),
+        lg_v: &mut [f64],
+    ) -> Turn {
+        let [dx, dy] = d;
+        if dx * dx + dy * dy <= NO_PUSH {
+            return Turn { v: 0.0, lf: 0.0 };
+        }
+        let off = car.theta - (-dy).atan2(-dx);
+        let (sigma, circled) = car.way(off, p, [self.target[0], self.target[1]]);
+        let share = (0.5 * off).sin().powi(2);
+        let share = if circled { share.max(BACK_OUT) } else { share };
+        let short = dx.hypot(dy) * share - sigma * car.speed;
+        if short <= 0.0 {
+            return Turn { v: 0.0, lf: 0.0 };
+        }
+        // d/dt (v* - sigma v)^2 = -2 sigma (v* - sigma v) (f_v + g_v . a), v* held.
+        for (l, g) in lg_v.iter_mut().zip(g_v) {
+            if sigma < 0.0 && *g != 0.0 {
+                *l = 0.0;
+            }
+            *l -= 2.0 * sigma * short * g;
+        }
+        self.rerouted = true;
+        Turn {
+            v: short * short,
+            lf: -2.0 * sigma * short * f_v,
         }
     }
 }

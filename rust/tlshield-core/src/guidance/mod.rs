@@ -31,7 +31,7 @@ mod router;
 mod search;
 
 pub use aim::LOOKAHEAD;
-pub(crate) use aim::{Aim, Turn};
+pub(crate) use aim::{Aim, Manoeuvre, Turn};
 pub(crate) use goal::GoalChoice;
 pub use graph::{ROBOT_SLACK, SIDES};
 pub use inflate::DEFAULT_CLEARANCE;

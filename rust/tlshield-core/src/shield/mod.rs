@@ -628,6 +628,7 @@ fn min_dim(
         .unwrap_or(0)
         .max(params.pos.iter().max().map_or(0, |p| p + 1))
         .max(params.heading.map_or(0, |h| h + 1))
+        .max(params.speed.map_or(0, |v| v + 1))
         .max(
             params
                 .disturbance

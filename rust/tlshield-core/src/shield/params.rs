@@ -310,6 +310,13 @@ pub struct ShieldParams {
     /// ([`Dynamics::steered_heading`](crate::Dynamics::steered_heading)); a custom model
     /// declares its own here.
     pub heading: Option<usize>,
+    /// The state dimension of the robot's speed along its heading, when it turns only while
+    /// moving (a car: its turn rate is the speed times the steering): routing's CLF then asks
+    /// for the speed a turn needs, backing up where driving on would only circle the target
+    /// (`guidance/aim.rs`). `None` takes the built-in model's
+    /// ([`Dynamics::turns_only_moving`](crate::Dynamics::turns_only_moving)); a custom model
+    /// declares its own here, with its `heading`.
+    pub speed: Option<usize>,
     /// A round bound on two inputs of `a_clf`, beside `clf_bounds` (see [`RoundBound`]).
     pub clf_round: Option<RoundBound>,
     /// The number of inputs m, for a shield whose model does not say it (no model, and
@@ -357,6 +364,7 @@ impl ShieldParams {
             route: true,
             route_clearance: crate::guidance::DEFAULT_CLEARANCE,
             heading: None,
+            speed: None,
             clf_round: None,
             inputs: None,
         }
@@ -461,6 +469,12 @@ impl ShieldParams {
         self
     }
 
+    /// The speed of a robot that turns only while moving (see [`ShieldParams::speed`]).
+    pub fn with_speed(mut self, speed: Option<usize>) -> Self {
+        self.speed = speed;
+        self
+    }
+
     /// The number of inputs, for a shield without a model (see [`ShieldParams::inputs`]).
     pub fn with_inputs(mut self, inputs: Option<usize>) -> Self {
         self.inputs = inputs;
@@ -558,6 +572,15 @@ impl ShieldParams {
                  heading is the angle a turn input steers",
                 self.pos
             )));
+        }
+        if let Some(v) = self.speed {
+            if self.pos.contains(&v) || self.heading == Some(v) {
+                return Err(ShieldError::Config(format!(
+                    "speed = {v}: it is one of the CLF's position dimensions pos = {:?} or the \
+                     heading {:?}; the speed is the state of the robot's speed along its heading",
+                    self.pos, self.heading
+                )));
+            }
         }
         if !(self.route_clearance.is_finite() && self.route_clearance >= 0.0) {
             return Err(ShieldError::Config(format!(

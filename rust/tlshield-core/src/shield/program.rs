@@ -23,7 +23,7 @@ use super::{BarrierSource, Call, ControlAffine, ShieldParams};
 use crate::automaton::{Automaton, Reading};
 use crate::cnf::Literal;
 use crate::dynamics::Dynamics;
-use crate::guidance::{Aim, Routing, Turn};
+use crate::guidance::{Aim, Manoeuvre, Routing, Turn};
 use crate::linalg::dot;
 use crate::monitor::Monitor;
 use crate::predicate::Predicate;
@@ -576,6 +576,32 @@ impl Program {
             let Turn { v: dv, lf: dlf } = turn;
             v += dv;
             lf += dlf;
+            let car = params
+                .speed
+                .or_else(|| model.and_then(Dynamics::turns_only_moving));
+            if let Some(speed) = car {
+                let [p0, p1] = [params.pos[0], params.pos[1]];
+                let target = &self.aim.target;
+                let d = [k * (s[p0] - target[0]), k * (s[p1] - target[1])];
+                // The fastest turn the CLF's own box drives at this speed, and its circle.
+                let turn_rate = (0..m)
+                    .map(|j| {
+                        let (lo, hi) = self.clf_box(params, j);
+                        self.g[theta * m + j].abs() * lo.abs().max(hi.abs())
+                    })
+                    .sum::<f64>();
+                let car = Manoeuvre {
+                    theta: s[theta],
+                    speed: s[speed],
+                    radius: (turn_rate > 0.0).then(|| s[speed].abs() / turn_rate),
+                };
+                let row = (&self.g[speed * m..(speed + 1) * m], self.f[speed]);
+                let Turn { v: dv, lf: dlf } =
+                    self.aim
+                        .move_to_turn((d, [s[p0], s[p1]]), car, row, &mut self.clf_lg);
+                v += dv;
+                lf += dlf;
+            }
         }
         (v, lf)
     }
