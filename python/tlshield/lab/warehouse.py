@@ -238,24 +238,25 @@ def episode(variant: str, robot_name: str, driver: str, seed: int) -> Episode:
 
 
 def cell(variant: str, robot_name: str, driver: str, episodes: int) -> dict:
-    """Over seeds ``0..episodes-1``: the success rate, obstacle entries, relaxed QPs, and
-    ``flagged``, the share of the steps whose goal was D with ``goal_unreachable`` set (None
-    when no episode got that far), ``flagged_p``, the steps whose goal was P with it set, and
+    """Over seeds ``0..episodes-1``: the success rate, obstacle entries, relaxed QPs,
+    ``d_steps``, the steps whose goal was D, ``flagged``, how many of them had
+    ``goal_unreachable`` set, ``flagged_p``, the steps whose goal was P with it set, and
     ``forklift_gap``, how close any episode came to the forklift's rim (m)."""
     runs = [episode(variant, robot_name, driver, seed) for seed in range(episodes)]
-    d_steps = sum(e.d_steps for e in runs)
     return {
         "success": sum(e.success for e in runs) / episodes,
         "entries": sum(e.entries for e in runs),
         "relaxed": sum(e.relaxed for e in runs),
-        "flagged": sum(e.unreachable for e in runs) / d_steps if d_steps else None,
+        "d_steps": sum(e.d_steps for e in runs),
+        "flagged": sum(e.unreachable for e in runs),
         "flagged_p": sum(e.p_unreachable for e in runs),
         "forklift_gap": min(e.forklift_gap for e in runs),
     }
 
 
 def table(variant: str, episodes: int) -> str:
-    """The markdown table of one variant: one row per robot and driver."""
+    """The markdown table of one variant: one row per robot and driver. The steps flagged
+    unreachable are counted over the steps whose goal was D (after P)."""
     lines = [
         "| robot | driver | success | entries | relaxed QPs | D-steps flagged unreachable "
         "| closest to the forklift (m) |",
@@ -264,7 +265,9 @@ def table(variant: str, episodes: int) -> str:
     for robot_name in ROBOTS:
         for driver in DRIVERS:
             c = cell(variant, robot_name, driver, episodes)
-            flagged = "-" if c["flagged"] is None else f"{c['flagged']:.2f}"
+            # Counts, not a share: "every step" must not hide behind a rounded 1.00.
+            flagged = "all" if c["flagged"] == c["d_steps"] else str(c["flagged"])
+            flagged += f" of {c['d_steps']}"
             if c["flagged_p"]:
                 flagged += f" (P-steps: {c['flagged_p']})"
             lines.append(
