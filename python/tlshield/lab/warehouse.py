@@ -77,8 +77,8 @@ PALLET = (np.array([2.4, 1.65]), 0.45)
 #: The forklift: its disc's radius (m), the x of its crossing, its speed northward (m/s, a
 #: third of the robots' speed limit), the range its start's y is drawn from, so that it meets
 #: the robot at different points of the robot's way from P to D, and where it stops. It stops
-#: because a disc that drives on for ever ends far from the rest: about 17 m away, the enclosed
-#: variant's search for a way to D stops at its work bound, which reports D reachable.
+#: because a disc that drives on for ever ends far from the rest: about 16 m from the robot, the
+#: enclosed variant's search for a way to D stops at its work bound, which reports D reachable.
 FORKLIFT_RADIUS = 0.4
 FORKLIFT_X = -0.2
 FORKLIFT_SPEED = 0.35
