@@ -61,11 +61,12 @@ impl Routing {
         if !first.unreachable {
             return first;
         }
-        let mut found = None;
+        let (mut found, mut tried) = (None, false);
         reading.goal_choice_where(q, buffer, &mut |alt, point| {
             if alt.dims != self.pos || point == goal {
                 return false;
             }
+            tried = true;
             let s = reading.state();
             let mut in_alt = |x, probe: &mut Vec<f64>| alt.holds_at(s, &self.pos, x, probe);
             let point = [point[0], point[1]];
@@ -73,8 +74,13 @@ impl Routing {
             found = (!routed.unreachable).then_some(routed);
             found.is_some()
         });
-        // The router keeps the last way planned: that of the goal taken.
-        found.unwrap_or_else(|| self.route_to(reading, goal, safe, router, (probe, &mut in_first)))
+        // The router keeps the last way planned: that of the goal taken (planned again only
+        // where another goal was tried since).
+        match (found, tried) {
+            (Some(routed), _) => routed,
+            (None, false) => first,
+            (None, true) => self.route_to(reading, goal, safe, router, (probe, &mut in_first)),
+        }
     }
 
     /// [`Routing::plan`] towards `goal` (its free part where a disc covers it, a point of the
