@@ -43,7 +43,8 @@ pub(crate) mod robustness;
 /// CLF's guidance. See [`Router::target`](route::Router::target).
 pub mod route {
     pub use crate::guidance::{
-        Disc, Router, Routing, DEFAULT_CLEARANCE, LOOKAHEAD, ROBOT_SLACK, SIDES, WORK_BOUND,
+        Disc, Routed, Router, Routing, Scratch, Wall, DEFAULT_CLEARANCE, LOOKAHEAD, ROBOT_SLACK,
+        SIDES, WORK_BOUND,
     };
 }
 pub(crate) mod sensitivity;

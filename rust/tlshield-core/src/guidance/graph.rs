@@ -275,17 +275,20 @@ impl Router {
         }
     }
 
-    /// Whether corner `k` is a node: not inside another inflated disc. Only the discs of
+    /// Whether corner `k` is a node: on the kept side of every wall, and not inside another
+    /// inflated disc. Only the discs of
     /// [`Router::near`] are tested, which is exact for a corner in the region they were chosen
     /// for (a disc that holds the corner meets that region). Remembered until the corner moves.
     pub(super) fn uncovered(&mut self, k: usize) -> bool {
         if self.cover[k] == Cover::Unknown {
             let (v, i) = (self.corners[k].at, self.corners[k].disc);
             self.work += self.near.len();
-            let covered = self
-                .near
-                .iter()
-                .any(|&j| j != i && length(sub(v, self.discs[j].center)) < self.inflated[j]);
+            self.work += self.walls.len();
+            let covered = self.walls.iter().any(|w| !w.keeps(v))
+                || self
+                    .near
+                    .iter()
+                    .any(|&j| j != i && length(sub(v, self.discs[j].center)) < self.inflated[j]);
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free

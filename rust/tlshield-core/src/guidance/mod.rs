@@ -35,7 +35,7 @@ pub(crate) use aim::{Aim, Manoeuvre, Turn};
 pub(crate) use goal::GoalChoice;
 pub use graph::{ROBOT_SLACK, SIDES};
 pub use inflate::DEFAULT_CLEARANCE;
-pub use plane::Disc;
+pub use plane::{Disc, Wall};
 pub use reach::{Routed, Scratch};
 pub use router::{Router, Routing};
 pub use search::WORK_BOUND;

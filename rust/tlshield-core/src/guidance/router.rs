@@ -54,8 +54,10 @@
 //!   the goal, and the shield parks as before (one an obstacle covers in part is aimed at at
 //!   its free part, `free.rs`);
 //! - it routes around discs only (balls over the CLF's two position dimensions, and unions of
-//!   them); half-spaces, intersections and balls over other dimensions are not routed around
-//!   (the barriers still hold them);
+//!   them), within walls: the half-planes the state is kept in (a half-space kept true, or
+//!   kept false, over the position; `plane.rs`), whose far side holds no node. A convex
+//!   polygon kept out of, and balls over other dimensions, are not routed around (the
+//!   barriers still hold them);
 //! - it is a path of the robot's reference point, not of its body, and does not look at the
 //!   dynamics: a robot that cannot follow a corner is still kept safe by the barriers, and may
 //!   be slowed by them.
@@ -65,7 +67,7 @@
 use std::collections::BinaryHeap;
 
 use super::graph::{Corner, Cover, Edges, Node};
-use super::plane::{each_disc, Disc};
+use super::plane::{each_disc, each_wall, Disc, Wall};
 use super::reach::{Routed, Scratch};
 use super::search::Open;
 use crate::automaton::Reading;
@@ -134,6 +136,12 @@ impl Routing {
             .filter(|(lit, _)| !lit.positive)
             .map(|(lit, _)| &predicates[lit.atom]);
         router.load(&self.pos, s, self.avoid.iter().chain(kept));
+        let kept = safe
+            .iter()
+            .map(|(lit, _)| (&predicates[lit.atom], lit.positive));
+        let user = self.avoid.iter().map(|p| (p, false));
+        let held = self.inside.iter().map(|p| (p, true));
+        router.load_walls(&self.pos, s, kept.chain(user).chain(held));
         let p = [s[self.pos[0]], s[self.pos[1]]];
         let goal = match router.holds(goal) {
             true => router.free_part(p, goal, in_goal).unwrap_or(goal),
@@ -147,6 +155,11 @@ impl Routing {
 #[derive(Debug, Clone, Default)]
 pub struct Router {
     pub(super) discs: Vec<Disc>,
+    /// The half-planes the state is kept in this step (`plane.rs`): the corners beyond them are
+    /// no nodes.
+    pub(super) walls: Vec<Wall>,
+    /// The walls the polygons' cover was tested against (kept with it).
+    pub(super) placed_walls: Vec<Wall>,
     /// Per disc, the inflated radius used this step (`inflate.rs`).
     pub(super) inflated: Vec<f64>,
     /// The graph's ends this step: the robot's position and the goal.
@@ -230,6 +243,25 @@ impl Router {
         }
     }
 
+    /// Adds the walls of `kept` (predicates kept true, `true`, or false) over `pos` at `s`
+    /// ([`each_wall`]): the corners on their far side are no nodes this step.
+    pub(crate) fn load_walls<'a>(
+        &mut self,
+        pos: &[usize],
+        s: &[f64],
+        kept: impl Iterator<Item = (&'a Predicate, bool)>,
+    ) {
+        self.walls.clear();
+        for predicate in kept {
+            each_wall(predicate, pos, s, &mut |wall| self.walls.push(wall));
+        }
+    }
+
+    /// The walls of this step.
+    pub fn walls(&self) -> &[Wall] {
+        &self.walls
+    }
+
     /// The target for a robot at `p` heading for `goal`, around this step's discs inflated by
     /// `clearance` (relative to each radius, >= 0). See the module docs.
     pub fn target(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> [f64; 2] {
@@ -243,9 +275,11 @@ impl Router {
         if self.visible(p, goal) {
             return goal;
         }
-        if self.discs != self.placed_discs || self.inflated != self.placed_inflated {
+        let walls_moved = self.walls != self.placed_walls;
+        if self.discs != self.placed_discs || self.inflated != self.placed_inflated || walls_moved {
             self.placed_discs.clone_from(&self.discs);
             self.placed_inflated.clone_from(&self.inflated);
+            self.placed_walls.clone_from(&self.walls);
             self.place_polygons();
         }
         if !self.search(p, goal, clearance) {
