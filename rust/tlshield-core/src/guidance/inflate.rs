@@ -18,7 +18,7 @@ impl Router {
     pub(super) fn holds(&self, goal: [f64; 2]) -> bool {
         self.discs
             .iter()
-            .any(|d| norm(sub(goal, d.center)) < d.radius)
+            .any(|d| !far(sub(goal, d.center), d.radius) && norm(sub(goal, d.center)) < d.radius)
     }
 
     /// Per disc, the radius planned around this step: grown by `clearance` (relative to its
@@ -26,8 +26,23 @@ impl Router {
     pub(super) fn inflate(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) {
         self.inflated.clear();
         for d in &self.discs {
-            let keep = norm(sub(p, d.center)).min(norm(sub(goal, d.center))) * (1.0 - KEEP_OUT);
-            self.inflated.push((d.radius * (1.0 + clearance)).min(keep));
+            let grown = d.radius * (1.0 + clearance);
+            let (to_p, to_goal) = (sub(p, d.center), sub(goal, d.center));
+            if far(to_p, grown) && far(to_goal, grown) {
+                // Both ends farther than the grown radius: `keep` below would exceed it.
+                self.inflated.push(grown);
+                continue;
+            }
+            let keep = norm(to_p).min(norm(to_goal)) * (1.0 - KEEP_OUT);
+            self.inflated.push(grown.min(keep));
         }
     }
+}
+
+/// Whether `|v|` is surely more than twice `r`, by one of its components alone (`hypot` is at
+/// least either): then the exact comparison (libm's `hypot`, which most of a step's discs
+/// would otherwise pay for twice) is not needed. False for what it cannot tell (not a number).
+#[inline]
+fn far(v: [f64; 2], r: f64) -> bool {
+    v[0].abs() > 2.0 * r || v[1].abs() > 2.0 * r
 }

@@ -178,8 +178,11 @@ pub struct Router {
     pub(super) placed_inflated: Vec<f64>,
     /// The discs that meet the region searched (`search.rs`), in order.
     pub(super) near: Vec<usize>,
-    /// The slots ([`Node::index`]) of the nodes in the region searched, in order.
-    pub(super) slots: Vec<usize>,
+    /// The disc that blocked the last segment this search found blocked (tested first).
+    pub(super) blocker: Option<usize>,
+    /// The slots ([`Node::index`]) of the nodes in the region searched, in order, each with
+    /// where its node is (read by every relaxation: kept beside the slot).
+    pub(super) slots: Vec<(usize, [f64; 2])>,
     /// The search's open nodes.
     pub(super) heap: BinaryHeap<Open>,
     /// Tests of a point or a segment against a disc this step ([`WORK_BOUND`](super::WORK_BOUND)).

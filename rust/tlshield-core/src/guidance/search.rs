@@ -158,6 +158,7 @@ impl Router {
         let everything = reach == f64::INFINITY;
         let mut whole = true;
         self.near.clear();
+        self.blocker = None;
         for (i, (d, &r)) in self.discs.iter().zip(&self.inflated).enumerate() {
             let span = length(sub(d.center, p)) + length(sub(d.center, goal)) - 2.0 * r;
             if everything || span <= reach * (1.0 + DISC_SLACK) {
@@ -168,7 +169,8 @@ impl Router {
         }
         self.work += self.discs.len();
         self.slots.clear();
-        self.slots.extend([Node::Robot.index(), Node::Goal.index()]);
+        self.slots
+            .extend([(Node::Robot.index(), p), (Node::Goal.index(), goal)]);
         for n in 0..self.near.len() {
             let i = self.near[n];
             self.place_tangents(i, p, clearance);
@@ -179,7 +181,7 @@ impl Router {
                 if !everything && !inside {
                     whole = false;
                 } else if self.uncovered(k) {
-                    self.slots.push(Node::Corner(k).index());
+                    self.slots.push((Node::Corner(k).index(), v));
                 }
             }
         }
@@ -189,12 +191,11 @@ impl Router {
     /// A* over the nodes gathered for `reach`.
     fn run(&mut self, reach: f64) -> Run {
         let goal = self.goal;
-        for s in 0..self.slots.len() {
-            let i = self.slots[s];
+        for &(i, at) in &self.slots {
             self.dist[i] = f64::INFINITY;
             self.prev[i] = None;
             self.done[i] = false;
-            self.rest[i] = length(sub(goal, self.point(Node::at(i))));
+            self.rest[i] = length(sub(goal, at));
         }
         let robot = Node::Robot.index();
         self.dist[robot] = 0.0;
@@ -228,11 +229,10 @@ impl Router {
         let best = self.dist[u.index()];
         let a = self.point(u);
         for s in 1..self.slots.len() {
-            let i = self.slots[s];
+            let (i, b) = self.slots[s];
             if self.done[i] {
                 continue;
             }
-            let b = self.point(Node::at(i));
             let through = best + length(sub(b, a));
             if through >= self.dist[i] {
                 continue;
