@@ -4,10 +4,10 @@ zero (CBF + CLF, routing on). A robot that must turn to move sideways, a car mos
 never get there: this table says which.
 
 The robots and their gains are ``tlshield.lab.routing``'s (its recommended CLF box, half the
-limits, and k by the rule), and the kinematic bicycle (wheelbase 0.5 m; inputs acceleration and
-``tan(steer)``, each bounded by 1) with the acceleration-level robots' gains. Each cell is the
-share of seeded episodes (start jittered by up to 0.1 m and 0.1 rad) that reach the goal disc
-(radius 0.2 m) within 40 s.
+limits, and k by the rule), the kinematic bicycle (wheelbase 0.5 m; inputs acceleration and
+``tan(steer)``, each bounded by 1) among them with the acceleration-level robots' gains. Each
+cell is the share of seeded episodes (start jittered by up to 0.1 m and 0.1 rad) that reach the
+goal disc (radius 0.2 m) within 40 s.
 
 Run: ``.venv/bin/python scripts/robot_reach.py [--episodes 20]``.
 """
@@ -18,18 +18,16 @@ import argparse
 
 import numpy as np
 
-from tlshield import Ball, KinematicBicycle, Monitor, Shield, Spec
+from tlshield import Ball, Monitor, Shield, Spec
 from tlshield.lab import routing
 
 BEARINGS = (0, 45, 90, 135, 180)
 DISTANCE = 2.0
-ROBOTS = (*routing.ROBOTS, *routing.TURNING, "bicycle")
+ROBOTS = routing.ALL_ROBOTS
 
 
 def _model_and_gains(name: str) -> tuple[object, dict, int]:
-    """The model, the shield's gains and the state's length."""
-    if name == "bicycle":
-        return KinematicBicycle(0.5), routing._second_order(routing.SPEED, routing.TURN_GAIN), 4
+    """The model, the shield's gains and the state's length (the routing lab's robot)."""
     r = routing.robot(name)
     return r.model, dict(r.shield_kwargs), len(r.start(np.zeros(2)))
 

@@ -47,7 +47,7 @@ def _episode(robot: str, encoding: str, offset: float, seed: int) -> tuple[bool,
     return False, inside, unreachable
 
 
-@pytest.mark.parametrize("robot", routing.ROBOTS + routing.TURNING)
+@pytest.mark.parametrize("robot", routing.ALL_ROBOTS)
 @pytest.mark.parametrize("encoding", routing.ENCODINGS)
 @pytest.mark.parametrize("offset", OFFSETS)
 def test_a_partly_covered_goal_is_reached_at_its_free_part(

@@ -52,7 +52,7 @@ def _episode(robot: str, encoding: str, seed: int) -> tuple[bool, int]:
     return False, outside
 
 
-@pytest.mark.parametrize("robot", routing.ROBOTS + routing.TURNING)
+@pytest.mark.parametrize("robot", routing.ALL_ROBOTS)
 @pytest.mark.parametrize("encoding", ENCODINGS)
 def test_the_way_round_a_disc_against_a_wall_takes_the_open_side(robot: str, encoding: str) -> None:
     for seed in range(2):

@@ -3,11 +3,13 @@ the other (docs/concepts/deadlock.md). They measure whether the shield routes ar
 keeps the robot out of, or parks in front of it (the CLF-CBF deadlock).
 
 Four layouts (a disc on the line, a disc 5 cm off it, a concave U of three discs, eight random
-discs), three robots (single integrator, the paper's unicycle reference point, a double
-integrator), two encodings (the obstacles in the formula, ``(!o1 & ...) U goal``, or as the
-shield's barriers with ``F goal``) and two drivers (the shield alone, a zero RL action; a greedy
-seeker pushing straight at the goal through CBF+CLF). Every episode is seeded: the start and the
-goal are jittered, and the random layout is drawn, from ``numpy.random.default_rng(seed)``.
+discs), six robots (single integrator, the paper's unicycle reference point, a double
+integrator; the acceleration unicycle and ThrustTurn, which turn at acceleration level; the
+kinematic bicycle, a car that turns only while moving), two encodings (the obstacles in the
+formula, ``(!o1 & ...) U goal``, or as the shield's barriers with ``F goal``) and two drivers
+(the shield alone, a zero RL action; a greedy seeker pushing straight at the goal through
+CBF+CLF). Every episode is seeded: the start and the goal are jittered, and the random layout is
+drawn, from ``numpy.random.default_rng(seed)``.
 
 How the drivers and boxes are set: every robot's inputs are bounded by its limits (``SPEED`` for
 a velocity or an acceleration, ``TURN`` for the unicycle's turn rate, ``SPEED`` for the turn of
@@ -34,6 +36,7 @@ from tlshield import (
     Avoid,
     Ball,
     DoubleIntegrator,
+    KinematicBicycle,
     Monitor,
     Shield,
     SingleIntegrator,
@@ -47,6 +50,10 @@ LAYOUTS = ("line", "off_line", "u_shape", "random8")
 ROBOTS = ("single", "unicycle", "double")
 #: Robots that must turn at acceleration level, measured beside ROBOTS.
 TURNING = ("accel_unicycle", "thrust_turn")
+#: Robots that turn only while moving: the kinematic bicycle (a car).
+CARS = ("bicycle",)
+#: Every robot the lab drives.
+ALL_ROBOTS = ROBOTS + TURNING + CARS
 ENCODINGS = ("formula", "barriers")
 DRIVERS = ("shield", "seeker")
 
@@ -111,6 +118,12 @@ def _unit(v: np.ndarray) -> np.ndarray:
 def _wrap(a: float) -> float:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
+
+#: The bicycle's wheelbase (m), and the speed its seeker asks for at most and at least (m/s,
+#: the creep that keeps it turning: a car turns only while moving).
+WHEELBASE = 0.5
+CAR_SPEED = 0.5 * SPEED
+CAR_CREEP = 0.1
 
 #: Overrides every robot's k when set (``--k``), to measure other gains.
 K_OVERRIDE: float | None = None
@@ -220,7 +233,22 @@ def _robot(name: str) -> Robot:
             _second_order(SPEED, TURN_GAIN),
             seek_turning,
         )
-    raise ValueError(f"robot: expected one of {ROBOTS + TURNING}, got {name!r}")
+    if name in CARS:
+        # x, y, theta, v; inputs (acceleration, tan(steer)), each bounded by SPEED (1), with
+        # the acceleration-level gains.
+        def seek_car(s: np.ndarray, g: np.ndarray) -> np.ndarray:
+            err = _heading_error(s, g)
+            speed = max(CAR_SPEED * np.cos(err), CAR_CREEP)
+            accel = np.clip(2.0 * (speed - s[3]), -SPEED, SPEED)
+            return np.array([accel, np.clip(2.0 * err, -SPEED, SPEED)])
+
+        return Robot(
+            KinematicBicycle(WHEELBASE),
+            lambda p: np.array([p[0], p[1], 0.0, 0.0]),
+            _second_order(SPEED, TURN_GAIN),
+            seek_car,
+        )
+    raise ValueError(f"robot: expected one of {ALL_ROBOTS}, got {name!r}")
 
 
 def shield_for(
@@ -310,7 +338,7 @@ def table(episodes: int, route: bool) -> str:
         "|---|---|" + "---|" * len(LAYOUTS),
     ]
     entries = relaxed = 0
-    for robot_name in ROBOTS + TURNING:
+    for robot_name in ALL_ROBOTS:
         for driver in DRIVERS:
             cells = []
             for layout_name in LAYOUTS:

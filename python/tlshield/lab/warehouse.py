@@ -44,11 +44,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tlshield import Avoid, Ball, KinematicBicycle, Monitor, Shield, Spec, Status
+from tlshield import Avoid, Ball, Monitor, Shield, Spec, Status
 from tlshield.lab import routing
 
 VARIANTS = ("alcove", "covered", "enclosed")
-ROBOTS = (*routing.ROBOTS, *routing.TURNING, "bicycle")
+ROBOTS = routing.ALL_ROBOTS
 DRIVERS = routing.DRIVERS
 
 #: A shelf is a chain of discs this big (m), centres this far apart: they overlap, so the
@@ -89,12 +89,6 @@ DT = routing.DT
 #: Steps per episode: 60 s, about three times the way's length at the CLF's speed.
 HORIZON = 1200
 
-#: The kinematic bicycle's wheelbase (m), and the speed its seeker asks for at most and at
-#: least (m/s, the creep that keeps it turning).
-WHEELBASE = 0.5
-BICYCLE_SPEED = 0.5 * routing.SPEED
-BICYCLE_CREEP = 0.1
-
 
 def _chain(a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndarray, float]]:
     """A shelf from ``a`` to ``b``: discs at most ``SHELF_PITCH`` apart, both ends included."""
@@ -130,30 +124,10 @@ def d_radius(variant: str) -> float:
     return COVERED_D_RADIUS if variant == "covered" else GOAL_RADIUS
 
 
-def robot(name: str) -> routing.Robot:
-    """One of ``ROBOTS``: ``routing.robot``'s, or the kinematic bicycle with the
-    acceleration-level robots' gains and its greedy seeker."""
-    if name != "bicycle":
-        return routing.robot(name)
-
-    def seek(s: np.ndarray, g: np.ndarray) -> np.ndarray:
-        err = routing._heading_error(s, g)
-        speed = max(BICYCLE_SPEED * np.cos(err), BICYCLE_CREEP)
-        accel = np.clip(2.0 * (speed - s[3]), -routing.SPEED, routing.SPEED)
-        return np.array([accel, np.clip(2.0 * err, -1.0, 1.0)])
-
-    return routing.Robot(
-        KinematicBicycle(WHEELBASE),
-        lambda p: np.array([p[0], p[1], 0.0, 0.0]),
-        routing._second_order(routing.SPEED, routing.TURN_GAIN),
-        seek,
-    )
-
-
 def shield_for(robot_name: str, variant: str, goal_p: np.ndarray, n: int) -> Shield:
     """The shield of one episode over states ``(robot's state, forklift's x, y)``, the
     forklift's centre at dimensions ``n, n + 1``."""
-    r = robot(robot_name)
+    r = routing.robot(robot_name)
     spec = Spec(
         "F (p & F d)",
         {
@@ -194,7 +168,7 @@ def episode(variant: str, robot_name: str, driver: str, seed: int) -> Episode:
     start = START + rng.uniform(-0.1, 0.1, 2)
     goal_p = P + rng.uniform(-0.1, 0.1, 2)
     fork = np.array([FORKLIFT_X, rng.uniform(*FORKLIFT_START_Y)])
-    r = robot(robot_name)
+    r = routing.robot(robot_name)
     robot_state = r.start(start)
     n = len(robot_state)
     shield = shield_for(robot_name, variant, goal_p, n)
