@@ -309,6 +309,17 @@ impl Dynamics {
         }
     }
 
+    /// Whether the sample after next bends with the action: the next heading (or, for the
+    /// bicycle, the turn the next speed allows) turns the step after it, so that a
+    /// second-order sampled barrier row linearised at one action errs, to second order, at
+    /// another (`shield/sampled.rs` linearises at the RL action for these models).
+    pub fn bends_step(&self) -> bool {
+        matches!(
+            self,
+            Dynamics::AccelerationUnicycle { .. } | Dynamics::KinematicBicycle { .. }
+        )
+    }
+
     /// The heading of a model that turns: the unicycle's (whose turn rate moves its reference
     /// point directly) and every [`Dynamics::steered_heading`]. Routing reads it to tell a turn
     /// into an obstacle the CBF blocks (`crate::guidance`), which it lets the CLF cancel.

@@ -1,6 +1,9 @@
 //! A goal partly covered by a disc the shield avoids (beyond the paper): the CLF aims at the
 //! nearest point of the goal's free part instead of its deepest point, which the barrier would
-//! hold the robot short of forever.
+//! hold the robot short of forever. Only a disc that stays put is looked past: one that moves
+//! (a forklift, Channel-v0's obstacles) will uncover the goal, and chasing its rim would press
+//! the robot against a moving barrier; the goal stays aimed at, and reported unreachable, while
+//! it is covered.
 
 use super::graph::{norm, sub};
 use super::router::Router;
@@ -15,7 +18,8 @@ const STEPS: usize = 12;
 
 impl Router {
     /// The point nearest `goal` (at least a [`RIM_MARGIN`] outside every disc of this step)
-    /// that `in_goal` accepts, among those just outside each disc that holds the goal, in
+    /// that `in_goal` accepts, among those just outside each disc that stays put and holds the
+    /// goal, in
     /// directions fanned out from the one through the goal (or towards the robot at `p`, for a
     /// goal at a disc's centre). `None` when no such point is in the goal: the goal is covered.
     pub(super) fn free_part(
@@ -25,7 +29,12 @@ impl Router {
         in_goal: &mut dyn FnMut([f64; 2]) -> bool,
     ) -> Option<[f64; 2]> {
         let mut best: Option<([f64; 2], f64)> = None;
-        for d in &self.discs {
+        for (d, _) in self
+            .discs
+            .iter()
+            .zip(&self.still)
+            .filter(|(_, &still)| still)
+        {
             let out = sub(goal, d.center);
             if norm(out) >= d.radius {
                 continue;

@@ -155,6 +155,8 @@ impl Routing {
 #[derive(Debug, Clone, Default)]
 pub struct Router {
     pub(super) discs: Vec<Disc>,
+    /// Per disc: whether it stays put (its predicate reads only the position).
+    pub(super) still: Vec<bool>,
     /// The half-planes the state is kept in this step (`plane.rs`): the corners beyond them are
     /// no nodes.
     pub(super) walls: Vec<Wall>,
@@ -211,13 +213,21 @@ impl Router {
     /// Forgets the discs of the last step.
     pub fn clear(&mut self) {
         self.discs.clear();
+        self.still.clear();
     }
 
-    /// Adds a disc to route around this step (one with a radius that is not finite and > 0 is
-    /// ignored).
+    /// Adds a disc that stays put to route around this step (one with a radius that is not
+    /// finite and > 0 is ignored).
     pub fn push(&mut self, disc: Disc) {
+        self.push_moving(disc, false);
+    }
+
+    /// [`Router::push`] for a disc that may move (`moves`: its centre is read from the state):
+    /// routed around alike, but a goal it covers is not aimed at at its rim (`free.rs`).
+    pub fn push_moving(&mut self, disc: Disc, moves: bool) {
         if disc.radius.is_finite() && disc.radius > 0.0 {
             self.discs.push(disc);
+            self.still.push(!moves);
         }
     }
 
@@ -242,7 +252,8 @@ impl Router {
     ) {
         self.clear();
         for predicate in avoided {
-            each_disc(predicate, pos, s, &mut |disc| self.push(disc));
+            let moves = (0..s.len()).any(|d| !pos.contains(&d) && predicate.reads(d));
+            each_disc(predicate, pos, s, &mut |disc| self.push_moving(disc, moves));
         }
     }
 

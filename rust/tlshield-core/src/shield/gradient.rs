@@ -22,6 +22,7 @@
 
 use smallvec::SmallVec;
 
+use super::program::row_barrier;
 use super::{BatchDynamics, BatchRows, Shield, Stage, StateBatch, Status, Want, Workspace};
 use crate::check::check_finite;
 use crate::error::{InputError, ShieldError};
@@ -29,6 +30,17 @@ use crate::guidance::GoalChoice;
 use crate::linalg::dot;
 use crate::predicate::{Center, Predicate};
 use crate::sensitivity::{QpAdjointSolver, Singular};
+
+/// The central difference's step over the point the bent rows are linearised at, relative to
+/// `1 + |a0_j|` ([`Shield::bent_jacobian`]): its error is the step squared times the third
+/// derivative, far below the QP's own tolerance.
+const BENT_STEP: f64 = 1e-5;
+/// The fixed point of a relinearised step's adjoint ([`Shield::settled_cotangent`]) is reached
+/// when no component moves more than this, relative to `1 + |v|`; it contracts by the rows'
+/// curvature times the correction each pass, a few hundredths.
+const ADJOINT_SETTLED: f64 = 1e-14;
+/// The most passes of that fixed point.
+const ADJOINT_PASSES: usize = 60;
 
 /// Flag: the step was relaxed (slacks on the barrier rows); the gradient is the relaxed QP's.
 pub const GRAD_RELAXED: u8 = 1;
@@ -142,6 +154,8 @@ pub(super) struct Buffers {
     spare: Vec<f64>,
     /// A sampled row's predicted sample `y = s + dt f(s)` (`sampled.rs`).
     ahead: Vec<f64>,
+    /// Per bent row, `dL/da0` (m x m, column by column; [`Shield::bent_jacobian`]).
+    bent_jac: Vec<f64>,
 }
 
 /// Adds to `gs` the state gradient of a sampled first-order row (`sampled.rs`) weighted by the
@@ -421,8 +435,22 @@ impl Shield {
                             f |= GRAD_DEGENERATE;
                         }
                     }
+                    // A step whose bent rows were linearised again at its own action: the
+                    // action is a fixed point, and so is its adjoint (`settled_cotangent`).
+                    let bent = ready && !ws.program.relin.is_empty();
+                    if bent {
+                        self.bent_jacobian(ws, (s, call.drift));
+                    }
+                    let mut settled = [0.0; 16];
                     for j in 0..k {
                         let v = cotangents.get(row, j, m, &mut unit);
+                        let v = match bent {
+                            true => {
+                                self.settled_cotangent(ws, a, v, &mut settled[..m]);
+                                &settled[..m]
+                            }
+                            false => v,
+                        };
                         let at = (i * k + j) * m;
                         let ga = &mut ga[at..at + m];
                         ga.copy_from_slice(v);
@@ -441,6 +469,107 @@ impl Shield {
             });
         };
         crate::parallel::for_each_part(&mut parts, work);
+    }
+
+    /// `dL_k/da0_j` of every bent row (`b.bent_jac`, rows x m x m, in row order) at the point
+    /// the step's last pass linearised them at, by central differences of
+    /// `Program::bent_lg` (`program.rs`). Once per gradient row, after its step.
+    fn bent_jacobian(&self, ws: &mut Workspace, (s, drift): (&[f64], Option<&[f64]>)) {
+        let Workspace {
+            program, grad: b, ..
+        } = ws;
+        let (params, m) = (&self.params, self.m);
+        let model = self.dynamics.as_ref().expect("bent rows have a model");
+        let predicates = self.automaton.spec().predicates();
+        b.bent_jac.clear();
+        let (mut a0, mut plus, mut minus) = ([0.0; 16], [0.0; 16], [0.0; 16]);
+        let lin: SmallVec<[f64; 16]> = program.relin.iter().copied().collect();
+        for row in 0..program.barriers() {
+            if !program.bent[row] {
+                continue;
+            }
+            let barrier = row_barrier(program.source(row), params, predicates);
+            for j in 0..m {
+                let step = BENT_STEP * (1.0 + lin[j].abs());
+                for (shift, out) in [(step, &mut plus), (-step, &mut minus)] {
+                    a0[..m].copy_from_slice(&lin);
+                    a0[j] += shift;
+                    let at = (s, &a0[..m]);
+                    program.bent_lg(barrier, at, (model, drift), params, &mut out[..m]);
+                }
+                // Column j: dL_k/da0_j for every k.
+                b.bent_jac
+                    .extend((0..m).map(|k| (plus[k] - minus[k]) / (2.0 * step)));
+            }
+        }
+    }
+
+    /// The cotangent `w` (into `w`) that makes a relinearised step's gradient exact: its action
+    /// `a* = a_rl + c(a_rl, a0)` is a fixed point `a0 = a*` (`Shield::step`), so `dL/da_rl =
+    /// w + dc/da_rl' w` with `w = v + dc/da0' w`. `dc/da0' w` runs through the bent rows alone
+    /// (every other row is built at `a = 0`): each holds `G = -L(a0)` on the `a_cbf` and
+    /// `a_clf` columns and `h = r(a0) + L(a0) . (a_rl - a0)`, whose `a0`-derivative is
+    /// `dL/da0' (a_rl - a0)`.
+    fn settled_cotangent(&self, ws: &mut Workspace, a_rl: &[f64], v: &[f64], w: &mut [f64]) {
+        let Workspace {
+            program,
+            qp,
+            solvers,
+            grad: b,
+            ..
+        } = ws;
+        let (m, nv) = (self.m, qp.vars());
+        let (cbf_vars, has_goal) = (program.cbf_vars, program.has_goal);
+        let lin = &program.relin;
+        w.copy_from_slice(v);
+        let mut next = [0.0; 16];
+        for _ in 0..ADJOINT_PASSES {
+            b.dx.clear();
+            b.dx.resize(nv, 0.0);
+            if self.params.use_cbf {
+                b.dx[..m].copy_from_slice(w);
+            }
+            if has_goal {
+                b.dx[cbf_vars..cbf_vars + m].copy_from_slice(w);
+            }
+            b.dh.resize(qp.rows(), 0.0);
+            b.dg.resize(qp.rows() * nv, 0.0);
+            b.adjoint
+                .apply(qp, &solvers.solution.x, &b.dx, &mut b.dh, &mut b.dg);
+            next[..m].copy_from_slice(v);
+            let mut at = 0;
+            for row in 0..program.barriers() {
+                if !program.bent[row] {
+                    continue;
+                }
+                let jac = &b.bent_jac[at * m * m..(at + 1) * m * m];
+                at += 1;
+                for (j, n) in next[..m].iter_mut().enumerate() {
+                    let col = &jac[j * m..(j + 1) * m];
+                    let moved: f64 = (0..m).map(|k| col[k] * (a_rl[k] - lin[k])).sum();
+                    let mut through_g = 0.0;
+                    for (k, &dl) in col.iter().enumerate() {
+                        let mut d = 0.0;
+                        if self.params.use_cbf {
+                            d += b.dg[row * nv + k];
+                        }
+                        if has_goal {
+                            d += b.dg[row * nv + cbf_vars + k];
+                        }
+                        through_g -= d * dl;
+                    }
+                    *n += b.dh[row] * moved + through_g;
+                }
+            }
+            let settled = w
+                .iter()
+                .zip(&next[..m])
+                .all(|(a, n)| (a - n).abs() <= ADJOINT_SETTLED * (1.0 + n.abs()));
+            w.copy_from_slice(&next[..m]);
+            if settled {
+                return;
+            }
+        }
     }
 
     /// The CLF goal's Jacobian over the centre dimensions (`b.goal_jac`, goal length x

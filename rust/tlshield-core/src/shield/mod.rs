@@ -535,6 +535,7 @@ impl Shield {
     /// only the problem is wanted.
     fn step(&self, ws: &mut Workspace, call: Call<'_>, stage: Stage) {
         let a_rl = call.a_rl;
+        ws.program.relin.clear();
         let record = stage == Stage::Filter(Want::Record);
         let params = &self.params;
         ws.out.barriers.clear();
@@ -548,9 +549,7 @@ impl Shield {
         ws.program
             .rows(rules, call, record.then_some(&mut ws.out.barriers));
         let program = &ws.program;
-        let (m, barriers, vars, has_goal) =
-            (self.m, program.barriers(), program.vars(), program.has_goal);
-        let (cbf_vars, clf_vars) = (program.cbf_vars, program.clf_vars);
+        let (vars, has_goal) = (program.vars(), program.has_goal);
 
         let out = &mut ws.out;
         out.action.copy_from_slice(a_rl);
@@ -574,9 +573,60 @@ impl Shield {
         }
 
         program.assemble(params, a_rl, &mut ws.qp, None);
-        if stage == Stage::Problem {
+        // A model that bends the step: its second-order sampled rows, first linearised at
+        // a = 0, are linearised again at the action found until it settles (`sampled.rs`);
+        // the problem asked for is the last one assembled, unrelaxed.
+        let model = self.dynamics.as_ref().filter(|m| m.bends_step());
+        let model = model.filter(|_| ws.program.bent.contains(&true));
+        if stage == Stage::Problem && model.is_none() {
             return;
         }
+        self.solve_and_report(ws, a_rl);
+        let Some(model) = model else {
+            return;
+        };
+        self.relinearise_until_settled(ws, call, model);
+        if stage == Stage::Problem {
+            ws.program.assemble(params, a_rl, &mut ws.qp, None);
+        }
+    }
+
+    /// The passes of [`Shield::step`] that linearise the bent rows again at the last action
+    /// found, while the QP solves, until the action settles.
+    fn relinearise_until_settled(&self, ws: &mut Workspace, call: Call<'_>, model: &Dynamics) {
+        let (params, a_rl) = (&self.params, call.a_rl);
+        let predicates = self.automaton.spec().predicates();
+        let mut a0 = [0.0; 16];
+        for _ in 0..RELINEARISE {
+            if ws.out.status != Status::Solved {
+                return;
+            }
+            a0[..self.m].copy_from_slice(&ws.out.action);
+            let at = (call.s, a_rl, &a0[..self.m]);
+            ws.program
+                .relinearise((params, predicates), (model, call.drift), at);
+            ws.program.assemble(params, a_rl, &mut ws.qp, None);
+            self.solve_and_report(ws, a_rl);
+            let settled = ws
+                .out
+                .action
+                .iter()
+                .zip(&a0)
+                .all(|(a, b)| (a - b).abs() <= SETTLED * (1.0 + b.abs()));
+            if settled {
+                return;
+            }
+        }
+    }
+
+    /// Solves the QP assembled in `ws` and writes the step's outcome into `ws.out`.
+    fn solve_and_report(&self, ws: &mut Workspace, a_rl: &[f64]) {
+        let params = &self.params;
+        let (m, barriers, vars, has_goal) = {
+            let p = &ws.program;
+            (self.m, p.barriers(), p.vars(), p.has_goal)
+        };
+        let (cbf_vars, clf_vars) = (ws.program.cbf_vars, ws.program.clf_vars);
         let (status, by, checked) = self.solve(ws, a_rl, barriers > 0);
         let program = &ws.program;
         let out = &mut ws.out;
@@ -609,6 +659,14 @@ impl Shield {
         out.solver = by;
     }
 }
+
+/// The most passes that linearise the bent rows again at the last pass's action (each
+/// shrinks the change by the rows' curvature times the correction, a few hundredths).
+const RELINEARISE: usize = 12;
+/// The action has settled when no input moves more than this, relative to `1 + |a_j|`: far
+/// below what a central difference of the action reads, so that its gradient (a fixed point's,
+/// `gradient.rs`) is that of the action returned.
+const SETTLED: f64 = 1e-13;
 
 /// The smallest state length every part of a shield reads: the predicates, the barriers,
 /// `pos`, the heading, the disturbance bounds and the model (a user's model fixes it, and

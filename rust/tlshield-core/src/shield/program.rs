@@ -61,6 +61,12 @@ pub(super) struct Program {
     weights: Vec<f64>,
     /// Per row: the barrier it holds (what gave way, when its slack is the largest).
     sources: Vec<BarrierSource>,
+    /// Per row: whether it is a second-order sampled row linearised at the RL action, whose
+    /// `L` then moves with `a_rl` (`sampled.rs`; the gradient reads it).
+    pub(super) bent: Vec<bool>,
+    /// The action the bent rows were last linearised at ([`Program::relinearise`]); empty
+    /// when they are at `a = 0`, as every row is first.
+    pub(super) relin: Vec<f64>,
     /// Where the CLF aims (the goal of Eq. 5B1 or the router's target in its place) and what
     /// guidance changed in its row (`crate::guidance`).
     pub(super) aim: Aim,
@@ -222,6 +228,24 @@ fn enforced<'a>(
     user.chain(kept)
 }
 
+/// The barrier (predicate, sign) a barrier row holds, from its source.
+pub(super) fn row_barrier<'a>(
+    source: BarrierSource,
+    params: &'a ShieldParams,
+    predicates: &'a [Predicate],
+) -> (&'a Predicate, f64) {
+    match source {
+        BarrierSource::User(i) => {
+            let bar = &params.barriers[i];
+            (&bar.predicate, if bar.positive { 1.0 } else { -1.0 })
+        }
+        BarrierSource::SafeSet(lit) => {
+            let sign = if lit.positive { 1.0 } else { -1.0 };
+            (&predicates[lit.atom], sign)
+        }
+    }
+}
+
 /// Appends a zero row of `nv` coefficients with right-hand side `rhs`; returns it to fill.
 fn push_row(qp: &mut DenseQp, nv: usize, rhs: f64) -> &mut [f64] {
     let start = qp.g.len();
@@ -252,6 +276,69 @@ impl Program {
     /// The barrier that barrier row `row` holds.
     pub(super) fn source(&self, row: usize) -> BarrierSource {
         self.sources[row]
+    }
+
+    /// Linearises the bent rows (`bent`) again at the action `a0` (`sampled.rs`): each
+    /// becomes `r(a0) + L(a0) . (a - a0) >= 0`, in the QP's variables `L . (a_cbf + a_clf) >=
+    /// -(r + L . (a_rl - a0))`. Every other row, the CLF's included, stays as built at `a =
+    /// 0`. `predicates` are the spec's (the safe set's literals read them).
+    pub(super) fn relinearise(
+        &mut self,
+        (params, predicates): (&ShieldParams, &[Predicate]),
+        (model, drift): (&Dynamics, Option<&[f64]>),
+        (s, a_rl, a0): (&[f64], &[f64], &[f64]),
+    ) {
+        let (m, dt) = (a_rl.len(), params.dt.expect("bent rows are sampled"));
+        let fg = (&self.f[..], &self.g[..]);
+        self.sampled.predict(s, fg, Some(model), (drift, a0), dt);
+        self.relin.clear();
+        self.relin.extend_from_slice(a0);
+        for row in 0..self.bent.len() {
+            if !self.bent[row] {
+                continue;
+            }
+            let (predicate, sign) = row_barrier(self.sources[row], params, predicates);
+            let h = sign * predicate.value(s);
+            let barrier = sampled::Barrier { predicate, sign, h };
+            let r = self.sampled.second(barrier, s, model, params, dt);
+            let robust = tightening(&self.sampled.coefficients, &params.disturbance);
+            let (mut lg_a, mut lg_0) = (0.0, 0.0);
+            for j in 0..m {
+                let l = (0..s.len())
+                    .map(|k| self.sampled.coefficients[k] * self.g[k * m + j])
+                    .sum::<f64>();
+                self.lg[row * m + j] = l;
+                lg_a += l * a_rl[j];
+                lg_0 += l * a0[j];
+            }
+            self.rhs[row] = r + lg_a - lg_0 - robust;
+        }
+    }
+
+    /// A bent row's `L` (`m` values, into `out`) were it linearised at `a0`: the barrier
+    /// `(predicate, sign)` at `s`, with this step's `f` and `g` and the model's drift
+    /// (`sampled.rs`). The gradient differences it over `a0`. Reuses the sampled rows'
+    /// buffers: call it only once the step is solved.
+    pub(super) fn bent_lg(
+        &mut self,
+        (predicate, sign): (&Predicate, f64),
+        (s, a0): (&[f64], &[f64]),
+        (model, drift): (&Dynamics, Option<&[f64]>),
+        params: &ShieldParams,
+        out: &mut [f64],
+    ) {
+        let dt = params.dt.expect("bent rows are sampled");
+        let fg = (&self.f[..], &self.g[..]);
+        self.sampled.predict(s, fg, Some(model), (drift, a0), dt);
+        let h = sign * predicate.value(s);
+        let barrier = sampled::Barrier { predicate, sign, h };
+        self.sampled.second(barrier, s, model, params, dt);
+        let m = a0.len();
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = (0..s.len())
+                .map(|k| self.sampled.coefficients[k] * self.g[k * m + j])
+                .sum();
+        }
     }
 
     /// The barrier each barrier row holds.
@@ -327,6 +414,7 @@ impl Program {
         self.rhs.clear();
         self.weights.clear();
         self.sources.clear();
+        self.bent.clear();
         self.aim.start();
         // The atoms' robustness at s, once for both the safe set and the goal: the task
         // monitor's reading of this state when there is one.
@@ -379,11 +467,14 @@ impl Program {
         if let Some(dt) = params.dt {
             // The sample after next only where a second-order row reads it.
             let model = model.filter(|_| orders.second_order());
-            self.sampled.predict(s, &self.f, model, drift, dt);
+            let fg = (&self.f[..], &self.g[..]);
+            self.sampled.predict(s, fg, model, (drift, &[]), dt);
         }
         for (source, predicate, sign, h, weight, form) in enforced {
             self.weights.push(weight);
             self.sources.push(source);
+            let bent = form == Form::Second && params.dt.is_some() && self.sampled.bent;
+            self.bent.push(bent);
             predicate.gradient_into(s, &mut self.grad);
             self.grad.iter_mut().for_each(|v| *v *= sign);
             self.aim
@@ -430,6 +521,7 @@ impl Program {
                 self.rhs.push(lg_a + psi - robust);
                 self.weights.push(weight);
                 self.sources.push(source);
+                self.bent.push(false);
                 self.aim.note_unrouted_row();
             }
             if let Some(out) = barriers_out.as_deref_mut() {

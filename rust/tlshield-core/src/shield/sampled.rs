@@ -25,8 +25,15 @@
 //! the step and the successor is affine in `a` (the outside of a disc or any half-space, under
 //! the single and double integrators, the unicycle's reference point and ThrustTurn), the
 //! linearisation is a lower bound, so a solved row keeps the sampled state out by any amount.
-//! Elsewhere (the inside of a disc; the acceleration unicycle and the bicycle, whose next
-//! heading bends the step) the error is second order in `dt a`.
+//! Under the acceleration unicycle and the bicycle the next heading bends the step
+//! ([`Dynamics::bends_step`]): `z(a)` is not affine in `a`, and a row linearised at `a = 0`
+//! errs by `O(dt^3 |a|^2)` in `~h(z)` at the action taken. Under steady hard turning at a
+//! disc's rim those errors added up to a millimetre inside it. So after the QP is solved, these
+//! rows are linearised again at the action found (`y0 = s + dt (f(s) + g(s) a0)`, `z0 = y0 +
+//! dt f(y0)`, `L = grad ~h(z0)^T (I + dt J_f(y0)) g(s) / dt`, `r` read at `z0`, the row
+//! `r + L . (a - a0) >= 0`) and the QP solved again, until the action settles
+//! (`Shield::step`): the rows then hold the sampled state of the action taken, to rounding.
+//! Elsewhere (the inside of a disc) the error is second order in `dt a`.
 
 use super::ShieldParams;
 use crate::dynamics::Dynamics;
@@ -35,9 +42,14 @@ use crate::predicate::Predicate;
 /// The predicted samples and gradients of one barrier's sampled row, reused from step to step.
 #[derive(Debug, Default)]
 pub(super) struct Sampled {
-    /// `y = s + dt f(s)` and, for second-order rows, `z0 = y + dt f(y)`.
+    /// `y = s + dt f(s)` and, for second-order rows, `z0 = y0 + dt f(y0)`, where `y0` is `y`,
+    /// or, under a model that bends the step (`bent`), the step of the action the rows are
+    /// linearised at.
     y: Vec<f64>,
+    y0: Vec<f64>,
     z: Vec<f64>,
+    /// Whether the model bends the step (see the module docs).
+    pub(super) bent: bool,
     /// `f(y)` and `g(y)` (the latter only because the model writes both).
     fy: Vec<f64>,
     gy: Vec<f64>,
@@ -68,6 +80,7 @@ impl Sampled {
     fn resize(&mut self, n: usize) {
         for buf in [
             &mut self.y,
+            &mut self.y0,
             &mut self.z,
             &mut self.fy,
             &mut self.grad,
@@ -80,13 +93,15 @@ impl Sampled {
 
     /// Predicts this step's samples, once for every barrier: `y = s + dt f(s)` from the
     /// drift-included `f`, and, under a model (whose drift `drift`, constant over the step,
-    /// moves the dimensions no input does), `z0 = y + dt f(y)` for the second-order rows.
+    /// moves the dimensions no input does), `z0 = y0 + dt f(y0)` for the second-order rows,
+    /// `y0` the step of the action `a0` (with `g` = `g(s)`) under a model that bends the step
+    /// and a non-empty `a0`, else `y` (the step of `a = 0`).
     pub(super) fn predict(
         &mut self,
         s: &[f64],
-        f: &[f64],
+        (f, g): (&[f64], &[f64]),
         model: Option<&Dynamics>,
-        drift: Option<&[f64]>,
+        (drift, a0): (Option<&[f64]>, &[f64]),
         dt: f64,
     ) {
         let n = s.len();
@@ -95,14 +110,24 @@ impl Sampled {
             *y = si + dt * fi;
         }
         let Some(model) = model else {
+            self.bent = false;
             return;
         };
+        self.bent = model.bends_step();
+        self.y0.copy_from_slice(&self.y);
+        if self.bent && !a0.is_empty() {
+            let m = a0.len();
+            for (k, y0) in self.y0.iter_mut().enumerate() {
+                let push = (0..m).map(|j| g[k * m + j] * a0[j]).sum::<f64>();
+                *y0 = s[k] + dt * (f[k] + push);
+            }
+        }
         self.gy.resize(n * model.inputs(), 0.0);
-        model.eval(&self.y, &mut self.fy, &mut self.gy);
+        model.eval(&self.y0, &mut self.fy, &mut self.gy);
         if let Some(d) = drift {
             self.fy.iter_mut().zip(d).for_each(|(f, d)| *f += d);
         }
-        for ((z, &y), &fy) in self.z.iter_mut().zip(&self.y).zip(&self.fy) {
+        for ((z, &y), &fy) in self.z.iter_mut().zip(&self.y0).zip(&self.fy) {
             *z = y + dt * fy;
         }
     }
@@ -124,7 +149,8 @@ impl Sampled {
     }
 
     /// The second-order row of barrier `b` at this step's [`Sampled::predict`] (made with
-    /// `model`): fills [`Sampled::coefficients`] and returns `r` (see the module docs).
+    /// `model`): fills [`Sampled::coefficients`] and returns `r`, read at `z0` (see the module
+    /// docs; when [`Sampled::bent`], the row is `r + L . (a - a0) >= 0`).
     pub(super) fn second(
         &mut self,
         b: Barrier<'_>,
@@ -135,7 +161,7 @@ impl Sampled {
     ) -> f64 {
         b.predicate.gradient_into(&self.z, &mut self.grad);
         self.grad.iter_mut().for_each(|g| *g *= b.sign);
-        model.jacobian_f_transpose_times(&self.y, &self.grad, &mut self.jt);
+        model.jacobian_f_transpose_times(&self.y0, &self.grad, &mut self.jt);
         for ((c, &g), &j) in self.coefficients.iter_mut().zip(&self.grad).zip(&self.jt) {
             *c = (g + dt * j) / dt;
         }
