@@ -25,10 +25,11 @@ higher-order barriers (``alpha2``); a body point's heading is one integration fr
 (mixed relative degree, which the shield holds with one row more).
 
 Entering a spot between parked cars needs a line-up (in front of the spot, on its axis, then
-straight in). ``--line-up`` (with ``--model body --clf``) writes it into the task as a sequence
-of two waypoints of the rear axle in the aisle, on the spot's axis (:data:`LINE_UP`): the
-routed CLF leads the car through them and then into the spot, with a box on its correction
-wide enough to overrule the policy's steering (:data:`LINE_UP_CLF_BOUND`).
+straight in). ``--line-up`` (with ``--model body --clf``) writes it into the task as a sequence:
+first a waypoint of the rear axle in the aisle, on the spot's axis (:data:`LINE_UP`), then the
+spot. The routed CLF leads the car there, turning it on the way, and then into the spot, with
+a box on its correction wide enough to overrule the policy's steering
+(:data:`LINE_UP_CLF_BOUND`).
 
 ``python examples/highway_parking.py [--steps N] [--seed S] [--model M] [--clf] [--line-up]``
 drives a naive policy (steer and accelerate towards the goal, 30% random actions) for N
@@ -71,14 +72,12 @@ PARKED_RADIUS = math.hypot(LENGTH / 2 - 1.5, 1.0)
 #: The walls' margin from the rear axle under ``--model body``: half a wall, the body's reach
 #: ahead of the rear axle (its far corner), and 0.5 m for the model's error.
 BODY_WALL_MARGIN = 0.5 + math.hypot(LENGTH, 1.0) + 0.5
-#: ``--line-up``: the two waypoints of the rear axle on the spot's axis, ``name: (distance back
-#: from its parked place, radius)`` (m). ``near`` is 5.5 m out: the body's front disc (4.17 m
-#: ahead, radius 1.30) then ends at the spot's mouth, still clear of the cars beside the spot,
-#: so the car can line up there and go straight in. ``far`` is twice as far out and wide (3 m),
-#: so that a car coming from anywhere in the aisle gets into it, and the way on from it to
-#: ``near`` runs within 0.3 rad of the axis. Chosen in a few 8-episode trials (seed 0) against
-#: one waypoint and smaller discs (docs/guides/highway-parking.md has the measurements).
-LINE_UP = {"far": (11.0, 3.0), "near": (5.5, 1.0)}
+#: ``--line-up``: the line-up waypoint of the rear axle on the spot's axis, ``(distance back
+#: from its parked place, radius)`` (m): 6 m out, the body's front disc (4.17 m ahead, radius
+#: 1.30) ends short of the spot's mouth, clear of the cars beside the spot, so the car can line
+#: up there and go straight in. One waypoint did better than two (a wide one farther out, then
+#: this one) and than smaller discs: docs/guides/highway-parking.md has the measurements.
+LINE_UP = (6.0, 1.5)
 #: ``--line-up``'s box on the CLF's correction (acceleration in m/s^2, ``tan delta``): 2, so that
 #: the CLF can turn the wheel full the other way against the policy's full lock (``|tan delta|
 #: <= 1``); the default box (0.5) cannot overrule a policy that steers at the spot.
@@ -112,10 +111,10 @@ def make_spec(env: gym.Env, model: str = "unicycle", line_up: bool = False) -> t
     point: the centre (unicycle) or the rear axle, whose goal disc is larger by the half length
     that separates the two (success is still judged on the centre: :func:`parked`).
 
-    ``line_up`` (``model="body"``) writes the way into the spot as a sequence, ``walls U (far
-    & (walls U (near & (walls U g))))``: two waypoints of the rear axle in the aisle, on the
-    spot's axis (:data:`LINE_UP`), so that the CLF brings the car in front of the spot lined
-    up with it before it aims into the spot."""
+    ``line_up`` (``model="body"``) writes the way into the spot as a sequence, ``walls U (pre
+    & (walls U g))``: a waypoint of the rear axle in the aisle, on the spot's axis
+    (:data:`LINE_UP`), so that the CLF brings the car in front of the spot, heading into it,
+    before it aims into the spot."""
     goal = env.unwrapped.vehicle.goal.position
     margin = BODY_WALL_MARGIN if model == "body" else WALL_MARGIN
     walls = {
@@ -138,9 +137,9 @@ def make_spec(env: gym.Env, model: str = "unicycle", line_up: bool = False) -> t
         return tlshield.Spec(f"{w} U g", preds)
     if model != "body":
         raise ValueError("line_up needs model='body' (a rear-axle goal on the spot's axis)")
-    for name, (back, r) in LINE_UP.items():
-        preds[name] = tlshield.Ball(pos=[0, 1], radius=r, center=list(goal - back * axis))
-    return tlshield.Spec(f"{w} U (far & ({w} U (near & ({w} U g))))", preds)
+    back, r = LINE_UP
+    preds["pre"] = tlshield.Ball(pos=[0, 1], radius=r, center=list(goal - back * axis))
+    return tlshield.Spec(f"{w} U (pre & ({w} U g))", preds)
 
 
 def make_shield(
@@ -320,7 +319,7 @@ def main() -> int:
     parser.add_argument(
         "--line-up",
         action="store_true",
-        help="(with --model body --clf) write the task with two waypoints in front of the spot, "
+        help="(with --model body --clf) write the task with a waypoint in front of the spot, "
         "on its axis, so that the CLF lines the car up before it goes in; the CLF's box is "
         f"{LINE_UP_CLF_BOUND:g} instead of 0.5",
     )
