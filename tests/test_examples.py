@@ -6,12 +6,19 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
-def test_highway_parking_example_runs() -> None:
+@pytest.mark.parametrize(
+    "flags",
+    [(), ("--model", "body", "--alpha", "0.5", "--clf", "--line-up")],
+    ids=["default", "line_up"],
+)
+def test_highway_parking_example_runs(flags: tuple[str, ...]) -> None:
     done = subprocess.run(
-        [sys.executable, str(EXAMPLES / "highway_parking.py"), "--steps", "150"],
+        [sys.executable, str(EXAMPLES / "highway_parking.py"), "--steps", "150", *flags],
         capture_output=True,
         text=True,
         timeout=600,
@@ -22,6 +29,8 @@ def test_highway_parking_example_runs() -> None:
     assert len(rows) == 2, done.stdout
     # With the shield on, the shield never failed to return an action.
     assert rows[1].split("|")[7].strip() == "0"
+    if flags:  # the body shield: no crash
+        assert rows[1].split("|")[4].strip() == "0 (0)", done.stdout
 
 
 def test_the_readme_example_is_the_shipped_one_and_does_the_task() -> None:
