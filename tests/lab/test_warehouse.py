@@ -11,9 +11,10 @@ import pytest
 from tlshield.lab import routing, warehouse
 
 #: The cells whose episodes do not all reach D today (the 30-episode table in the docs): the
-#: bicycle's greedy seeker in the alcove; in the covered variant every cell but the single
-#: integrator's seeker.
+#: bicycle's greedy seeker in the alcove; in the covered variant, the seekers that press at the
+#: pallet over D's centre and stay (ThrustTurn's at seed 0, the bicycle's).
 ALCOVE_SHORT = {("bicycle", "seeker")}
+COVERED_SHORT = {("thrust_turn", "seeker"), ("bicycle", "seeker")}
 
 
 def _inside_a_shelf(p: np.ndarray, variant: str) -> bool:
@@ -46,14 +47,16 @@ def test_the_alcove_is_reached_past_the_forklift_without_entering(robot: str, dr
 
 
 @pytest.mark.parametrize("robot", warehouse.ROBOTS)
-def test_a_covered_goal_is_never_a_reason_to_enter(robot: str) -> None:
-    """Most robots park short of the covered D today (not asserted); none enters a shelf, the
-    pallet or the forklift."""
+def test_a_covered_goal_is_reached_at_its_free_part(robot: str) -> None:
+    """A pallet covers D's centre: the shield alone reaches D's free part, flagging no step
+    unreachable; no driver enters a shelf, the pallet or the forklift (a seeker turning hard at
+    the pallet's rim once did, by a millimetre, before the bent steps' rows were settled)."""
     for driver in warehouse.DRIVERS:
         e = warehouse.episode("covered", robot, driver, 0)
         assert e.entries == 0, f"{robot}/{driver}: {e.entries} steps inside"
         assert e.d_steps > 0
-    assert warehouse.episode("covered", "single", "seeker", 0).success
+        if (robot, driver) not in COVERED_SHORT:
+            assert e.success and e.unreachable == 0, f"{robot}/{driver}: ended at {e.end}"
 
 
 @pytest.mark.parametrize(("robot", "driver"), [("single", "shield"), ("bicycle", "seeker")])
