@@ -541,8 +541,18 @@ mod tests {
                     r.region.open.as_ptr() as usize,
                 ],
                 [r.path.as_ptr() as usize, r.path.capacity()],
-                [r.dist.as_ptr() as usize, r.region.prev.as_ptr() as usize],
-                [r.prev.as_ptr() as usize, r.region.dist.as_ptr() as usize],
+                [
+                    r.dist.as_ptr() as usize,
+                    r.region.prev.as_ptr() as usize,
+                    r.spans.as_ptr() as usize,
+                    r.pending.as_ptr() as usize,
+                ],
+                [
+                    r.prev.as_ptr() as usize,
+                    r.region.dist.as_ptr() as usize,
+                    r.region.flags.as_ptr() as usize,
+                    r.region.settled.as_ptr() as usize,
+                ],
                 [
                     r.placed_discs.as_ptr() as usize,
                     r.placed_inflated.as_ptr() as usize,
