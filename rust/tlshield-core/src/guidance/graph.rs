@@ -5,6 +5,7 @@
 use std::f64::consts::PI;
 
 use super::aim::lookahead;
+use super::plane::Disc;
 use super::router::Router;
 
 /// Sides of the polygon circumscribing each inflated disc.
@@ -122,7 +123,9 @@ impl Node {
         }
     }
 
-    /// The node in slot `i` (the inverse of [`Node::index`]).
+    /// The node in slot `i` (the inverse of [`Node::index`]; the reference planner numbers its
+    /// nodes by slot).
+    #[cfg(test)]
     pub(super) fn at(i: usize) -> Node {
         match i {
             0 => Node::Robot,
@@ -185,6 +188,28 @@ fn tangent(p: [f64; 2], c: [f64; 2], r: f64, side: f64) -> [f64; 2] {
     ]
 }
 
+/// [`past_tangent`] on both sides (`+1` then `-1`), sharing the distance, the angle and its sine
+/// and cosine (libm's are odd and even in the angle: the same points, bit for bit).
+pub(super) fn past_tangents(p: [f64; 2], c: [f64; 2], r: f64, lookahead: f64) -> [[f64; 2]; 2] {
+    let rim = sub(p, c);
+    let d = norm(rim);
+    if d <= r || d == 0.0 {
+        return [1.0, -1.0].map(|side| past_tangent(p, c, r, side, lookahead));
+    }
+    let (sin, cos) = (r / d).acos().sin_cos();
+    let u = [rim[0] / d, rim[1] / d];
+    [sin, -sin].map(|sin| {
+        let at = [
+            c[0] + r * (u[0] * cos - u[1] * sin),
+            c[1] + r * (u[0] * sin + u[1] * cos),
+        ];
+        let v = sub(at, p);
+        let len = norm(v).max(f64::MIN_POSITIVE);
+        let to = len.max(lookahead);
+        [p[0] + to * v[0] / len, p[1] + to * v[1] / len]
+    })
+}
+
 /// The point on the tangent from `p` to the circle (`c`, `r`) on `side`, at least `lookahead`
 /// from `p` (past the tangent point when that is nearer).
 pub(super) fn past_tangent(
@@ -204,27 +229,119 @@ pub(super) fn past_tangent(
 /// it, as a polygon's side does, is allowed).
 #[inline]
 pub(super) fn crosses(a: [f64; 2], b: [f64; 2], c: [f64; 2], r: f64) -> bool {
-    // Most discs a segment is tested against lie far from it: a centre more than `r` outside
-    // the segment's bounding box on either axis is more than `r` from every point of it,
-    // which four comparisons tell (exactly) before the projection's division.
-    if c[0] + r < a[0].min(b[0])
-        || c[0] - r > a[0].max(b[0])
-        || c[1] + r < a[1].min(b[1])
-        || c[1] - r > a[1].max(b[1])
-    {
-        return false;
+    Segment::new(a, b).crosses(c, r)
+}
+
+/// A segment, with its bounding box, tested against many discs.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Segment {
+    a: [f64; 2],
+    b: [f64; 2],
+    /// The bounding box: least and greatest x, least and greatest y.
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+impl Segment {
+    #[inline]
+    pub(super) fn new(a: [f64; 2], b: [f64; 2]) -> Segment {
+        Segment {
+            a,
+            b,
+            lo: [a[0].min(b[0]), a[1].min(b[1])],
+            hi: [a[0].max(b[0]), a[1].max(b[1])],
+        }
     }
-    let d = sub(b, a);
-    let len2 = d[0] * d[0] + d[1] * d[1];
-    let ac = sub(c, a);
-    let t = if len2 > 0.0 {
-        ((ac[0] * d[0] + ac[1] * d[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let closest = [a[0] + t * d[0], a[1] + t * d[1]];
-    let (e, cut) = (sub(c, closest), r * (1.0 - TOUCH));
-    e[0] * e[0] + e[1] * e[1] < cut * cut
+
+    /// Whether it passes strictly inside the disc at `c` of radius `r` (touching it, as a
+    /// polygon's side does, is allowed).
+    #[inline]
+    pub(super) fn crosses(&self, c: [f64; 2], r: f64) -> bool {
+        // Most discs a segment is tested against lie far from it: a centre more than `r`
+        // outside the segment's bounding box on either axis is more than `r` from every point
+        // of it, which four comparisons tell (exactly) before the projection's division.
+        if c[0] + r < self.lo[0]
+            || c[0] - r > self.hi[0]
+            || c[1] + r < self.lo[1]
+            || c[1] - r > self.hi[1]
+        {
+            return false;
+        }
+        // The nearest point is an end, or the foot of the perpendicular, whose squared
+        // distance `(ac x d)^2 / |d|^2` is compared without the division.
+        let cut = r * (1.0 - TOUCH);
+        let cut2 = cut * cut;
+        let (a, b) = (self.a, self.b);
+        let d = sub(b, a);
+        let ac = sub(c, a);
+        let along = ac[0] * d[0] + ac[1] * d[1];
+        if along <= 0.0 {
+            return ac[0] * ac[0] + ac[1] * ac[1] < cut2;
+        }
+        let len2 = d[0] * d[0] + d[1] * d[1];
+        if along >= len2 {
+            let bc = sub(c, b);
+            return bc[0] * bc[0] + bc[1] * bc[1] < cut2;
+        }
+        let cross = ac[0] * d[1] - ac[1] * d[0];
+        cross * cross < cut2 * len2
+    }
+}
+
+/// The discs that meet the region searched (`search.rs`), in order, each field a column: every
+/// segment the search tests is tested against them.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Near {
+    /// The disc's index among the step's.
+    pub(super) disc: Vec<usize>,
+    /// Its centre.
+    pub(super) x: Vec<f64>,
+    pub(super) y: Vec<f64>,
+    /// Its inflated radius, and the radius a segment from the robot may not cut into
+    /// ([`Router::visible_from_robot`]).
+    pub(super) r: Vec<f64>,
+    pub(super) robot: Vec<f64>,
+    /// Per disc of the step: its place among these (meaningful for these only).
+    pub(super) place: Vec<usize>,
+}
+
+impl Near {
+    pub(super) fn clear(&mut self, discs: usize) {
+        for column in [&mut self.disc, &mut self.place] {
+            column.clear();
+        }
+        for column in [&mut self.x, &mut self.y, &mut self.r, &mut self.robot] {
+            column.clear();
+        }
+        self.place.resize(discs, usize::MAX);
+    }
+
+    pub(super) fn push(&mut self, i: usize, disc: &Disc, inflated: f64) {
+        self.place[i] = self.disc.len();
+        self.disc.push(i);
+        self.x.push(disc.center[0]);
+        self.y.push(disc.center[1]);
+        self.r.push(inflated);
+        self.robot.push(robot_cut(disc, inflated));
+    }
+
+    pub(super) fn len(&self) -> usize {
+        self.disc.len()
+    }
+
+    /// Whether disc `i` of the step is among these.
+    pub(super) fn holds(&self, i: usize) -> bool {
+        self.place[i] != usize::MAX
+    }
+}
+
+/// The radius of `disc` (inflated to `inflated`) a segment from the robot may not cut into: it
+/// may cut [`ROBOT_SLACK`] into the clearance, never into the disc.
+#[inline]
+fn robot_cut(disc: &Disc, inflated: f64) -> f64 {
+    ((1.0 - ROBOT_SLACK) * inflated)
+        .max(disc.radius)
+        .min(inflated)
 }
 
 impl Router {
@@ -269,8 +386,8 @@ impl Router {
         self.tangents[i] = true;
         let d = self.discs[i];
         let lookahead = lookahead(d.radius, clearance);
-        for (j, side) in [1.0, -1.0].into_iter().enumerate() {
-            let at = past_tangent(p, d.center, self.inflated[i], side, lookahead);
+        let ways = past_tangents(p, d.center, self.inflated[i], lookahead);
+        for (j, at) in ways.into_iter().enumerate() {
             self.corners[CORNERS * i + SIDES + j].at = at;
         }
     }
@@ -282,13 +399,17 @@ impl Router {
     pub(super) fn uncovered(&mut self, k: usize) -> bool {
         if self.cover[k] == Cover::Unknown {
             let (v, i) = (self.corners[k].at, self.corners[k].disc);
-            self.work += self.near.len();
+            let near = &self.near;
+            self.work += near.len();
             self.work += self.walls.len();
             let covered = self.walls.iter().any(|w| !w.keeps(v))
-                || self
-                    .near
-                    .iter()
-                    .any(|&j| j != i && length(sub(v, self.discs[j].center)) < self.inflated[j]);
+                || (0..near.len()).any(|j| {
+                    // A component as long as the radius tells a point outside without the root
+                    // (the root of a sum of squares is at least either component, exactly).
+                    let e = sub(v, [near.x[j], near.y[j]]);
+                    let r = near.r[j];
+                    e[0].abs() < r && e[1].abs() < r && near.disc[j] != i && length(e) < r
+                });
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free
@@ -313,19 +434,6 @@ impl Router {
             .any(|(d, &r)| crosses(a, b, d.center, r))
     }
 
-    /// Whether inflated disc `j` blocks the segment `a`-`b` (cut to its robot radius
-    /// `from_robot`, see [`Router::visible_from_robot`]).
-    #[inline]
-    fn blocks(&self, j: usize, a: [f64; 2], b: [f64; 2], from_robot: bool) -> bool {
-        let (d, r) = (&self.discs[j], self.inflated[j]);
-        let cut = if from_robot {
-            ((1.0 - ROBOT_SLACK) * r).max(d.radius).min(r)
-        } else {
-            r
-        };
-        crosses(a, b, d.center, cut)
-    }
-
     /// [`Router::visible`] (or, from the robot, [`Router::visible_from_robot`]) from node `u`
     /// to node `v` (at `a` and `b`) tested against the discs of [`Router::near`] only: exact
     /// for a segment inside the region they were chosen for (a disc that crosses it meets that
@@ -336,32 +444,35 @@ impl Router {
     /// it), or the one that blocked the last segment. Those are tested first; the answer is
     /// the same in any order.
     pub(super) fn sees(&mut self, (u, v): (Node, Node), a: [f64; 2], b: [f64; 2]) -> bool {
-        let from_robot = u == Node::Robot;
-        let disc = |n: Node| match n {
-            Node::Corner(k) => Some(self.corners[k].disc),
+        let near = &self.near;
+        let radii = match u {
+            Node::Robot => &near.robot,
+            _ => &near.r,
+        };
+        let place = |n: Node| match n {
+            Node::Corner(k) => Some(near.place[self.corners[k].disc]),
             _ => None,
         };
-        let hints = [self.blocker, disc(v), disc(u)];
+        let segment = Segment::new(a, b);
+        let hints = [self.blocker, place(v), place(u)];
         let mut tests = 0;
         let mut blocker = None;
         for j in hints.into_iter().flatten() {
             tests += 1;
-            if self.blocks(j, a, b, from_robot) {
+            if segment.crosses([near.x[j], near.y[j]], radii[j]) {
                 blocker = Some(j);
                 break;
             }
         }
         if blocker.is_none() {
-            for &j in &self.near {
-                if hints.contains(&Some(j)) {
-                    continue;
-                }
-                tests += 1;
-                if self.blocks(j, a, b, from_robot) {
-                    blocker = Some(j);
-                    break;
-                }
-            }
+            // The guesses are tested again with the rest: cheaper than skipping them.
+            tests += near.x.len();
+            blocker = near
+                .x
+                .iter()
+                .zip(&near.y)
+                .zip(radii)
+                .position(|((&x, &y), &r)| segment.crosses([x, y], r));
         }
         self.work += tests;
         match blocker {
@@ -402,9 +513,10 @@ impl Router {
     /// the clearance (never into a disc): a robot that has reached a corner, or stands a hair
     /// inside its polygon, still sees the next corner, instead of creeping onto the corner.
     pub(super) fn visible_from_robot(&self, a: [f64; 2], b: [f64; 2]) -> bool {
-        !self.discs.iter().zip(&self.inflated).any(|(d, &r)| {
-            let cut = ((1.0 - ROBOT_SLACK) * r).max(d.radius).min(r);
-            crosses(a, b, d.center, cut)
-        })
+        !self
+            .discs
+            .iter()
+            .zip(&self.inflated)
+            .any(|(d, &r)| crosses(a, b, d.center, robot_cut(d, r)))
     }
 }

@@ -65,37 +65,33 @@ impl Router {
     fn reference_search(&mut self) -> bool {
         let n = 2 + self.corners.len();
         let (robot, goal) = (self.robot, self.goal);
-        self.rest.clear();
-        self.rest.push(norm(sub(goal, robot)));
-        self.rest.push(0.0);
-        self.rest
-            .extend(self.corners.iter().map(|c| norm(sub(goal, c.at))));
+        let mut rest = vec![norm(sub(goal, robot)), 0.0];
+        rest.extend(self.corners.iter().map(|c| norm(sub(goal, c.at))));
         self.dist.clear();
         self.dist.resize(n, f64::INFINITY);
         self.prev.clear();
         self.prev.resize(n, None);
-        self.done.clear();
-        self.done.resize(n, false);
+        let mut done = vec![false; n];
         self.dist[0] = 0.0;
         loop {
             let mut u = None;
             let mut best = f64::INFINITY;
             for i in 0..n {
-                if !self.done[i] && self.dist[i] + self.rest[i] < best {
-                    (u, best) = (Some(i), self.dist[i] + self.rest[i]);
+                if !done[i] && self.dist[i] + rest[i] < best {
+                    (u, best) = (Some(i), self.dist[i] + rest[i]);
                 }
             }
             let Some(u) = u.map(Node::at) else { break };
             if u == Node::Goal {
                 break;
             }
-            self.done[u.index()] = true;
+            done[u.index()] = true;
             let base = self.dist[u.index()];
             let a = self.point(u);
-            for i in 1..n {
+            for (i, &settled) in done.iter().enumerate().skip(1) {
                 let b = self.point(Node::at(i));
                 let through = base + norm(sub(b, a));
-                if self.done[i] || through >= self.dist[i] {
+                if settled || through >= self.dist[i] {
                     continue;
                 }
                 let seen = match u {

@@ -66,10 +66,10 @@
 
 use std::collections::BinaryHeap;
 
-use super::graph::{Corner, Cover, Edges, Node};
+use super::graph::{Corner, Cover, Edges, Near, Node};
 use super::plane::{each_disc, each_wall, Disc, Wall};
 use super::reach::{Routed, Scratch};
-use super::search::Open;
+use super::search::{Open, Region};
 use crate::automaton::Reading;
 use crate::cnf::Literal;
 use crate::predicate::Predicate;
@@ -179,25 +179,28 @@ pub struct Router {
     pub(super) placed_discs: Vec<Disc>,
     pub(super) placed_inflated: Vec<f64>,
     /// The discs that meet the region searched (`search.rs`), in order.
-    pub(super) near: Vec<usize>,
-    /// The disc that blocked the last segment this search found blocked (tested first).
+    pub(super) near: Near,
+    /// The disc that blocked the last segment this search found blocked (tested first; its
+    /// place in [`Router::near`]).
     pub(super) blocker: Option<usize>,
-    /// The slots ([`Node::index`]) of the nodes in the region searched, in order, each with
-    /// where its node is (read by every relaxation: kept beside the slot).
-    pub(super) slots: Vec<(usize, [f64; 2])>,
+    /// The nodes in the region searched, and the search's per-node buffers (`search.rs`).
+    pub(super) region: Region,
+    /// Per disc: how much longer than the straight line a way past it is at least (a region
+    /// wider than that meets it, `search.rs`).
+    pub(super) spans: Vec<f64>,
+    /// The corners of the near discs not yet inside the region, each with its distances
+    /// from the robot and the goal summed.
+    pub(super) pending: Vec<(usize, f64)>,
     /// The search's open nodes.
     pub(super) heap: BinaryHeap<Open>,
     /// Tests of a point or a segment against a disc this step ([`WORK_BOUND`](super::WORK_BOUND)).
     pub(super) work: usize,
     /// Whether the last search was cut short by the work bound.
     pub(super) truncated: bool,
-    /// Per node ([`Node::index`]): the shortest way found from the robot, the straight
-    /// distance to the goal (A*'s heuristic), the node before it on that way, and whether it
-    /// is settled (`search.rs`).
+    /// Per node ([`Node::index`]) of the way found: the length of the way from the robot to
+    /// it, and the node before it (written for the way's nodes only, `search.rs`).
     pub(super) dist: Vec<f64>,
-    pub(super) rest: Vec<f64>,
     pub(super) prev: Vec<Option<Node>>,
-    pub(super) done: Vec<bool>,
     /// Which segments between two polygon corners are known to be clear of every inflated
     /// disc (`graph.rs`, [`Router::sees_between`]): kept, like the corners, while the discs
     /// stay put.
@@ -538,11 +541,29 @@ mod tests {
             (
                 [r.discs.as_ptr() as usize, r.inflated.as_ptr() as usize],
                 [r.corners.as_ptr() as usize, r.cover.as_ptr() as usize],
-                [r.tangents.as_ptr() as usize, r.near.as_ptr() as usize],
-                [r.slots.as_ptr() as usize, r.heap.capacity()],
+                [r.tangents.as_ptr() as usize, r.near.x.as_ptr() as usize],
+                [r.region.node.as_ptr() as usize, r.heap.capacity()],
+                [
+                    r.region.x.as_ptr() as usize,
+                    r.region.through.as_ptr() as usize,
+                ],
+                [
+                    r.region.rest.as_ptr() as usize,
+                    r.region.open.as_ptr() as usize,
+                ],
                 [r.path.as_ptr() as usize, r.path.capacity()],
-                [r.dist.as_ptr() as usize, r.rest.as_ptr() as usize],
-                [r.prev.as_ptr() as usize, r.done.as_ptr() as usize],
+                [
+                    r.dist.as_ptr() as usize,
+                    r.region.prev.as_ptr() as usize,
+                    r.spans.as_ptr() as usize,
+                    r.pending.as_ptr() as usize,
+                ],
+                [
+                    r.prev.as_ptr() as usize,
+                    r.region.dist.as_ptr() as usize,
+                    r.region.flags.as_ptr() as usize,
+                    r.region.settled.as_ptr() as usize,
+                ],
                 [
                     r.placed_discs.as_ptr() as usize,
                     r.placed_inflated.as_ptr() as usize,

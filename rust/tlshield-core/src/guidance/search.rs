@@ -7,13 +7,22 @@
 //!   and a segment inside it can only be blocked by a disc that meets it, so a way found no
 //!   longer than `reach` is the shortest of the whole graph. The first reach is a little more
 //!   than the straight line; where no such way is found, its excess over the straight line
-//!   grows and the search starts again;
+//!   grows, and the search goes on in the wider region without starting over: the nodes
+//!   settled keep their ways (no way through the wider region to them is shorter), a segment
+//!   tested keeps its answer (it lies inside the narrower region, whose discs were all
+//!   tested), and only the ways the narrower reach left out are offered again;
 //! - an edge's visibility is tested only when it would improve a node that could still beat
 //!   the way to the goal found so far and fit the reach (lazy: most of the `O(n^2)` edges are
 //!   never tested), and a corner's cover only when the corner is first inside the region;
 //! - the open nodes wait in a heap ordered by way so far plus way left, then by slot: the node
-//!   of least sum first, ties to the lowest slot (the order the corners are numbered in),
-//!   deterministically, as a scan of every node would pick it.
+//!   of least sum first, ties to the lowest slot (the order the corners are numbered in), and
+//!   a node's way among equally short ones goes through the node settled first, whatever the
+//!   order the ways were offered in. So the search settles the nodes in the order, and with
+//!   the ways, of one search over the widest region, which is the from-scratch planner's
+//!   (`reference.rs`): the same target, bit for bit;
+//! - the ways through the node just settled are measured for every node of the region in one
+//!   pass over its columns ([`Region`]), and only the few that could improve a node are looked
+//!   at one by one.
 //!
 //! Its work is bounded ([`WORK_BOUND`]); a search cut short keeps the way to the goal it has
 //! found, if any, else the router aims at the goal. Safety never depends on the search: the
@@ -32,8 +41,9 @@ use super::router::Router;
 pub const WORK_BOUND: usize = 1 << 18;
 /// The first reach's excess over the straight distance from the robot to the goal, in inflated
 /// radii of the largest disc across the straight line: a way around it is often not much
-/// longer, and a region only as wide as needed holds few discs.
-const FIRST_EXCESS: f64 = 0.25;
+/// longer, a region only as wide as needed holds few discs and offers few ways, and a reach too
+/// short costs only the ways offered again when it widens (the search does not start over).
+const FIRST_EXCESS: f64 = 0.1;
 /// How much the excess grows when no way that short was found.
 const GROW: f64 = 2.0;
 /// Searches with a finite reach before the whole graph is searched (an excess that has grown
@@ -47,13 +57,16 @@ const NODE_SLACK: f64 = 1e-9;
 /// between two, is among those tested.
 const DISC_SLACK: f64 = 1e-6;
 
-/// An open node waiting in the heap: its way so far plus way left when pushed, and its slot.
+/// An open node waiting in the heap: its way so far plus way left when pushed, its slot, and
+/// its place in the [`Region`].
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Open {
     /// Way so far plus way left.
     f: f64,
-    /// The node's slot ([`Node::index`]).
+    /// The node's slot ([`Node::index`]): ties go to the lowest.
     slot: usize,
+    /// The node's place in the region.
+    at: usize,
 }
 
 impl PartialEq for Open {
@@ -77,7 +90,99 @@ impl Ord for Open {
     }
 }
 
-/// How one search within a reach ended.
+/// The robot's and the goal's places in a [`Region`] (it holds them first).
+const ROBOT: usize = 0;
+const GOAL: usize = 1;
+/// No predecessor.
+const NONE: usize = usize::MAX;
+/// A settled node's key in [`Region::open`]: no way is shorter.
+const SETTLED: f64 = f64::NEG_INFINITY;
+
+/// The nodes of the region searched, in the order they entered it (the robot, the goal, then
+/// corners as the region grew), each field a column, so that the ways through the node just
+/// settled are measured for all of them in one pass.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Region {
+    /// The graph's node.
+    pub(super) node: Vec<Node>,
+    /// Where it is.
+    pub(super) x: Vec<f64>,
+    pub(super) y: Vec<f64>,
+    /// The straight distance to the goal (A*'s heuristic).
+    pub(super) rest: Vec<f64>,
+    /// The shortest way found from the robot.
+    pub(super) dist: Vec<f64>,
+    /// That way while the node is open, [`SETTLED`] once it is settled: what a way through
+    /// the node just settled must beat.
+    pub(super) open: Vec<f64>,
+    /// The node before it on that way ([`NONE`]: none yet).
+    pub(super) prev: Vec<usize>,
+    /// When it was settled (the settled nodes' order).
+    pub(super) rank: Vec<usize>,
+    /// Scratch: each node's way through the node just settled.
+    pub(super) through: Vec<f64>,
+    /// The settled nodes, in the order they were settled.
+    pub(super) settled: Vec<usize>,
+    /// Scratch: per node (rounded up to eight), whether its way through the node just
+    /// settled is worth a closer look.
+    pub(super) flags: Vec<u8>,
+}
+
+impl Region {
+    fn clear(&mut self) {
+        self.node.clear();
+        for column in [
+            &mut self.x,
+            &mut self.y,
+            &mut self.rest,
+            &mut self.dist,
+            &mut self.open,
+            &mut self.through,
+        ] {
+            column.clear();
+        }
+        for column in [&mut self.prev, &mut self.rank, &mut self.settled] {
+            column.clear();
+        }
+    }
+
+    fn reserve(&mut self, nodes: usize) {
+        self.node.reserve(nodes);
+        for column in [
+            &mut self.x,
+            &mut self.y,
+            &mut self.rest,
+            &mut self.dist,
+            &mut self.open,
+            &mut self.through,
+        ] {
+            column.reserve(nodes);
+        }
+        for column in [&mut self.prev, &mut self.rank, &mut self.settled] {
+            column.reserve(nodes);
+        }
+        self.flags.reserve(nodes.next_multiple_of(8));
+    }
+
+    /// Adds `node` at `at`, open and not reached yet, `goal` the goal.
+    fn push(&mut self, node: Node, at: [f64; 2], goal: [f64; 2]) {
+        self.node.push(node);
+        self.x.push(at[0]);
+        self.y.push(at[1]);
+        self.rest.push(length(sub(goal, at)));
+        self.dist.push(f64::INFINITY);
+        self.open.push(f64::INFINITY);
+        self.prev.push(NONE);
+        self.rank.push(NONE);
+        self.through.push(0.0);
+    }
+
+    fn len(&self) -> usize {
+        self.node.len()
+    }
+}
+
+/// How the search within one reach ended.
 enum Run {
     /// The goal was settled, no farther than the reach: the shortest way.
     Reached,
@@ -89,8 +194,9 @@ enum Run {
 
 impl Router {
     /// Searches for the shortest way from the robot at `p` to `goal` around this step's
-    /// inflated discs; whether one was found (the way to each node settled, and its
-    /// predecessor, are left in the router's buffers). Sets [`Router::truncated`].
+    /// inflated discs; whether one was found (the way to the goal, node by node, is left in
+    /// the router's buffers, [`Router::way_to`] and [`Router::before`]). Sets
+    /// [`Router::truncated`].
     pub(super) fn search(&mut self, p: [f64; 2], goal: [f64; 2], clearance: f64) -> bool {
         self.robot = p;
         self.goal = goal;
@@ -98,159 +204,265 @@ impl Router {
         self.truncated = false;
         self.forget_tangents();
         let nodes = 2 + self.corners.len();
-        for buffer in [&mut self.dist, &mut self.rest] {
-            buffer.resize(nodes, f64::INFINITY);
-        }
+        self.dist.resize(nodes, f64::INFINITY);
         self.prev.resize(nodes, None);
-        self.done.resize(nodes, false);
-        self.near.reserve(self.discs.len());
-        self.slots.reserve(nodes);
+        self.region.reserve(nodes);
         self.heap.reserve(nodes);
-        // Past this reach the region holds every corner: a corner is at most its disc's
-        // inflated radius plus a lookahead from the centre.
-        let everything = self
-            .discs
-            .iter()
-            .zip(&self.inflated)
-            .map(|(d, &r)| {
-                let around = r + lookahead(d.radius, clearance);
-                length(sub(d.center, p)) + length(sub(d.center, goal)) + 2.0 * around
-            })
-            .fold(0.0, f64::max);
+        self.pending.reserve(self.corners.len());
+        // Each disc's distances from the ends: how wide a region must be to meet it, and, past
+        // the widest, a region that holds every corner (a corner is at most its disc's
+        // inflated radius plus a lookahead from the centre).
+        self.spans.clear();
+        let mut everything = 0.0;
+        let mut widest = 0.0;
+        for (d, &r) in self.discs.iter().zip(&self.inflated) {
+            let ends = length(sub(d.center, p)) + length(sub(d.center, goal));
+            self.spans.push(ends - 2.0 * r);
+            everything = f64::max(
+                everything,
+                ends + 2.0 * (r + lookahead(d.radius, clearance)),
+            );
+            if crosses(p, goal, d.center, r) {
+                widest = f64::max(widest, r);
+            }
+        }
+        self.work += 2 * self.discs.len();
         let straight = length(sub(goal, p));
-        let mut excess = FIRST_EXCESS
-            * self
-                .discs
-                .iter()
-                .zip(&self.inflated)
-                .filter(|(d, &r)| crosses(p, goal, d.center, r))
-                .map(|(_, &r)| r)
-                .fold(0.0, f64::max);
-        self.work += self.discs.len();
+        let mut excess = FIRST_EXCESS * widest;
+        self.near.clear(self.discs.len());
+        self.blocker = None;
+        self.pending.clear();
+        self.region.clear();
+        self.region.push(Node::Robot, p, goal);
+        self.region.push(Node::Goal, goal, goal);
+        self.region.dist[ROBOT] = 0.0;
+        self.region.open[ROBOT] = 0.0;
+        self.heap.clear();
+        self.heap.push(Open {
+            f: self.region.rest[ROBOT],
+            slot: Node::Robot.index(),
+            at: ROBOT,
+        });
+        let mut last = f64::NEG_INFINITY;
         for tries in 0.. {
             let mut reach = straight + excess;
-            // A reach past every corner (or not a number) searches the whole graph.
+            // A reach past every corner (or not a number) takes in the whole graph.
             let short = reach < everything;
             if tries >= MAX_REACHES || !short {
                 reach = f64::INFINITY;
             }
             // With every node inside, the reach prunes nothing the whole graph would keep: a
             // search without it tells an enclosed goal from a reach too short.
-            let whole = self.gather(reach, clearance);
-            match self.run(if whole { f64::INFINITY } else { reach }) {
+            let entered = self.region.len();
+            if self.widen(reach, clearance) {
+                reach = f64::INFINITY;
+            }
+            let run = self.offer_settled((last, entered), reach);
+            let run = match run {
+                Run::Exhausted => self.run(reach),
+                stop => stop,
+            };
+            match run {
                 Run::Reached => return true,
                 Run::OutOfWork => {
                     self.truncated = true;
+                    self.write_way();
                     return self.dist[Node::Goal.index()].is_finite();
                 }
-                Run::Exhausted if whole => return false,
-                Run::Exhausted => excess *= GROW,
+                Run::Exhausted if reach == f64::INFINITY => return false,
+                Run::Exhausted => {
+                    last = reach;
+                    excess *= GROW;
+                }
             }
         }
         unreachable!("the reach becomes infinite after MAX_REACHES tries")
     }
 
-    /// The nodes within `reach` (infinite: all): the discs that meet the region into
-    /// [`Router::near`], and the robot, the goal and the uncovered corners inside it into
-    /// [`Router::slots`], in slot order. Whether nothing was left out.
-    fn gather(&mut self, reach: f64, clearance: f64) -> bool {
+    /// Widens the region to `reach` (infinite: all): the discs that meet it join
+    /// [`Router::near`] (their corners wait in [`Router::pending`]), and the uncovered corners
+    /// inside it join the [`Router::region`], open. Whether nothing is left out.
+    fn widen(&mut self, reach: f64, clearance: f64) -> bool {
         let (p, goal) = (self.robot, self.goal);
         let everything = reach == f64::INFINITY;
         let mut whole = true;
-        self.near.clear();
-        self.blocker = None;
-        for (i, (d, &r)) in self.discs.iter().zip(&self.inflated).enumerate() {
-            let span = length(sub(d.center, p)) + length(sub(d.center, goal)) - 2.0 * r;
-            if everything || span <= reach * (1.0 + DISC_SLACK) {
-                self.near.push(i);
-            } else {
-                whole = false;
+        for i in 0..self.discs.len() {
+            if self.near.holds(i) {
+                continue;
             }
-        }
-        self.work += self.discs.len();
-        self.slots.clear();
-        self.slots
-            .extend([(Node::Robot.index(), p), (Node::Goal.index(), goal)]);
-        for n in 0..self.near.len() {
-            let i = self.near[n];
+            let meets = self.spans[i] <= reach * (1.0 + DISC_SLACK);
+            if !everything && !meets {
+                whole = false;
+                continue;
+            }
+            self.near.push(i, &self.discs[i], self.inflated[i]);
             self.place_tangents(i, p, clearance);
             for k in CORNERS * i..CORNERS * (i + 1) {
                 let v = self.corners[k].at;
-                let span = length(sub(v, p)) + length(sub(v, goal));
-                let inside = span <= reach * (1.0 + NODE_SLACK);
-                if !everything && !inside {
-                    whole = false;
-                } else if self.uncovered(k) {
-                    self.slots.push((Node::Corner(k).index(), v));
-                }
+                self.pending
+                    .push((k, length(sub(v, p)) + length(sub(v, goal))));
+            }
+        }
+        self.work += self.discs.len();
+        // The corners inside the region are tested for cover once every disc that meets it is
+        // near: a disc that holds a corner meets any region the corner is in.
+        let mut j = 0;
+        while j < self.pending.len() {
+            let (k, span) = self.pending[j];
+            let inside = span <= reach * (1.0 + NODE_SLACK);
+            if !everything && !inside {
+                whole = false;
+                j += 1;
+                continue;
+            }
+            self.pending.swap_remove(j);
+            if self.uncovered(k) {
+                self.region.push(Node::Corner(k), self.corners[k].at, goal);
             }
         }
         whole
     }
 
-    /// A* over the nodes gathered for `reach`.
-    fn run(&mut self, reach: f64) -> Run {
-        let goal = self.goal;
-        for &(i, at) in &self.slots {
-            self.dist[i] = f64::INFINITY;
-            self.prev[i] = None;
-            self.done[i] = false;
-            self.rest[i] = length(sub(goal, at));
-        }
-        let robot = Node::Robot.index();
-        self.dist[robot] = 0.0;
-        self.heap.clear();
-        self.heap.push(Open {
-            f: self.rest[robot],
-            slot: robot,
-        });
-        while let Some(Open { f, slot }) = self.heap.pop() {
-            // A node whose way was shortened after it was pushed waits again, nearer the top.
-            if self.done[slot] || f != self.dist[slot] + self.rest[slot] {
-                continue;
-            }
-            if slot == Node::Goal.index() {
-                return Run::Reached;
-            }
-            self.done[slot] = true;
-            if !self.relax(Node::at(slot), reach) {
+    /// After the region was widened from reach `last` to `reach` (the nodes from place
+    /// `entered` on new to it): offers every settled node's ways that the narrower region
+    /// left out, in the order they were settled. [`Run::Exhausted`] unless the work bound was
+    /// hit.
+    fn offer_settled(&mut self, (last, entered): (f64, usize), reach: f64) -> Run {
+        for s in 0..self.region.settled.len() {
+            let u = self.region.settled[s];
+            if !self.relax(u, (last, entered), reach) {
                 return Run::OutOfWork;
             }
         }
         Run::Exhausted
     }
 
-    /// Shortens the way to every open node that `u` sees (the robot with its slack, see
-    /// [`Router::visible_from_robot`]) through `u`, testing the edge only where the way
-    /// through `u` would be shorter, fit the reach and could beat the way to the goal found so
-    /// far (a node that cannot is never settled before the goal: ties go to the goal, the
-    /// lower slot). Whether the work bound was kept.
-    fn relax(&mut self, u: Node, reach: f64) -> bool {
-        let best = self.dist[u.index()];
-        let a = self.point(u);
-        for s in 1..self.slots.len() {
-            let (i, b) = self.slots[s];
-            if self.done[i] {
+    /// A* within `reach`, from the open nodes in the heap.
+    fn run(&mut self, reach: f64) -> Run {
+        while let Some(Open { f, at, .. }) = self.heap.pop() {
+            let region = &mut self.region;
+            // A node whose way was shortened after it was pushed waits again, nearer the top.
+            if region.open[at] == SETTLED || f != region.dist[at] + region.rest[at] {
                 continue;
             }
-            let through = best + length(sub(b, a));
-            if through >= self.dist[i] {
-                continue;
+            if at == GOAL {
+                self.write_way();
+                return Run::Reached;
             }
-            let f = through + self.rest[i];
-            if f > reach || f >= self.dist[Node::Goal.index()] {
-                continue;
+            region.open[at] = SETTLED;
+            region.rank[at] = region.settled.len();
+            region.settled.push(at);
+            if !self.relax(at, (f64::NEG_INFINITY, 0), reach) {
+                return Run::OutOfWork;
             }
-            if self.work >= WORK_BOUND {
-                return false;
-            }
-            if self.sees_between(u, Node::at(i), a, b) {
-                self.dist[i] = through;
-                self.prev[i] = Some(u);
-                self.heap.push(Open { f, slot: i });
+        }
+        Run::Exhausted
+    }
+
+    /// Shortens the way to every open node that the settled node `u` (a region place) sees
+    /// (the robot with its slack, see [`Router::visible_from_robot`]) through `u`, testing
+    /// the edge only where the way through `u` would be shorter (or as short, through a node
+    /// settled earlier: ties go to the node settled first, whatever the order the ways are
+    /// offered in), fit the reach and could beat the way to the goal found so far (a node that
+    /// cannot is never settled before the goal: ties go to the goal, the lower slot). Ways
+    /// of a sum up to `last` to nodes before place `entered` were offered before, and are
+    /// not offered again. Whether the work bound was kept.
+    fn relax(&mut self, u: usize, (last, entered): (f64, usize), reach: f64) -> bool {
+        let region = &mut self.region;
+        let (best, a) = (region.dist[u], [region.x[u], region.y[u]]);
+        // Every node's way through `u` first, in one pass the compiler vectorises, flagging
+        // those that may be shorter than the way the node has and fit the reach (or whose
+        // square overflowed): most are not, and the pass below skips them eight at a time.
+        let m = region.len();
+        region.flags.clear();
+        region.flags.resize(m.next_multiple_of(8), 0);
+        for i in 0..m {
+            let (dx, dy) = (region.x[i] - a[0], region.y[i] - a[1]);
+            let t = best + (dx * dx + dy * dy).sqrt();
+            region.through[i] = t;
+            let maybe = (t <= region.open[i]) & (t + region.rest[i] <= reach);
+            region.flags[i] = u8::from(maybe | (t == f64::INFINITY));
+        }
+        let (node_u, rank_u) = (region.node[u], region.rank[u]);
+        for word in 0..region.flags.len() / 8 {
+            let flags = &self.region.flags[8 * word..8 * word + 8];
+            let mut set = u64::from_le_bytes(flags.try_into().expect("eight flags"));
+            while set != 0 {
+                let i = 8 * word + set.trailing_zeros() as usize / 8;
+                set &= set - 1;
+                if !self.offer(u, (node_u, rank_u), i, (last, entered), reach) {
+                    return false;
+                }
             }
         }
         true
+    }
+
+    /// [`Router::relax`] for node `i` (flagged), through `u` (its node and rank given).
+    /// Whether the work bound was kept.
+    #[inline]
+    fn offer(
+        &mut self,
+        u: usize,
+        (node_u, rank_u): (Node, usize),
+        i: usize,
+        (last, entered): (f64, usize),
+        reach: f64,
+    ) -> bool {
+        let region = &mut self.region;
+        let (open, mut through) = (region.open[i], region.through[i]);
+        if through < open {
+        } else if open == f64::INFINITY {
+            // Not reached yet, and a square that overflowed: measured again as `length` does.
+            let a = [region.x[u], region.y[u]];
+            through = region.dist[u] + length([region.x[i] - a[0], region.y[i] - a[1]]);
+            if through.partial_cmp(&open) != Some(Ordering::Less) {
+                return true;
+            }
+        } else if through == open {
+            // As short: through the node settled first.
+            if region.rank[region.prev[i]] < rank_u {
+                return true;
+            }
+        } else {
+            return true;
+        }
+        let f = through + region.rest[i];
+        if f > reach || f >= region.dist[GOAL] || (i < entered && f <= last) {
+            return true;
+        }
+        if self.work >= WORK_BOUND {
+            return false;
+        }
+        let (a, b) = ([region.x[u], region.y[u]], [region.x[i], region.y[i]]);
+        let v = region.node[i];
+        if self.sees_between(node_u, v, a, b) {
+            let region = &mut self.region;
+            region.dist[i] = through;
+            region.open[i] = through;
+            region.prev[i] = u;
+            self.heap.push(Open {
+                f,
+                slot: v.index(),
+                at: i,
+            });
+        }
+        true
+    }
+
+    /// Leaves the way found to the goal (if any) in the per-node buffers [`Router::way_to`]
+    /// and [`Router::before`] read: only its nodes are written.
+    fn write_way(&mut self) {
+        let region = &self.region;
+        let mut k = GOAL;
+        self.dist[Node::Robot.index()] = 0.0;
+        self.dist[Node::Goal.index()] = region.dist[GOAL];
+        while k != ROBOT && region.prev[k] != NONE {
+            let (node, before) = (region.node[k], region.prev[k]);
+            self.prev[node.index()] = Some(region.node[before]);
+            self.dist[node.index()] = region.dist[k];
+            k = before;
+        }
     }
 
     /// Measures the way found again with [`norm`], node by node from the robot, as a search
