@@ -71,16 +71,8 @@ impl Router {
 
 #[cfg(test)]
 mod tests {
-    use super::super::plane::Disc;
+    use super::super::router::tests::router;
     use super::*;
-
-    fn router(discs: &[([f64; 2], f64)]) -> Router {
-        let mut r = Router::default();
-        for &(center, radius) in discs {
-            r.push(Disc { center, radius });
-        }
-        r
-    }
 
     #[test]
     fn a_goal_whose_centre_a_shelf_covers_is_aimed_at_its_free_edge() {

@@ -320,7 +320,7 @@ impl Router {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use std::f64::consts::PI;
 
     use super::super::graph::{crosses, norm, sub, ROBOT_SLACK, SIDES};
@@ -328,7 +328,8 @@ mod tests {
     use proptest::prelude::*;
     use proptest::strategy::ValueTree;
 
-    fn router(discs: &[([f64; 2], f64)]) -> Router {
+    /// A router holding `discs` (centre, radius), each staying put.
+    pub(in super::super) fn router(discs: &[([f64; 2], f64)]) -> Router {
         let mut r = Router::default();
         for &(center, radius) in discs {
             r.push(Disc { center, radius });
