@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.test_routed_reference import assert_vjp_matches_differences
 from tlshield import Status
 from tlshield.lab import routing
 
@@ -65,11 +66,4 @@ def test_the_settled_action_s_gradient_is_exact(robot: str) -> None:
     corrected = np.abs(batch.action - a).max(axis=1) > 1e-3
     exact = (batch.status == Status.SOLVED) & corrected & ((flags & np.uint8(0xEF)) == 0)
     assert exact.sum() >= 40, exact.sum()
-    eps = 1e-6
-    for j in range(2):
-        d = np.zeros_like(a)
-        d[:, j] = eps
-        plus = (shield.filter_batch(s, q, a + d).action * v).sum(axis=1)
-        minus = (shield.filter_batch(s, q, a - d).action * v).sum(axis=1)
-        fd = (plus - minus) / (2 * eps)
-        np.testing.assert_allclose(ga[exact, j], fd[exact], atol=1e-5, rtol=1e-5)
+    assert_vjp_matches_differences(shield, s, q, a, v, ga, exact)

@@ -129,38 +129,33 @@ pub(super) struct Region {
 }
 
 impl Region {
+    /// The per-node columns of numbers and of indices (one place to list them).
+    fn columns(&mut self) -> ([&mut Vec<f64>; 6], [&mut Vec<usize>; 3]) {
+        (
+            [
+                &mut self.x,
+                &mut self.y,
+                &mut self.rest,
+                &mut self.dist,
+                &mut self.open,
+                &mut self.through,
+            ],
+            [&mut self.prev, &mut self.rank, &mut self.settled],
+        )
+    }
+
     fn clear(&mut self) {
         self.node.clear();
-        for column in [
-            &mut self.x,
-            &mut self.y,
-            &mut self.rest,
-            &mut self.dist,
-            &mut self.open,
-            &mut self.through,
-        ] {
-            column.clear();
-        }
-        for column in [&mut self.prev, &mut self.rank, &mut self.settled] {
-            column.clear();
-        }
+        let (numbers, indices) = self.columns();
+        numbers.into_iter().for_each(Vec::clear);
+        indices.into_iter().for_each(Vec::clear);
     }
 
     fn reserve(&mut self, nodes: usize) {
         self.node.reserve(nodes);
-        for column in [
-            &mut self.x,
-            &mut self.y,
-            &mut self.rest,
-            &mut self.dist,
-            &mut self.open,
-            &mut self.through,
-        ] {
-            column.reserve(nodes);
-        }
-        for column in [&mut self.prev, &mut self.rank, &mut self.settled] {
-            column.reserve(nodes);
-        }
+        let (numbers, indices) = self.columns();
+        numbers.into_iter().for_each(|c| c.reserve(nodes));
+        indices.into_iter().for_each(|c| c.reserve(nodes));
         self.flags.reserve(nodes.next_multiple_of(8));
     }
 
