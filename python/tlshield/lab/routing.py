@@ -147,6 +147,8 @@ def _heading_error(s: np.ndarray, g: np.ndarray) -> float:
 #: the recommended box, the rule's k without it (``clf_bound / d`` = 1) leaves the acceleration
 #: unicycle's shield alone parked in front of a single disc.
 TURN_GAIN = 0.1
+#: ThrustTurn's drag (1/s), which bounds its alpha.
+DRAG = 1.0
 
 
 def _second_order(b: float, turn_gain: float = 1.0) -> dict:
@@ -219,7 +221,9 @@ def _robot(name: str) -> Robot:
     if name in TURNING:
         # x, y, theta, then v (the acceleration unicycle) or vx, vy (ThrustTurn: a body pushed
         # along its heading, with drag, like Safety-Gymnasium's Point).
-        model = AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, 1.0)
+        model = (
+            AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, DRAG)
+        )
 
         def seek_turning(s: np.ndarray, g: np.ndarray) -> np.ndarray:
             err = _heading_error(s, g)
@@ -227,10 +231,17 @@ def _robot(name: str) -> Robot:
                 [0.5 * SPEED * max(np.cos(err), 0.0), float(np.clip(2.0 * err, -SPEED, SPEED))]
             )
 
+        gains = _second_order(SPEED, TURN_GAIN)
+        if name == "thrust_turn":
+            # A body that slides keeps alpha <= drag <= alpha + alpha2 (own-robot.md, "alpha,
+            # alpha2"): the drag alone then keeps the second-order row among still discs, so
+            # the QP has a solution whatever the heading. At alpha = 2 the thrust, across the
+            # barrier, had no hold on it and the shield gave way into a shelf.
+            gains["alpha"] = gains["alpha2"] = DRAG
         return Robot(
             model,
             lambda p: np.concatenate([p, np.zeros(2 if name == "accel_unicycle" else 3)]),
-            _second_order(SPEED, TURN_GAIN),
+            gains,
             seek_turning,
         )
     if name in CARS:
