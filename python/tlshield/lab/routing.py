@@ -221,9 +221,7 @@ def _robot(name: str) -> Robot:
     if name in TURNING:
         # x, y, theta, then v (the acceleration unicycle) or vx, vy (ThrustTurn: a body pushed
         # along its heading, with drag, like Safety-Gymnasium's Point).
-        model = (
-            AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, DRAG)
-        )
+        model = AccelerationUnicycle() if name == "accel_unicycle" else ThrustTurn(2.0, 3.0, DRAG)
 
         def seek_turning(s: np.ndarray, g: np.ndarray) -> np.ndarray:
             err = _heading_error(s, g)

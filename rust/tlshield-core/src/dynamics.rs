@@ -73,7 +73,9 @@ pub enum Dynamics {
     /// `dvy = thrust a[0] sin theta - drag vy`; m = 2. Safety-Gymnasium's Point robot is this
     /// model, identified from MuJoCo (`tlshield.envs.safety_gym`). A barrier on `x, y` has
     /// relative degree 2, acted on by the thrust alone: it loses authority while the heading
-    /// is perpendicular to the barrier's gradient (the drag then slows the body).
+    /// is perpendicular to the barrier's gradient (the drag then slows the body). With
+    /// `alpha <= drag <= alpha + alpha2` the drag alone keeps the sampled second-order row
+    /// among still obstacles, so zero thrust is always admissible there.
     ThrustTurn {
         /// Acceleration per unit of `a[0]` (m/s^2, > 0).
         thrust: f64,

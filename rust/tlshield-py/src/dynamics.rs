@@ -241,7 +241,9 @@ model_methods!(PyKinematicBicycle);
 /// ``(thrust, turn)``; ``dx = vx``, ``dy = vy``, ``dtheta = turn * a[1]``,
 /// ``dvx = thrust * a[0] * cos(theta) - drag * vx`` (and ``sin`` for ``vy``).
 /// Safety-Gymnasium's Point robot is this model (``tlshield.envs.safety_gym``). Barriers on
-/// ``x, y`` have relative degree 2 and are acted on by the thrust alone.
+/// ``x, y`` have relative degree 2 and are acted on by the thrust alone; with
+/// ``alpha <= drag <= alpha + alpha2`` the drag alone keeps them among still obstacles, so the
+/// shield's QP has a solution at every heading.
 #[pyclass(name = "ThrustTurn", module = "tlshield._core", frozen)]
 pub struct PyThrustTurn {
     pub(crate) inner: Dynamics,
