@@ -9,7 +9,7 @@
 //! blocks does not hold the CLF's turn (all beyond the paper, see the methods).
 
 use super::graph::{norm, past_tangent, sub, Node};
-use super::plane::is_disc;
+use super::plane::{each_disc, is_disc, Disc};
 use super::reach::{Routed, Scratch};
 use super::router::{Router, Routing};
 use crate::automaton::Reading;
@@ -37,6 +37,10 @@ const BACK_OUT: f64 = 0.25;
 /// target is this many radii from the circle's centre; in between it keeps the way it moves
 /// ([`Manoeuvre::way`]), so that it does not rock on the circle's rim.
 const CLEAR_OF_CIRCLE: f64 = 1.5;
+/// A car whose nose is this close to the rim of a disc it heads into (a share of the disc's
+/// radius) backs out ([`Aim::backs_out`]): forwards, the barrier holds it there, and at rest it
+/// cannot turn.
+const NOSE: f64 = 0.1;
 
 /// What [`Aim::move_to_turn`] reads of a car at one step: its heading, its speed, and the
 /// radius of the tightest circle the CLF's own steering drives at that speed (`None` at rest,
@@ -61,17 +65,9 @@ impl Manoeuvre {
         if off.cos() < 0.0 {
             return (-1.0, false);
         }
-        let Some(radius) = self.radius else {
+        let Some((centre, radius)) = self.circle(p, target) else {
             return (1.0, false);
         };
-        let (sin, cos) = self.theta.sin_cos();
-        let to = sub(target, p);
-        let side = if cos * to[1] - sin * to[0] >= 0.0 {
-            1.0
-        } else {
-            -1.0
-        };
-        let centre = [p[0] - side * radius * sin, p[1] + side * radius * cos];
         let from_centre = norm(sub(target, centre));
         if from_centre < radius {
             (-1.0, true)
@@ -80,6 +76,23 @@ impl Manoeuvre {
         } else {
             (-1.0, true)
         }
+    }
+
+    /// The tightest circle the car drives at this speed on the side of `target` (centre,
+    /// radius), `None` at rest.
+    fn circle(&self, p: [f64; 2], target: [f64; 2]) -> Option<([f64; 2], f64)> {
+        let radius = self.radius?;
+        let (sin, cos) = self.theta.sin_cos();
+        let to = sub(target, p);
+        let side = if cos * to[1] - sin * to[0] >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        Some((
+            [p[0] - side * radius * sin, p[1] + side * radius * cos],
+            radius,
+        ))
     }
 }
 
@@ -203,6 +216,9 @@ pub(crate) struct Aim {
     /// Per barrier row: whether it is a routed disc that stays put (its predicate reads only
     /// the position), the only kind whose blocking turn is released to the CLF.
     still: Vec<bool>,
+    /// Per barrier row that is a routed disc staying put: its disc nearest the state (a car
+    /// backs away from it, [`Aim::backs_out`]).
+    nearest: Vec<Option<Disc>>,
     /// Per input: the part of the RL action the CLF's box is widened to cancel this step (the
     /// RL action's turn into a blocked disc, [`Aim::release_blocked_turn`]); zero elsewhere.
     released: Vec<f64>,
@@ -222,6 +238,7 @@ impl Aim {
         self.routed.clear();
         self.inward.clear();
         self.still.clear();
+        self.nearest.clear();
         self.released.clear();
         self.rerouted = false;
         self.unreachable = false;
@@ -258,7 +275,19 @@ impl Aim {
         // A disc read from other dimensions than the position moves (or turns with the body):
         // its barrier, not the CLF, answers a turn towards it.
         let moves = || (0..s.len()).any(|d| !pos.contains(&d) && predicate.reads(d));
-        self.still.push(routed && !moves());
+        let still = routed && !moves();
+        self.still.push(still);
+        let mut nearest: Option<Disc> = None;
+        if still {
+            let p = [s[pos[0]], s[pos[1]]];
+            let gap = |d: &Disc| norm(sub(d.center, p)) - d.radius;
+            each_disc(predicate, pos, s, &mut |d| {
+                if nearest.as_ref().is_none_or(|n| gap(&d) < gap(n)) {
+                    nearest = Some(d);
+                }
+            });
+        }
+        self.nearest.push(nearest);
         self.inward.push(match routed {
             true => [-grad[pos[0]], -grad[pos[1]]],
             false => [0.0, 0.0],
@@ -269,6 +298,7 @@ impl Aim {
     pub(crate) fn note_unrouted_row(&mut self) {
         self.routed.push(false);
         self.still.push(false);
+        self.nearest.push(None);
         self.inward.push([0.0, 0.0]);
     }
 
@@ -379,6 +409,34 @@ impl Aim {
         }
     }
 
+    /// A car's throttle into a disc at its nose does not hold it there either (nor backwards
+    /// into one at its tail): for a car at `p` heading `theta`, at the rim of a routed disc
+    /// that stays put ([`Aim::at_rim`]), every input of `a_rl` that pushes its speed (`g_v`,
+    /// the speed's row of `g`) towards that disc is released to the CLF, as
+    /// [`Aim::release_blocked_turn`] releases a turn. Without this, a policy that drives at its
+    /// goal behind a disc holds the car's nose at the rim, where it cannot turn, as hard as
+    /// the CLF's box backs it out. Call after [`Aim::release_blocked_turn`].
+    pub(crate) fn release_blocked_throttle(
+        &mut self,
+        (theta, p): (f64, [f64; 2]),
+        g_v: &[f64],
+        a_rl: &[f64],
+    ) {
+        let ahead = self.at_rim(theta, p, 1.0);
+        let behind = self.at_rim(theta, p, -1.0);
+        if !(ahead || behind) {
+            return;
+        }
+        self.released.resize(a_rl.len(), 0.0);
+        let parts = self.released.iter_mut().zip(g_v).zip(a_rl);
+        for ((released, &g), &a) in parts {
+            if (ahead && g * a > 0.0) || (behind && g * a < 0.0) {
+                *released = a;
+                self.rerouted = true;
+            }
+        }
+    }
+
     /// The CLF's box this step on input `j`: `bounds` (its `(lo, hi)`) widened by the RL
     /// action's turn released on `j` ([`Aim::release_blocked_turn`]).
     pub(crate) fn clf_box(&self, (lo, hi): (f64, f64), j: usize) -> (f64, f64) {
@@ -422,6 +480,38 @@ impl Aim {
         }
     }
 
+    /// Whether a car at `p` backs away from a routed disc that stays put and lies ahead of it
+    /// (towards `target`, which is not behind its axle line): its nose is within [`NOSE`] of
+    /// the disc's radius from the rim, where forwards the barrier holds it and at rest it
+    /// cannot turn; or, backing already, its tightest forward circle on the target's side
+    /// still crosses that disc, so that driving on would take it back to the rim.
+    fn backs_out(&self, car: Manoeuvre, p: [f64; 2], target: [f64; 2]) -> bool {
+        let (sin, cos) = car.theta.sin_cos();
+        let circle = match car.speed < 0.0 {
+            true => car.circle(p, target),
+            false => None,
+        };
+        self.at_rim(car.theta, p, 1.0)
+            || self.nearest.iter().flatten().any(|d| {
+                let to = sub(d.center, p);
+                let ahead = cos * to[0] + sin * to[1] > 0.0;
+                ahead
+                    && circle.is_some_and(|(c, radius)| {
+                        (norm(sub(d.center, c)) - radius).abs() < d.radius
+                    })
+            })
+    }
+
+    /// Whether a car at `p` heading `theta` is within [`NOSE`] of a routed still disc's
+    /// radius from its rim, the disc ahead (`way = 1`) or behind (`way = -1`).
+    fn at_rim(&self, theta: f64, p: [f64; 2], way: f64) -> bool {
+        let (sin, cos) = theta.sin_cos();
+        self.nearest.iter().flatten().any(|d| {
+            let to = sub(d.center, p);
+            way * (cos * to[0] + sin * to[1]) > 0.0 && norm(to) - d.radius <= NOSE * d.radius
+        })
+    }
+
     /// Robots that turn only while moving (beyond the paper), a car: its turn rate is `v tan
     /// delta / l`, so at rest the turn term's `Lg V` on the steering is zero
     /// ([`Aim::turn_towards_push`]), and with its target abeam the push along the heading is
@@ -446,7 +536,17 @@ impl Aim {
             return Turn { v: 0.0, lf: 0.0 };
         }
         let off = car.theta - (-dy).atan2(-dx);
-        let (sigma, circled) = car.way(off, p, [self.target[0], self.target[1]]);
+        let target = [self.target[0], self.target[1]];
+        let (sigma, circled) = match off.cos() >= 0.0 && self.backs_out(car, p, target) {
+            true => (-1.0, true),
+            false => car.way(off, p, target),
+        };
+        // Backing with its tail at a disc's rim, the car drives on instead: the barrier holds
+        // it there too.
+        let (sigma, circled) = match sigma < 0.0 && self.at_rim(car.theta, p, -1.0) {
+            true => (1.0, false),
+            false => (sigma, circled),
+        };
         let share = (0.5 * off).sin().powi(2);
         let share = if circled { share.max(BACK_OUT) } else { share };
         let short = dx.hypot(dy) * share - sigma * car.speed;

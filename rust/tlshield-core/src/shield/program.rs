@@ -583,6 +583,15 @@ impl Program {
                     let g_theta = &self.g[theta * m..(theta + 1) * m];
                     self.aim
                         .release_blocked_turn(at.s[theta], g_theta, a_rl, &self.rhs);
+                    let car = params
+                        .speed
+                        .or_else(|| at.model.and_then(Dynamics::turns_only_moving));
+                    if let Some(speed) = car {
+                        let p = [at.s[params.pos[0]], at.s[params.pos[1]]];
+                        let g_v = &self.g[speed * m..(speed + 1) * m];
+                        self.aim
+                            .release_blocked_throttle((at.s[theta], p), g_v, a_rl);
+                    }
                 }
             }
             self.clf_rhs = -(lf + dot(&self.clf_lg, a_rl) + params.c3 * v);
