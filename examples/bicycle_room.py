@@ -130,6 +130,9 @@ def room_shield(config: str = "rl_cbf_clf") -> tlshield.Shield:
         k=1e4,
         clf_gain=0.5,
         barriers=barriers(),
+        # The env holds the action for DT and takes the model's Euler step: with dt the
+        # barrier rows hold the sampled states, not only the state at the sample.
+        dt=DT,
         # What the correction may add, what the applied action may be (the car's limits),
         # and the RL action's range (the shield checks the box can cancel it).
         cbf_bounds=([-2 * MAX_ACCEL, -2 * TAN_MAX], [2 * MAX_ACCEL, 2 * TAN_MAX]),

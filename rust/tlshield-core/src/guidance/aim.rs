@@ -483,8 +483,9 @@ impl Aim {
     /// Whether a car at `p` backs away from a routed disc that stays put and lies ahead of it
     /// (towards `target`, which is not behind its axle line): its nose is within [`NOSE`] of
     /// the disc's radius from the rim, where forwards the barrier holds it and at rest it
-    /// cannot turn; or, backing already, its tightest forward circle on the target's side
-    /// still crosses that disc, so that driving on would take it back to the rim.
+    /// cannot turn; or, backing already, with the disc's rim within the car's turning radius,
+    /// its tightest forward circle on the target's side still crosses that disc, so that
+    /// driving on would take it back to the rim.
     fn backs_out(&self, car: Manoeuvre, p: [f64; 2], target: [f64; 2]) -> bool {
         let (sin, cos) = car.theta.sin_cos();
         let circle = match car.speed < 0.0 {
@@ -495,9 +496,11 @@ impl Aim {
             || self.nearest.iter().flatten().any(|d| {
                 let to = sub(d.center, p);
                 let ahead = cos * to[0] + sin * to[1] > 0.0;
+                // Only a disc within a turning radius of the car is one it backs away from.
                 ahead
                     && circle.is_some_and(|(c, radius)| {
-                        (norm(sub(d.center, c)) - radius).abs() < d.radius
+                        norm(to) - d.radius <= radius
+                            && (norm(sub(d.center, c)) - radius).abs() < d.radius
                     })
             })
     }
