@@ -363,6 +363,7 @@ impl Router {
         self.cover.clear();
         self.cover.resize(self.corners.len(), Cover::Unknown);
         self.edges.reset(SIDES * self.discs.len());
+        self.onward.forget(self.corners.len());
     }
 
     /// Forgets the ways past each disc from the last step's robot position: they are placed
@@ -491,6 +492,9 @@ impl Router {
     pub(super) fn sees_between(&mut self, u: Node, v: Node, a: [f64; 2], b: [f64; 2]) -> bool {
         let pair = match (u, v) {
             (Node::Corner(k), Node::Corner(l)) => self.edges.pair(k, l),
+            (Node::Corner(k), Node::Goal) if k % CORNERS < SIDES => {
+                return self.sees_goal(k, a, b);
+            }
             _ => None,
         };
         let Some(bit) = pair else {
@@ -506,6 +510,22 @@ impl Router {
             self.edges.set.push(word);
         }
         self.edges.known[word] |= (1 | u64::from(clear) << 1) << shift;
+        clear
+    }
+
+    /// [`Router::sees`] from polygon corner `k` (at `a`) to the goal (at `b`), remembered while
+    /// the discs stay put and the goal is the same (exact, as [`Router::sees_between`]'s). A
+    /// corner that sees the goal is at most the straight line from it
+    /// ([`Onward::way`](super::search::Onward)).
+    fn sees_goal(&mut self, k: usize, a: [f64; 2], b: [f64; 2]) -> bool {
+        if let Some(clear) = self.onward.sees[k] {
+            return clear;
+        }
+        let clear = self.sees((Node::Corner(k), Node::Goal), a, b);
+        self.onward.sees[k] = Some(clear);
+        if clear {
+            self.onward.learn(k, length(sub(b, a)));
+        }
         clear
     }
 
