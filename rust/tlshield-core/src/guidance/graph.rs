@@ -333,6 +333,35 @@ impl Near {
     pub(super) fn holds(&self, i: usize) -> bool {
         self.place[i] != usize::MAX
     }
+
+    /// Whether one of these other than disc `i` (one of these) holds `v` strictly inside its
+    /// inflated radius.
+    fn covers(&self, v: [f64; 2], i: usize) -> bool {
+        // Every disc in one pass without early exits, which the compiler vectorises: most
+        // corners tested (the ways past a disc from the robot, tested every step) are covered
+        // by none, so every disc is looked at anyway.
+        let own = self.place[i];
+        let n = self.x.len();
+        let (x, y, r) = (&self.x[..n], &self.y[..n], &self.r[..n]);
+        let (mut covered, mut overflow) = (false, false);
+        for j in 0..n {
+            // A component as long as the radius tells a point outside without the root (the
+            // root of a sum of squares is at least either component, exactly).
+            let e = [v[0] - x[j], v[1] - y[j]];
+            let near = (e[0].abs() < r[j]) & (e[1].abs() < r[j]) & (j != own);
+            let sq = e[0] * e[0] + e[1] * e[1];
+            covered |= near & (sq.sqrt() < r[j]);
+            overflow |= near & (sq == f64::INFINITY);
+        }
+        if overflow {
+            // A square that overflowed: measured again as `length` does.
+            return (0..n).any(|j| {
+                let e = sub(v, [x[j], y[j]]);
+                e[0].abs() < r[j] && e[1].abs() < r[j] && j != own && length(e) < r[j]
+            });
+        }
+        covered
+    }
 }
 
 /// The radius of `disc` (inflated to `inflated`) a segment from the robot may not cut into: it
@@ -403,14 +432,7 @@ impl Router {
             let near = &self.near;
             self.work += near.len();
             self.work += self.walls.len();
-            let covered = self.walls.iter().any(|w| !w.keeps(v))
-                || (0..near.len()).any(|j| {
-                    // A component as long as the radius tells a point outside without the root
-                    // (the root of a sum of squares is at least either component, exactly).
-                    let e = sub(v, [near.x[j], near.y[j]]);
-                    let r = near.r[j];
-                    e[0].abs() < r && e[1].abs() < r && near.disc[j] != i && length(e) < r
-                });
+            let covered = self.walls.iter().any(|w| !w.keeps(v)) || near.covers(v, i);
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free
