@@ -34,7 +34,10 @@
 //! improve a node, and a corner's cover only when the corner is first needed (`search.rs`).
 //! The polygons' corners, what covers them and which segments between them are clear do not
 //! depend on the robot: they are kept from step to step while the discs (and their inflated
-//! radii) stay the same, and placed again when any disc moves, appears or goes. The way is searched again every step, from the robot's new
+//! radii) stay the same, and placed again when any disc moves, appears or goes. So are, while
+//! the goal stays the same too, which polygon corners see the goal and the ways on to it from
+//! the polygon corners of the ways found: they bound later searches (`search.rs`), and change
+//! no target. The way is searched again every step, from the robot's new
 //! position (its tangent points move with it), so the target is the one a planner built from
 //! scratch would give. A step's work is bounded ([`WORK_BOUND`](super::WORK_BOUND)); where the
 //! bound is hit the step keeps the way to the goal found so far, or aims at the goal itself.

@@ -22,7 +22,14 @@
 //!   (`reference.rs`): the same target, bit for bit;
 //! - the ways through the node just settled are measured for every node of the region in one
 //!   pass over its columns ([`Region`]), and only the few that could improve a node are looked
-//!   at one by one.
+//!   at one by one;
+//! - searches towards the same goal among the same discs learn from each other ([`Onward`]):
+//!   the rest of each way found, from each of its polygon corners on, is a way of every later
+//!   search's graph, so a later search that reaches such a corner knows a way to the goal at
+//!   most that long, and neither offers a way nor widens its reach past it. Most independent
+//!   states towards one goal (a batch, an env's episodes) soon meet a corner of an earlier
+//!   way. A way or a node past the bound is never settled before the goal, so the target is
+//!   the same, bit for bit.
 //!
 //! Its work is bounded ([`WORK_BOUND`]); a search cut short keeps the way to the goal it has
 //! found, if any, else the router aims at the goal. Safety never depends on the search: the
