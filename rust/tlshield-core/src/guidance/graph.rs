@@ -333,6 +333,35 @@ impl Near {
     pub(super) fn holds(&self, i: usize) -> bool {
         self.place[i] != usize::MAX
     }
+
+    /// Whether one of these other than disc `i` (one of these) holds `v` strictly inside its
+    /// inflated radius.
+    fn covers(&self, v: [f64; 2], i: usize) -> bool {
+        // Every disc in one pass without early exits, which the compiler vectorises: most
+        // corners tested (the ways past a disc from the robot, tested every step) are covered
+        // by none, so every disc is looked at anyway.
+        let own = self.place[i];
+        let n = self.x.len();
+        let (x, y, r) = (&self.x[..n], &self.y[..n], &self.r[..n]);
+        let (mut covered, mut overflow) = (false, false);
+        for j in 0..n {
+            // A component as long as the radius tells a point outside without the root (the
+            // root of a sum of squares is at least either component, exactly).
+            let e = [v[0] - x[j], v[1] - y[j]];
+            let near = (e[0].abs() < r[j]) & (e[1].abs() < r[j]) & (j != own);
+            let sq = e[0] * e[0] + e[1] * e[1];
+            covered |= near & (sq.sqrt() < r[j]);
+            overflow |= near & (sq == f64::INFINITY);
+        }
+        if overflow {
+            // A square that overflowed: measured again as `length` does.
+            return (0..n).any(|j| {
+                let e = sub(v, [x[j], y[j]]);
+                e[0].abs() < r[j] && e[1].abs() < r[j] && j != own && length(e) < r[j]
+            });
+        }
+        covered
+    }
 }
 
 /// The radius of `disc` (inflated to `inflated`) a segment from the robot may not cut into: it
@@ -363,6 +392,7 @@ impl Router {
         self.cover.clear();
         self.cover.resize(self.corners.len(), Cover::Unknown);
         self.edges.reset(SIDES * self.discs.len());
+        self.onward.forget(self.corners.len());
     }
 
     /// Forgets the ways past each disc from the last step's robot position: they are placed
@@ -402,14 +432,7 @@ impl Router {
             let near = &self.near;
             self.work += near.len();
             self.work += self.walls.len();
-            let covered = self.walls.iter().any(|w| !w.keeps(v))
-                || (0..near.len()).any(|j| {
-                    // A component as long as the radius tells a point outside without the root
-                    // (the root of a sum of squares is at least either component, exactly).
-                    let e = sub(v, [near.x[j], near.y[j]]);
-                    let r = near.r[j];
-                    e[0].abs() < r && e[1].abs() < r && near.disc[j] != i && length(e) < r
-                });
+            let covered = self.walls.iter().any(|w| !w.keeps(v)) || near.covers(v, i);
             self.cover[k] = if covered { Cover::Covered } else { Cover::Free };
         }
         self.cover[k] == Cover::Free
@@ -491,6 +514,9 @@ impl Router {
     pub(super) fn sees_between(&mut self, u: Node, v: Node, a: [f64; 2], b: [f64; 2]) -> bool {
         let pair = match (u, v) {
             (Node::Corner(k), Node::Corner(l)) => self.edges.pair(k, l),
+            (Node::Corner(k), Node::Goal) if k % CORNERS < SIDES => {
+                return self.sees_goal(k, a, b);
+            }
             _ => None,
         };
         let Some(bit) = pair else {
@@ -506,6 +532,22 @@ impl Router {
             self.edges.set.push(word);
         }
         self.edges.known[word] |= (1 | u64::from(clear) << 1) << shift;
+        clear
+    }
+
+    /// [`Router::sees`] from polygon corner `k` (at `a`) to the goal (at `b`), remembered while
+    /// the discs stay put and the goal is the same (exact, as [`Router::sees_between`]'s). A
+    /// corner that sees the goal is at most the straight line from it
+    /// ([`Onward::way`](super::search::Onward)).
+    fn sees_goal(&mut self, k: usize, a: [f64; 2], b: [f64; 2]) -> bool {
+        if let Some(clear) = self.onward.sees[k] {
+            return clear;
+        }
+        let clear = self.sees((Node::Corner(k), Node::Goal), a, b);
+        self.onward.sees[k] = Some(clear);
+        if clear {
+            self.onward.learn(k, length(sub(b, a)));
+        }
         clear
     }
 

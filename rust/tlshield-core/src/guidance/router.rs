@@ -34,7 +34,10 @@
 //! improve a node, and a corner's cover only when the corner is first needed (`search.rs`).
 //! The polygons' corners, what covers them and which segments between them are clear do not
 //! depend on the robot: they are kept from step to step while the discs (and their inflated
-//! radii) stay the same, and placed again when any disc moves, appears or goes. The way is searched again every step, from the robot's new
+//! radii) stay the same, and placed again when any disc moves, appears or goes. So are, while
+//! the goal stays the same too, which polygon corners see the goal and the ways on to it from
+//! the polygon corners of the ways found: they bound later searches (`search.rs`), and change
+//! no target. The way is searched again every step, from the robot's new
 //! position (its tangent points move with it), so the target is the one a planner built from
 //! scratch would give. A step's work is bounded ([`WORK_BOUND`](super::WORK_BOUND)); where the
 //! bound is hit the step keeps the way to the goal found so far, or aims at the goal itself.
@@ -69,7 +72,7 @@ use std::collections::BinaryHeap;
 use super::graph::{Corner, Cover, Edges, Near, Node};
 use super::plane::{each_disc, each_wall, Disc, Wall};
 use super::reach::{Routed, Scratch};
-use super::search::{Open, Region};
+use super::search::{Onward, Open, Region};
 use crate::automaton::Reading;
 use crate::cnf::Literal;
 use crate::predicate::Predicate;
@@ -207,6 +210,10 @@ pub struct Router {
     pub(super) edges: Edges,
     /// The way found, goal first (`Router::measure_way`).
     pub(super) path: Vec<Node>,
+    /// What the searches towards one goal learned that later searches towards it can prune
+    /// with (`search.rs`): kept, like the corners, while the discs stay put and the goal is
+    /// the same.
+    pub(super) onward: Onward,
     /// Whether the last [`Router::target`] found the goal reachable: outside every disc, and
     /// joined to the robot by a way around them.
     reached: bool,
@@ -468,6 +475,57 @@ pub(super) mod tests {
                 }
             }
         }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        /// Searches towards one goal among the same discs bound their ways by what the earlier
+        /// ones found (`search.rs`'s `Onward`): the targets are still the from-scratch
+        /// planner's, bit for bit.
+        #[test]
+        fn what_earlier_searches_learned_leaves_the_targets_as_they_were(
+            discs in proptest::collection::vec(((-4.0..4.0f64, -4.0..4.0f64), 0.2..1.2f64), 0..24),
+            robots in proptest::collection::vec((-6.0..6.0f64, -6.0..6.0f64), 1..12),
+            goal in (-6.0..6.0f64, -6.0..6.0f64),
+        ) {
+            let discs = discs_of(discs);
+            let mut kept = router(&discs);
+            let goal = [goal.0, goal.1];
+            for (k, p) in robots.into_iter().enumerate() {
+                let p = [p.0, p.1];
+                let t = kept.target(p, goal, 0.2);
+                prop_assert!(!kept.truncated());
+                let (want, way) = reference(&discs, p, goal);
+                prop_assert_eq!(t, want, "robot {} way {:?}", k, way);
+                if let Some(way) = way {
+                    prop_assert_eq!(kept.way_to(Node::Goal), way);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn independent_states_towards_one_goal_give_the_reference_targets() {
+        // The routing bench's independent states among 64 discs: later searches are bounded by
+        // the ways earlier ones found, and their targets stay the from-scratch planner's.
+        let discs = field(64, 5);
+        let mut r = router(&discs);
+        let side = 64f64.sqrt() * 1.2;
+        let goal = [side + 1.0, 0.3 * side];
+        let mut routed = 0;
+        for k in 0..60 {
+            let y = (k as f64 * 0.618_034).fract() * 2.0 - 1.0;
+            let p = [-side - 1.0 + 0.02 * k as f64, y * side];
+            let t = r.target(p, goal, 0.2);
+            routed += usize::from(t != goal);
+            assert_eq!(
+                t,
+                router(&discs).reference_target(p, goal, 0.2).0,
+                "state {k}"
+            );
+        }
+        assert!(routed > 30, "{routed}");
+        assert!(r.onward.learned() > 0);
     }
 
     #[test]

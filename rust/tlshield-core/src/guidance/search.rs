@@ -22,7 +22,14 @@
 //!   (`reference.rs`): the same target, bit for bit;
 //! - the ways through the node just settled are measured for every node of the region in one
 //!   pass over its columns ([`Region`]), and only the few that could improve a node are looked
-//!   at one by one.
+//!   at one by one;
+//! - searches towards the same goal among the same discs learn from each other ([`Onward`]):
+//!   the rest of each way found, from each of its polygon corners on, is a way of every later
+//!   search's graph, so a later search that reaches such a corner knows a way to the goal at
+//!   most that long, and neither offers a way nor widens its reach past it. Most independent
+//!   states towards one goal (a batch, an env's episodes) soon meet a corner of an earlier
+//!   way. A way or a node past the bound is never settled before the goal, so the target is
+//!   the same, bit for bit.
 //!
 //! Its work is bounded ([`WORK_BOUND`]); a search cut short keeps the way to the goal it has
 //! found, if any, else the router aims at the goal. Safety never depends on the search: the
@@ -31,7 +38,7 @@
 use std::cmp::Ordering;
 
 use super::aim::lookahead;
-use super::graph::{crosses, length, norm, sub, Node, CORNERS};
+use super::graph::{crosses, length, norm, sub, Node, CORNERS, SIDES};
 use super::router::Router;
 
 /// The most tests of a point or a segment against a disc the planner makes in one step (the
@@ -177,6 +184,71 @@ impl Region {
     }
 }
 
+/// Relative slack on a bound learned from a way found ([`Onward`]): the way's own sums, and
+/// the sums a search makes along it from another robot, may differ in the last bits.
+const ONWARD_SLACK: f64 = 1e-9;
+
+/// What earlier searches towards the same goal (among the same discs) tell a search: per
+/// polygon corner, the length of a way from it to the goal (the rest of a way found, or the
+/// straight line where the corner sees the goal), and whether it sees the goal. Those ways
+/// use only polygon corners and the goal, whose segments do not depend on the robot, so they
+/// are ways of every later search's graph: a node reached at `d` with a way on of `w` bounds
+/// the shortest way by `d + w`, and a way or a node whose sum exceeds that bound is never
+/// settled before the goal (A*'s sums only grow along a way). Offering it changes nothing;
+/// not offering it saves its test, and a reach past the bound is never needed.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Onward {
+    /// Per corner ([`Node::Corner`] index): the shortest way to the goal learned (infinite:
+    /// none; the two ways past a disc from the robot are always infinite).
+    way: Vec<f64>,
+    /// Per corner: whether the segment to the goal is clear, once tested.
+    pub(super) sees: Vec<Option<bool>>,
+    /// The goal these are for.
+    goal: [f64; 2],
+    /// This search's bound on the shortest way, slack included (infinite: none yet).
+    pub(super) bound: f64,
+}
+
+impl Onward {
+    /// Forgets everything learned, for `corners` corners.
+    pub(super) fn forget(&mut self, corners: usize) {
+        self.way.clear();
+        self.way.resize(corners, f64::INFINITY);
+        self.sees.clear();
+        self.sees.resize(corners, None);
+    }
+
+    /// How many corners have a way on learned (tests).
+    #[cfg(test)]
+    pub(super) fn learned(&self) -> usize {
+        self.way.iter().filter(|w| w.is_finite()).count()
+    }
+
+    /// Learns that corner `k` has a way of `way` to the goal.
+    pub(super) fn learn(&mut self, k: usize, way: f64) {
+        self.way[k] = self.way[k].min(way);
+    }
+
+    /// Starts a search towards `goal` among `corners` corners: what was learned towards
+    /// another goal is forgotten.
+    fn start(&mut self, goal: [f64; 2], corners: usize) {
+        if self.goal != goal || self.way.len() != corners {
+            self.goal = goal;
+            self.forget(corners);
+        }
+        self.bound = f64::INFINITY;
+    }
+
+    /// Corner `k` was reached at `dist`: the bound tightens where a way on from it is known.
+    #[inline]
+    fn reached(&mut self, k: usize, dist: f64) {
+        let way = self.way[k];
+        if way < f64::INFINITY {
+            self.bound = self.bound.min((dist + way) * (1.0 + ONWARD_SLACK));
+        }
+    }
+}
+
 /// How the search within one reach ended.
 enum Run {
     /// The goal was settled, no farther than the reach: the shortest way.
@@ -198,6 +270,7 @@ impl Router {
         self.work = 0;
         self.truncated = false;
         self.forget_tangents();
+        self.onward.start(goal, self.corners.len());
         let nodes = 2 + self.corners.len();
         self.dist.resize(nodes, f64::INFINITY);
         self.prev.resize(nodes, None);
@@ -245,6 +318,10 @@ impl Router {
             let short = reach < everything;
             if tries >= MAX_REACHES || !short {
                 reach = f64::INFINITY;
+            } else {
+                // A way no longer than the bound is known to exist: no wider reach is needed
+                // (finite tries only, so that a reach that fails in rounding still widens).
+                reach = reach.min(self.onward.bound);
             }
             // With every node inside, the reach prunes nothing the whole graph would keep: a
             // search without it tells an enclosed goal from a reach too short.
@@ -258,7 +335,10 @@ impl Router {
                 stop => stop,
             };
             match run {
-                Run::Reached => return true,
+                Run::Reached => {
+                    self.learn_onward();
+                    return true;
+                }
                 Run::OutOfWork => {
                     self.truncated = true;
                     self.write_way();
@@ -369,14 +449,20 @@ impl Router {
         // those that may be shorter than the way the node has and fit the reach (or whose
         // square overflowed): most are not, and the pass below skips them eight at a time.
         let m = region.len();
+        let within = reach.min(self.onward.bound);
         region.flags.clear();
         region.flags.resize(m.next_multiple_of(8), 0);
+        // Every column cut to the region's length: a loop without bounds checks, which the
+        // compiler vectorises (the same arithmetic, node by node).
+        let (x, y) = (&region.x[..m], &region.y[..m]);
+        let (open, rest) = (&region.open[..m], &region.rest[..m]);
+        let (through, flags) = (&mut region.through[..m], &mut region.flags[..m]);
         for i in 0..m {
-            let (dx, dy) = (region.x[i] - a[0], region.y[i] - a[1]);
+            let (dx, dy) = (x[i] - a[0], y[i] - a[1]);
             let t = best + (dx * dx + dy * dy).sqrt();
-            region.through[i] = t;
-            let maybe = (t <= region.open[i]) & (t + region.rest[i] <= reach);
-            region.flags[i] = u8::from(maybe | (t == f64::INFINITY));
+            through[i] = t;
+            let maybe = (t <= open[i]) & (t + rest[i] <= within);
+            flags[i] = u8::from(maybe | (t == f64::INFINITY));
         }
         let (node_u, rank_u) = (region.node[u], region.rank[u]);
         for word in 0..region.flags.len() / 8 {
@@ -423,7 +509,11 @@ impl Router {
             return true;
         }
         let f = through + region.rest[i];
-        if f > reach || f >= region.dist[GOAL] || (i < entered && f <= last) {
+        if f > reach
+            || f >= region.dist[GOAL]
+            || f > self.onward.bound
+            || (i < entered && f <= last)
+        {
             return true;
         }
         if self.work >= WORK_BOUND {
@@ -436,6 +526,9 @@ impl Router {
             region.dist[i] = through;
             region.open[i] = through;
             region.prev[i] = u;
+            if let Node::Corner(k) = v {
+                self.onward.reached(k, through);
+            }
             self.heap.push(Open {
                 f,
                 slot: v.index(),
@@ -443,6 +536,27 @@ impl Router {
             });
         }
         true
+    }
+
+    /// Learns the ways on to the goal that the way just found gives its polygon corners: from
+    /// the goal back to the first node that is not one (a way past a disc from the robot, or
+    /// the robot).
+    fn learn_onward(&mut self) {
+        let region = &self.region;
+        let (mut k, mut way) = (GOAL, 0.0);
+        loop {
+            let before = region.prev[k];
+            let corner = match region.node.get(before) {
+                Some(&Node::Corner(c)) if c % CORNERS < SIDES => c,
+                _ => break,
+            };
+            way += length(sub(
+                [region.x[k], region.y[k]],
+                [region.x[before], region.y[before]],
+            ));
+            self.onward.learn(corner, way);
+            k = before;
+        }
     }
 
     /// Leaves the way found to the goal (if any) in the per-node buffers [`Router::way_to`]
