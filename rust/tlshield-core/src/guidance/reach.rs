@@ -31,7 +31,7 @@ pub struct Routed {
 /// Whether a point of the plane lies in a goal's region (with a scratch state).
 type InGoal<'f> = &'f mut dyn FnMut([f64; 2], &mut Vec<f64>) -> bool;
 
-/// Scratch of [`Routing::route`]: states with the position moved, and a goal buffer.
+/// Scratch of `Routing::route`: states with the position moved, and a goal buffer.
 #[derive(Debug, Clone, Default)]
 pub struct Scratch {
     probe: Vec<f64>,
