@@ -9,12 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 import tlshield
-from tests.test_routed_reference import (
-    assert_vjp_matches_differences,
-    clf_box_rows,
-    independent,
-)
-from tlshield import GradFlag, Status
+from tests.test_routed_reference import assert_released_rows_exact, clf_box_rows
 from tlshield.lab import routing
 
 
@@ -42,26 +37,14 @@ def test_a_throttle_into_a_disc_at_the_nose_widens_only_the_clf_box_exactly() ->
     bounds = car.shield_kwargs["clf_bounds"]
     s_arr = _nose_at_rim(rng, obstacles, 200)
     a_arr = np.array([car.seeker(s, routing.GOAL) for s in s_arr])
-    q = np.full(len(s_arr), sh.automaton.initial)
-    m = sh.num_inputs
-    batch = sh.filter_batch(s_arr, q, a_arr)
-    v = np.random.default_rng(0).normal(size=a_arr.shape)
-    ga, _, flags = sh.vjp_batch(s_arr, q, a_arr, v, state_grad=False)
-    released = np.zeros(len(s_arr), dtype=bool)
-    for i, (s, a) in enumerate(zip(s_arr, a_arr, strict=True)):
-        assert batch.status[i] == Status.SOLVED
-        widened = clf_box_rows(sh.problem(s, q[i], a), m, bounds)
+
+    def released(problem: dict, a: np.ndarray) -> bool:
+        widened = clf_box_rows(problem, sh.num_inputs, bounds)
         # The throttle is released exactly where the policy pushes the nose in.
-        assert widened[0] == (a[0] > 0.0), f"row {i}: throttle {a[0]}, widened {widened[0]}"
-        released[i] = widened[0]
-        if widened[0]:
-            assert flags[i] & GradFlag.ROUTED
-            x = independent(sh.problem(s, q[i], a))
-            assert x is not None
-            np.testing.assert_allclose(batch.action[i], a + x[:m] + x[m : 2 * m], atol=1e-5)
-    check = released & (flags == GradFlag.ROUTED)
-    assert check.sum() >= 20, check.sum()
-    assert_vjp_matches_differences(sh, s_arr, q, a_arr, v, ga, check)
+        assert widened[0] == (a[0] > 0.0), f"throttle {a[0]}, widened {widened[0]}"
+        return bool(widened[0])
+
+    assert_released_rows_exact(sh, s_arr, a_arr, released, all_solved=True)
 
 
 def _drive(s: np.ndarray, goal: np.ndarray, obstacles: list, seek: bool) -> tuple[bool, float]:

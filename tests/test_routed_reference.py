@@ -6,6 +6,8 @@ it must equal central differences of the action."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -133,29 +135,49 @@ def test_a_released_turn_widens_only_the_clf_box_and_its_gradient_is_exact(robot
         states.append(s)
         a_rl.append(model.seeker(s, goal))
     s_arr, a_arr = np.array(states), np.array(a_rl)
-    q = np.full(len(s_arr), sh.automaton.initial)
     m = sh.num_inputs
+
+    def released(problem: dict, a: np.ndarray) -> bool:
+        if len(problem["c"]) != 2 * m + 1:
+            return False
+        widened = clf_box_rows(problem, m, bounds)
+        # Only the turn input (the second) is released; the forward push never is.
+        assert not widened[0], "the forward input's CLF box widened"
+        return bool(widened[1])
+
+    assert_released_rows_exact(sh, s_arr, a_arr, released, all_solved=False)
+
+
+def assert_released_rows_exact(
+    sh: tlshield.Shield,
+    s_arr: np.ndarray,
+    a_arr: np.ndarray,
+    released: Callable[[dict, np.ndarray], bool],
+    all_solved: bool,
+) -> None:
+    """On the rows whose QP ``released(problem, a_rl)`` says widened a CLF box by the RL
+    action (at least 20 of them): the step is flagged ``GradFlag.ROUTED``, the action equals an
+    independent solve of the same problem, and ``dL/da_rl`` equals central differences.
+    ``all_solved``: every row's QP must be solved (else unsolved rows are passed over)."""
+    m = sh.num_inputs
+    q = np.full(len(s_arr), sh.automaton.initial)
     batch = sh.filter_batch(s_arr, q, a_arr)
     v = np.random.default_rng(0).normal(size=a_arr.shape)
     ga, _, flags = sh.vjp_batch(s_arr, q, a_arr, v, state_grad=False)
-    released = np.zeros(len(s_arr), dtype=bool)
+    rows = np.zeros(len(s_arr), dtype=bool)
     for i, (s, a) in enumerate(zip(s_arr, a_arr, strict=True)):
         if batch.status[i] != Status.SOLVED:
+            assert not all_solved, f"row {i}: {batch.status[i]}"
             continue
         problem = sh.problem(s, q[i], a)
-        if len(problem["c"]) != 2 * m + 1:
-            continue
-        widened = clf_box_rows(problem, m, bounds)
-        # Only the turn input (the second) is released; the forward push never is.
-        assert not widened[0], f"row {i}: the forward input's CLF box widened"
-        released[i] = widened[1]
-        if widened[1]:
-            assert flags[i] & GradFlag.ROUTED, f"row {i}: a released turn is not flagged"
+        rows[i] = released(problem, a)
+        if rows[i]:
+            assert flags[i] & GradFlag.ROUTED, f"row {i}: a released input is not flagged"
             x = independent(problem)
             assert x is not None
             want = a + x[:m] + x[m : 2 * m]
             np.testing.assert_allclose(batch.action[i], want, atol=1e-5, rtol=0)
-    check = released & (flags == GradFlag.ROUTED)
+    check = rows & (flags == GradFlag.ROUTED)
     assert check.sum() >= 20, check.sum()
     assert_vjp_matches_differences(sh, s_arr, q, a_arr, v, ga, check)
 
