@@ -30,8 +30,15 @@ hazards and vases), which the policy never sees:
   to the goal. When the goal is met Safety-Gymnasium places a new one and the task starts
   again.
 
-Every name is importable from this package as from its module. The lidar hazard attacker the
-scripts use is ``hazard_attacker`` in ``scripts/safety_gym_attack.py``.
+**The lidar** (:mod:`~tlshield.envs.safety_gym.lidar`): what Safety-Gymnasium's pseudo-lidar
+bins say about the objects around the robot, read without MuJoCo's positions (per bin, the
+distance no centre is nearer than; a lone object's exact position; the discs a barrier can
+hold on), and the lidar itself, to measure against (``scripts/lidar_estimate.py``).
+
+Every name of the adapter, env, robots and task modules is importable from this package as
+from its module; the lidar's are read from their module (``from tlshield.envs.safety_gym
+import lidar``). The lidar hazard attacker the scripts use is ``hazard_attacker`` in
+``scripts/safety_gym_attack.py``.
 """
 
 from __future__ import annotations

@@ -218,7 +218,9 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
 
     def lidar(self, obs: NDArray[np.float64], name: str = "hazards") -> NDArray[np.float64]:
         """The bins of the observation's ``<name>_lidar`` (closeness in ``[0, 1]`` per
-        direction, counter-clockwise from the heading)."""
+        direction: bin 0 starts at the agent body's +x axis and the bins run
+        counter-clockwise; the Point's +x is its heading, the Car's heading is its -y,
+        :attr:`CarModel.ahead`). :mod:`tlshield.envs.safety_gym.lidar` reads them."""
         return self.sensor(obs, f"{name}_lidar")
 
     def native_action(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
