@@ -90,6 +90,12 @@ def main() -> None:
     )
     parser.add_argument("--configs", nargs="+", default=["rl", "rl_cbf", "rl_cbf_clf"])
     parser.add_argument(
+        "--sensing",
+        default="state",
+        choices=["state", "lidar"],
+        help="what the shield reads: MuJoCo's state (default) or the observation alone",
+    )
+    parser.add_argument(
         "--velocity-error", type=float, help="the env's velocity_error override (m/s^2)"
     )
     parser.add_argument(
@@ -119,7 +125,7 @@ def main() -> None:
     for task in args.tasks or TASKS:
         for policy in args.policies:
             for config in args.configs:
-                env = SafetyGoalEnv(task, config, **overrides)
+                env = SafetyGoalEnv(task, config, sensing=args.sensing, **overrides)
                 rng = np.random.default_rng(3)
                 cost, goals, relaxed, ret = 0.0, 0, 0, 0.0
                 for ep in range(args.episodes):

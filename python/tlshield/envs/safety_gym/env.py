@@ -17,7 +17,9 @@ from numpy.typing import NDArray
 from tlshield._core import Automaton, Monitor, Shield
 from tlshield.envs.params import CONFIGS, FULL, build, check_config
 from tlshield.envs.safety_gym.adapter import TASKS, make_builder
+from tlshield.envs.safety_gym.lidar import BINS
 from tlshield.envs.safety_gym.robots import CarModel, robot_of
+from tlshield.envs.safety_gym.sensing import LidarState
 from tlshield.envs.safety_gym.task import SafetyGoalParams, goal_spec
 from tlshield.step_info import ShieldedStep
 
@@ -26,6 +28,10 @@ from tlshield.step_info import ShieldedStep
 #: Car's wheels at 0.02), so that a Gaussian policy's noise is noise in what the robot does.
 #: ``"native"``: Safety-Gymnasium's own box, for rows like for like with the field's.
 ACTIONS = ("robot", "native")
+#: What the shield reads (``sensing=``). ``"state"`` (the default): MuJoCo's true positions of
+#: the robot, the goal, the hazards and the vases. ``"lidar"``: only the agent's observation
+#: (:mod:`~tlshield.envs.safety_gym.sensing`).
+SENSING = ("state", "lidar")
 
 
 class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
@@ -46,6 +52,7 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         config: str = FULL,
         evaluation: bool = False,
         actions: str = "robot",
+        sensing: str = "state",
         **overrides: Any,
     ) -> None:
         check_config(config)
@@ -53,14 +60,17 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
             raise ValueError(f"task = {task!r}: the shielded envs are {', '.join(TASKS)}")
         if not isinstance(actions, str) or actions not in ACTIONS:
             raise ValueError(f"actions = {actions!r}: expected one of {', '.join(ACTIONS)}")
+        if not isinstance(sensing, str) or sensing not in SENSING:
+            raise ValueError(f"sensing = {sensing!r}: expected one of {', '.join(SENSING)}")
         self.robot = robot_of(task)
         self.params = build(SafetyGoalParams, {**self.robot.defaults, **overrides}, task)
         # What a copy is rebuilt from (see __getstate__).
-        self._args = (task, config, evaluation, actions, dict(overrides))
+        self._args = (task, config, evaluation, actions, sensing, dict(overrides))
         self._episode: tuple[int, list[NDArray[np.float64]]] | None = None
         self.config = config
         self.task = task
         self.actions = actions
+        self.sensing = sensing
         self._env = make_builder(task)
         self.observation_space = self._env.observation_space
         native = self._env.action_space
@@ -75,9 +85,30 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._hazards = sg.hazards.num if hasattr(sg, "hazards") else 0
         vases = getattr(sg, "vases", None)
         self._vases = vases.num if vases is not None and vases.is_constrained else 0
-        self._state_dim = self.robot.agent_dim + 2 * (1 + self._hazards + self._vases)
         robot = self.robot
-        spec = goal_spec(self._hazards, self._vases, self.params, robot.agent_dim, robot.pivot)
+        self._sensing: LidarState | None = None
+        slack = 0.0
+        if sensing == "lidar":
+            # One slot per lidar bin in place of one per object, and the barriers grown by
+            # what the robot may move between readings.
+            radii = {"hazards": 0.2 + self.params.hazard_margin}
+            if self._vases:
+                radii["vases"] = self.params.vase_radius
+            self._sensing = LidarState(
+                self.sensor,
+                agent_dim=robot.agent_dim,
+                ahead=robot.ahead,
+                pivot=robot.pivot,
+                radii=radii,
+            )
+            # One obstacle per bin, hazards' and vases' readings shared (their barrier
+            # radius the hazards'), grown by what the robot may move between readings.
+            self._hazards, self._vases = BINS, 0
+            slack = self.params.lidar_slack
+        self._state_dim = robot.agent_dim + 2 * (1 + self._hazards + self._vases)
+        spec = goal_spec(
+            self._hazards, self._vases, self.params, robot.agent_dim, robot.pivot, slack
+        )
         self.automaton: Automaton = spec.automaton()
         use_cbf, use_clf = CONFIGS[config]
         use_cbf = use_cbf or evaluation
@@ -131,6 +162,10 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._bodies = np.array([model.body(n).id for n in names])
         self._buffer = np.zeros(self._state_dim)
 
+    def _read(self, obs: NDArray[np.float64]) -> NDArray[np.float64]:
+        # What the shield reads: MuJoCo's state, or the observation alone.
+        return self.true_state() if self._sensing is None else self._sensing.read(obs)
+
     def true_state(self) -> NDArray[np.float64]:
         """The privileged state: the agent's (Point: ``x, y, theta, vx, vy``; Car: ``x, y,
         psi, v``), then the goal's ``x, y``, the hazards' and the vases': the agent from
@@ -154,8 +189,14 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         # needs to continue it (MuJoCo and Safety-Gymnasium replay them exactly).
         obs, info = self._env.reset(seed=seed)
         self._episode = (seed, [])
-        self._find_agent()
-        self._state = self.true_state()
+        if self._sensing is None:
+            self._find_agent()
+        else:
+            # The env's step, for the odometry: MuJoCo's timestep times the substeps (the
+            # world exists once reset).
+            sg = self._env.task
+            self._sensing.reset(float(sg.model.opt.timestep) * sg.sim_conf.frameskip_binom_n)
+        self._state = self._read(np.asarray(obs, dtype=np.float64))
         self.monitor.reset(self._state)
         self._detour = self.detour()
         return np.asarray(obs, dtype=np.float64), {**info, "state": self._state}
@@ -173,8 +214,8 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         return {"args": self._args, "rng": rng, "episode": episode}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        task, config, evaluation, actions, overrides = state["args"]
-        self.__init__(task, config, evaluation, actions, **overrides)  # type: ignore[misc]
+        task, config, evaluation, actions, sensing, overrides = state["args"]
+        self.__init__(task, config, evaluation, actions, sensing, **overrides)  # type: ignore[misc]
         if state["episode"] is not None:
             seed, taken = state["episode"]
             self._start(seed)
@@ -265,9 +306,11 @@ class SafetyGoalEnv(gym.Env[NDArray[np.float64], NDArray[np.float64]]):
         self._episode[1].append(action.copy())
         obs, reward, cost, terminated, truncated, info = self._env.step(self.native_action(applied))
         goal_met = bool(info.get("goal_met", False))
-        if goal_met:
+        if goal_met and self._sensing is None:
             self._find_agent()
-        self._state = self.true_state()
+        elif goal_met and self._sensing is not None:
+            self._sensing.forget_goal()
+        self._state = self._read(np.asarray(obs, dtype=np.float64))
         # A goal met: a new one was placed, and the task starts again.
         step = self._step.advance(self._state, restart=goal_met)
         detour = self.detour()
@@ -301,8 +344,9 @@ def make_safety_goal(
     config: str = FULL,
     evaluation: bool = False,
     actions: str = "robot",
+    sensing: str = "state",
     **overrides: Any,
 ) -> gym.Env:
     """``gymnasium.make("tlshield/SafetyPointGoal1-v0", config=..., evaluation=...,
-    actions=..., ...)``."""
-    return SafetyGoalEnv(task, config, evaluation, actions, **overrides)
+    actions=..., sensing=..., ...)``."""
+    return SafetyGoalEnv(task, config, evaluation, actions, sensing, **overrides)

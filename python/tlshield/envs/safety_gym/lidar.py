@@ -71,7 +71,11 @@ class Lidar:
         return bins
 
 
-def reading(points: ArrayLike, lidar: Lidar = Lidar()) -> NDArray[np.float64]:
+#: The Goal tasks' lidar.
+GOAL_TASKS = Lidar()
+
+
+def reading(points: ArrayLike, lidar: Lidar = GOAL_TASKS) -> NDArray[np.float64]:
     """The bins ``lidar`` reads of objects centred at ``points`` (``(k, 2)``, the body frame:
     metres, +x the body's x axis), as Safety-Gymnasium computes them."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -91,14 +95,14 @@ def reading(points: ArrayLike, lidar: Lidar = Lidar()) -> NDArray[np.float64]:
     return out
 
 
-def floors(obs: ArrayLike, lidar: Lidar = Lidar()) -> NDArray[np.float64]:
+def floors(obs: ArrayLike, lidar: Lidar = GOAL_TASKS) -> NDArray[np.float64]:
     """Per bin, the distance (m) no centre in that bin is nearer than: ``max_dist (1 - obs)``
     (``max_dist`` where the bin reads 0: nothing is seen)."""
     bins = lidar.check(obs)
     return lidar.max_dist * (1.0 - bins)
 
 
-def nearest(obs: ArrayLike, lidar: Lidar = Lidar()) -> tuple[float, float] | None:
+def nearest(obs: ArrayLike, lidar: Lidar = GOAL_TASKS) -> tuple[float, float] | None:
     """The one object of a lidar that sees a single object (the goal's): its distance (m) and
     its angle from the body's +x axis (rad, counter-clockwise, in ``[0, 2 pi)``), exact where
     its bin and both neighbours hold only its readings. ``None`` where every bin reads 0 (the
@@ -119,7 +123,7 @@ def nearest(obs: ArrayLike, lidar: Lidar = Lidar()) -> tuple[float, float] | Non
     return d, ((b + min(max(a, 0.0), 1.0)) * lidar.width) % (2.0 * np.pi)
 
 
-def clean(obs: ArrayLike, b: int, lidar: Lidar = Lidar()) -> bool:
+def clean(obs: ArrayLike, b: int, lidar: Lidar = GOAL_TASKS) -> bool:
     """Whether bin ``b`` and its neighbours hold one object's readings alone (its alias spills
     sum to its own reading; another object would only raise a neighbour)."""
     bins = lidar.check(obs)
@@ -134,7 +138,7 @@ def clean(obs: ArrayLike, b: int, lidar: Lidar = Lidar()) -> bool:
 Discs = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
-def cover(obs: ArrayLike, lidar: Lidar = Lidar()) -> Discs:
+def cover(obs: ArrayLike, lidar: Lidar = GOAL_TASKS) -> Discs:
     """Per bin, the disc a barrier holds on for what the bin may hold: its centre (``(bins, 2)``,
     the body frame) and radius (``(bins,)``), the smallest disc round the arc of radius
     ``floor_b`` across the bin (centre ``floor_b cos(B / 2)`` along the bin's middle, radius

@@ -57,6 +57,11 @@ class SafetyGoalParams:
     #: (Krasowski et al. 2023); ``info["task_reward"]`` keeps Safety-Gymnasium's reward, which
     #: every table reports. 0 (the default) pays nothing.
     correction_penalty: float = 0.0
+    #: With ``sensing="lidar"``, every hazard's and vase's barrier radius grows by this (m):
+    #: twice what the robot may move over the step a reading serves (the lidar's points stand
+    #: for every centre they may hide up to twice the robot's motion since the reading,
+    #: :mod:`~tlshield.envs.safety_gym.sensing`): 2 x 1.5 m/s x 0.02 s for the Point.
+    lidar_slack: float = 0.06
 
     #: The settings that may be 0 (every other one must be > 0).
     _MAY_BE_ZERO: ClassVar[tuple[str, ...]] = (
@@ -64,6 +69,7 @@ class SafetyGoalParams:
         "velocity_error",
         "heading_error",
         "correction_penalty",
+        "lidar_slack",
     )
 
     def check(self) -> None:
@@ -79,17 +85,23 @@ class SafetyGoalParams:
 
 
 def goal_spec(
-    hazards: int, vases: int, params: SafetyGoalParams, agent_dim: int = 5, pivot: float = 0.0
+    hazards: int,
+    vases: int,
+    params: SafetyGoalParams,
+    agent_dim: int = 5,
+    pivot: float = 0.0,
+    slack: float = 0.0,
 ) -> Spec:
     """``(!h1 & ... & !v1 & ...) U goal`` over the shield's state: the agent's ``agent_dim``
     values, the goal's ``x, y``, then two values per hazard and per vase (the objects' centres
     are read from the state, so one spec serves every layout). With ``pivot`` > 0 the hazards
-    and vases hold the point ``pivot`` ahead of ``x, y`` along the heading ``s[2]``."""
+    and vases hold the point ``pivot`` ahead of ``x, y`` along the heading ``s[2]``; ``slack``
+    grows their radii (m)."""
     # The goal is 0.3 m in Safety-Gymnasium; 0.25 here, so that Safety-Gymnasium meets it (and
     # places the next one, which restarts the task) before the automaton accepts.
     goal = [agent_dim, agent_dim + 1]
     preds: dict[str, Ball] = {"goal": Ball(pos=[0, 1], radius=0.25, center_dims=goal)}
-    radius = {"h": 0.2 + params.hazard_margin, "v": params.vase_radius}
+    radius = {"h": 0.2 + params.hazard_margin + slack, "v": params.vase_radius + slack}
     start = agent_dim + 2
     for kind, count in (("h", hazards), ("v", vases)):
         for i in range(count):
