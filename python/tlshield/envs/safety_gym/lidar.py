@@ -36,8 +36,11 @@ from numpy.typing import ArrayLike, NDArray
 #: Safety-Gymnasium's Goal tasks' lidar: bins, range (m), alias.
 BINS = 16
 MAX_DIST = 3.0
-#: Two readings this close are one reading's alias spills summing to it (a clean triple).
-CLEAN = 1e-9
+#: Two readings this close are one reading's alias spills summing to it (a clean triple):
+#: Safety-Gymnasium's readings are exact to rounding, and a bin holding only a neighbour's
+#: spill passes as clean only within this much of the shared edge, its distance then off by at
+#: most ``max_dist * CLEAN``.
+CLEAN = 1e-12
 
 
 @dataclass(frozen=True)
