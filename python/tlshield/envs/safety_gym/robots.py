@@ -26,7 +26,7 @@ class Robot(Protocol):
     (``env.robot``): exactly the attributes and methods the env uses. :class:`PointModel` and
     :class:`CarModel` satisfy it; the attributes are read-only (properties here, class or
     dataclass fields in the models). The models also give what policies reading the sensors
-    use through ``env.robot`` and the env does not (``ahead``, ``forward_speed``)."""
+    use through ``env.robot`` and the env does not (``forward_speed``)."""
 
     @property
     def agent_dim(self) -> int:
@@ -36,6 +36,12 @@ class Robot(Protocol):
     @property
     def defaults(self) -> dict[str, float]:
         """The robot's own defaults of ``SafetyGoalParams`` (keyword overrides win)."""
+        ...
+
+    @property
+    def ahead(self) -> float:
+        """The heading's angle in the body frame the lidars and sensors read (rad; the
+        ``sensing="lidar"`` state places the robot's heading there)."""
         ...
 
     @property
