@@ -56,6 +56,19 @@ def attack(env: sg.SafetyGoalEnv, episodes: int, steps: int, seed: int) -> float
     return cost
 
 
+def shield_alone(env: Any, steps: int, seed: int) -> tuple[int, float]:
+    """(goals met, cost) over one episode of zero actions from ``seed`` (the shield drives)."""
+    env.reset(seed=seed)
+    goals, cost = 0, 0.0
+    for _ in range(steps):
+        _, _, terminated, truncated, info = env.step(np.zeros(2))
+        goals += info["goal_met"]
+        cost += info["cost"]
+        if terminated or truncated:
+            break
+    return goals, cost
+
+
 def test_the_adapter_checks_versions_and_says_what_to_install(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -260,14 +273,7 @@ def test_the_defaults_route_the_shield_alone_to_goals() -> None:
     seeds 700-709): with no action it meets goals, at cost 0. The settings before (a CLF at
     half thrust, routes that grazed the hazards) met 1 in this episode, these 8."""
     env = gym.make("tlshield/SafetyPointGoal1-v0", config="rl_cbf_clf")
-    env.reset(seed=702)
-    goals, cost = 0, 0.0
-    for _ in range(1000):
-        _, _, terminated, truncated, info = env.step(np.zeros(2))
-        goals += info["goal_met"]
-        cost += info["cost"]
-        if terminated or truncated:
-            break
+    goals, cost = shield_alone(env, steps=1000, seed=702)
     assert cost == 0.0
     assert goals >= 4
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.test_safety_gym import attack
+from tests.test_safety_gym import attack, shield_alone
 from tlshield.envs.safety_gym import SafetyGoalEnv
 from tlshield.envs.safety_gym import lidar as L
 
@@ -34,15 +34,7 @@ def test_the_lidar_mode_reads_no_mujoco_position_and_keeps_cost_at_zero(task: st
     env = _blind(SafetyGoalEnv(task, config="rl_cbf_clf", evaluation=True, sensing="lidar"))
     try:
         assert attack(env, episodes=2, steps=250, seed=700) == 0.0
-        cost = goals = 0.0
-        env.reset(seed=710)
-        for _ in range(250):
-            _, _, terminated, truncated, info = env.step(np.zeros(2))
-            cost += info["cost"]
-            goals += info["goal_met"]
-            if terminated or truncated:
-                break
-        assert cost == 0.0
+        assert shield_alone(env, steps=250, seed=710)[1] == 0.0
     finally:
         env.close()
 

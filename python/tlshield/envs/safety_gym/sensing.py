@@ -30,6 +30,7 @@ frame: origin at the body, +x its x axis), so the robot's position is known exac
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,7 +56,7 @@ class LidarState:
 
     def __init__(
         self,
-        sensor: object,
+        sensor: Callable[[NDArray[np.float64], str], NDArray[np.float64]],
         *,
         agent_dim: int,
         ahead: float,
@@ -93,8 +94,8 @@ class LidarState:
     def read(self, obs: NDArray[np.float64]) -> NDArray[np.float64]:
         """The state of this observation, and the odometry advanced over the step it ends."""
         sensor = self._sensor
-        heading = heading_of(sensor(obs, "magnetometer"))  # type: ignore[operator]
-        velocity = np.asarray(sensor(obs, "velocimeter"), dtype=np.float64)[:2]  # type: ignore[operator]
+        heading = heading_of(sensor(obs, "magnetometer"))
+        velocity = np.asarray(sensor(obs, "velocimeter"), dtype=np.float64)[:2]
         c, s = math.cos(heading), math.sin(heading)
         # The body's velocity in the odometry's (world-aligned) frame.
         world_v = np.array([c * velocity[0] - s * velocity[1], s * velocity[0] + c * velocity[1]])
@@ -107,7 +108,7 @@ class LidarState:
             out[1] = -self.pivot * math.sin(self.ahead)
             out[2] = self.ahead
             out[3] = math.cos(self.ahead) * velocity[0] + math.sin(self.ahead) * velocity[1]
-        goal = L.nearest(sensor(obs, "goal_lidar"), self.lidar)  # type: ignore[operator]
+        goal = L.nearest(sensor(obs, "goal_lidar"), self.lidar)
         if goal is not None:
             ego = goal[0] * np.array([math.cos(goal[1]), math.sin(goal[1])])
             self._goal = self._odometry + np.array(
@@ -122,7 +123,7 @@ class LidarState:
         out[at : at + 2] = ego
         clearance = np.full(self.lidar.bins, np.inf)
         for kind, radius in self.radii.items():
-            floors = L.floors(sensor(obs, f"{kind}_lidar"), self.lidar)  # type: ignore[operator]
+            floors = L.floors(sensor(obs, f"{kind}_lidar"), self.lidar)
             clearance = np.minimum(clearance, floors - radius)
         distance = clearance + self.shared
         out[at + 2 :] = (distance[:, None] * self._rays).ravel()
