@@ -92,6 +92,43 @@ def test_validation_keeps_the_best_return_and_metrics_count_the_cost(tmp_path: P
     assert (tmp_path / "model.zip").is_file() and (tmp_path / "last_model.zip").is_file()
 
 
+def test_sensing_is_a_column_and_a_lidar_row_reads_no_privileged_state(tmp_path: Path) -> None:
+    from tlshield.lab import benchmark_safety_gym as bench
+    from tlshield.lab.runs import load_run
+
+    out = bench.safety_gym(
+        tmp_path,
+        envs=["SafetyPointGoal1-v0"],
+        configs=["rl_cbf_clf"],
+        seeds=[0],
+        sensing=["state", "lidar"],
+        steps=64,
+        episodes=1,
+        workers=1,
+        progress=False,
+    )
+    with open(out / "safety_gym.csv") as fh:
+        rows = {r["sensing"]: r for r in csv.DictReader(fh)}
+    assert sorted(rows) == ["lidar", "state"]
+    for row in rows.values():
+        assert float(row["kept_cost"]) == 0.0 and float(row["train_cost"]) == 0.0
+    # The lidar row trained and was evaluated with the lidar mode; the state row's folder keeps
+    # the name and the settings it had before the column.
+    lidar = load_run(
+        out / "runs" / bench.folder_name("SafetyPointGoal1-v0", "rl_cbf_clf", 0, 64, "lidar")
+    )
+    state = load_run(out / "runs" / "SafetyPointGoal1-v0-rl_cbf_clf-s0-64")
+    assert lidar is not None and lidar.record["overrides"] == {"sensing": "lidar"}
+    assert state is not None and state.record["overrides"] == {}
+    text = (out / "safety_gym.md").read_text()
+    assert "| SafetyPointGoal1-v0 | rl_cbf_clf | lidar | 0 |" in text
+    assert "| SafetyPointGoal1-v0 | rl_cbf_clf | state | 0 |" in text
+    assert "sensing` = lidar the shield reads only the policy's own observation" in text
+    assert "like for like with the rows read from the lidar" in text
+    with pytest.raises(ValueError, match="sensing 'radar'"):
+        bench.safety_gym(tmp_path, envs=["SafetyPointGoal1-v0"], sensing=["radar"])
+
+
 def test_the_cli_refuses_what_the_suite_does_not_take(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["benchmark", "safety-gym", "--formulas", "F a"]) == 2
     assert "--formulas" in capsys.readouterr().err
@@ -99,3 +136,7 @@ def test_the_cli_refuses_what_the_suite_does_not_take(capsys: pytest.CaptureFixt
     assert "SafetyCarGoal2-v0" in capsys.readouterr().err
     assert cli.main(["benchmark", "safety-gym", "--configs", "rl_cbf+nothing"]) == 2
     assert "rl_cbf+penalty" in capsys.readouterr().err  # the error lists the known rows
+    assert cli.main(["benchmark", "safety-gym", "--sensing", "radar"]) == 2
+    assert "radar" in capsys.readouterr().err
+    assert cli.main(["benchmark", "flatworld", "--sensing", "lidar"]) == 2
+    assert "--sensing" in capsys.readouterr().err

@@ -10,9 +10,12 @@ observation of ``tlshield/<env>``. The run folder is a tlshield run folder
 on the return keeps the best policy, and the last policy is kept beside it. Both are evaluated
 (:func:`tlshield.lab.evaluation.evaluate`: deterministic, each variant as it trained, ``rl``
 unshielded, 1,000-step episodes). Jobs run as Ray tasks (:mod:`tlshield.lab.cluster`); a
-finished job keeps its folder, so an interrupted run resumes where it stopped. The shield reads
-the privileged true state (agent pose and velocity, goal, hazards, vases), which the policy
-never sees; every table says so.
+finished job keeps its folder, so an interrupted run resumes where it stopped.
+
+What the shield reads is the ``sensing`` column (:data:`tlshield.envs.safety_gym.env.SENSING`):
+``"state"``, the privileged true state (agent pose and velocity, goal, hazards, vases), which
+the policy never sees; or ``"lidar"``, the policy's own observation and nothing else. Every
+table says which.
 
 Seeds (:mod:`tlshield.lab.seeds`): training resets from ``train_seed(seed)``, validation from
 ``validation_seed(seed, k)``, evaluation episode ``k`` from ``EVAL_SEED + k`` (disjoint, never
@@ -46,6 +49,8 @@ DEFAULT_STEPS = {
 DEFAULT_CONFIGS = ("rl", "rl+native", "rl_cbf", "rl_cbf_clf")
 DEFAULT_SEEDS = (0, 1, 2)
 DEFAULT_EPISODES = 10
+#: What the shield reads by default (``--sensing``): MuJoCo's true state.
+DEFAULT_SENSING = ("state",)
 #: The training preset (:data:`tlshield.lab.presets.PRESETS`).
 PRESET = "safety-gym"
 
@@ -94,6 +99,7 @@ VARIANTS: dict[str, Variant] = {
 COLUMNS = (
     "env",
     "method",
+    "sensing",
     "seed",
     "steps",
     "kept_return",
@@ -125,12 +131,25 @@ OMNISAFE = {
 }
 
 
+def folder_name(env: str, variant: str, seed: int, budget: int, sensing: str) -> str:
+    """The run folder of one job under ``out/runs`` (the state mode's keeps the name it had
+    before the ``sensing`` column, so that its finished jobs resume)."""
+    tail = "" if sensing == "state" else f"-{sensing}"
+    return f"{env}-{variant}-s{seed}-{budget}{tail}"
+
+
 def train_and_evaluate(
-    env: str, variant: str, seed: int, steps: int, episodes: int, folder: Path
+    env: str,
+    variant: str,
+    seed: int,
+    steps: int,
+    episodes: int,
+    folder: Path,
+    sensing: str = "state",
 ) -> None:
-    """One (env, variant, seed): a run of at least ``steps`` PPO steps trained into ``folder``,
-    then ``episodes`` evaluation episodes of the kept and of the last policy; writes
-    ``result.json`` last, so a folder without it is not finished (a Ray task)."""
+    """One (env, variant, seed, sensing): a run of at least ``steps`` PPO steps trained into
+    ``folder``, then ``episodes`` evaluation episodes of the kept and of the last policy;
+    writes ``result.json`` last, so a folder without it is not finished (a Ray task)."""
     import time
 
     import torch
@@ -142,6 +161,8 @@ def train_and_evaluate(
     torch.set_num_threads(1)
     start = time.perf_counter()
     v = VARIANTS[variant]
+    # The state mode passes nothing, so its runs read as they did before the column.
+    reads = {} if sensing == "state" else {"sensing": sensing}
     run = prepare(
         v.config,
         seed,
@@ -152,6 +173,7 @@ def train_and_evaluate(
         ppo=dict(v.ppo),
         env=f"tlshield/{env}",
         **v.env,
+        **reads,
     )
     learn(run)
     kept = evaluate(folder, trials=episodes)
@@ -164,6 +186,7 @@ def train_and_evaluate(
     row = {
         "env": env,
         "method": variant,
+        "sensing": sensing,
         "seed": seed,
         "steps": timesteps,
         "budget": steps,
@@ -189,6 +212,7 @@ def safety_gym(
     envs: Sequence[str] = tuple(DEFAULT_STEPS),
     configs: Sequence[str] = DEFAULT_CONFIGS,
     seeds: Sequence[int] = DEFAULT_SEEDS,
+    sensing: Sequence[str] = DEFAULT_SENSING,
     steps: int | None = None,
     episodes: int = DEFAULT_EPISODES,
     address: str | None = None,
@@ -197,8 +221,10 @@ def safety_gym(
 ) -> Path:
     """Runs the benchmark into ``out`` (resumable: finished jobs are kept) and writes
     ``safety_gym.csv``, ``safety_gym.md`` and ``safety_gym.png``. ``steps`` overrides
-    :data:`DEFAULT_STEPS` for every env; ``configs`` are names of :data:`VARIANTS`."""
+    :data:`DEFAULT_STEPS` for every env; ``configs`` are names of :data:`VARIANTS`;
+    ``sensing`` what the shield reads, each a row of its own."""
     from tlshield.envs.safety_gym import TASKS, load_builder
+    from tlshield.envs.safety_gym.env import SENSING
 
     load_builder()  # a missing stack is one clear ImportError, before any job
     for e in envs:
@@ -207,6 +233,11 @@ def safety_gym(
     for c in configs:
         if c not in VARIANTS:
             raise ValueError(f"config {c!r}: expected one of {', '.join(VARIANTS)}")
+    for m in sensing:
+        if m not in SENSING:
+            raise ValueError(f"sensing {m!r}: expected one of {', '.join(SENSING)}")
+    if not sensing:
+        raise ValueError("sensing: expected at least one of " + ", ".join(SENSING))
     check_block(episodes, "episodes")
     if steps is not None and not (isinstance(steps, int) and steps > 0):
         raise ValueError(f"steps = {steps!r}: expected a positive integer")
@@ -215,10 +246,13 @@ def safety_gym(
     runs = out / "runs"
     runs.mkdir(parents=True, exist_ok=True)
     jobs = {
-        runs / f"{e}-{c}-s{s}-{budget}": partial(train_and_evaluate, e, c, s, budget, episodes)
+        runs / folder_name(e, c, s, budget, m): partial(
+            train_and_evaluate, e, c, s, budget, episodes, sensing=m
+        )
         for e in envs
         for budget in (steps or DEFAULT_STEPS[e],)
         for c in configs
+        for m in dict.fromkeys(sensing)
         for s in seeds
     }
     return bench.run(REPORT, out, jobs, address, workers, progress)
@@ -228,24 +262,36 @@ def _cost(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.1f}"
 
 
+def _sensing(row: dict[str, Any]) -> str:
+    # Rows written before the column read the true state.
+    return str(row.get("sensing") or "state")
+
+
 def markdown(rows: list[dict[str, Any]]) -> str:
     """The per-seed table (the kept and the last policy), then OmniSafe's rows for the same
     envs."""
+    modes = {_sensing(r) for r in rows}
+    reads = {
+        "state": "With `sensing` = state the shield reads the privileged true state (agent pose "
+        "and velocity, goal, hazards, vases), which the policy never sees.",
+        "lidar": "With `sensing` = lidar the shield reads only the policy's own observation "
+        "(lidars, velocimeter, magnetometer): no privileged state.",
+    }
     lines = [
         "Per seed: evaluation return and cost per episode of the kept policy (the best on the "
         "validation episodes' return) and of the last one (deterministic, each variant as "
         "trained; `rl` is unshielded), the update the kept policy comes from, the cost summed "
-        "over training, and the wall time of training and evaluation. The shield reads the "
-        "privileged true state (agent pose and velocity, goal, hazards, vases); the policy "
-        "sees Safety-Gymnasium's standard observation.",
+        "over training, and the wall time of training and evaluation. The policy sees "
+        "Safety-Gymnasium's standard observation. "
+        + " ".join(reads[m] for m in sorted(modes) if m in reads),
         "",
-        "| env | method | seed | PPO steps | kept return | kept cost | last return | "
+        "| env | method | sensing | seed | PPO steps | kept return | kept cost | last return | "
         "last cost | kept update | train cost | train cost / step | wall (s) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['env']} | {r['method']} | {r['seed']} | {r['steps']:,} | "
+            f"| {r['env']} | {r['method']} | {_sensing(r)} | {r['seed']} | {r['steps']:,} | "
             f"{r['kept_return']:.2f} | {_cost(r['kept_cost'])} | {r['last_return']:.2f} | "
             f"{_cost(r['last_cost'])} | {r['kept_update']} | {r['train_cost']:.0f} | "
             f"{r['train_cost_rate']:.4f} | {r['wall_s']:.0f} |"
@@ -253,10 +299,16 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     envs = sorted({r["env"] for r in rows})
     published = [(e, m, v) for e in envs for m, v in OMNISAFE.get(e, {}).items()]
     if published:
+        like = (
+            "like for like with the rows read from the lidar, not with those read from the "
+            "true state"
+            if "lidar" in modes
+            else "not like for like"
+        )
         lines += [
             "",
             "OmniSafe's published rows (1e7 steps against the budgets above, cost limit 25, "
-            "and no privileged state: not like for like):",
+            f"and no privileged state: {like}):",
             "",
             "| env | method | return | cost |",
             "|---|---|---:|---:|",
@@ -278,19 +330,25 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
     if not envs:
         return
     fig, axes = plt.subplots(2, len(envs), figsize=(5.5 * len(envs), 6), squeeze=False)
-    methods = sorted({r["method"] for r in rows})
+
+    # A (method, sensing)'s colour.
+    def key(r: dict[str, Any]) -> tuple[str, str]:
+        return (r["method"], _sensing(r))
+
+    methods = sorted({key(r) for r in rows})
     colours = {m: plt.get_cmap("tab10")(k % 10) for k, m in enumerate(methods)}
     # A method's colour, a seed's line style: the legend tells the seeds apart.
     seeds = sorted({r["seed"] for r in rows})
     styles = {s: ("-", "--", ":", "-.")[k % 4] for k, s in enumerate(seeds)}
     for j, e in enumerate(envs):
         for r in (r for r in rows if r["env"] == e):
-            run = load_run(out / "runs" / f"{e}-{r['method']}-s{r['seed']}-{r['budget']}")
+            name = folder_name(e, r["method"], r["seed"], r["budget"], _sensing(r))
+            run = load_run(out / "runs" / name)
             if run is None:
                 continue
             m = run.metrics
-            label = f"{r['method']} s{r['seed']}"
-            look = {"color": colours[r["method"]], "ls": styles[r["seed"]], "lw": 1}
+            label = f"{r['method']} {_sensing(r)} s{r['seed']}"
+            look = {"color": colours[key(r)], "ls": styles[r["seed"]], "lw": 1}
             axes[0, j].plot(m["timesteps"], m["task_return_mean"], label=label, **look)
             axes[1, j].plot(m["timesteps"], m["episode_cost_mean"], **look)
         axes[0, j].set_title(e)
@@ -310,7 +368,7 @@ def _figure(out: Path, rows: list[dict[str, Any]]) -> None:
 REPORT = bench.Benchmark(
     name="safety_gym",
     columns=COLUMNS,
-    order=lambda r: (r["env"], r["budget"], r["method"], r["seed"]),
+    order=lambda r: (r["env"], r["budget"], r["method"], _sensing(r), r["seed"]),
     markdown=markdown,
     figure=_figure,
 )

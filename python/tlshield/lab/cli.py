@@ -503,6 +503,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--seeds", nargs="+", type=int, help="default: flatworld 1 2 3; safety-gym 0 1 2"
     )
     bench.add_argument(
+        "--sensing",
+        nargs="+",
+        metavar="SENSING",
+        help="safety-gym: what the shield reads, each a row of its own (default: state, "
+        "MuJoCo's true state; lidar: the policy's observation alone)",
+    )
+    bench.add_argument(
         "--episodes",
         type=_positive,
         help="evaluation episodes (default: flatworld 500; safety-gym 10)",
@@ -530,6 +537,8 @@ def _benchmark(args: argparse.Namespace) -> int:
         return _benchmark_safety_gym(args)
     if args.envs:
         raise ValueError("--envs: the flatworld benchmark has one env; use --formulas")
+    if args.sensing:
+        raise ValueError("--sensing: the flatworld benchmark's shield reads its own state")
     from tlshield.lab import benchmark
 
     out = benchmark.flatworld(
@@ -556,6 +565,7 @@ def _benchmark_safety_gym(args: argparse.Namespace) -> int:
         envs=args.envs or tuple(sg.DEFAULT_STEPS),
         configs=args.configs or sg.DEFAULT_CONFIGS,
         seeds=args.seeds or sg.DEFAULT_SEEDS,
+        sensing=args.sensing or sg.DEFAULT_SENSING,
         steps=args.steps,
         episodes=args.episodes or sg.DEFAULT_EPISODES,
         **_ray_options(args),

@@ -39,6 +39,8 @@ from tlshield.envs.safety_gym import lidar as L
 
 #: Where the goal is placed before the goal lidar has seen one (m ahead): past its range.
 UNSEEN_GOAL = L.MAX_DIST + 1.0
+#: Where a bin that reads nothing places its obstacle (m): beyond every goal and every route.
+EMPTY = 30.0
 
 
 def heading_of(magnetometer: NDArray[np.float64]) -> float:
@@ -122,9 +124,14 @@ class LidarState:
         at = self.agent_dim
         out[at : at + 2] = ego
         clearance = np.full(self.lidar.bins, np.inf)
+        seen = np.zeros(self.lidar.bins, dtype=bool)
         for kind, radius in self.radii.items():
-            floors = L.floors(sensor(obs, f"{kind}_lidar"), self.lidar)
-            clearance = np.minimum(clearance, floors - radius)
-        distance = clearance + self.shared
+            reads = sensor(obs, f"{kind}_lidar")
+            seen |= np.asarray(reads) > 0.0
+            clearance = np.minimum(clearance, L.floors(reads, self.lidar) - radius)
+        # A bin that reads nothing holds no centre within the lidar's range, farther than the
+        # robot moves in a step: its point stands out of the way, so that the router does
+        # not plan around a ring of discs at the range that nothing put there.
+        distance = np.where(seen, clearance + self.shared, EMPTY)
         out[at + 2 :] = (distance[:, None] * self._rays).ravel()
         return out
