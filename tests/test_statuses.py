@@ -76,6 +76,40 @@ def test_a_singular_kkt_system_is_flagged_and_gives_the_identity_part_only() -> 
     assert abs(ga[0, 0]) < 1e-6  # the push into the wall has no effect
 
 
+def test_a_barrier_abeam_of_the_thrust_within_rounding_is_solved_as_if_exactly_abeam() -> None:
+    # A ThrustTurn robot at rest, heading +x, an obstacle 2.6 m to its left: the barrier's
+    # second-order row reads the thrust through grad h . heading, 0 exactly abeam and ~1e-16
+    # when the obstacle's x is 1.6e-16 (a lidar bin's edge at 90 degrees). That row's plane
+    # lies ~1e16 away; it used to set the active-set solver's scale and certify a point the
+    # final check refused (INACCURATE on every step of such a reading).
+    spec = tlshield.Spec(
+        "(!h) U goal",
+        {
+            "goal": tlshield.Ball([0, 1], 0.25, center_dims=[5, 6]),
+            "h": tlshield.Ball([0, 1], 0.36, center_dims=[7, 8]),
+        },
+    )
+    shield = tlshield.Shield(
+        spec.automaton(),
+        tlshield.ThrustTurn(2.846, 1.0, 1.0),
+        alpha=2.0,
+        alpha2=4.0,
+        c3=5.0,
+        k=1e4,
+        cbf_bounds=(-2.0, 2.0),
+        clf_bounds=(-1.0, 1.0),
+        action_bounds=((-1.0, -1.0), (1.0, 1.0)),
+        disturbance={0: 0.05, 1: 0.05},
+    )
+    outs = [
+        shield.filter(np.array([0, 0, 0, 0, 0, 1.0, 0.0, x, 2.609]), 0, np.zeros(2))
+        for x in (0.0, 1.6e-16, -1.6e-16, 1e-12)
+    ]
+    for out in outs:
+        assert out.status == Status.SOLVED, out
+        np.testing.assert_allclose(out.action, outs[0].action, rtol=0, atol=1e-12)
+
+
 def test_the_python_codes_are_the_cores_every_one() -> None:
     """``Status`` and ``Solver`` take their values from the core's tables, and every code the
     core has is a member (a new core status cannot come back as an unknown integer)."""

@@ -4,7 +4,8 @@
 //!
 //! Design:
 //! 1. Rows are scaled to unit norm. A zero row is skipped when `h >= 0` and proves
-//!    infeasibility otherwise.
+//!    infeasibility otherwise; so is a row whose plane is farther than [`FAR`] from the origin
+//!    (it cannot bind, and it would set the problem's length scale).
 //! 2. Identification: Goldfarb–Idnani dual active set (no feasible start, independent working
 //!    rows) on a strictly convex surrogate. Zero or tiny `P_jj` become
 //!    `eps_j = max(|c_j| / X, 1e-8 p_ref)` with `X = 1e6 x length scale`, so a linear cost moves
@@ -44,6 +45,13 @@ const DEPENDENT: f64 = 1e-10;
 const KKT_TOL: f64 = 1e-9;
 /// Relative pivot threshold of the KKT factorisation (against the column's largest entry).
 const PIVOT_TOL: f64 = 1e-14;
+/// A row whose plane lies farther than this from the origin, on the side of it that holds the
+/// origin (`h / |row| > FAR`, in `x`'s units), cannot bind at any point the problem reaches.
+/// It is set aside like a zero row with `h >= 0`: kept, it would set the length scale
+/// (`bmax`) that the surrogate and the certificate's tolerance read, and a barrier row whose
+/// gradient is orthogonal to the input up to rounding (coefficients ~1e-16) made that
+/// tolerance 1e8 and certified a wrong point.
+const FAR: f64 = 1e12;
 
 /// Fixed-capacity dense storage (boxed once so the solver itself stays small to move).
 #[derive(Debug, Clone)]
@@ -219,7 +227,8 @@ impl ActiveSetQp {
         self.polish(qp, out)
     }
 
-    /// Fills the unit-norm rows; a zero row with `h < 0` proves infeasibility.
+    /// Fills the unit-norm rows; a zero row with `h < 0` proves infeasibility, and a zero
+    /// row with `h >= 0` or a row beyond [`FAR`] is set aside (norm 0).
     fn normalise_rows(&mut self, qp: &DenseQp) -> Result<(), QpStatus> {
         let (n, rows) = (qp.vars(), qp.rows());
         self.a.clear();
@@ -247,8 +256,14 @@ impl ActiveSetQp {
                     .sum::<f64>()
                     .sqrt();
             let inv = 1.0 / norm;
-            self.a.extend(row.iter().map(|v| v * inv));
             let b = h * inv;
+            if b > FAR {
+                self.a.extend(row.iter().map(|_| 0.0));
+                self.b.push(0.0);
+                self.norm.push(0.0);
+                continue;
+            }
+            self.a.extend(row.iter().map(|v| v * inv));
             if !b.is_finite() {
                 return Err(QpStatus::Failed);
             }

@@ -127,6 +127,49 @@ fn duplicated_and_dependent_rows() {
 }
 
 #[test]
+fn a_row_whose_plane_is_out_of_reach_changes_nothing() {
+    // The shield's shape: min |a|^2 / 2 + K d over a in the box, the CLF row a0 + d >= 1,
+    // d >= 0; then a barrier row whose gradient is orthogonal to the input up to rounding
+    // (1.7e-16 a0 <= 10: its plane ~6e16 away). It set the length scale, and the
+    // certificate's tolerance with it, to ~6e7: a wrong point passed as solved.
+    let base = DenseQp {
+        p_diag: vec![1.0, 1.0, 0.0],
+        c: vec![0.0, 0.0, 1e4],
+        g: vec![
+            1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, -1.0, 0.0, -1.0, 0.0,
+            0.0, -1.0,
+        ],
+        h: vec![1.0, 1.0, 1.0, 1.0, -1.0, 0.0],
+    };
+    let clean = ActiveSetQp::new().solve(&base);
+    assert_solved(&base, &clean, &[1.0, 0.0, 0.0]);
+    for (coefficient, h) in [
+        (1.7e-16, 10.0),
+        (-1.7e-16, 10.0),
+        (1e-30, 1.0),
+        (1e-300, 1e-10),
+    ] {
+        let mut qp = base.clone();
+        push_row(&mut qp, &[coefficient, 0.0, 0.0], h);
+        let sol = ActiveSetQp::new().solve(&qp);
+        assert_eq!(sol.status, QpStatus::Solved, "{qp:?}");
+        assert_eq!(sol.x, clean.x, "{coefficient} {h}");
+        assert_eq!(sol.z[6], 0.0);
+        assert!(scaled_kkt(&qp, &sol) < 1e-12, "{}", scaled_kkt(&qp, &sol));
+    }
+    // A tiny row near enough to bind is kept: 1e-9 a0 <= 1e-10 holds a0 at 0.1.
+    let mut qp = base.clone();
+    push_row(&mut qp, &[1e-9, 0.0, 0.0], 1e-10);
+    let sol = ActiveSetQp::new().solve(&qp);
+    assert_eq!(sol.status, QpStatus::Solved);
+    assert!(
+        (sol.x[0] - 0.1).abs() < 1e-9 && (sol.x[2] - 0.9).abs() < 1e-9,
+        "{:?}",
+        sol.x
+    );
+}
+
+#[test]
 fn degenerate_vertex() {
     // Three rows through the optimal vertex (1, 1): x0 <= 1, x1 <= 1, x0 + x1 <= 2, plus a
     // linear-cost variable pinned at its bound by a fourth row through the same point.
