@@ -90,6 +90,72 @@ def test_a_clean_bin_is_one_of_the_objects_read_exactly(points: list[np.ndarray]
 
 
 @settings(max_examples=300, deadline=None)
+@given(layouts)
+def test_a_centre_at_its_bins_floor_lies_within_its_arc(points: list[np.ndarray]) -> None:
+    obs = L.reading(points)
+    lo, hi = L.arcs(obs)
+    start = np.arange(LIDAR.bins) * LIDAR.width
+    assert np.all(start <= lo) and np.all(lo <= hi) and np.all(hi <= start + LIDAR.width)
+    for p in points:
+        b, d = _bin(p), float(np.hypot(*p))
+        if d >= LIDAR.max_dist or abs((LIDAR.max_dist - d) / LIDAR.max_dist - obs[b]) > 1e-12:
+            continue  # beyond the range, or not the one the bin's reading is
+        ang = float(np.arctan2(p[1], p[0]) % (2 * np.pi))
+        if b == 0 and ang > np.pi:  # on bin 0's start, as 2 pi
+            ang -= 2 * np.pi
+        assert lo[b] - 1e-9 <= ang <= hi[b] + 1e-9, (b, ang, lo[b], hi[b])
+    # A single object's arc is its angle.
+    one = points[0]
+    if np.hypot(*one) < LIDAR.max_dist:
+        b = _bin(one)
+        lo1, hi1 = L.arcs(L.reading([one]))
+        assert hi1[b] - lo1[b] < 1e-9
+
+
+@settings(max_examples=500, deadline=None)
+@given(
+    st.floats(0.0, 0.1),  # delta
+    st.floats(0.0, 1.0),  # how far the robot went, of delta
+    st.floats(-np.pi, np.pi),  # which way
+    st.floats(-1.0, 1.0),  # the point's direction off the centre's, of two bins
+    st.floats(0.0, 2.0),  # the centre beyond the floor (m)
+    st.sampled_from([0.3, 0.4]),  # the centre's kind's barrier radius (hazard, vase)
+    st.floats(0.0, 2.5),  # the bin's clearance beyond the slack (m)
+)
+def test_the_slack_keeps_the_point_barrier_below_the_true_clearance(
+    delta: float, went: float, way: float, off: float, beyond: float, r: float, gap: float
+) -> None:
+    from tlshield.envs.safety_gym.sensing import slack
+
+    shared = 0.3
+    s = slack(delta, shared)
+    clearance = gap + s  # the barrier holds at the reading (D >= R + s)
+    floor = clearance + r
+    x = (floor + beyond) * np.array([1.0, 0.0])
+    turn = off * 2 * LIDAR.width
+    q = (clearance + shared - s) * np.array([np.cos(turn), np.sin(turn)])
+    p = went * delta * np.array([np.cos(way), np.sin(way)])
+    assert np.hypot(*(p - x)) - r >= np.hypot(*(p - q)) - shared - 1e-12
+    # Half the slack does not hold in the worst case: the point two bins off the centre, the
+    # robot moved along the difference of their directions (for any motion at all).
+    if delta > 1e-3:
+        u = np.array([np.cos(2 * LIDAR.width), np.sin(2 * LIDAR.width)])
+        half = (clearance + shared - s / 2) * u
+        worst = delta * (np.array([1.0, 0.0]) - u) / np.hypot(*(np.array([1.0, 0.0]) - u))
+        x0 = floor * np.array([1.0, 0.0])
+        assert np.hypot(*(worst - x0)) - r < np.hypot(*(worst - half)) - shared
+
+
+def test_the_slack_is_infinite_once_the_motion_reaches_the_radius() -> None:
+    from tlshield.envs.safety_gym.sensing import slack
+
+    assert slack(0.0, 0.3) == 0.0
+    assert slack(0.3, 0.3) == float("inf")
+    # 1.5 m/s over Safety-Gymnasium's 0.02 s step: 2.6 cm, where twice the motion was 6 cm.
+    assert 0.025 < slack(0.03 + 0.002, 0.3) < 0.027
+
+
+@settings(max_examples=300, deadline=None)
 @given(layouts, point, st.floats(0.0, 0.2))
 def test_the_cover_stands_for_every_centre_up_to_twice_the_motion(
     points: list[np.ndarray], away: np.ndarray, delta: float

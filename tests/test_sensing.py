@@ -58,17 +58,20 @@ def test_the_state_is_the_observations_alone() -> None:
         env.close()
 
 
-@pytest.mark.parametrize("task", ["SafetyPointGoal2-v0", "SafetyCarGoal1-v0"])
+@pytest.mark.parametrize("task", TASKS)
 def test_each_obstacle_point_stands_for_the_centres_its_bin_may_hold(task: str) -> None:
-    """Against MuJoCo's positions (read here only): every hazard or vase within the lidar's
-    range is no nearer, less its kind's barrier radius, than its bin's point less the shared
-    radius."""
+    """Against MuJoCo's positions (read here only): from anywhere within the step's bound on
+    the robot's motion (``delta``) of where the lidar read, every hazard or vase within the
+    lidar's range is no nearer, less its kind's barrier radius, than its bin's point less the
+    shared radius: the barrier never reads more clearance than there is."""
     env = SafetyGoalEnv(task, config="rl_cbf_clf", sensing="lidar")
     rng = np.random.default_rng(0)
     try:
         sensing = env._sensing
         assert sensing is not None
         env.reset(seed=5)
+        turns = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
+        ring = np.column_stack([np.cos(turns), np.sin(turns)])
         checked = 0
         for _ in range(60):
             *_, info = env.step(rng.uniform(-1.0, 1.0, 2))
@@ -87,8 +90,11 @@ def test_each_obstacle_point_stands_for_the_centres_its_bin_may_hold(task: str) 
                         continue
                     b = int((np.arctan2(ego[1], ego[0]) % (2 * np.pi)) / (2 * np.pi / L.BINS))
                     b %= L.BINS
-                    point = float(np.hypot(*points[b]))
-                    assert d - radius >= point - sensing.shared - 1e-9, (kind, i, b)
+                    # The robot anywhere on the circle of radius delta, and at the origin.
+                    p = np.vstack([[0.0, 0.0], sensing.delta * ring])
+                    true = np.hypot(*(ego - p).T) - radius
+                    barrier = np.hypot(*(points[b] - p).T) - sensing.shared
+                    assert np.all(true >= barrier - 1e-9), (kind, i, b, true - barrier)
                     checked += 1
         assert checked > 100
     finally:

@@ -69,7 +69,8 @@ class Lidar:
         bins = np.asarray(obs, dtype=np.float64)
         if bins.shape != (self.bins,):
             raise ValueError(f"{where}: expected {self.bins} lidar bins, got shape {bins.shape}")
-        if not np.all(np.isfinite(bins)) or bins.min() < 0.0 or bins.max() > 1.0:
+        # Read every step: two reductions, and NaN fails both comparisons.
+        if not (bins.min() >= 0.0 and bins.max() <= 1.0):
             raise ValueError(f"{where}: lidar bins must lie in [0, 1], got {bins}")
         return bins
 
@@ -103,6 +104,28 @@ def floors(obs: ArrayLike, lidar: Lidar = GOAL_TASKS) -> NDArray[np.float64]:
     (``max_dist`` where the bin reads 0: nothing is seen)."""
     bins = lidar.check(obs)
     return lidar.max_dist * (1.0 - bins)
+
+
+def arcs(
+    obs: ArrayLike, lidar: Lidar = GOAL_TASKS
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per bin, the angles ``lo <= hi`` (rad, from the body's +x axis, within the bin) between
+    which a centre at the bin's floor lies, if the bin holds one there. Such a centre's reading
+    ``s`` is the bin's, and its spills ``a s`` and ``(1 - a) s`` are at most the neighbours'
+    readings, so ``1 - obs[b - 1] / s <= a <= obs[b + 1] / s``: one angle where the bin is
+    clean, the whole bin where it reads 0 or without alias. (Farther centres may lie anywhere
+    in the bin; only the floor is sure.)"""
+    bins = lidar.check(obs)
+    lo, hi = np.zeros(lidar.bins), np.ones(lidar.bins)
+    if lidar.alias:
+        seen = bins > 0.0
+        s = np.where(seen, bins, 1.0)
+        lo = np.where(seen, np.clip(1.0 - np.roll(bins, 1) / s, 0.0, 1.0), 0.0)
+        hi = np.where(seen, np.clip(np.roll(bins, -1) / s, 0.0, 1.0), 1.0)
+        # Rounding may cross a clean bin's two bounds (equal in exact arithmetic).
+        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+    start = np.arange(lidar.bins) * lidar.width
+    return start + lo * lidar.width, start + hi * lidar.width
 
 
 def nearest(obs: ArrayLike, lidar: Lidar = GOAL_TASKS) -> tuple[float, float] | None:

@@ -57,11 +57,11 @@ class SafetyGoalParams:
     #: (Krasowski et al. 2023); ``info["task_reward"]`` keeps Safety-Gymnasium's reward, which
     #: every table reports. 0 (the default) pays nothing.
     correction_penalty: float = 0.0
-    #: With ``sensing="lidar"``, every hazard's and vase's barrier radius grows by this (m):
-    #: twice what the robot may move over the step a reading serves (the lidar's points stand
-    #: for every centre they may hide up to twice the robot's motion since the reading,
-    #: :mod:`~tlshield.envs.safety_gym.sensing`): 2 x 1.5 m/s x 0.02 s for the Point.
-    lidar_slack: float = 0.06
+    #: With ``sensing="lidar"``, every hazard's and vase's barrier radius grows by this (m),
+    #: beyond the bound the lidar's points already keep for the robot's motion between
+    #: readings (computed each step from the velocimeter,
+    #: :mod:`~tlshield.envs.safety_gym.sensing`): a margin of one's own. 0 by default.
+    lidar_slack: float = 0.0
 
     #: The settings that may be 0 (every other one must be > 0).
     _MAY_BE_ZERO: ClassVar[tuple[str, ...]] = (
