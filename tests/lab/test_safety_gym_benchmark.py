@@ -99,7 +99,7 @@ def test_sensing_is_a_column_and_a_lidar_row_reads_no_privileged_state(tmp_path:
     out = bench.safety_gym(
         tmp_path,
         envs=["SafetyPointGoal1-v0"],
-        configs=["rl_cbf_clf"],
+        configs=["rl_cbf_clf", "rl"],
         seeds=[0],
         sensing=["state", "lidar"],
         steps=64,
@@ -108,8 +108,12 @@ def test_sensing_is_a_column_and_a_lidar_row_reads_no_privileged_state(tmp_path:
         progress=False,
     )
     with open(out / "safety_gym.csv") as fh:
-        rows = {r["sensing"]: r for r in csv.DictReader(fh)}
+        rows = {r["sensing"]: r for r in csv.DictReader(fh) if r["method"] == "rl_cbf_clf"}
+        fh.seek(0)
+        unshielded = [r for r in csv.DictReader(fh) if r["method"] == "rl"]
     assert sorted(rows) == ["lidar", "state"]
+    # The unshielded row reads nothing: one job, whatever the modes asked for.
+    assert [r["sensing"] for r in unshielded] == ["none"]
     for row in rows.values():
         assert float(row["kept_cost"]) == 0.0 and float(row["train_cost"]) == 0.0
     # The lidar row trained and was evaluated with the lidar mode; the state row's folder keeps

@@ -51,6 +51,8 @@ DEFAULT_SEEDS = (0, 1, 2)
 DEFAULT_EPISODES = 10
 #: What the shield reads by default (``--sensing``): MuJoCo's true state.
 DEFAULT_SENSING = ("state",)
+#: The ``sensing`` of an unshielded row (``rl``, ``rl+native``): no shield reads anything.
+UNSHIELDED = "none"
 #: The training preset (:data:`tlshield.lab.presets.PRESETS`).
 PRESET = "safety-gym"
 
@@ -134,7 +136,7 @@ OMNISAFE = {
 def folder_name(env: str, variant: str, seed: int, budget: int, sensing: str) -> str:
     """The run folder of one job under ``out/runs`` (the state mode's keeps the name it had
     before the ``sensing`` column, so that its finished jobs resume)."""
-    tail = "" if sensing == "state" else f"-{sensing}"
+    tail = "" if sensing in ("state", UNSHIELDED) else f"-{sensing}"
     return f"{env}-{variant}-s{seed}-{budget}{tail}"
 
 
@@ -162,7 +164,7 @@ def train_and_evaluate(
     start = time.perf_counter()
     v = VARIANTS[variant]
     # The state mode passes nothing, so its runs read as they did before the column.
-    reads = {} if sensing == "state" else {"sensing": sensing}
+    reads = {} if sensing in ("state", UNSHIELDED) else {"sensing": sensing}
     run = prepare(
         v.config,
         seed,
@@ -252,7 +254,8 @@ def safety_gym(
         for e in envs
         for budget in (steps or DEFAULT_STEPS[e],)
         for c in configs
-        for m in dict.fromkeys(sensing)
+        # An unshielded row reads nothing: one job, whatever the modes.
+        for m in ((UNSHIELDED,) if VARIANTS[c].config == "rl" else dict.fromkeys(sensing))
         for s in seeds
     }
     return bench.run(REPORT, out, jobs, address, workers, progress)
