@@ -1,6 +1,7 @@
 """The shield's overhead on Safety-Gymnasium: what ``tlshield/SafetyPointGoal1-v0`` with the
-shield (``rl_cbf_clf``: reading the privileged state, the QP, the task monitor and the info)
-adds to Safety-Gymnasium's own step.
+shield (``rl_cbf_clf``: reading the privileged state, or with ``--sensing lidar`` writing the
+state from the observation, then the QP, the task monitor and the info) adds to
+Safety-Gymnasium's own step.
 
 Each round is a fresh episode of ``--steps`` random actions. Within it, the time spent inside
 Safety-Gymnasium's ``step`` is timed apart from the whole shielded step, so both are measured
@@ -11,7 +12,7 @@ actions alternate with them. Target: overhead <= 10 % of Safety-Gymnasium's own 
 ``make safety-gym`` installs the stack.
 
 Run: ``.venv/bin/python benches/safety_gym_overhead.py [--rounds 7] [--steps 1000]
-[--task SafetyCarGoal1-v0]``. Exit 2 when the target is missed.
+[--task SafetyCarGoal1-v0] [--sensing lidar]``. Exit 2 when the target is missed.
 """
 
 from __future__ import annotations
@@ -46,11 +47,12 @@ def main() -> int:
     parser.add_argument(
         "--task", default="SafetyPointGoal1-v0", help="one of tlshield.envs.safety_gym.TASKS"
     )
+    parser.add_argument("--sensing", default="state", help="what the shield reads: state, lidar")
     args = parser.parse_args()
     from tlshield.envs.safety_gym import SafetyGoalEnv, make_builder
 
     raw = make_builder(args.task)
-    shielded = SafetyGoalEnv(args.task, "rl_cbf_clf", actions="native")
+    shielded = SafetyGoalEnv(args.task, "rl_cbf_clf", actions="native", sensing=args.sensing)
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, 2))
     inner = {"seconds": 0.0, "steps": 0}
     step = shielded._env.step
@@ -75,7 +77,7 @@ def main() -> int:
     print("|---|---:|")
     rows = [
         ("Safety-Gymnasium's own (Builder), random actions", base),
-        (f"tlshield/{args.task}, rl_cbf_clf: whole step", ours),
+        (f"tlshield/{args.task}, rl_cbf_clf, sensing={args.sensing}: whole step", ours),
         ("of which inside Safety-Gymnasium's step", inside),
     ]
     for name, times in rows:
