@@ -33,6 +33,11 @@ BENCHES = Path(__file__).resolve().parent.parent / "benches"
         ("ray_overhead.py", ["--quick"], "runs identical: yes"),
         ("ray_scaling.py", ["--quick"], "runs identical at every size: yes"),
         ("safety_gym_overhead.py", ["--rounds", "1", "--steps", "100"], "shield overhead"),
+        (
+            "safety_gym_overhead.py",
+            ["--rounds", "1", "--steps", "100", "--sensing", "lidar"],
+            "sensing=lidar: whole step",
+        ),
     ],
 )
 def test_benchmark_runs(script: str, args: list[str], expected: str) -> None:
