@@ -10,7 +10,12 @@ the object's true distance from the agent's body origin (bands up to the lidar's
   (how far beyond the floor it lies; never negative if the floors hold) and ``true distance -
   distance to its bin's cover disc`` (the barrier's conservatism at the lidar's origin; never
   negative if the cover holds), and for every clean bin the distance from its exact reading to
-  the nearest true centre.
+  the nearest true centre;
+- ``hazards``, ``vases``: the shield's own obstacle points (``sensing="lidar"``,
+  :mod:`~tlshield.envs.safety_gym.sensing`): ``point margin``, the object's true clearance
+  less what its bin's point's barrier reads, at the reading and at its least from anywhere
+  within the step's bound on the robot's motion (``within delta``; never negative if the
+  bound holds): what the barrier gives up for what the lidar cannot see.
 
 Each cell is ``median / p99 / max`` over the samples, and ``min`` for the margins (a negative
 one would be a bound broken). ``python scripts/lidar_estimate.py --episodes 10 --steps 200``;
@@ -50,7 +55,11 @@ def _band(d: float) -> str:
 
 def measure(task: str, episodes: int, steps: int, seed: int) -> dict[tuple[str, str, str], list]:
     """Samples per (kind, measure, band)."""
-    env = SafetyGoalEnv(task, config="rl")
+    env = SafetyGoalEnv(task, config="rl", sensing="lidar")
+    sensing = env._sensing
+    assert sensing is not None
+    ring = np.exp(1j * np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False))
+    ring2 = np.column_stack([ring.real, ring.imag])
     rng = np.random.default_rng(seed)
     sg = env._env.task
     kinds = {"hazards": sg.hazards.num, "vases": sg.vases.num}
@@ -59,7 +68,9 @@ def measure(task: str, episodes: int, steps: int, seed: int) -> dict[tuple[str, 
         for episode in range(episodes):
             obs, _ = env.reset(seed=seed + episode)
             for _ in range(steps):
-                obs, *_ = env.step(rng.uniform(env.action_space.low, env.action_space.high))
+                obs, *_, info = env.step(rng.uniform(env.action_space.low, env.action_space.high))
+                points = info["state"][env.robot.agent_dim + 2 :].reshape(-1, 2)
+                moved = np.vstack([[0.0, 0.0], sensing.delta * ring2])
                 goal = _ego(env, ["goal"])[0]
                 found = L.nearest(env.lidar(obs, "goal"))
                 d = float(np.hypot(*goal))
@@ -80,6 +91,13 @@ def measure(task: str, episodes: int, steps: int, seed: int) -> dict[tuple[str, 
                         out[kind, "beyond floor", _band(d)].append(d - floors[b])
                         disc = max(0.0, float(np.hypot(*discs[b])) - radii[b])
                         out[kind, "beyond cover", _band(d)].append(d - disc)
+                        if kind in sensing.radii:
+                            radius, shared = sensing.radii[kind], sensing.shared
+                            true = np.hypot(*(c - moved).T) - radius
+                            barrier = np.hypot(*(points[b] - moved).T) - shared
+                            out[kind, "point margin", _band(d)].append(true[0] - barrier[0])
+                            least = float(np.min(true - barrier))
+                            out[kind, "point margin within delta", _band(d)].append(least)
                     for b in range(L.BINS):
                         if L.clean(bins, b) and len(centres):
                             ang = (b + bins[(b + 1) % L.BINS] / bins[b]) * (2 * np.pi / L.BINS)
