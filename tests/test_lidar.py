@@ -205,8 +205,8 @@ def test_each_disc_is_the_smallest_round_its_bins_arc(points: list[np.ndarray], 
 
 def test_the_estimate_script_measures_bounds_that_hold(capsys: pytest.CaptureFixture) -> None:
     """``scripts/lidar_estimate.py`` on a tiny budget: its margins against MuJoCo's true
-    positions are never negative (the floors and the cover hold), the goal is read exactly,
-    and it prints a table."""
+    positions are never negative (the floors, the cover and the shield's points hold), the
+    goal and clean bins are read exactly, and it prints a table."""
     import importlib.util
     from pathlib import Path
 
@@ -217,8 +217,10 @@ def test_the_estimate_script_measures_bounds_that_hold(capsys: pytest.CaptureFix
     spec.loader.exec_module(script)
     samples = script.measure("SafetyPointGoal2-v0", episodes=1, steps=30, seed=3)
     assert samples
+    measured = {what for _, what, _ in samples}
+    assert {"point margin", "point margin within delta"} <= measured
     for (kind, what, _band), xs in samples.items():
-        if what in ("beyond floor", "beyond cover"):
+        if what in ("beyond floor", "beyond cover", "point margin", "point margin within delta"):
             assert min(xs) >= -1e-12, (kind, what)
         else:
             assert max(xs) < 1e-9, (kind, what)

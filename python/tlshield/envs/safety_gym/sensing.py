@@ -171,11 +171,11 @@ class LidarState:
             clearance = np.minimum(clearance, near)
             seen |= reads > 0.0
         near = np.where(seen, clearance, np.inf)
-        before, after = np.roll(near, 1), np.roll(near, -1)
+        before, after = near[lidar.before], near[lidar.after]
         # Bins nearest among their neighbours, and which neighbour (if any) each bin stands on.
         anchor = seen & (near <= before) & (near <= after)
-        left = np.where(np.roll(anchor, 1) & (before < near), before, np.inf)
-        right = np.where(np.roll(anchor, -1) & (after < near), after, np.inf)
+        left = np.where(anchor[lidar.before] & (before < near), before, np.inf)
+        right = np.where(anchor[lidar.after] & (after < near), after, np.inf)
         bins = np.arange(lidar.bins)
         on = np.where(
             np.minimum(left, right) < np.inf, np.where(left <= right, bins - 1, bins + 1), bins
