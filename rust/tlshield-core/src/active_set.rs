@@ -4,8 +4,8 @@
 //!
 //! Design:
 //! 1. Rows are scaled to unit norm. A zero row is skipped when `h >= 0` and proves
-//!    infeasibility otherwise; so is a row whose plane is farther than [`FAR`] from the origin
-//!    (it cannot bind, and it would set the problem's length scale).
+//!    infeasibility otherwise; so is a row whose plane is farther than `FAR` (1e12) from the
+//!    origin (it cannot bind, and it would set the problem's length scale).
 //! 2. Identification: Goldfarb–Idnani dual active set (no feasible start, independent working
 //!    rows) on a strictly convex surrogate. Zero or tiny `P_jj` become
 //!    `eps_j = max(|c_j| / X, 1e-8 p_ref)` with `X = 1e6 x length scale`, so a linear cost moves
