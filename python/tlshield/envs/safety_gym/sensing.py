@@ -105,7 +105,8 @@ class LidarState:
         self.dim = agent_dim + 2 * (1 + lidar.bins)
         #: The bound on the robot's motion over the step the last reading serves (m).
         self.delta = 0.0
-        mid = (np.arange(lidar.bins) + 0.5) * lidar.width
+        self._bins = np.arange(lidar.bins)
+        mid = (self._bins + 0.5) * lidar.width
         self._rays = np.column_stack([np.cos(mid), np.sin(mid)])
         self._odometry = np.zeros(2)
         self._goal: NDArray[np.float64] | None = None
@@ -176,11 +177,8 @@ class LidarState:
         anchor = seen & (near <= before) & (near <= after)
         left = np.where(anchor[lidar.before] & (before < near), before, np.inf)
         right = np.where(anchor[lidar.after] & (after < near), after, np.inf)
-        bins = np.arange(lidar.bins)
-        on = np.where(
-            np.minimum(left, right) < np.inf, np.where(left <= right, bins - 1, bins + 1), bins
-        )
-        on %= lidar.bins
+        neighbour = np.where(left <= right, lidar.before, lidar.after)
+        on = np.where(np.minimum(left, right) < np.inf, neighbour, self._bins)
         distance = np.where(seen, clearance + self.shared - slack(delta, self.shared, lidar), EMPTY)
         rays = np.where(
             seen[:, None], np.column_stack([np.cos(bearing), np.sin(bearing)]), self._rays
